@@ -1,0 +1,168 @@
+"""A zero-corrected calibration set: the data every fit and cross-validation uses."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .config import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS, Settings
+from .errors import InputError
+from .io import calibration_files, read_calibration_table, sha256_file
+from .zero import assign_sweeps, zero_correct
+
+
+@dataclass(frozen=True)
+class CalibrationSet:
+    """Zero-corrected single-axis calibration points of several repetitions.
+
+    Attributes
+    ----------
+    points : DataFrame
+        One row per calibration point in file order (repetition, then row), with
+        ``repetition, axis, file, row, fx, fy, fz`` [N], ``ux, uy, uz`` [V]
+        (zero-corrected) and ``ux_raw, uy_raw, uz_raw`` [V].
+    offsets : DataFrame
+        Zero offsets removed, one row per (repetition, axis) sweep [V].
+    files : tuple of (str, str)
+        Each input file and its SHA-256.
+    skipped : tuple of str
+        Rows left out, with the reason.
+    warnings : tuple of str
+        Things a technician should look at; the data are still usable.
+    """
+
+    points: pd.DataFrame
+    offsets: pd.DataFrame
+    files: tuple[tuple[str, str], ...] = ()
+    skipped: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = field(default=())
+
+    @property
+    def repetitions(self) -> list[int]:
+        return sorted(int(r) for r in self.points["repetition"].unique())
+
+    def subset(self, repetitions) -> CalibrationSet:
+        """The same set restricted to some repetitions (for cross-validation)."""
+        reps = set(int(r) for r in repetitions)
+        unknown = reps - set(self.repetitions)
+        if unknown:
+            raise InputError(
+                f"repetition {sorted(unknown)[0]} is not in the calibration set "
+                f"(it has {', '.join(map(str, self.repetitions))})"
+            )
+        keep = self.points["repetition"].isin(reps)
+        return CalibrationSet(
+            self.points[keep].reset_index(drop=True),
+            self.offsets[self.offsets["repetition"].isin(reps)].reset_index(drop=True),
+            self.files, self.skipped, self.warnings,
+        )
+
+    def sweep(self, axis: str) -> pd.DataFrame:
+        """All points whose loaded axis is ``axis``, in file order."""
+        return self.points[self.points["axis"] == axis]
+
+    @property
+    def forces(self) -> np.ndarray:
+        return self.points[list(FORCE_COLUMNS)].to_numpy()
+
+    @property
+    def voltages(self) -> np.ndarray:
+        return self.points[list(VOLTAGE_COLUMNS)].to_numpy()
+
+    def load_grid(self, axis: str) -> dict[int, np.ndarray]:
+        """Sorted distinct loads [N] of each repetition's ``axis`` sweep."""
+        s = self.sweep(axis)
+        col = FORCE_COLUMNS[AXES.index(axis)]
+        return {int(r): np.unique(g[col].to_numpy()) for r, g in s.groupby("repetition")}
+
+
+def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=()) -> CalibrationSet:
+    """Validate a long table (as :func:`read_calibration_table` returns) and zero-correct it."""
+    table = assign_sweeps(table)
+    reps = sorted(table["repetition"].unique())
+    if len(reps) < settings.min_repetitions:
+        raise InputError(
+            f"{files[0][0] if len(files) == 1 else 'calibration set'}: {len(reps)} "
+            f"repetition{'s' if len(reps) != 1 else ''}, the config requires at least "
+            f"{settings.min_repetitions} (min_repetitions)"
+        )
+    for rep in reps:
+        have = set(table.loc[table["repetition"] == rep, "axis"])
+        missing = [a for a in AXES if a not in have]
+        if missing:
+            first = table.loc[table["repetition"] == rep].iloc[0]
+            raise InputError(
+                f"{first['file']}: repetition {rep} has no {' or '.join(missing)} sweep; "
+                "every repetition must calibrate all three axes"
+            )
+    points, offsets = zero_correct(table)
+    warnings = []
+    cs = CalibrationSet(points, offsets, tuple(files), tuple(skipped))
+    for axis in AXES:
+        grids = cs.load_grid(axis)
+        ref_rep, ref = next(iter(grids.items()))
+        for rep, g in grids.items():
+            if g.shape != ref.shape or not np.allclose(g, ref, rtol=0, atol=1e-9):
+                warnings.append(
+                    f"the {axis} sweep of repetition {rep} uses a different load grid than "
+                    f"repetition {ref_rep}; gamma compares repetitions at different loads"
+                )
+                break
+    return CalibrationSet(points, offsets, tuple(files), tuple(skipped), tuple(warnings))
+
+
+def load_calibration(path: str | Path, settings: Settings) -> CalibrationSet:
+    """Read, validate and zero-correct a calibration set (a directory or one CSV)."""
+    table, skipped = read_calibration_table(path, settings)
+    files = tuple((str(f), sha256_file(f)) for f in calibration_files(path))
+    return from_table(table, settings, files, skipped)
+
+
+@dataclass(frozen=True)
+class GrossError:
+    """One calibration point moved away from its place (Section 4.4).
+
+    ``offset`` [V] is added to the prime voltage of point ``point`` (1-based, file
+    order) of the ``axis`` sweep of repetition ``repetition``.
+    """
+
+    axis: str
+    repetition: int
+    point: int
+    offset: float
+
+    @classmethod
+    def parse(cls, spec: str) -> GrossError:
+        parts = spec.split(":")
+        try:
+            axis, rep, point, offset = parts
+            axis = axis.strip().lower()
+            if axis not in AXES:
+                raise ValueError
+            ge = cls(axis, int(rep), int(point), float(offset))
+        except ValueError:
+            raise InputError(
+                f"--gross-error {spec!r}: expected AXIS:REP:POINT:OFFSET, e.g. x:1:5:0.2"
+            ) from None
+        if ge.repetition < 1 or ge.point < 1 or not np.isfinite(ge.offset):
+            raise InputError(f"--gross-error {spec!r}: REP and POINT count from 1")
+        return ge
+
+    def apply(self, table: pd.DataFrame) -> pd.DataFrame:
+        """A copy of ``table`` with this point's prime voltage moved by ``offset``."""
+        idx = np.flatnonzero(
+            (table["repetition"] == self.repetition).to_numpy()
+            & (table["axis"] == self.axis).to_numpy()
+        )
+        if self.point > idx.size:
+            raise InputError(
+                f"--gross-error: the {self.axis} sweep of repetition {self.repetition} has "
+                f"{idx.size} points, no point {self.point}"
+            )
+        out = table.copy()
+        col = out.columns.get_loc(VOLTAGE_COLUMNS[AXES.index(self.axis)])
+        out.iloc[idx[self.point - 1], col] += self.offset
+        return out

@@ -1,0 +1,274 @@
+"""Settings: the sensor, the file layout and the epsilon-SVR parameters.
+
+A YAML file (``configs/paper-sensor.yaml`` describes the paper's sensor) is read
+with ``yaml.safe_load`` into a frozen :class:`Settings`; command-line flags
+override it.  The built-in defaults *are* the paper's sensor (Section 3) and
+Table 2, so running without a config reproduces the paper's set-up.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from .errors import ConfigError
+
+AXES = ("x", "y", "z")
+FORCE_COLUMNS = ("fx", "fy", "fz")
+VOLTAGE_COLUMNS = ("ux", "uy", "uz")
+CANONICAL_COLUMNS = ("repetition", "axis", *FORCE_COLUMNS, *VOLTAGE_COLUMNS)
+SCALINGS = ("none", "full_scale")
+
+
+@dataclass(frozen=True)
+class SVRSettings:
+    """epsilon-SVR parameters of Table 2 (libsvm ``-s 3 -t 2``).
+
+    ``gamma`` is libsvm's kernel parameter, ``exp(-gamma |u - v|^2)``; the paper's
+    Gaussian ``exp(-|u - v|^2 / 2 delta^2)`` with delta^2 = 1 gives gamma = 0.5.
+    """
+
+    C: float = 1000.0
+    epsilon: float = 0.0001
+    gamma: float = 0.5
+    tolerance: float = 0.001
+
+    @property
+    def delta2(self) -> float:
+        return 1.0 / (2.0 * self.gamma)
+
+    def libsvm_options(self) -> str:
+        return (
+            f"-s 3 -t 2 -g {self.gamma!r} -c {self.C!r} -p {self.epsilon!r} "
+            f"-e {self.tolerance!r} -q"
+        )
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Everything given (not learned) for fitting and applying a model."""
+
+    sensor: str = "paper-3axis"
+    full_scale: tuple[float, float, float] = (100.0, 100.0, 150.0)  # [N], Section 3
+    min_repetitions: int = 6
+    columns: dict[str, str] = field(default_factory=lambda: {c: c for c in CANONICAL_COLUMNS})
+    scale: dict[str, float] = field(
+        default_factory=lambda: {c: 1.0 for c in (*FORCE_COLUMNS, *VOLTAGE_COLUMNS)}
+    )
+    sep: str = ","
+    decimal: str = "."
+    svr: SVRSettings = SVRSettings()
+    scaling: str = "none"
+    rotation: tuple[tuple[float, float, float], ...] | None = None
+    min_r2: float = 0.99
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["full_scale"] = dict(zip(AXES, self.full_scale, strict=True))
+        d["rotation"] = None if self.rotation is None else [list(r) for r in self.rotation]
+        d["csv"] = {"sep": d.pop("sep"), "decimal": d.pop("decimal")}
+        d["checks"] = {"min_r2": d.pop("min_r2")}
+        return d
+
+
+_TOP_KEYS = {
+    "sensor", "full_scale", "min_repetitions", "columns", "scale", "csv", "svr",
+    "scaling", "rotation", "checks",
+}
+_SVR_KEYS = {"C", "epsilon", "gamma", "delta2", "tolerance"}
+
+
+def _unknown(key: str, allowed: set[str], where: str) -> ConfigError:
+    hint = difflib.get_close_matches(key, sorted(allowed), n=1)
+    did_you_mean = f" (did you mean '{hint[0]}'?)" if hint else ""
+    return ConfigError(
+        f"{where}: unknown key '{key}'{did_you_mean}; allowed: {', '.join(sorted(allowed))}"
+    )
+
+
+def _number(value: Any, where: str, *, positive: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ConfigError(f"{where}: expected a number, found {value!r}")
+    v = float(value)
+    if not math.isfinite(v):
+        raise ConfigError(f"{where}: expected a finite number, found {value!r}")
+    if positive and v <= 0:
+        raise ConfigError(f"{where}: must be greater than 0, found {value!r}")
+    return v
+
+
+def _mapping(value: Any, where: str) -> dict:
+    if not isinstance(value, dict):
+        raise ConfigError(f"{where}: expected a mapping, found {type(value).__name__} {value!r}")
+    return value
+
+
+def _svr_settings(raw: Any, where: str, base: SVRSettings) -> SVRSettings:
+    raw = _mapping(raw, where)
+    for key in raw:
+        if key not in _SVR_KEYS:
+            raise _unknown(key, _SVR_KEYS, where)
+    if "gamma" in raw and "delta2" in raw:
+        raise ConfigError(f"{where}: give either 'gamma' or 'delta2' (gamma = 1/(2 delta2)), not both")
+    kw = {}
+    for key in ("C", "epsilon", "tolerance", "gamma"):
+        if key in raw:
+            kw[key] = _number(raw[key], f"{where}: {key}", positive=True)
+    if "delta2" in raw:
+        kw["gamma"] = 1.0 / (2.0 * _number(raw["delta2"], f"{where}: delta2", positive=True))
+    return replace(base, **kw)
+
+
+def _rotation(raw: Any, where: str) -> tuple[tuple[float, float, float], ...] | None:
+    if raw is None:
+        return None
+    if not (isinstance(raw, list) and len(raw) == 3 and all(
+        isinstance(r, list) and len(r) == 3 for r in raw
+    )):
+        raise ConfigError(f"{where}: expected a 3x3 list of lists, found {raw!r}")
+    rows = tuple(
+        tuple(_number(v, f"{where}[{i}][{j}]") for j, v in enumerate(r)) for i, r in enumerate(raw)
+    )
+    # A rotation from the sensor frame to the reference frame (end of Section 2.3)
+    # must be orthonormal with det +1, or forces would be scaled or mirrored.
+    m = [[rows[i][j] for j in range(3)] for i in range(3)]
+    for i in range(3):
+        for j in range(3):
+            dot = sum(m[i][k] * m[j][k] for k in range(3))
+            if abs(dot - (1.0 if i == j else 0.0)) > 1e-6:
+                raise ConfigError(f"{where}: not a rotation matrix (rows are not orthonormal)")
+    det = (
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    )
+    if det < 0:
+        raise ConfigError(f"{where}: determinant is -1, a reflection, not a rotation")
+    return rows
+
+
+def settings_from_dict(raw: Any, source: str = "config") -> Settings:
+    """Validate a parsed YAML document into :class:`Settings` (unknown keys refused)."""
+    if raw is None:
+        raw = {}
+    raw = _mapping(raw, source)
+    for key in raw:
+        if key not in _TOP_KEYS:
+            raise _unknown(str(key), _TOP_KEYS, source)
+    s = Settings()
+    kw: dict[str, Any] = {}
+    if "sensor" in raw:
+        if not isinstance(raw["sensor"], str) or not raw["sensor"].strip():
+            raise ConfigError(f"{source}: sensor: expected a name, found {raw['sensor']!r}")
+        kw["sensor"] = raw["sensor"]
+    if "full_scale" in raw:
+        fs = _mapping(raw["full_scale"], f"{source}: full_scale")
+        for key in fs:
+            if key not in AXES:
+                raise _unknown(str(key), set(AXES), f"{source}: full_scale")
+        missing = [a for a in AXES if a not in fs]
+        if missing:
+            raise ConfigError(f"{source}: full_scale: missing axis {', '.join(missing)}")
+        kw["full_scale"] = tuple(
+            _number(fs[a], f"{source}: full_scale: {a}", positive=True) for a in AXES
+        )
+    if "min_repetitions" in raw:
+        v = raw["min_repetitions"]
+        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            raise ConfigError(f"{source}: min_repetitions: expected a whole number >= 1, found {v!r}")
+        kw["min_repetitions"] = v
+    if "columns" in raw:
+        cols = _mapping(raw["columns"], f"{source}: columns")
+        merged = dict(s.columns)
+        for key, name in cols.items():
+            if key not in CANONICAL_COLUMNS:
+                raise _unknown(str(key), set(CANONICAL_COLUMNS), f"{source}: columns")
+            if not isinstance(name, str) or not name:
+                raise ConfigError(f"{source}: columns: {key}: expected a column name, found {name!r}")
+            merged[key] = name
+        if len(set(merged.values())) != len(merged):
+            raise ConfigError(f"{source}: columns: two quantities map to the same file column")
+        kw["columns"] = merged
+    if "scale" in raw:
+        sc = _mapping(raw["scale"], f"{source}: scale")
+        merged_scale = dict(s.scale)
+        for key, value in sc.items():
+            if key not in merged_scale:
+                raise _unknown(str(key), set(merged_scale), f"{source}: scale")
+            v = _number(value, f"{source}: scale: {key}")
+            if v == 0:
+                raise ConfigError(f"{source}: scale: {key}: must not be 0")
+            merged_scale[key] = v
+        kw["scale"] = merged_scale
+    if "csv" in raw:
+        csv = _mapping(raw["csv"], f"{source}: csv")
+        for key, value in csv.items():
+            if key not in ("sep", "decimal"):
+                raise _unknown(str(key), {"sep", "decimal"}, f"{source}: csv")
+            if not isinstance(value, str) or len(value) != 1:
+                raise ConfigError(f"{source}: csv: {key}: expected one character, found {value!r}")
+            kw[key] = value
+        if kw.get("sep", ",") == kw.get("decimal", "."):
+            raise ConfigError(f"{source}: csv: sep and decimal must differ")
+    if "svr" in raw:
+        kw["svr"] = _svr_settings(raw["svr"], f"{source}: svr", s.svr)
+    if "scaling" in raw:
+        if raw["scaling"] not in SCALINGS:
+            raise ConfigError(
+                f"{source}: scaling: expected one of {', '.join(SCALINGS)}, found {raw['scaling']!r}"
+            )
+        kw["scaling"] = raw["scaling"]
+    if "rotation" in raw:
+        kw["rotation"] = _rotation(raw["rotation"], f"{source}: rotation")
+    if "checks" in raw:
+        checks = _mapping(raw["checks"], f"{source}: checks")
+        for key, value in checks.items():
+            if key != "min_r2":
+                raise _unknown(str(key), {"min_r2"}, f"{source}: checks")
+            kw["min_r2"] = _number(value, f"{source}: checks: min_r2", positive=True)
+    return replace(s, **kw)
+
+
+def load_config(path: str | Path | None = None, **overrides: Any) -> Settings:
+    """Read a YAML config (``None``: the built-in paper sensor) and apply overrides.
+
+    Overrides are flag values; ``None`` means "not given".  SVR keys (``C``,
+    ``epsilon``, ``gamma``, ``delta2``, ``tolerance``) go to :class:`SVRSettings`.
+    """
+    if path is None:
+        settings = Settings()
+    else:
+        path = Path(path)
+        try:
+            text = path.read_text(encoding="utf-8-sig")
+        except FileNotFoundError:
+            raise ConfigError(f"{path}: config file not found") from None
+        except (OSError, UnicodeDecodeError) as err:
+            raise ConfigError(f"{path}: cannot read config ({err})") from None
+        try:
+            raw = yaml.safe_load(text)
+        except yaml.YAMLError as err:
+            mark = getattr(err, "problem_mark", None)
+            loc = f", row {mark.line + 1}, column {mark.column + 1}" if mark else ""
+            raise ConfigError(f"{path}{loc}: not valid YAML") from None
+        settings = settings_from_dict(raw, str(path))
+    return apply_overrides(settings, **overrides)
+
+
+def apply_overrides(settings: Settings, **overrides: Any) -> Settings:
+    given = {k: v for k, v in overrides.items() if v is not None}
+    svr_raw = {k: given.pop(k) for k in list(given) if k in _SVR_KEYS}
+    if svr_raw:
+        settings = replace(
+            settings, svr=_svr_settings(svr_raw, "command-line SVR setting", settings.svr)
+        )
+    if "scaling" in given and given["scaling"] not in SCALINGS:
+        raise ConfigError(
+            f"--scaling: expected one of {', '.join(SCALINGS)}, found {given['scaling']!r}"
+        )
+    return replace(settings, **given)

@@ -1,0 +1,54 @@
+"""Linear parts: the non-coupling functions omega (eq. 2) by least squares."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .config import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
+
+
+@dataclass(frozen=True)
+class OmegaFit:
+    """Slopes of the non-coupling functions, ``u_aa = k_aa * f_a`` (eq. 2).
+
+    Attributes
+    ----------
+    k : ndarray, shape (3,)
+        k_xx, k_yy, k_zz [V/N].
+    r2 : ndarray, shape (3,)
+        Coefficient of determination of each fit, ``1 - SS_res / SS_tot`` with
+        SS_tot about the mean (the stricter form for a fit through the origin).
+    n : ndarray, shape (3,)
+        Number of points per axis.
+    """
+
+    k: np.ndarray
+    r2: np.ndarray
+    n: np.ndarray
+
+    @property
+    def inverse(self) -> np.ndarray:
+        """1/k [N/V]: the form of eq. (13), ``f_x = omega_x^-1(u_x) = (1/k_xx) u_x``."""
+        return 1.0 / self.k
+
+
+def fit_omega(points) -> OmegaFit:
+    """Least squares through the origin of prime voltage on prime force (Section 2.3, step 2).
+
+    ``points`` is a zero-corrected DataFrame with ``axis``, ``fx..fz`` and ``ux..uz``.
+    k = sum(f u) / sum(f^2) minimises sum (u - k f)^2.
+    """
+    k, r2, n = np.empty(3), np.empty(3), np.empty(3, dtype=int)
+    for a, axis in enumerate(AXES):
+        s = points[points["axis"] == axis]
+        f = s[FORCE_COLUMNS[a]].to_numpy(dtype=float)
+        u = s[VOLTAGE_COLUMNS[a]].to_numpy(dtype=float)
+        ff = float(f @ f)
+        k[a] = float(f @ u) / ff if ff > 0 else np.nan
+        ss_res = float(((u - k[a] * f) ** 2).sum())
+        ss_tot = float(((u - u.mean()) ** 2).sum())
+        r2[a] = 1.0 - ss_res / ss_tot if ss_tot > 0 else np.nan
+        n[a] = f.size
+    return OmegaFit(k, r2, n)

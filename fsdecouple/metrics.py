@@ -1,0 +1,37 @@
+"""Interference error gamma (eq. 12) and related figures of merit."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .config import AXES
+
+
+def interference_error(forces: np.ndarray, axis: int, full_scale: float) -> float:
+    """gamma of eq. (12) for single-axis loads along ``axis``.
+
+    gamma_x = (max |f_y(m)| + max |f_z(m)|) / f_x(FS): the largest decoupled forces
+    on the two unloaded axes, as a fraction of the loaded axis's full scale.
+
+    Parameters
+    ----------
+    forces : ndarray, shape (n, 3)
+        Measured (decoupled) forces of the ``axis`` sweep points [N].
+    axis : int
+        0, 1, 2 for the loaded axis x, y, z.
+    full_scale : float
+        f_(FS) of the loaded axis [N].
+    """
+    forces = np.asarray(forces, dtype=float).reshape(-1, 3)
+    others = [a for a in range(3) if a != axis]
+    return float(sum(np.abs(forces[:, o]).max() for o in others) / full_scale)
+
+
+def interference_errors(points, forces: np.ndarray, full_scale) -> dict[str, float]:
+    """gamma for each loaded axis of a calibration set (all its repetitions pooled)."""
+    axis = points["axis"].to_numpy()
+    return {
+        a: interference_error(forces[axis == a], i, full_scale[i])
+        for i, a in enumerate(AXES)
+        if (axis == a).any()
+    }

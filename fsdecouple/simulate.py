@@ -1,0 +1,168 @@
+"""A synthetic 3-axis force sensor for the sample data and for tests.
+
+The sensor follows the paper's coupling error model exactly (eq. 1-3): linear
+prime voltages with the sensitivities of eq. (13), smooth nonlinear coupling
+error elements of 1-3 % of full-scale output per axis pair, by superposition;
+plus Gaussian noise and a zero offset per sweep.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .calibration import GrossError
+from .config import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
+from .io import atomic_write
+
+# Section 3 and eq. (13)
+PAPER_INVERSE_SLOPES = (75.065, 77.788, 125.17)  # [N/V]
+PAPER_FULL_SCALE = (100.0, 100.0, 150.0)  # [N]
+PAPER_GRIDS = (
+    np.arange(-100.0, 100.0 + 1e-9, 10.0),
+    np.arange(-100.0, 100.0 + 1e-9, 10.0),
+    np.arange(0.0, -150.0 - 1e-9, -5.0),
+)
+
+
+def _shape(s: np.ndarray, c: tuple[float, float, float]) -> np.ndarray:
+    """A smooth nonlinear coupling shape of the normalised load s."""
+    return c[0] * s + c[1] * s * s + c[2] * np.sin(np.pi * s)
+
+
+@dataclass(frozen=True)
+class SimulatedSensor:
+    """Ground truth for a simulated sensor.
+
+    ``phi_ab(f_b) = amplitude[a][b] * u_FS[a] * g_ab(f_b / F_FS[b]) / max|g_ab|`` is the
+    coupling function of eq. (3), a fraction ``amplitude`` of the full-scale output.
+    """
+
+    inverse_slopes: tuple[float, float, float] = PAPER_INVERSE_SLOPES
+    full_scale: tuple[float, float, float] = PAPER_FULL_SCALE
+    amplitude: tuple[tuple[float, ...], ...] = (
+        (0.0, 0.021, 0.013),
+        (0.027, 0.0, 0.016),
+        (0.018, 0.011, 0.0),
+    )
+    shapes: dict[str, tuple[float, float, float]] = field(default_factory=lambda: {
+        "xy": (0.7, 0.5, 0.3), "xz": (0.4, -0.6, 0.5), "yx": (-0.5, 0.8, 0.2),
+        "yz": (0.9, 0.2, -0.4), "zx": (0.3, -0.4, 0.6), "zy": (-0.6, -0.5, 0.3),
+    })
+    noise: float = 0.0005  # [V], standard deviation per channel
+
+    @property
+    def k(self) -> np.ndarray:
+        return 1.0 / np.asarray(self.inverse_slopes)
+
+    @property
+    def full_scale_output(self) -> np.ndarray:
+        return self.k * np.asarray(self.full_scale)
+
+    def phi(self, name: str, f: np.ndarray) -> np.ndarray:
+        """Coupling error element e_ab [V] caused by load f_b [N] (eq. 3)."""
+        a, b = AXES.index(name[0]), AXES.index(name[1])
+        fs = self.full_scale[b]
+        grid = np.linspace(-1.0, 1.0, 2001) if b < 2 else np.linspace(-1.0, 0.0, 1001)
+        peak = np.abs(_shape(grid, self.shapes[name])).max()
+        g = _shape(np.asarray(f, dtype=float) / fs, self.shapes[name]) / peak
+        return self.amplitude[a][b] * self.full_scale_output[a] * g
+
+    def voltages(self, f: np.ndarray) -> np.ndarray:
+        """Noise-free zero-corrected voltages for forces f, shape (n, 3), by eq. (1)-(3)."""
+        f = np.asarray(f, dtype=float).reshape(-1, 3)
+        u = f * self.k
+        for name in self.shapes:
+            a, b = AXES.index(name[0]), AXES.index(name[1])
+            u[:, a] += self.phi(name, f[:, b])
+        return u
+
+
+def simulate_calibration(
+    sensor: SimulatedSensor, repetitions: int = 6, seed: int = 0
+) -> pd.DataFrame:
+    """A six-repetition single-axis calibration on the paper's grid (Section 3).
+
+    Returns the long table with raw (not zero-corrected) voltages.
+    """
+    rng = np.random.default_rng(seed)
+    rows = []
+    for rep in range(1, repetitions + 1):
+        for a, axis in enumerate(AXES):
+            loads = PAPER_GRIDS[a]
+            f = np.zeros((loads.size, 3))
+            f[:, a] = loads
+            offset = rng.uniform(-0.05, 0.05, size=3)
+            u = sensor.voltages(f) + offset + rng.normal(0.0, sensor.noise, size=f.shape)
+            for i in range(loads.size):
+                rows.append((rep, axis, *f[i], *u[i]))
+    return pd.DataFrame(rows, columns=["repetition", "axis", *FORCE_COLUMNS, *VOLTAGE_COLUMNS])
+
+
+def simulate_task(
+    sensor: SimulatedSensor, n: int = 3000, rate: float = 1000.0, tare_rows: int = 200,
+    seed: int = 0,
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """A combined-load task log: all three forces non-zero at once.
+
+    The first ``tare_rows`` rows are unloaded (for ``apply --tare``).  Returns the
+    voltage log (``t, ux, uy, uz``, raw with a zero offset) and the true forces.
+    """
+    rng = np.random.default_rng(seed + 1_000_003)
+    t = np.arange(n) / rate
+    f = np.zeros((n, 3))
+    moving = np.arange(n) >= tare_rows
+    tm = t[moving] - t[tare_rows] if tare_rows < n else t[moving]
+    ramp = np.minimum(1.0, tm / 0.2)
+    f[moving, 0] = 70.0 * ramp * np.sin(2 * np.pi * 0.7 * tm)
+    f[moving, 1] = 60.0 * ramp * np.sin(2 * np.pi * 1.1 * tm + 1.0)
+    f[moving, 2] = -75.0 * ramp * (1.0 - 0.8 * np.cos(2 * np.pi * 0.5 * tm))
+    offset = rng.uniform(-0.05, 0.05, size=3)
+    u = sensor.voltages(f) + offset + rng.normal(0.0, sensor.noise, size=f.shape)
+    volts = pd.DataFrame({"t": t, "ux": u[:, 0], "uy": u[:, 1], "uz": u[:, 2]})
+    forces = pd.DataFrame({"t": t, "fx": f[:, 0], "fy": f[:, 1], "fz": f[:, 2]})
+    return volts, forces
+
+
+def _write_csv(df: pd.DataFrame, path: Path, formats: dict[str, str], force: bool) -> None:
+    out = df.copy()
+    for col, fmt in formats.items():
+        out[col] = out[col].map(lambda v, fmt=fmt: fmt % v)
+    with atomic_write(path, force=force) as fh:
+        out.to_csv(fh, index=False, lineterminator="\n")
+
+
+def simulate(
+    out_dir: str | Path,
+    *,
+    seed: int = 0,
+    gross_error: GrossError | None = None,
+    sensor: SimulatedSensor | None = None,
+    force: bool = False,
+) -> list[Path]:
+    """Write a calibration set and a task log for a simulated sensor.
+
+    Layout: ``OUT_DIR/calibration/rep1.csv .. rep6.csv``, ``OUT_DIR/task_voltages.csv``
+    and ``OUT_DIR/task_forces.csv`` (true forces).  Voltages are written to 0.1 uV.
+    """
+    sensor = sensor or SimulatedSensor()
+    out = Path(out_dir)
+    (out / "calibration").mkdir(parents=True, exist_ok=True)
+    table = simulate_calibration(sensor, seed=seed)
+    if gross_error is not None:
+        table = gross_error.apply(table)
+    volt_fmt = {c: "%.7f" for c in VOLTAGE_COLUMNS}
+    force_fmt = {c: "%.3f" for c in FORCE_COLUMNS}
+    written = []
+    for rep, g in table.groupby("repetition"):
+        path = out / "calibration" / f"rep{rep}.csv"
+        _write_csv(g.drop(columns="repetition"), path, {**force_fmt, **volt_fmt}, force)
+        written.append(path)
+    volts, forces = simulate_task(sensor, seed=seed)
+    _write_csv(volts, out / "task_voltages.csv", {"t": "%.3f", **volt_fmt}, force)
+    _write_csv(forces, out / "task_forces.csv", {"t": "%.3f", **force_fmt}, force)
+    written += [out / "task_voltages.csv", out / "task_forces.csv"]
+    return written

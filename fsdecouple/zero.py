@@ -1,0 +1,125 @@
+"""Sweeps and zero correction.
+
+A *sweep* is one (repetition, loaded axis) series of a single-axis calibration
+(Section 3).  Each sweep's voltages are zero-corrected by subtracting the mean
+voltages of its zero-load rows; task data are zeroed by a tare or by given offsets.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from .config import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
+from .errors import InputError, where
+
+
+def loaded_axes(forces: np.ndarray) -> np.ndarray:
+    """Index of the single non-zero force per row, -1 for a zero-load row.
+
+    Raises nothing: rows with more than one non-zero force get -2.
+    """
+    nonzero = forces != 0.0
+    count = nonzero.sum(axis=1)
+    idx = np.where(count == 1, np.argmax(nonzero, axis=1), -1)
+    return np.where(count > 1, -2, idx)
+
+
+def assign_sweeps(table: pd.DataFrame) -> pd.DataFrame:
+    """Check that each row loads one axis at most and give every row its sweep axis.
+
+    With an ``axis`` column, a row's load must lie on that axis.  Without one, the
+    sweeps are inferred from consecutive rows: a zero-load row joins the sweep it
+    leads (the next loaded row of the same repetition), and trailing zero-load rows
+    join the sweep before them.
+    """
+    table = table.copy()
+    forces = table[list(FORCE_COLUMNS)].to_numpy()
+    loaded = loaded_axes(forces)
+    two = np.flatnonzero(loaded == -2)
+    if two.size:
+        i = int(two[0])
+        cols = [c for c, v in zip(FORCE_COLUMNS, forces[i], strict=True) if v != 0]
+        raise InputError(
+            f"{where(table['file'].iat[i], int(table['row'].iat[i]), cols[1])}: "
+            f"row loads {' and '.join(cols)} at once; a calibration row loads one axis"
+        )
+    if (table["axis"] != "").all():
+        labelled = table["axis"].map({a: k for k, a in enumerate(AXES)}).to_numpy()
+        wrong = np.flatnonzero((loaded >= 0) & (loaded != labelled))
+        if wrong.size:
+            i = int(wrong[0])
+            col = FORCE_COLUMNS[loaded[i]]
+            raise InputError(
+                f"{where(table['file'].iat[i], int(table['row'].iat[i]), col)}: "
+                f"row loads {col} but its axis is '{table['axis'].iat[i]}'"
+            )
+        return table
+    axis = np.empty(len(table), dtype=object)
+    for _, idx in table.groupby("repetition", sort=False).indices.items():
+        pending: list[int] = []
+        last = -1
+        for i in idx:
+            if loaded[i] < 0:
+                pending.append(i)
+                continue
+            last = loaded[i]
+            for j in pending:
+                axis[j] = AXES[last]
+            pending = []
+            axis[i] = AXES[last]
+        if last < 0:
+            i = int(idx[0])
+            raise InputError(
+                f"{where(table['file'].iat[i])}: repetition {table['repetition'].iat[i]} "
+                "has only zero-load rows, so no sweep can be told apart"
+            )
+        for j in pending:
+            axis[j] = AXES[last]
+    table["axis"] = axis
+    return table
+
+
+def zero_correct(table: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Subtract each sweep's mean zero-load voltages (Section 3: "zero-corrected").
+
+    Returns the corrected points (raw voltages kept as ``ux_raw`` ...) and the
+    offsets removed, one row per (repetition, axis) sweep.
+    """
+    points = table.copy()
+    for c in VOLTAGE_COLUMNS:
+        points[f"{c}_raw"] = points[c]
+    zero = (points[list(FORCE_COLUMNS)] == 0.0).all(axis=1).to_numpy()
+    offsets = []
+    for (rep, axis), idx in points.groupby(["repetition", "axis"], sort=True).indices.items():
+        z = idx[zero[idx]]
+        first = points.iloc[idx[0]]
+        sweep = f"the {axis} sweep of repetition {rep}"
+        if z.size == 0:
+            raise InputError(
+                f"{where(first['file'])}: {sweep} (from row {first['row']}) has no zero-load "
+                "row (fx = fy = fz = 0), so it cannot be zero-corrected"
+            )
+        if z.size == idx.size:
+            raise InputError(
+                f"{where(first['file'])}: {sweep} (from row {first['row']}) has only "
+                "zero-load rows; a sweep needs loaded points"
+            )
+        mean = points.iloc[z][list(VOLTAGE_COLUMNS)].mean().to_numpy()
+        for k, c in enumerate(VOLTAGE_COLUMNS):
+            points.iloc[idx, points.columns.get_loc(c)] -= mean[k]
+        offsets.append({"repetition": rep, "axis": axis, "n_zero": int(z.size),
+                        **{c: float(mean[k]) for k, c in enumerate(VOLTAGE_COLUMNS)}})
+    return points, pd.DataFrame(offsets)
+
+
+def tare_offsets(u: np.ndarray, n: int) -> np.ndarray:
+    """Mean of the first ``n`` voltage rows, the zero of a task log [V]."""
+    if n < 1:
+        raise InputError(f"--tare: needs at least 1 row, got {n}")
+    if len(u) < n:
+        raise InputError(f"--tare {n}: the log has only {len(u)} rows")
+    head = u[:n]
+    if not np.isfinite(head).all():
+        raise InputError(f"--tare {n}: the first {n} rows contain missing values")
+    return head.mean(axis=0)

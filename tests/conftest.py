@@ -1,0 +1,53 @@
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from fsdecouple import load_calibration, load_config
+from fsdecouple.model import fit
+from fsdecouple.simulate import SimulatedSensor, simulate
+
+ROOT = Path(__file__).resolve().parent.parent
+SAMPLE = ROOT / "sample_data"
+
+
+@pytest.fixture(scope="session")
+def settings():
+    return load_config()
+
+
+@pytest.fixture(scope="session")
+def sim_dir(tmp_path_factory):
+    """A freshly simulated data set (seed 7), independent of the committed sample."""
+    out = tmp_path_factory.mktemp("sim")
+    simulate(out, seed=7)
+    return out
+
+
+@pytest.fixture(scope="session")
+def sensor():
+    return SimulatedSensor()
+
+
+@pytest.fixture(scope="session")
+def calib(sim_dir, settings):
+    return load_calibration(sim_dir / "calibration", settings)
+
+
+@pytest.fixture(scope="session")
+def model(calib, settings):
+    return fit(calib, settings)
+
+
+def invoke(args, code=0, **kw):
+    """Run the CLI and assert its exit code, showing its output on failure."""
+    from fsdecouple.cli import app
+
+    result = CliRunner().invoke(app, [str(a) for a in args], **kw)
+    assert result.exit_code == code, (
+        f"exit {result.exit_code}, expected {code}\nstdout:\n{result.stdout}\n"
+        f"stderr:\n{result.stderr}\n{result.exception!r}"
+    )
+    return result

@@ -1,0 +1,145 @@
+"""The command line, end to end, through CliRunner."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+from conftest import SAMPLE, invoke
+
+
+def test_fit_apply_round_trip(tmp_path, sim_dir):
+    model = tmp_path / "model.json"
+    r = invoke(["fit", sim_dir / "calibration", "-o", model])
+    assert "Interference error gamma" in r.stdout and model.exists()
+    doc = json.loads(model.read_text())
+    assert doc["format"] == "fsdecouple.model" and len(doc["chi"]) == 6
+    assert all(len(f["sha256"]) == 64 for f in doc["provenance"]["files"])
+    out = tmp_path / "forces.csv"
+    invoke(["apply", model, sim_dir / "task_voltages.csv", "-o", out, "--tare", "200"])
+    forces = pd.read_csv(out)
+    log = pd.read_csv(sim_dir / "task_voltages.csv", dtype=str)
+    assert list(forces.columns) == [*log.columns, "fx", "fy", "fz"]
+    # input columns pass through as text, unchanged and in order
+    pd.testing.assert_frame_equal(pd.read_csv(out, dtype=str)[list(log.columns)], log)
+    truth = pd.read_csv(sim_dir / "task_forces.csv")
+    err = np.abs(forces[["fx", "fy", "fz"]].to_numpy() - truth[["fx", "fy", "fz"]].to_numpy())
+    assert err.max() < 0.75  # 0.5 % of 150 N, see test_task_forces_close_to_truth
+
+
+def test_sample_data_is_the_simulator_output(tmp_path):
+    """sample_data/ is exactly what `fsdecouple simulate sample_data` writes."""
+    invoke(["simulate", tmp_path])
+    for f in sorted(SAMPLE.rglob("*.csv")):
+        rel = f.relative_to(SAMPLE)
+        assert (tmp_path / rel).read_bytes() == f.read_bytes(), rel
+
+
+def test_ingest_summary_and_tidy_output(tmp_path):
+    tidy = tmp_path / "tidy.csv"
+    r = invoke(["ingest", SAMPLE / "calibration", "-o", tidy, "--json"])
+    doc = json.loads(r.stdout)
+    assert doc["repetitions"] == [1, 2, 3, 4, 5, 6]
+    assert doc["axes"]["x"]["points"] == 126 and doc["axes"]["z"]["load_min"] == -150
+    points = pd.read_csv(tidy)
+    # zero-corrected: every sweep's zero-load rows now average 0
+    zero = points[(points[["fx", "fy", "fz"]] == 0).all(axis=1)]
+    assert np.abs(zero.groupby(["repetition", "axis"])[["ux", "uy", "uz"]].mean()).max().max() < 1e-12
+
+
+def test_single_csv_with_repetition_column_gives_same_model(tmp_path, sim_dir):
+    frames = []
+    for rep in range(1, 7):
+        df = pd.read_csv(sim_dir / "calibration" / f"rep{rep}.csv", dtype=str)
+        df.insert(0, "repetition", str(rep))
+        frames.append(df)
+    single = tmp_path / "all.csv"
+    pd.concat(frames).to_csv(single, index=False)
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    invoke(["fit", single, "-o", a])
+    invoke(["fit", sim_dir / "calibration", "-o", b])
+    da, db = json.loads(a.read_text()), json.loads(b.read_text())
+    assert da["chi"] == db["chi"] and da["omega"] == db["omega"]
+
+
+def test_axis_column_is_optional(tmp_path, sim_dir):
+    """Without `axis`, sweeps are inferred from consecutive rows: same model."""
+    d = tmp_path / "noaxis"
+    d.mkdir()
+    for f in (sim_dir / "calibration").glob("*.csv"):
+        pd.read_csv(f, dtype=str).drop(columns="axis").to_csv(d / f.name, index=False)
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    invoke(["fit", d, "-o", a])
+    invoke(["fit", sim_dir / "calibration", "-o", b])
+    assert json.loads(a.read_text())["chi"] == json.loads(b.read_text())["chi"]
+
+
+def test_max_gamma_gate(tmp_path):
+    invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "a.json", "--max-gamma", "0.5"])
+    r = invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "b.json", "--max-gamma", "1e-6"],
+               code=1)
+    assert "gate failed" in r.stderr
+
+
+def test_show_and_flags_override(tmp_path):
+    m = tmp_path / "m.json"
+    invoke(["fit", SAMPLE / "calibration", "-o", m, "--C", "10", "--delta2", "2"])
+    svr = json.loads(m.read_text())["settings"]["svr"]
+    assert svr["C"] == 10 and svr["gamma"] == 0.25
+    assert "chi_zy" in invoke(["show", m]).stdout
+
+
+def test_rotation_from_config(tmp_path):
+    cfg = tmp_path / "rot.yaml"
+    cfg.write_text("rotation: [[0, -1, 0], [1, 0, 0], [0, 0, 1]]\n")
+    plain, rotated = tmp_path / "p.json", tmp_path / "r.json"
+    invoke(["fit", SAMPLE / "calibration", "-o", plain])
+    invoke(["fit", SAMPLE / "calibration", "-o", rotated, "-c", cfg])
+    from fsdecouple import load_model
+
+    u = np.array([[0.3, -0.2, -0.5]])
+    f = load_model(plain).decouple(u)[0]
+    np.testing.assert_allclose(load_model(rotated).decouple(u)[0], [-f[1], f[0], f[2]], rtol=1e-12)
+
+
+def test_zero_option_equals_tare(tmp_path, sim_dir):
+    m = tmp_path / "m.json"
+    invoke(["fit", sim_dir / "calibration", "-o", m])
+    log = pd.read_csv(sim_dir / "task_voltages.csv")
+    offs = log[["ux", "uy", "uz"]].iloc[:50].mean().to_numpy()
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    invoke(["apply", m, sim_dir / "task_voltages.csv", "-o", a, "--tare", "50"])
+    invoke(["apply", m, sim_dir / "task_voltages.csv", "-o", b,
+            "--zero", ",".join(repr(float(v)) for v in offs)])
+    np.testing.assert_allclose(pd.read_csv(a)[["fx", "fy", "fz"]], pd.read_csv(b)[["fx", "fy", "fz"]],
+                               atol=1e-9)
+
+
+def test_apply_keeps_rows_with_missing_values(tmp_path, sim_dir):
+    m = tmp_path / "m.json"
+    invoke(["fit", sim_dir / "calibration", "-o", m])
+    log = tmp_path / "log.csv"
+    log.write_text("t,ux,uy,uz\n0,0.1,0.0,-0.1\n1,,0.0,-0.1\n2,0.2,0.1,-0.2\n")
+    out = tmp_path / "f.csv"
+    r = invoke(["apply", m, log, "-o", out])
+    assert "1 rows have a missing voltage" in r.stderr and "rows 3" in r.stderr
+    f = pd.read_csv(out)
+    assert len(f) == 3 and f["fx"].isna().tolist() == [False, True, False]
+
+
+def test_apply_chunks_give_same_result(tmp_path, model, sim_dir):
+    from fsdecouple.apply import apply_file
+
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    apply_file(model, sim_dir / "task_voltages.csv", a, tare=200)
+    apply_file(model, sim_dir / "task_voltages.csv", b, tare=200, chunk_rows=7)
+    assert a.read_bytes() == b.read_bytes()
+
+
+def test_python_module_entry_point():
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-m", "fsdecouple", "--help"], capture_output=True, text=True)
+    assert r.returncode == 0 and "apply" in r.stdout

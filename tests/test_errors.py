@@ -1,0 +1,122 @@
+"""Each bad input: one line naming file, row and column; exit 2; no output file."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+from conftest import SAMPLE, invoke
+
+CAL = SAMPLE / "calibration"
+
+
+@pytest.fixture
+def cal(tmp_path):
+    d = tmp_path / "cal"
+    shutil.copytree(CAL, d)
+    return d
+
+
+def edit(path, row, col, value):
+    """Set one cell (row as a spreadsheet counts: header = 1)."""
+    lines = path.read_text().splitlines()
+    header = lines[0].split(",")
+    cells = lines[row - 1].split(",")
+    cells[header.index(col)] = value
+    lines[row - 1] = ",".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+
+
+def fails(args, tmp_path, *needles):
+    out = tmp_path / "out.json"
+    r = invoke([*args, "-o", out], code=2)
+    msg = r.stderr.strip()
+    assert msg.startswith("error:") and len(msg.splitlines()) == 1, msg
+    assert "Traceback" not in r.stderr + r.stdout
+    for n in needles:
+        assert n in msg, (n, msg)
+    assert not out.exists()
+    assert not list(tmp_path.glob(".out.json.*"))
+    return msg
+
+
+def test_missing_directory(tmp_path):
+    fails(["fit", tmp_path / "nope"], tmp_path, "nope", "not found")
+
+
+def test_missing_column(cal, tmp_path):
+    p = cal / "rep2.csv"
+    p.write_text(p.read_text().replace("uy", "u_y", 1))
+    fails(["fit", cal], tmp_path, "rep2.csv", "row 1", "missing column 'uy'")
+
+
+def test_non_numeric_cell(cal, tmp_path):
+    edit(cal / "rep3.csv", 17, "uy", "n/a")
+    fails(["fit", cal], tmp_path, "rep3.csv", "row 17", "column 'uy'", "'n/a'")
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", ""])
+def test_nan_inf_empty(cal, tmp_path, value):
+    edit(cal / "rep1.csv", 5, "fx", value)
+    fails(["fit", cal], tmp_path, "rep1.csv", "row 5", "column 'fx'")
+
+
+def test_row_loading_two_axes(cal, tmp_path):
+    edit(cal / "rep4.csv", 3, "fy", "10.000")
+    fails(["fit", cal], tmp_path, "rep4.csv", "row 3", "fx and fy")
+
+
+def test_sweep_without_zero_load_row(cal, tmp_path):
+    p = cal / "rep5.csv"
+    lines = p.read_text().splitlines()
+    lines = [ln for ln in lines if not (ln.startswith("y,") and ln.split(",")[2] == "0.000")]
+    p.write_text("\n".join(lines) + "\n")
+    fails(["fit", cal], tmp_path, "rep5.csv", "y sweep of repetition 5", "no zero-load row")
+
+
+def test_fewer_repetitions_than_config_requires(cal, tmp_path):
+    (cal / "rep6.csv").unlink()
+    fails(["fit", cal], tmp_path, "5 repetitions", "at least 6")
+
+
+def test_bad_config_key(tmp_path):
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("ful_scale: {x: 1, y: 1, z: 1}\n")
+    fails(["fit", CAL, "-c", cfg], tmp_path, "c.yaml", "unknown key 'ful_scale'",
+          "did you mean 'full_scale'")
+
+
+def test_negative_full_scale(tmp_path):
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("full_scale: {x: 100, y: -100, z: 150}\n")
+    fails(["fit", CAL, "-c", cfg], tmp_path, "full_scale: y", "greater than 0")
+
+
+def test_model_of_another_format(tmp_path):
+    bad = tmp_path / "m.json"
+    bad.write_text(json.dumps({"format": "something.else"}))
+    fails(["apply", bad, SAMPLE / "task_voltages.csv"], tmp_path, "not an fsdecouple model")
+
+
+def test_voltage_log_missing_column(tmp_path):
+    m = tmp_path / "m.json"
+    invoke(["fit", CAL, "-o", m])
+    log = tmp_path / "log.csv"
+    log.write_text("t,ux,uy\n0,0.1,0.2\n")
+    fails(["apply", m, log], tmp_path, "log.csv", "missing column 'uz'")
+
+
+def test_voltage_log_non_numeric(tmp_path):
+    m = tmp_path / "m.json"
+    invoke(["fit", CAL, "-o", m])
+    log = tmp_path / "log.csv"
+    log.write_text("t,ux,uy,uz\n0,0.1,0.2,0.3\n1,0.1,abc,0.3\n")
+    fails(["apply", m, log], tmp_path, "log.csv", "row 3", "column 'uy'", "'abc'")
+
+
+def test_existing_output_not_overwritten_without_force(tmp_path):
+    out = tmp_path / "out.json"
+    out.write_text("precious")
+    r = invoke(["fit", CAL, "-o", out], code=2)
+    assert "--force" in r.stderr and out.read_text() == "precious"
