@@ -21,6 +21,7 @@ from .model import CouplingErrorModel
 from .zero import tare_offsets
 
 CHUNK_ROWS = 200_000
+RANGE_MARGIN = 0.01  # fraction of the calibrated voltage span
 MISSING = ("", "nan", "NaN", "NA", "N/A", "null")
 
 
@@ -114,6 +115,10 @@ def apply_file(
     elif zero is not None:
         summary.offsets = np.asarray(zero, dtype=float)
     lo, hi = model.calibrated_range.T
+    # Noise around an end of the range (e.g. Z's 0 N end at rest) is not
+    # extrapolation worth a warning: allow 1 % of the calibrated span.
+    margin = RANGE_MARGIN * (hi - lo)
+    lo, hi = lo - margin, hi + margin
     total = max(1, path.stat().st_size)
     with atomic_write(out, force=force) as fh, open(path, "rb") as raw:
         first_row = HEADER_ROW + 1

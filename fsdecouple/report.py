@@ -113,6 +113,6 @@ def apply_warnings(summary) -> list[str]:
         w.append(f"{summary.missing_rows} rows have a missing voltage; kept with empty "
                  f"forces (rows {rows}{more})")
     if summary.out_of_range_rows:
-        w.append(f"{summary.out_of_range_rows} rows have a voltage outside the calibrated "
-                 "range; their forces are extrapolated")
+        w.append(f"{summary.out_of_range_rows} rows have a voltage more than 1 % of the span "
+                 "outside the calibrated range; their forces are extrapolated")
     return w

@@ -143,3 +143,20 @@ def test_python_module_entry_point():
 
     r = subprocess.run([sys.executable, "-m", "fsdecouple", "--help"], capture_output=True, text=True)
     assert r.returncode == 0 and "apply" in r.stdout
+
+
+def test_apply_counts_rows_outside_calibrated_range(tmp_path, model):
+    from fsdecouple.apply import apply_file
+
+    lo, hi = model.calibrated_range.T
+    span = hi - lo
+    rows = [
+        (0.5 * (lo[0] + hi[0]), 0.0, -0.5),  # inside
+        (hi[0] + 0.005 * span[0], 0.0, -0.5),  # within the 1 % margin: not counted
+        (hi[0] + 0.05 * span[0], 0.0, -0.5),  # 5 % beyond: counted
+        (0.0, lo[1] - 0.5, -0.5),  # far below on y: counted
+    ]
+    log = tmp_path / "log.csv"
+    log.write_text("ux,uy,uz\n" + "".join(f"{float(a)!r},{float(b)!r},{float(c)!r}\n" for a, b, c in rows))
+    summary = apply_file(model, log, tmp_path / "f.csv")
+    assert summary.out_of_range_rows == 2 and summary.rows == 4
