@@ -23,7 +23,6 @@ from .apply import apply_file
 from .calibration import GrossError, load_calibration
 from .config import load_config
 from .errors import FsdecoupleError, InputError
-from .html_report import build_report, load_cv_results
 from .io import atomic_write
 from .model import fit as fit_model
 from .model import load_model
@@ -196,6 +195,9 @@ def report(
     force: ForceOpt = False,
 ) -> None:
     """Write a self-contained HTML calibration report (figures, gamma tables, checks)."""
+    # imported here so that the other commands do not pay for loading matplotlib
+    from .html_report import build_report, load_cv_results
+
     with user_errors():
         model = load_model(model_file)
         cv_doc = load_cv_results(cv) if cv is not None else None
