@@ -169,3 +169,11 @@ def test_bad_cv_file_is_one_line_error(tmp_path, sample_model, content, match):
 def test_fit_mentions_the_report_command(tmp_path):
     r = invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "m.json"])
     assert "fsdecouple report" in r.stdout
+
+
+def test_readme_ends_its_main_command_with_a_report_and_shows_a_figure():
+    readme = (SAMPLE.parent / "README.md").read_text(encoding="utf-8")
+    main = next(ln for ln in readme.splitlines() if ln.startswith("python3 -m venv") and " fit " in ln)
+    assert main.endswith("report model.json --calib sample_data/calibration -o report.html --force")
+    assert "](docs/figure7.png)" in readme
+    assert_figure_ok(imread(SAMPLE.parent / "docs" / "figure7.png"))
