@@ -154,8 +154,11 @@ def chi_figure(model, points: pd.DataFrame | None = None, curves: dict | None = 
             u = np.asarray(c["u"], dtype=float)
             ax.plot(u, np.asarray(c["svr"], dtype=float) * MV, label="ε-SVR", **SVR_STYLE)
             if c.get("rbf-siso") is not None:
+                ax.autoscale_view()
+                frame = ax.get_ylim()  # points and eps-SVR
                 ax.plot(u, np.asarray(c["rbf-siso"], dtype=float) * MV, label="SISO RBF NN",
                         **RBF_STYLE)
+                _clip_to_frame(ax, frame)
         else:
             u = np.linspace(*model.chi[name].input_range, 400)
             ax.plot(u, model.chi[name](u) * MV, label="ε-SVR", **SVR_STYLE)
@@ -168,6 +171,20 @@ def chi_figure(model, points: pd.DataFrame | None = None, curves: dict | None = 
     fig.legend(handles, labels, loc="outside lower center", ncol=len(labels), frameon=False)
     fig.suptitle("Corrected coupling functions χ (eq. 4)")
     return fig
+
+
+def _clip_to_frame(ax, frame: tuple[float, float]) -> None:
+    """Keep the points and the eps-SVR readable when an overfitted RBF curve runs far
+    outside them: the frame grows by at most half its height and a note says so."""
+    lo, hi = frame
+    pad = 0.5 * (hi - lo)
+    ax.autoscale_view()
+    ylo, yhi = ax.get_ylim()
+    if ylo < lo - pad or yhi > hi + pad:
+        ax.set_ylim(max(ylo, lo - pad), min(yhi, hi + pad))
+        ax.text(0.98, 0.02, "SISO RBF NN leaves the frame", transform=ax.transAxes, ha="right",
+                va="bottom", fontsize=8, style="italic",
+                bbox=dict(boxstyle="round", fc="white", ec="0.6"))
 
 
 def residual_figure(residuals: pd.DataFrame, title: str) -> Figure:

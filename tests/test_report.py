@@ -177,3 +177,23 @@ def test_readme_ends_its_main_command_with_a_report_and_shows_a_figure():
     assert main.endswith("report model.json --calib sample_data/calibration -o report.html --force")
     assert "](docs/figure7.png)" in readme
     assert_figure_ok(imread(SAMPLE.parent / "docs" / "figure7.png"))
+
+
+def test_report_copes_with_a_minimal_cv_and_draws_rbf_siso_when_present(tmp_path, sample_model, cv_json):
+    doc = json.loads(cv_json.read_text())
+    for c in doc["curves"]["chi"].values():
+        # a wiggly stand-in for the SISO RBF baseline, only to exercise its curve
+        c["rbf-siso"] = [v + 0.002 * np.sin(40 * u) for u, v in zip(c["u"], c["svr"], strict=True)]
+    with_rbf = tmp_path / "rbf.json"
+    with_rbf.write_text(json.dumps(doc))
+    invoke(["report", sample_model, "--cv", with_rbf, "-o", tmp_path / "a.html", "--png", tmp_path / "png"])
+    assert "SISO RBF NN curves dashed" in (tmp_path / "a.html").read_text(encoding="utf-8")
+    minimal = {k: doc[k] for k in ("format", "format_version", "folds", "methods", "records")}
+    minimal.update(task=None, gross_error=None, points=[], checks=[], curves=None)
+    (tmp_path / "min.json").write_text(json.dumps(minimal))
+    invoke(["report", sample_model, "--cv", tmp_path / "min.json", "--calib", SAMPLE / "calibration",
+            "-o", tmp_path / "b.html"])
+    text = (tmp_path / "b.html").read_text(encoding="utf-8")
+    tree = parse(text)
+    assert {"table-gamma-methods", "table-gamma-svr", "fig-residuals"} <= set(tree.ids)
+    assert "No gross-error run" in text and "No combined-load validation" in text
