@@ -157,6 +157,7 @@ def fit(
         for t in fit_tables(model):
             console.print(t)
         console.print(f"model written to {output}")
+        console.print(f"calibration report: fsdecouple report {output} -o report.html", highlight=False)
     warn(model.warnings)
     if max_gamma is not None:
         worst = max(model.report["gamma_after"].values())
@@ -176,6 +177,53 @@ def show(model_file: Annotated[Path, typer.Argument(help="Model file (JSON).")])
     for t in fit_tables(model):
         console.print(t)
     warn(model.warnings)
+
+
+@app.command()
+def report(
+    model_file: Annotated[Path, typer.Argument(help="Model file (JSON).")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="HTML report to write.")],
+    cv: Annotated[
+        Path | None, typer.Option("--cv", help="cv.json of `fsdecouple cv`: Tables 1, 3, 5, residuals.")
+    ] = None,
+    calib: Annotated[
+        Path | None, typer.Option("--calib", help="Calibration directory or CSV, to plot its points.")
+    ] = None,
+    png: Annotated[
+        Path | None, typer.Option("--png", help="Also write each figure as a PNG into this directory.")
+    ] = None,
+    force: ForceOpt = False,
+) -> None:
+    """Write a self-contained HTML calibration report (figures, gamma tables, checks)."""
+    # imported here so that the other commands do not pay for loading matplotlib
+    from .html_report import build_report, load_cv_results
+
+    with user_errors():
+        model = load_model(model_file)
+        cv_doc = load_cv_results(cv) if cv is not None else None
+        cs = load_calibration(calib, model.settings) if calib is not None else None
+        targets = [output]
+        if png is not None:
+            if png.exists() and not png.is_dir():
+                raise InputError(f"--png {png}: exists and is not a directory")
+            png.mkdir(parents=True, exist_ok=True)
+        result = build_report(model, cv_doc, cs)
+        if png is not None:
+            targets += [png / f"{name}.png" for name in result.figures]
+        if not force:
+            for t in targets:
+                if t.exists():
+                    raise InputError(f"{t}: already exists; pass --force to overwrite it")
+        with atomic_write(output, force=True) as fh:
+            fh.write(result.html)
+        for name, data in result.figures.items():
+            if png is not None:
+                with atomic_write(png / f"{name}.png", "wb", force=True) as fh:
+                    fh.write(data)
+    console.print(f"report written to {output} ({len(result.figures)} figures)", highlight=False)
+    if png is not None:
+        console.print(f"figures written to {png}/: " + ", ".join(f"{n}.png" for n in result.figures),
+                      highlight=False)
 
 
 def _parse_zero(text: str) -> tuple[float, float, float]:

@@ -51,3 +51,23 @@ def invoke(args, code=0, **kw):
         f"stderr:\n{result.stderr}\n{result.exception!r}"
     )
     return result
+
+
+@pytest.fixture(scope="session")
+def cv_json(tmp_path_factory, settings):
+    """cv.json of the sample data (tests/cv_fixture.py until `fsdecouple cv` exists)."""
+    import json
+
+    from cv_fixture import cv_document
+
+    path = tmp_path_factory.mktemp("cv") / "cv.json"
+    path.write_text(json.dumps(cv_document(SAMPLE, settings), sort_keys=True, allow_nan=False, indent=1))
+    return path
+
+
+@pytest.fixture(scope="session")
+def sample_model(tmp_path_factory):
+    """A model file fitted on the committed sample data."""
+    path = tmp_path_factory.mktemp("model") / "model.json"
+    invoke(["fit", SAMPLE / "calibration", "-o", path])
+    return path
