@@ -160,3 +160,16 @@ def test_apply_counts_rows_outside_calibrated_range(tmp_path, model):
     log.write_text("ux,uy,uz\n" + "".join(f"{float(a)!r},{float(b)!r},{float(c)!r}\n" for a, b, c in rows))
     summary = apply_file(model, log, tmp_path / "f.csv")
     assert summary.out_of_range_rows == 2 and summary.rows == 4
+
+
+def test_outputs_get_the_usual_file_mode(tmp_path):
+    """Atomic writes go through mkstemp (mode 0600); the result must not stay private."""
+    import os
+
+    old = os.umask(0o022)
+    try:
+        out = tmp_path / "m.json"
+        invoke(["fit", SAMPLE / "calibration", "-o", out])
+    finally:
+        os.umask(old)
+    assert out.stat().st_mode & 0o777 == 0o644
