@@ -175,28 +175,37 @@ def _train_all(jobs, settings, workers, progress) -> tuple[dict, float]:
 # --- scoring -----------------------------------------------------------------------
 
 
-def _score(calib, folds, models, settings, points=None) -> list[dict]:
+def _held_out(calib: CalibrationSet, folds) -> dict[int, tuple]:
+    """(voltages, loaded axis, forces) of every held-out repetition, extracted once."""
+    out = {}
+    for rep in sorted({rep for fold in folds for rep in fold}):
+        test = calib.subset([rep])
+        out[rep] = (test.voltages, test.points["axis"].to_numpy(), test.forces)
+    return out
+
+
+def _decouple_held_out(tests, folds, models) -> dict[tuple, np.ndarray]:
+    """(round, test_set, method) -> decoupled forces of that held-out repetition [N]."""
+    return {(r, rep, m): models[(r, m)].decouple(tests[rep][0], rotate=False)
+            for r, fold in enumerate(folds, start=1) for rep in fold for m in METHODS}
+
+
+def _score(tests, forces, settings, points=None) -> list[dict]:
     """gamma (eq. 12) per (round, test_set, method, axis) on the clean held-out data."""
     records = []
     fs = settings.full_scale
-    for r, fold in enumerate(folds, start=1):
-        for rep in fold:
-            test = calib.subset([rep])
-            axis = test.points["axis"].to_numpy()
-            for method in METHODS:
-                f = models[(r, method)].decouple(test.voltages, rotate=False)
-                for a, name in enumerate(AXES):
-                    records.append({"round": r, "test_set": rep, "method": method, "axis": name,
-                                    "metric": "gamma",
-                                    "value": interference_error(f[axis == name], a, fs[a])})
-                if points is not None:
-                    loads = test.forces
-                    for i in range(len(f)):
-                        a = AXES.index(axis[i])
-                        points.append({"round": r, "test_set": rep, "method": method,
-                                       "axis": axis[i], "load": float(loads[i, a]),
-                                       **{c: float(v) for c, v in zip(FORCE_COLUMNS, f[i],
-                                                                      strict=True)}})
+    for (r, rep, method), f in forces.items():
+        _, axis, loads = tests[rep]
+        for a, name in enumerate(AXES):
+            records.append({"round": r, "test_set": rep, "method": method, "axis": name,
+                            "metric": "gamma",
+                            "value": interference_error(f[axis == name], a, fs[a])})
+        if points is not None:
+            for i in range(len(f)):
+                a = AXES.index(axis[i])
+                points.append({"round": r, "test_set": rep, "method": method,
+                               "axis": axis[i], "load": float(loads[i, a]),
+                               **{c: float(v) for c, v in zip(FORCE_COLUMNS, f[i], strict=True)}})
     return records
 
 
@@ -323,8 +332,10 @@ def run_cv(
     all_models, wall = _train_all(jobs + gross_jobs, settings, workers, progress)
     models = {k: v for k, v in all_models.items() if k[0] != "gross"}
 
+    tests = _held_out(calib, folds)
+    forces = _decouple_held_out(tests, folds, models)
     points: list[dict] = []
-    records = _score(calib, folds, models, settings, points)
+    records = _score(tests, forces, settings, points)
 
     # Table 4: each method established again, sequentially and alone, `repeats` times
     establish_times: dict[str, list[float]] = {m: [] for m in METHODS}
@@ -339,10 +350,14 @@ def run_cv(
                 establish_times[method].append(time.perf_counter() - t0)
         passes.append(time.perf_counter() - t_pass)
     sequential = float(np.median(passes))
+    # parallel training must not change a single bit of any decoupled force
     identical = all(
-        _score(calib, folds, _models_for(seq_models, g), settings)
-        == _score(calib, folds, _models_for(all_models, g), settings)
-        for g in ([False, True] if gross_jobs else [False])
+        all(np.array_equal(a[k], b[k]) for k in a)
+        for a, b in [
+            (_decouple_held_out(tests, folds, _models_for(all_models, g)),
+             _decouple_held_out(tests, folds, _models_for(seq_models, g)))
+            for g in ([False, True] if gross_jobs else [False])
+        ]
     )
     first_test = calib.subset(folds[0]).voltages
     vectors = [first_test[i:i + 1] for i in range(min(TIMING_VECTORS, len(first_test)))]
@@ -416,7 +431,7 @@ def run_cv(
             "placement": "added to the prime voltage of the point in the zero-corrected data; "
                          "training data only, the held-out test data stay clean",
             "rounds_affected": gross_rounds,
-            "records": _score(calib, folds, gmodels, settings),
+            "records": _score(tests, _decouple_held_out(tests, folds, gmodels), settings),
             "omega": omega,
         }
     if max_gamma is not None:
