@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 import re
 
@@ -213,3 +214,20 @@ def test_cv_needs_three_repetitions(tmp_path):
     assert "cross-validation needs at least 3 repetitions" in r.stderr
     r = invoke(["cv", d], code=2)  # the default config already wants six
     assert "requires at least 6" in r.stderr
+
+
+def test_cells_worse_than_initial_are_marked(doc):
+    from rich.console import Console
+
+    from fsdecouple.cv_report import cv_renderables
+
+    bad = json.loads(json.dumps(doc))
+    for r in bad["records"]:
+        if (r["round"], r["test_set"], r["method"], r["axis"]) == (2, 3, "rbf-mimo", "y"):
+            r["value"] = 0.5
+    console = Console(record=True, width=200, file=io.StringIO())
+    for item in cv_renderables(bad):
+        console.print(item)
+    text = console.export_text()
+    assert "50.00!" in text and text.count("!") == 2  # the cell and the title
+    assert "rbf-mimo  worst gamma  50.00 % F.S., 1 of 18 cells worse than initial" in text
