@@ -388,8 +388,9 @@ def run_cv(
         "rbf": {"spread": SPREAD, "b": B_FACTOR / SPREAD, "mse_goal": MSE_GOAL,
                 "output_layer": OUTPUT_LAYER,
                 "input_units": "full-scale outputs" if settings.scaling == "full_scale" else "V",
-                "rank": [{"round": r, "method": m, "subject": s, "rank": rank}
-                         for r in trains for m, s, rank in _ranks(models, r)]},
+                "rank": [{"round": r, "method": m, "subject": s, "rank": net.rank,
+                          "centres": len(net.centres), "train_mse": net.train_mse}
+                         for r in trains for m, s, net in _networks(models, r)]},
         "records": records,
         "task": None,
         "gross_error": None,
@@ -448,7 +449,7 @@ def _models_for(models: dict, gross: bool) -> dict:
     return out
 
 
-def _ranks(models, r):
-    yield "rbf-mimo", "fx,fy,fz", models[(r, "rbf-mimo")].net.rank
+def _networks(models, r):
+    yield "rbf-mimo", "fx,fy,fz", models[(r, "rbf-mimo")].net
     for name, c in models[(r, "rbf-siso")].chi.items():
-        yield "rbf-siso", name, c.net.rank
+        yield "rbf-siso", name, c.net
