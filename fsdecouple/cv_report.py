@@ -83,7 +83,7 @@ def task_table(doc: dict[str, Any]) -> Table:
     task = doc["task"]
     tare = f", tare {task['tare']} rows" if task["tare"] else ", no tare"
     t = Table(title=f"Combined loads: {task['voltages']} ({task['rows']} rows{tare}) against "
-                    "true forces; error % F.S., worst round")
+                    "true forces; error % F.S., worst round (!: over 10x the best method's)")
     t.add_column("method")
     for metric in ("max", "RMS"):
         for a in AXES:
@@ -99,7 +99,9 @@ def task_table(doc: dict[str, Any]) -> Table:
             for a in AXES:
                 v = worst[(m, metric, a)]
                 # an error above 10x the best method's is an explosion worth seeing
-                cells.append(Text(_num(v), style=WORSE if v > 10 * max(best, 1e-12) else ""))
+                explodes = v > 10 * max(best, 1e-12)
+                cells.append(Text(_num(v) + ("!" if explodes else ""),
+                                  style=WORSE if explodes else ""))
         t.add_row(m, *cells)
     return t
 
