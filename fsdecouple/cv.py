@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from . import __version__
-from . import svr as _svr  # noqa: F401  (load libsvm before any timing starts)
+from . import svr as _svr
 from .calibration import CalibrationSet, GrossError, load_calibration
 from .checks import assumption_checks
 from .config import AXES, FORCE_COLUMNS, Settings
@@ -38,7 +38,7 @@ from .io import read_task_log
 from .linear import fit_calibration_matrix, fit_omega
 from .metrics import interference_error
 from .model import CHI_NAMES, chi_training_data, fit
-from .rbf import B_FACTOR, MSE_GOAL, OUTPUT_LAYER, SPREAD, fit_mimo, fit_siso
+from .rbf import B_FACTOR, MSE_GOAL, OUTPUT_LAYER, SPREAD, basic_solution, fit_mimo, fit_siso
 from .zero import tare_offsets
 
 FORMAT = "fsdecouple.cv"
@@ -325,10 +325,9 @@ def run_cv(
     gross_rounds = [r for r in trains if gross_calib is not None and gross_error.repetition in trains[r]]
     gross_jobs = [(("gross", r, m), m, gross_calib.subset(trains[r]))
                   for r in gross_rounds for m in METHODS]
-    # warm up (first libsvm, LAPACK and pandas calls) so neither timing pays for it
-    warm = calib.subset(reps[:1])
-    for m in METHODS:
-        establish(m, warm, settings)
+    # first calls into libsvm and LAPACK, so that neither timing below pays for them
+    _svr.fit_svr(np.array([0.0, 1.0]), np.array([0.0, 0.01]), settings.svr)
+    basic_solution(np.eye(2), np.ones((2, 1)))
     all_models, wall = _train_all(jobs + gross_jobs, settings, workers, progress)
     models = {k: v for k, v in all_models.items() if k[0] != "gross"}
 
