@@ -1,15 +1,8 @@
 """The cross-validation protocol of Section 4, against the baselines of Tables 1 and 3.
 
 In each round two repetitions are held out ("test data I" and "test data II") and
-the others train every method:
-
-* ``initial``: no coupling correction, ``f = omega^-1(u)`` per axis (Table 1, eq. 13);
-* ``linear``: the industrial calibration matrix, ``f = C u`` by least squares (Section 1);
-* ``rbf-mimo``: the standard MIMO RBF network of Section 4.1 (:mod:`fsdecouple.rbf`);
-* ``rbf-siso``: the coupling error model with six 1-D RBF networks (Figure 7, red);
-* ``svr``: the coupling error model with six epsilon-SVRs (Table 2, Table 3).
-
-Each is scored by the interference error gamma of eq. (12) on each held-out
+the others train every method of :mod:`fsdecouple.methods` (initial, linear,
+rbf-mimo, rbf-siso, svr).  Each is scored by the interference error gamma of eq. (12) on each held-out
 repetition's sweeps; optionally also on a combined-load task log with true forces,
 with one calibration point moved (Section 4.4, Table 5), and timed (Table 4).
 :func:`run_cv` returns the ``cv.json`` document (layout in the README).
@@ -20,8 +13,6 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor, as_completed
-from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -35,30 +26,19 @@ from .checks import assumption_checks
 from .config import AXES, FORCE_COLUMNS, Settings
 from .errors import InputError
 from .io import read_task_log
-from .linear import fit_calibration_matrix, fit_omega
+from .linear import fit_omega
+from .methods import METHODS, establish, train_all
 from .metrics import interference_error
-from .model import CHI_NAMES, chi_training_data, fit
-from .rbf import B_FACTOR, MSE_GOAL, OUTPUT_LAYER, SPREAD, basic_solution, fit_mimo, fit_siso
+from .model import CHI_NAMES
+from .rbf import B_FACTOR, MSE_GOAL, OUTPUT_LAYER, SPREAD, basic_solution
 from .zero import tare_offsets
 
 FORMAT = "fsdecouple.cv"
 FORMAT_VERSION = 1
-METHODS = ("initial", "linear", "rbf-mimo", "rbf-siso", "svr")
 ROUNDS = 3  # Section 4.1: "the cross validation is repeated three times"
 HELD_OUT = 2  # "test data I" and "test data II"
 CURVE_POINTS = 201
 TIMING_VECTORS = 100  # single-vector decoupling calls timed per repeat (Table 4)
-
-
-@dataclass(frozen=True)
-class InitialMethod:
-    """No coupling correction: ``f_a = u_a / k_aa`` (the "initial data" of Table 1)."""
-
-    k: np.ndarray
-
-    def decouple(self, u: np.ndarray, *, rotate: bool = False) -> np.ndarray:
-        del rotate
-        return np.asarray(u, dtype=float).reshape(-1, 3) / self.k
 
 
 # --- folds ------------------------------------------------------------------------
@@ -116,60 +96,6 @@ def check_folds(folds: list[list[int]], repetitions: list[int]) -> None:
             raise InputError(f"--folds: round {r} names a repetition twice")
         if len(set(fold)) >= len(repetitions):
             raise InputError(f"--folds: round {r} holds out every repetition; none is left to train")
-
-
-# --- establishing the methods -------------------------------------------------------
-
-
-def input_scale(train: CalibrationSet, settings: Settings) -> np.ndarray | None:
-    """RBF input units: volts as they are, or full-scale outputs as the SVRs see them."""
-    if settings.scaling != "full_scale":
-        return None
-    return np.abs(fit_omega(train.points).k) * np.asarray(settings.full_scale)
-
-
-def establish(method: str, train: CalibrationSet, settings: Settings, *, workers: int = 1):
-    """Fit one method on a training set; the result has ``decouple(u, rotate=False)``."""
-    if method == "initial":
-        return InitialMethod(fit_omega(train.points).k)
-    if method == "linear":
-        return fit_calibration_matrix(train.voltages, train.forces)
-    if method == "rbf-mimo":
-        return fit_mimo(train.voltages, train.forces, spread=SPREAD,
-                        input_scale=input_scale(train, settings))
-    if method == "rbf-siso":
-        data = {name: chi_training_data(train, name) for name in CHI_NAMES}
-        return fit_siso(fit_omega(train.points).k, data, spread=SPREAD,
-                        input_scale=input_scale(train, settings))
-    if method == "svr":
-        return fit(train, settings, workers=workers)
-    raise ValueError(f"unknown method {method!r}")
-
-
-def _train_all(jobs, settings, workers, progress) -> tuple[dict, float]:
-    """Fit every (key, method, train) job on a thread pool; (models, wall seconds).
-
-    libsvm and LAPACK release the GIL, so threads train in parallel; each model
-    depends only on its own job, so the results equal sequential training.
-    """
-    models = {}
-    t0 = time.perf_counter()
-    if workers <= 1:
-        for i, (key, method, train) in enumerate(jobs, start=1):
-            models[key] = establish(method, train, settings, workers=1)
-            if progress:
-                progress(i, len(jobs))
-    else:
-        # the SVR jobs are the long ones: start them first
-        order = sorted(jobs, key=lambda j: j[1] != "svr")
-        with ThreadPoolExecutor(workers) as pool:
-            futures = {pool.submit(establish, m, tr, settings, workers=workers): key
-                       for key, m, tr in order}
-            for i, fut in enumerate(as_completed(futures), start=1):
-                models[futures[fut]] = fut.result()
-                if progress:
-                    progress(i, len(jobs))
-    return models, time.perf_counter() - t0
 
 
 # --- scoring -----------------------------------------------------------------------
@@ -328,7 +254,7 @@ def run_cv(
     # first calls into libsvm and LAPACK, so that neither timing below pays for them
     _svr.fit_svr(np.array([0.0, 1.0]), np.array([0.0, 0.01]), settings.svr)
     basic_solution(np.eye(2), np.ones((2, 1)))
-    all_models, wall = _train_all(jobs + gross_jobs, settings, workers, progress)
+    all_models, wall = train_all(jobs + gross_jobs, settings, workers, progress)
     models = {k: v for k, v in all_models.items() if k[0] != "gross"}
 
     tests = _held_out(calib, folds)
