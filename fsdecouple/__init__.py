@@ -10,6 +10,17 @@ Error Model and epsilon-SVR" (Sensors, 2012).
 >>> forces = model.decouple([[0.5, 0.01, -0.2]])
 """
 
+import os as _os
+
+# Every matrix here is small (hundreds of rows) and fsdecouple parallelises over
+# whole jobs (the six SVRs of a fit, the models of cv) with its own threads.
+# OpenBLAS's and libsvm's OpenMP worker threads would only compete with those
+# threads for the cores, and their spin-waiting made cv up to 10x slower on a
+# loaded 2-core machine.  Set before numpy and libsvm load; a value the user
+# set wins.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"):
+    _os.environ.setdefault(_var, "1")
+
 __version__ = "0.1.0"
 
 from .calibration import CalibrationSet, load_calibration  # noqa: E402

@@ -22,6 +22,8 @@ from . import __version__
 from .apply import apply_file
 from .calibration import GrossError, load_calibration
 from .config import load_config
+from .cv import parse_folds, run_cv
+from .cv_report import cv_renderables
 from .errors import FsdecoupleError, InputError
 from .io import atomic_write
 from .model import fit as fit_model
@@ -267,6 +269,85 @@ def apply(
     for line in apply_lines(summary, output):
         console.print(line, highlight=False)
     warn(apply_warnings(summary))
+
+
+def _bar():
+    return Progress(
+        "[progress.description]{task.description}", BarColumn(),
+        "{task.completed}/{task.total}", console=err_console, disable=not interactive(),
+        transient=True,
+    )
+
+
+@app.command()
+def cv(
+    calib: Annotated[Path, typer.Argument(help="Calibration directory or CSV.")],
+    config: ConfigOpt = None,
+    folds: Annotated[
+        str | None,
+        typer.Option(help='Held-out repetitions per round, e.g. "1,2;3,4;5,6" (the default).'),
+    ] = None,
+    output: Annotated[
+        Path | None, typer.Option("--output", "-o", help="Write the cv.json document.")
+    ] = None,
+    task: Annotated[
+        Path | None, typer.Option(help="Combined-load voltage log (CSV) to validate on.")
+    ] = None,
+    task_forces: Annotated[
+        Path | None, typer.Option(help="True forces of --task, row for row (CSV: fx, fy, fz).")
+    ] = None,
+    task_tare: Annotated[
+        int | None, typer.Option(help="Zero the task voltages by the mean of their first N rows.")
+    ] = None,
+    gross_error: Annotated[
+        str | None,
+        typer.Option(help="Move one training point: AXIS:REP:POINT:OFFSET[V], e.g. x:1:5:0.2"),
+    ] = None,
+    max_gamma: Annotated[
+        float | None,
+        typer.Option(help="Exit 1 if any svr gamma on held-out data exceeds this fraction."),
+    ] = None,
+    workers: Annotated[
+        int | None, typer.Option(help="Training threads (default: cores; 1: sequential).")
+    ] = None,
+    repeats: Annotated[int, typer.Option(help="Sequential timing passes (Table 4).")] = 1,
+    force: ForceOpt = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Cross-validate the model against the baselines of Section 4 (Tables 1, 3, 4, 5)."""
+    with user_errors():
+        settings = load_config(config)
+        if (task is None) != (task_forces is None):
+            raise InputError("--task and --task-forces go together: the log and its true forces")
+        if task_tare is not None and task is None:
+            raise InputError("--task-tare needs --task")
+        if workers is not None and workers < 1:
+            raise InputError(f"--workers {workers}: needs at least 1")
+        if output is not None and not force and output.exists():
+            raise InputError(f"{output}: already exists; pass --force to overwrite it")
+        with _bar() as bar:
+            job = bar.add_task("training", total=None)
+            doc = run_cv(
+                calib, settings, folds=parse_folds(folds) if folds is not None else None,
+                task=(task, task_forces) if task is not None else None, task_tare=task_tare,
+                gross_error=GrossError.parse(gross_error) if gross_error else None,
+                max_gamma=max_gamma, workers=workers, repeats=repeats,
+                progress=lambda done, total: bar.update(job, completed=done, total=total),
+            )
+        text = json.dumps(doc, indent=1, sort_keys=True, allow_nan=False)
+        if output is not None:
+            with atomic_write(output, force=force) as fh:
+                fh.write(text + "\n")
+    if json_out:
+        sys.stdout.write(text + "\n")
+    else:
+        for r in cv_renderables(doc):
+            console.print(r)
+        if output is not None:
+            console.print(f"cv document written to {output}", highlight=False)
+    warn(doc["warnings"])
+    if doc["gate"] is not None and not doc["gate"]["passed"]:
+        raise typer.Exit(1)
 
 
 def main() -> None:

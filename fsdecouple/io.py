@@ -237,3 +237,33 @@ def atomic_write(path: str | Path, mode: str = "w", *, force: bool = True) -> It
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
+
+
+# --- task logs with true forces (combined-load validation) --------------------
+
+def read_task_log(
+    voltages: str | Path, forces: str | Path, settings: Settings
+) -> tuple[np.ndarray, np.ndarray]:
+    """A voltage log and its true forces, as ``simulate`` writes them, row for row.
+
+    Returns ``(u, f)``, shape (n, 3) each, in V and N (config columns and scales).
+    """
+    out = []
+    for path, canon in ((Path(voltages), VOLTAGE_COLUMNS), (Path(forces), FORCE_COLUMNS)):
+        header = read_header(path, settings)
+        names = {c: settings.columns[c] for c in canon}
+        require_columns(header, names, path)
+        raw = read_csv_text(path, settings)
+        if raw.empty:
+            raise InputError(f"{path}: header only, no data rows")
+        out.append(np.column_stack([
+            to_numbers(raw[n], path, n, HEADER_ROW + 1, settings.decimal) * settings.scale[c]
+            for c, n in names.items()
+        ]))
+    u, f = out
+    if len(u) != len(f):
+        raise InputError(
+            f"{forces}: {len(f)} rows, but {voltages} has {len(u)}; the true forces must "
+            "match the voltage log row for row"
+        )
+    return u, f

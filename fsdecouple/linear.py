@@ -52,3 +52,33 @@ def fit_omega(points) -> OmegaFit:
         r2[a] = 1.0 - ss_res / ss_tot if ss_tot > 0 else np.nan
         n[a] = f.size
     return OmegaFit(k, r2, n)
+
+
+@dataclass(frozen=True)
+class CalibrationMatrix:
+    """The standard industrial linear calibration, ``f = C u`` (Section 1, refs 9-11).
+
+    Attributes
+    ----------
+    C : ndarray, shape (3, 3)
+        Calibration matrix [N/V], row a gives f_a from u_x, u_y, u_z.
+    """
+
+    C: np.ndarray
+
+    def decouple(self, u: np.ndarray, *, rotate: bool = False) -> np.ndarray:
+        """Forces [N] from zero-corrected voltages [V]: ``f = C u`` per row."""
+        del rotate  # the baseline works in the sensor frame only
+        return np.asarray(u, dtype=float).reshape(-1, 3) @ self.C.T
+
+
+def fit_calibration_matrix(u: np.ndarray, f: np.ndarray) -> CalibrationMatrix:
+    """Least squares ``F ~ U C^T`` over all training points (the pseudo-inverse method).
+
+    No intercept: the calibration data are zero-corrected, so zero load gives
+    zero voltage by construction.  ``u`` and ``f`` have shape (n, 3) [V], [N].
+    """
+    u = np.asarray(u, dtype=float).reshape(-1, 3)
+    f = np.asarray(f, dtype=float).reshape(-1, 3)
+    ct, *_ = np.linalg.lstsq(u, f, rcond=None)
+    return CalibrationMatrix(np.ascontiguousarray(ct.T))

@@ -1,0 +1,55 @@
+"""Regenerate the sample `fsdecouple cv` output quoted in the README.
+
+Runs the command below on the committed sample data, writes its printed text to
+docs/cv-sample-output.txt and copies that text into README.md between the
+``<!-- cv-sample-output:start -->`` and ``<!-- cv-sample-output:end -->`` markers.
+Never edit either by hand; run ``python docs/make_readme_output.py`` from the
+repository root instead.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+ARGS = [
+    "cv", "sample_data/calibration",
+    "--task", "sample_data/task_voltages.csv", "--task-forces", "sample_data/task_forces.csv",
+    "--task-tare", "200", "--gross-error", "x:1:5:0.2", "--max-gamma", "0.016",
+]
+WIDTH = 132
+START, END = "<!-- cv-sample-output:start -->", "<!-- cv-sample-output:end -->"
+
+
+def main() -> int:
+    env = {**os.environ, "COLUMNS": str(WIDTH), "NO_COLOR": "1", "TERM": "dumb",
+           "PYTHONPATH": str(ROOT)}
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [sys.executable, "-m", "fsdecouple", *ARGS, "-o", str(Path(tmp) / "cv.json")]
+        run = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
+    if run.returncode not in (0, 1):
+        sys.stderr.write(run.stderr)
+        return run.returncode
+    lines = [line.rstrip() for line in run.stdout.splitlines()]
+    lines = [line for line in lines if not line.startswith("cv document written to")]
+    text = "$ fsdecouple " + " ".join(ARGS) + " -o cv.json\n" + "\n".join(lines).rstrip() + "\n"
+    (ROOT / "docs" / "cv-sample-output.txt").write_text(text, encoding="utf-8")
+    readme = ROOT / "README.md"
+    body = readme.read_text(encoding="utf-8")
+    block = f"{START}\n```text\n{text}```\n{END}"
+    new, n = re.subn(re.escape(START) + r".*?" + re.escape(END), lambda _: block, body, flags=re.S)
+    if n != 1:
+        sys.stderr.write(f"README.md: expected one {START} ... {END} block, found {n}\n")
+        return 2
+    readme.write_text(new, encoding="utf-8")
+    print(f"wrote docs/cv-sample-output.txt and README.md ({len(lines)} lines)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

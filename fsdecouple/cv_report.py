@@ -1,0 +1,206 @@
+"""Rich tables for ``fsdecouple cv``, built from the cv.json document (no computation here
+beyond picking numbers out of its records)."""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from typing import Any
+
+from rich import box
+from rich.table import Table
+from rich.text import Text
+
+from .config import AXES
+
+TEST_NAMES = ("I", "II", "III", "IV")
+WORSE = "bold red"  # Table 1 sets cells worse than the initial data in bold
+
+
+def _index(records) -> dict[tuple, float]:
+    return {(r["round"], r["test_set"], r["method"], r["axis"]): r["value"] for r in records}
+
+
+def _num(fraction: float) -> str:
+    return f"{100.0 * fraction:.2f}"
+
+
+def gamma_table(doc: dict[str, Any], records=None, title=None, clean=None) -> Table:
+    """Tables 1 and 3 side by side: rows round x test set, a column group per method.
+
+    A cell worse than the initial data of the same round, test set and axis is
+    bold red, as Table 1 sets them in bold.  With ``clean`` records (Table 5), a
+    cell that differs from its clean value carries a ``*``.
+    """
+    idx = _index(doc["records"] if records is None else records)
+    ref = _index(clean) if clean is not None else None
+    t = Table(title=title or "Interference error gamma (eq. 12) on held-out repetitions, % F.S. "
+                             "(! and bold red: worse than initial)", box=box.SIMPLE_HEAD,
+              pad_edge=False, padding=(0, 0, 0, 1))
+    t.add_column("round", no_wrap=True)
+    t.add_column("test (rep)", no_wrap=True)
+    cell_width = 5 if ref is not None else 4
+    for m in doc["methods"]:
+        for a in AXES:
+            # the method names its column group once, over its gamma_x column
+            t.add_column(f"{m if a == 'x' else ''}\nγ{a}", justify="right", no_wrap=True,
+                         min_width=max(len(m), cell_width) if a == "x" else cell_width)
+    for r, fold in enumerate(doc["folds"], start=1):
+        for i, rep in enumerate(fold):
+            cells = []
+            for m in doc["methods"]:
+                for a in AXES:
+                    v = idx[(r, rep, m, a)]
+                    worse = m != "initial" and v > idx[(r, rep, "initial", a)]
+                    mark = "*" if ref is not None and ref[(r, rep, m, a)] != v else ""
+                    # "!" keeps the paper's bold visible in plain-text CI logs
+                    cells.append(Text(_num(v) + mark + ("!" if worse else ""),
+                                      style=WORSE if worse else ""))
+            name = TEST_NAMES[i] if i < len(TEST_NAMES) else str(i + 1)
+            t.add_row(str(r) if i == 0 else "", f"{name} ({rep})", *cells)
+        if r < len(doc["folds"]):
+            t.add_section()
+    return t
+
+
+def summary_lines(doc: dict[str, Any]) -> list[str]:
+    worst = defaultdict(float)
+    worse = defaultdict(int)
+    base = _index(doc["records"])
+    for rec in doc["records"]:
+        m = rec["method"]
+        worst[m] = max(worst[m], rec["value"])
+        if m != "initial" and rec["value"] > base[(rec["round"], rec["test_set"], "initial",
+                                                   rec["axis"])]:
+            worse[m] += 1
+    n = len([r for r in doc["records"] if r["method"] == "initial"])
+    return [f"{m:9s} worst gamma {_num(worst[m]):>6s} % F.S."
+            + ("" if m == "initial" else f", {worse[m]} of {n} cells worse than initial")
+            for m in doc["methods"]]
+
+
+def task_table(doc: dict[str, Any]) -> Table:
+    """Combined-load errors per method: worst round's max and RMS error, % F.S."""
+    task = doc["task"]
+    tare = f", tare {task['tare']} rows" if task["tare"] else ", no tare"
+    t = Table(title=f"Combined loads: {task['voltages']} ({task['rows']} rows{tare}) against "
+                    "true forces; error % F.S., worst round (!: over 10x the best method's)")
+    t.add_column("method")
+    for metric in ("max", "RMS"):
+        for a in AXES:
+            t.add_column(f"{metric if a == 'x' else ''}\n|Δf{a}|", justify="right")
+    worst: dict[tuple, float] = defaultdict(float)
+    for rec in task["records"]:
+        key = (rec["method"], rec["metric"], rec["axis"])
+        worst[key] = max(worst[key], rec["value"])
+    best = min(worst[(m, "max_error", a)] for m in doc["methods"] for a in AXES)
+    for m in doc["methods"]:
+        cells = []
+        for metric in ("max_error", "rms_error"):
+            for a in AXES:
+                v = worst[(m, metric, a)]
+                # an error above 10x the best method's is an explosion worth seeing
+                explodes = v > 10 * max(best, 1e-12)
+                cells.append(Text(_num(v) + ("!" if explodes else ""),
+                                  style=WORSE if explodes else ""))
+        t.add_row(m, *cells)
+    return t
+
+
+def gross_tables(doc: dict[str, Any]) -> list[Table]:
+    """Table 5 (svr with and without the moved point) and eq. (13) vs eq. (14)."""
+    g = doc["gross_error"]
+    s = g["spec"]
+    t = gamma_table(
+        doc, g["records"], clean=doc["records"],
+        title=f"Table 5: gamma % F.S. with point {s['point']} of the {s['axis']} sweep of "
+              f"repetition {s['repetition']} moved by {s['offset']:+g} V in the training data "
+              "(*: changed from the clean run)")
+    side = Table(title="svr: Table 3 (clean) beside Table 5 (moved point), % F.S.",
+                 box=box.SIMPLE_HEAD, pad_edge=False)
+    side.add_column("round")
+    side.add_column("test (rep)")
+    for label in ("clean", "moved"):
+        for a in AXES:
+            side.add_column(f"{label if a == 'x' else ''}\nγ{a}", justify="right")
+    side.add_column("largest\nchange", justify="right")
+    clean, moved = _index(doc["records"]), _index(g["records"])
+    for r in g["rounds_affected"]:
+        for i, rep in enumerate(doc["folds"][r - 1]):
+            c = [clean[(r, rep, "svr", a)] for a in AXES]
+            m = [moved[(r, rep, "svr", a)] for a in AXES]
+            change = max(abs(x - y) for x, y in zip(c, m, strict=True))
+            side.add_row(str(r) if i == 0 else "",
+                         f"{TEST_NAMES[i] if i < len(TEST_NAMES) else i + 1} ({rep})",
+                         *(_num(v) for v in c + m), _num(change))
+    o = Table(title="omega^-1 \\[N/V]: clean (eq. 13) vs with the gross error (eq. 14)")
+    for col in ("round", "axis", "clean", "gross", "change"):
+        o.add_column(col, justify="right")
+    for rec in g["omega"]:
+        if rec["k_clean"] == rec["k_gross"]:
+            continue
+        o.add_row(str(rec["round"]), rec["axis"], f"{rec['inverse_clean']:.3f}",
+                  f"{rec['inverse_gross']:.3f}",
+                  f"{100 * (rec['inverse_gross'] / rec['inverse_clean'] - 1):+.2f} %")
+    return [t, side, o]
+
+
+def checks_table(doc: dict[str, Any]) -> Table:
+    """Section 2.1 assumption checks of each round's svr model."""
+    rounds = sorted({c["round"] for c in doc["checks"]})
+    t = Table(title="Assumption checks (Section 2.1) of each round's svr model")
+    t.add_column("check")
+    t.add_column("subject")
+    t.add_column("limit", justify="right")
+    for r in rounds:
+        t.add_column(f"round {r}", justify="right")
+    t.add_column("status")
+    rows: dict[tuple, dict] = {}
+    for c in doc["checks"]:
+        rows.setdefault((c["name"], c["subject"], c["limit"]), {})[c["round"]] = c
+    fmt = {"linearity": "{:.5f}", "coupling": "{:.2%}", "slope": "{:.4f}",
+           "second_order": "{:.3%}"}
+    for (name, subject, limit), by_round in rows.items():
+        f = fmt.get(name, "{:.4g}")
+        sign = ">=" if name == "linearity" else "<="
+        status = "pass" if all(c["status"] == "pass" for c in by_round.values()) else "warning"
+        t.add_row(name, subject, f"{sign} {f.format(limit)}",
+                  *(f.format(by_round[r]["value"]) if r in by_round else "-" for r in rounds),
+                  Text(status, style="" if status == "pass" else "yellow"))
+    return t
+
+
+def timing_table(doc: dict[str, Any]) -> Table:
+    tm = doc["timing"]
+    v = {(r["method"], r["metric"]): r["value"] for r in tm["records"]}
+    t = Table(title=f"Timing (Table 4): medians over rounds and {tm['repeats']} sequential pass(es)")
+    for col in ("method", "establishment \\[ms]", "decoupling one vector \\[µs]"):
+        t.add_column(col, justify="right")
+    for m in doc["methods"]:
+        t.add_row(m, f"{1e3 * v[(m, 'establish_seconds')]:.1f}",
+                  f"{1e6 * v[(m, 'decouple_seconds_per_vector')]:.1f}")
+    return t
+
+
+def parallel_line(doc: dict[str, Any]) -> str:
+    p = doc["timing"]["parallel"]
+    same = "identical to" if p["identical"] else "DIFFERENT from"
+    return (f"training: {p['wall_seconds']:.2f} s on {p['workers']} threads, "
+            f"{p['sequential_seconds']:.2f} s sequential (speed-up {p['speedup']:.2f}x); "
+            f"results {same} sequential training")
+
+
+def cv_renderables(doc: dict[str, Any]) -> list:
+    """Everything ``fsdecouple cv`` prints, in order."""
+    out: list = [gamma_table(doc), Text("\n".join(summary_lines(doc)))]
+    if doc["task"] is not None:
+        out.append(task_table(doc))
+    if doc["gross_error"] is not None:
+        out += gross_tables(doc)
+    out += [checks_table(doc), timing_table(doc), Text(parallel_line(doc))]
+    if doc["gate"] is not None:
+        g = doc["gate"]
+        out.append(Text(f"gate: worst svr gamma {_num(g['worst'])} % F.S. "
+                        f"{'<=' if g['passed'] else '>'} --max-gamma {_num(g['max_gamma'])} % "
+                        f"-> {'passed' if g['passed'] else 'FAILED'}",
+                        style="" if g["passed"] else "bold red"))
+    return out

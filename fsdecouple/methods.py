@@ -1,0 +1,89 @@
+"""The five decoupling methods of Section 4, and training many of them in parallel.
+
+Every fitted method has ``decouple(u, rotate=False)`` -> forces [N]:
+
+* ``initial``: no coupling correction, ``f = omega^-1(u)`` per axis (Table 1, eq. 13);
+* ``linear``: the industrial calibration matrix, ``f = C u`` by least squares (Section 1);
+* ``rbf-mimo``: the standard MIMO RBF network of Section 4.1 (:mod:`fsdecouple.rbf`);
+* ``rbf-siso``: the coupling error model with six 1-D RBF networks (Figure 7, red);
+* ``svr``: the coupling error model with six epsilon-SVRs (Table 2, Table 3).
+"""
+
+from __future__ import annotations
+
+import time
+from concurrent.futures import ThreadPoolExecutor, as_completed
+from dataclasses import dataclass
+
+import numpy as np
+
+from .calibration import CalibrationSet
+from .config import Settings
+from .linear import fit_calibration_matrix, fit_omega
+from .model import CHI_NAMES, chi_training_data, fit
+from .rbf import SPREAD, fit_mimo, fit_siso
+
+METHODS = ("initial", "linear", "rbf-mimo", "rbf-siso", "svr")
+
+
+@dataclass(frozen=True)
+class InitialMethod:
+    """No coupling correction: ``f_a = u_a / k_aa`` (the "initial data" of Table 1)."""
+
+    k: np.ndarray
+
+    def decouple(self, u: np.ndarray, *, rotate: bool = False) -> np.ndarray:
+        del rotate
+        return np.asarray(u, dtype=float).reshape(-1, 3) / self.k
+
+
+def input_scale(train: CalibrationSet, settings: Settings) -> np.ndarray | None:
+    """RBF input units: volts as they are, or full-scale outputs as the SVRs see them."""
+    if settings.scaling != "full_scale":
+        return None
+    return np.abs(fit_omega(train.points).k) * np.asarray(settings.full_scale)
+
+
+def establish(method: str, train: CalibrationSet, settings: Settings, *, workers: int = 1):
+    """Fit one method on a training set; the result has ``decouple(u, rotate=False)``."""
+    if method == "initial":
+        return InitialMethod(fit_omega(train.points).k)
+    if method == "linear":
+        return fit_calibration_matrix(train.voltages, train.forces)
+    if method == "rbf-mimo":
+        return fit_mimo(train.voltages, train.forces, spread=SPREAD,
+                        input_scale=input_scale(train, settings))
+    if method == "rbf-siso":
+        data = {name: chi_training_data(train, name) for name in CHI_NAMES}
+        return fit_siso(fit_omega(train.points).k, data, spread=SPREAD,
+                        input_scale=input_scale(train, settings))
+    if method == "svr":
+        return fit(train, settings, workers=workers)
+    raise ValueError(f"unknown method {method!r}")
+
+
+def train_all(jobs, settings, workers, progress) -> tuple[dict, float]:
+    """Fit every (key, method, train) job on a thread pool; (models, wall seconds).
+
+    libsvm and LAPACK release the GIL, so threads train in parallel; each model
+    depends only on its own job, so the results equal sequential training.
+    """
+    models = {}
+    t0 = time.perf_counter()
+    if workers <= 1:
+        for i, (key, method, train) in enumerate(jobs, start=1):
+            models[key] = establish(method, train, settings, workers=1)
+            if progress:
+                progress(i, len(jobs))
+    else:
+        # the SVR jobs are the long ones: start them first
+        order = sorted(jobs, key=lambda j: j[1] != "svr")
+        with ThreadPoolExecutor(workers) as pool:
+            futures = {pool.submit(establish, m, tr, settings, workers=workers): key
+                       for key, m, tr in order}
+            for i, fut in enumerate(as_completed(futures), start=1):
+                models[futures[fut]] = fut.result()
+                if progress:
+                    progress(i, len(jobs))
+    return models, time.perf_counter() - t0
+
