@@ -345,6 +345,10 @@ def cv(
             console.print(r)
         if output is not None:
             console.print(f"cv document written to {output}", highlight=False)
+            console.print(
+                f"calibration report: fsdecouple report MODEL --cv {output} --calib {calib} "
+                "-o report.html", highlight=False,
+            )
     warn(doc["warnings"])
     if doc["gate"] is not None and not doc["gate"]["passed"]:
         raise typer.Exit(1)

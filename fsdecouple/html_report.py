@@ -137,15 +137,25 @@ def _reps(reps) -> str:
     return ", ".join(str(r) for r in sorted(reps))
 
 
+def _test_name(cv, rnd: int, test_set: int) -> str:
+    """'test I' / 'test II': the held-out repetition's place in its round's fold.
+
+    ``test_set`` is the held-out repetition's number (README, cv.json).
+    """
+    try:
+        return TEST_NAMES.get(cv["folds"][rnd - 1].index(test_set) + 1, "test")
+    except (KeyError, IndexError, ValueError, TypeError):
+        return "test"
+
+
 def _cv_residuals(cv) -> pd.DataFrame | None:
     pts = [p for p in cv.get("points") or [] if p.get("method") == "svr"]
     if not pts:
         return None
     df = pd.DataFrame(pts)
-    folds = cv["folds"]
-    df["rep"] = [folds[r - 1][t - 1] for r, t in zip(df["round"], df["test_set"], strict=True)]
-    df["label"] = [f"rep {rep} (round {r}, {TEST_NAMES.get(t, t)})"
-                   for rep, r, t in zip(df["rep"], df["round"], df["test_set"], strict=True)]
+    df["rep"] = df["test_set"]
+    df["label"] = [f"rep {t} (round {r}, {_test_name(cv, r, t)})"
+                   for r, t in zip(df["round"], df["test_set"], strict=True)]
     df = df.sort_values(["rep", "round"], kind="stable")
     for a, axis in enumerate(AXES):
         applied = np.where(df["axis"] == axis, df["load"], 0.0)
@@ -261,13 +271,9 @@ def _gamma_tables(cv) -> str:
     g = _records(cv.get("records"))
     keys = sorted({(r, t) for r, t, _, _ in g})
     methods = [m for m in cv.get("methods", []) if any(k[2] == m for k in g)]
-    folds = cv.get("folds", [])
 
     def held(r, t):
-        try:
-            return f"{TEST_NAMES.get(t, t)} (rep {folds[r - 1][t - 1]})"
-        except (IndexError, TypeError):
-            return TEST_NAMES.get(t, str(t))
+        return f"{_test_name(cv, r, t)} (rep {t})"
 
     def val(r, t, m, a, base="initial"):
         v, b = g.get((r, t, m, a)), g.get((r, t, base, a))

@@ -54,14 +54,12 @@ def invoke(args, code=0, **kw):
 
 
 @pytest.fixture(scope="session")
-def cv_json(tmp_path_factory, settings):
-    """cv.json of the sample data (tests/cv_fixture.py until `fsdecouple cv` exists)."""
-    import json
-
-    from cv_fixture import cv_document
-
+def cv_json(tmp_path_factory):
+    """cv.json of the sample data, from a real `fsdecouple cv` run with every option."""
     path = tmp_path_factory.mktemp("cv") / "cv.json"
-    path.write_text(json.dumps(cv_document(SAMPLE, settings), sort_keys=True, allow_nan=False, indent=1))
+    invoke(["cv", SAMPLE / "calibration", "-o", path, "--task", SAMPLE / "task_voltages.csv",
+            "--task-forces", SAMPLE / "task_forces.csv", "--task-tare", "200",
+            "--gross-error", "x:3:5:0.2"])
     return path
 
 

@@ -99,10 +99,9 @@ def test_report_is_self_contained_html_with_every_figure_and_table(full_report):
 def test_report_marks_worse_than_initial_and_shows_badges(full_report):
     text = full_report[0].read_text(encoding="utf-8")
     assert "PASS" in text and 'class="badge' in text
-    # the fixture has no RBF baselines: the report says so instead of failing
-    assert "Not in cv.json (not run)" in text and "no SISO RBF NN curves" in text
-    # the sample data's svr gamma is below the initial one everywhere: nothing flagged
-    assert 'class="worse"' not in text
+    # a real cv run has every baseline: all columns and the dashed SISO curves
+    assert "Not in cv.json (not run)" not in text and "SISO RBF NN curves dashed" in text
+    assert "MIMO RBF NN" in text and "linear matrix" in text
 
 
 def test_png_files_are_sized_and_not_blank(full_report):
@@ -120,9 +119,11 @@ def test_worse_cells_are_highlighted(tmp_path, sample_model, cv_json):
             r["value"] = 0.5
     bad = tmp_path / "cv.json"
     bad.write_text(json.dumps(doc))
+    invoke(["report", sample_model, "--cv", cv_json, "-o", tmp_path / "before.html"])
     invoke(["report", sample_model, "--cv", bad, "-o", tmp_path / "r.html"])
+    before = (tmp_path / "before.html").read_text(encoding="utf-8").count('class="worse"')
     text = (tmp_path / "r.html").read_text(encoding="utf-8")
-    assert text.count('class="worse"') == 2  # Table 1 and Table 3 analogues
+    assert text.count('class="worse"') == before + 2  # Table 1 and Table 3 analogues
     assert "▲</span> 50.00 %" in text
 
 
@@ -179,15 +180,16 @@ def test_readme_ends_its_main_command_with_a_report_and_shows_a_figure():
     assert_figure_ok(imread(SAMPLE.parent / "docs" / "figure7.png"))
 
 
-def test_report_copes_with_a_minimal_cv_and_draws_rbf_siso_when_present(tmp_path, sample_model, cv_json):
+def test_report_copes_with_a_minimal_cv_and_absent_methods(tmp_path, sample_model, cv_json):
     doc = json.loads(cv_json.read_text())
     for c in doc["curves"]["chi"].values():
-        # a wiggly stand-in for the SISO RBF baseline, only to exercise its curve
-        c["rbf-siso"] = [v + 0.002 * np.sin(40 * u) for u, v in zip(c["u"], c["svr"], strict=True)]
-    with_rbf = tmp_path / "rbf.json"
-    with_rbf.write_text(json.dumps(doc))
-    invoke(["report", sample_model, "--cv", with_rbf, "-o", tmp_path / "a.html", "--png", tmp_path / "png"])
-    assert "SISO RBF NN curves dashed" in (tmp_path / "a.html").read_text(encoding="utf-8")
+        del c["rbf-siso"]
+    doc["records"] = [r for r in doc["records"] if r["method"] in ("initial", "svr")]
+    without = tmp_path / "svr-only.json"
+    without.write_text(json.dumps(doc))
+    invoke(["report", sample_model, "--cv", without, "-o", tmp_path / "a.html", "--png", tmp_path / "png"])
+    text = (tmp_path / "a.html").read_text(encoding="utf-8")
+    assert "no SISO RBF NN curves" in text and "Not in cv.json (not run)" in text
     minimal = {k: doc[k] for k in ("format", "format_version", "folds", "methods", "records")}
     minimal.update(task=None, gross_error=None, points=[], checks=[], curves=None)
     (tmp_path / "min.json").write_text(json.dumps(minimal))
