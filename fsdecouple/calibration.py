@@ -41,6 +41,11 @@ class CalibrationSet:
     warnings: tuple[str, ...] = field(default=())
 
     @property
+    def source(self) -> str:
+        """The calibration file, or the directory of the files, for messages."""
+        return _source(self.files)
+
+    @property
     def repetitions(self) -> list[int]:
         return sorted(int(r) for r in self.points["repetition"].unique())
 
@@ -79,13 +84,21 @@ class CalibrationSet:
         return {int(r): np.unique(g[col].to_numpy()) for r, g in s.groupby("repetition")}
 
 
+def _source(files) -> str:
+    if not files:
+        return "calibration set"
+    if len(files) == 1:
+        return str(files[0][0])
+    return str(Path(files[0][0]).parent)
+
+
 def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=()) -> CalibrationSet:
     """Validate a long table (as :func:`read_calibration_table` returns) and zero-correct it."""
     table = assign_sweeps(table)
     reps = sorted(table["repetition"].unique())
     if len(reps) < settings.min_repetitions:
         raise InputError(
-            f"{files[0][0] if len(files) == 1 else 'calibration set'}: {len(reps)} "
+            f"{_source(files)}: {len(reps)} "
             f"repetition{'s' if len(reps) != 1 else ''}, the config requires at least "
             f"{settings.min_repetitions} (min_repetitions)"
         )

@@ -12,6 +12,7 @@ import hashlib
 import os
 import re
 import tempfile
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -58,7 +59,7 @@ def read_header(path: Path, settings: Settings) -> list[str]:
         seen.add(n)
         if not n:
             raise InputError(f"{where(path, HEADER_ROW)}: column {i + 1} has no name")
-    if len(names) == 1 and settings.sep == "," and ";" in names[0]:
+    if settings.sep != ";" and any(";" in n for n in names):
         raise InputError(
             f"{where(path, HEADER_ROW)}: looks like a ';'-separated CSV; set "
             "csv: {sep: ';', decimal: ','} in the config to read it"
@@ -66,28 +67,57 @@ def read_header(path: Path, settings: Settings) -> list[str]:
     return names
 
 
-def read_csv_text(path: Path, settings: Settings, **kw) -> pd.DataFrame:
-    """Read a whole CSV as strings, blank lines kept so that row numbers stay true."""
+def csv_chunks(source, path: Path, settings: Settings, **kw):
+    """``pandas.read_csv`` of strings that never guesses, as an iterator of frames.
+
+    Blank lines are kept (row numbers stay true) and the first column is never
+    taken as an index: pandas does that silently when the first data row has one
+    field more than the header, which is how ``1,5`` in a comma file looks.
+    """
     try:
-        df = pd.read_csv(
-            path, sep=settings.sep, dtype=str, keep_default_na=False, na_filter=False,
-            skip_blank_lines=False, encoding="utf-8-sig", skipinitialspace=True, **kw,
-        )
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", pd.errors.ParserWarning)
+            reader = pd.read_csv(
+                source, sep=settings.sep, dtype=str, keep_default_na=False, na_filter=False,
+                skip_blank_lines=False, encoding="utf-8-sig", index_col=False, **kw,
+            )
+            if isinstance(reader, pd.DataFrame):
+                yield reader
+                return
+            with reader:
+                yield from reader
     except pd.errors.EmptyDataError:
         raise InputError(f"{path}: file is empty (no header row)") from None
+    except pd.errors.ParserWarning:
+        raise InputError(
+            f"{where(path, HEADER_ROW + 1)}: more fields than the header's "
+            f"(a decimal comma in a '{settings.sep}'-separated file?)"
+        ) from None
     except pd.errors.ParserError as err:
         raise InputError(f"{path}: {parser_message(err)}") from None
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a UTF-8 text file") from None
+
+
+def read_csv_text(path: Path, settings: Settings, **kw) -> pd.DataFrame:
+    """Read a whole CSV as strings, blank lines kept so that row numbers stay true."""
+    df = next(csv_chunks(path, path, settings, skipinitialspace=True, **kw))
     df.columns = [str(c).strip() for c in df.columns]
     return df
 
 
 def parser_message(err: Exception) -> str:
-    m = re.search(r"Expected (\d+) fields in line (\d+), saw (\d+)", str(err))
+    text = str(err)
+    m = re.search(r"Expected (\d+) fields in line (\d+), saw (\d+)", text)
     if m:
-        return f"row {m.group(2)}: {m.group(3)} fields, expected {m.group(1)} as in the header"
-    return f"cannot parse CSV ({str(err).strip().splitlines()[-1]})"
+        return (
+            f"row {m.group(2)}: {m.group(3)} fields, expected {m.group(1)} as in the header "
+            "(a decimal comma, or a separator inside a value?)"
+        )
+    m = re.search(r"EOF inside string starting at row (\d+)", text)
+    if m:  # pandas counts lines from 0 here
+        return f"row {int(m.group(1)) + 1}: a quote (\") opens a value that never closes"
+    return f"cannot parse CSV ({text.strip().splitlines()[-1]})"
 
 
 def to_numbers(
@@ -107,9 +137,17 @@ def to_numbers(
         elif np.isnan(nums[i]) and cell.lower() not in ("nan", "na", "n/a", "null", "none"):
             what = f"is {cell!r}"
         else:
-            what = f"is {cell!r}, not a finite number"
-        raise InputError(f"{where(path, first_row + i, column)}: {what}, expected a number")
+            what = f"is {cell!r}"
+        raise InputError(f"{where(path, first_row + i, column)}: {what}, expected a finite number")
     return nums
+
+
+def refuse_overwriting_input(out: str | Path, inputs) -> None:
+    """Refuse an output path that is one of the inputs, even with ``--force``."""
+    target = Path(out).resolve()
+    for f in inputs:
+        if Path(f).resolve() == target:
+            raise InputError(f"{out}: is also an input file; write the output somewhere else")
 
 
 def require_columns(header: list[str], wanted: dict[str, str], path: Path) -> None:
