@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import signal
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -23,7 +24,7 @@ from .apply import apply_file
 from .calibration import GrossError, load_calibration
 from .config import load_config
 from .errors import FsdecoupleError, InputError
-from .io import atomic_write
+from .io import atomic_write, calibration_files, check_output, refuse_overwriting_input
 from .model import fit as fit_model
 from .model import load_model
 from .report import apply_lines, apply_warnings, fit_tables, ingest_summary, ingest_tables
@@ -110,6 +111,9 @@ def ingest(
     """Validate and zero-correct a calibration set, and summarise it."""
     with user_errors():
         settings = load_config(config)
+        if output is not None:
+            check_output(output, force=force)
+            refuse_overwriting_input(output, [*calibration_files(calib), *_given(config)])
         cs = load_calibration(calib, settings)
         summary = ingest_summary(cs, settings)
         if output is not None:
@@ -147,8 +151,8 @@ def fit(
             config, C=C, epsilon=epsilon, gamma=gamma, delta2=delta2, tolerance=tolerance,
             scaling=scaling,
         )
-        if not force and output.exists():
-            raise InputError(f"{output}: already exists; pass --force to overwrite it")
+        check_output(output, force=force)
+        refuse_overwriting_input(output, [*calibration_files(calib), *_given(config)])
         model = fit_model(calib, settings)
         model.save(output, force=force)
     if json_out:
@@ -178,6 +182,10 @@ def show(model_file: Annotated[Path, typer.Argument(help="Model file (JSON).")])
     warn(model.warnings)
 
 
+def _given(*paths):
+    return [p for p in paths if p is not None]
+
+
 def _parse_zero(text: str) -> tuple[float, float, float]:
     try:
         values = tuple(float(v) for v in text.split(","))
@@ -205,6 +213,8 @@ def apply(
         model = load_model(model_file)
         settings = load_config(config) if config is not None else None
         offsets = _parse_zero(zero) if zero is not None else None
+        check_output(output, force=force)
+        refuse_overwriting_input(output, [model_file, *_given(config)])
         with Progress(
             "[progress.description]{task.description}", BarColumn(), DownloadColumn(),
             TimeRemainingColumn(), console=err_console, disable=not interactive(),
@@ -221,5 +231,11 @@ def apply(
     warn(apply_warnings(summary))
 
 
+def _terminate(signum, frame) -> None:
+    # SIGTERM (kill, CI timeouts) unwinds like Ctrl-C, so temporary files are removed
+    raise SystemExit(128 + signum)
+
+
 def main() -> None:
+    signal.signal(signal.SIGTERM, _terminate)
     app()

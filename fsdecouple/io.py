@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import errno
 import hashlib
 import os
 import re
@@ -49,6 +50,8 @@ def read_header(path: Path, settings: Settings) -> list[str]:
         raise InputError(f"{path}: is a directory, expected a CSV file") from None
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a UTF-8 text file") from None
+    except OSError as err:
+        raise InputError(f"{path}: cannot read ({err.strerror})") from None
     if not first.strip():
         raise InputError(f"{path}: file is empty (no header row)")
     names = [n.strip() for n in next(csv.reader([first], delimiter=settings.sep))]
@@ -247,27 +250,50 @@ def read_calibration_table(path: str | Path, settings: Settings) -> tuple[pd.Dat
 
 # --- atomic output ------------------------------------------------------------
 
-@contextlib.contextmanager
-def atomic_write(path: str | Path, mode: str = "w", *, force: bool = True) -> Iterator:
-    """Write to a temporary file beside ``path`` and rename it into place on success.
+# errors of a write that a user can act on (free space, permissions): not bugs
+_WRITE_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EACCES, errno.EPERM}
 
-    An exception or interruption leaves any previous file untouched and removes
-    the temporary file.
-    """
+
+def check_output(path: str | Path, *, force: bool) -> None:
+    """Refuse, before any work is done, an output that cannot or may not be written."""
     path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{path}: is a directory, expected a file name for the output")
     if not force and path.exists():
         raise InputError(f"{path}: already exists; pass --force to overwrite it")
     directory = path.parent if str(path.parent) else Path(".")
     if not directory.is_dir():
         raise InputError(f"{path}: directory {directory} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
+
+
+@contextlib.contextmanager
+def atomic_write(path: str | Path, mode: str = "w", *, force: bool = True) -> Iterator:
+    """Write to a temporary file beside ``path`` and rename it into place on success.
+
+    The temporary file is hidden (``.NAME.XXXX.tmp``) in the same directory, so the
+    rename is atomic.  An exception, Ctrl-C or SIGTERM leaves any previous file
+    untouched and removes the temporary file; a full disk is reported as an
+    :class:`InputError`.  Only SIGKILL (or a power cut) can leave the hidden
+    temporary file behind, never a partial ``path``.
+    """
+    path = Path(path)
+    check_output(path, force=force)
+    directory = path.parent if str(path.parent) else Path(".")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
+    except OSError as err:
+        raise InputError(f"{path}: cannot write in {directory} ({err.strerror})") from None
     try:
         with os.fdopen(fd, mode, **({} if "b" in mode else {"encoding": "utf-8", "newline": ""})) as fh:
             yield fh
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        if isinstance(err, OSError) and err.errno in _WRITE_ERRNOS:
+            raise InputError(
+                f"{path}: cannot write ({err.strerror}); any previous file is unchanged"
+            ) from None
         raise
