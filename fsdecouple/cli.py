@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import signal
 import sys
@@ -191,7 +192,7 @@ def _parse_zero(text: str) -> tuple[float, float, float]:
         values = tuple(float(v) for v in text.split(","))
     except ValueError:
         values = ()
-    if len(values) != 3:
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
         raise InputError(f"--zero {text!r}: expected three voltages ux,uy,uz, e.g. 0.01,-0.02,0")
     return values  # type: ignore[return-value]
 

@@ -53,6 +53,8 @@ def read_header(path: Path, settings: Settings) -> list[str]:
     except OSError as err:
         raise InputError(f"{path}: cannot read ({err.strerror})") from None
     if not first.strip():
+        if path.stat().st_size > len(first.encode("utf-8")):
+            raise InputError(f"{where(path, HEADER_ROW)}: blank, expected the header row")
         raise InputError(f"{path}: file is empty (no header row)")
     names = [n.strip() for n in next(csv.reader([first], delimiter=settings.sep))]
     seen: set[str] = set()

@@ -279,9 +279,29 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
             f"{source}: omega {bad[0]}: slope k = {float(k[AXES.index(bad[0])])!r}, expected a finite "
             "non-zero number"
         )
+    report = doc.get("report")
+    _check_report(report, source)
     return CouplingErrorModel(
-        settings, k, chi, doc.get("report", {}), doc.get("provenance", {}), doc.get("created", "")
+        settings, k, chi, report, doc.get("provenance", {}), doc.get("created", "")
     )
+
+
+def _check_report(report: Any, source: str) -> None:
+    """The fit figures ``show`` prints: per-axis numbers and a list of warnings."""
+    def number(v):
+        return isinstance(v, int | float) and not isinstance(v, bool)
+
+    if not isinstance(report, dict):
+        raise ModelFileError(f"{source}: malformed model file (report is not a mapping)")
+    for key in ("r2", "n_points", "gamma_before", "gamma_after"):
+        table = report.get(key)
+        if not (isinstance(table, dict) and all(number(table.get(a)) for a in AXES)):
+            raise ModelFileError(
+                f"{source}: malformed model file (report: {key} needs a number per axis)"
+            )
+    warnings = report.get("warnings", [])
+    if not (isinstance(warnings, list) and all(isinstance(w, str) for w in warnings)):
+        raise ModelFileError(f"{source}: malformed model file (report: warnings is not a list of text)")
 
 
 def _settings_yaml_form(d: dict[str, Any]) -> dict[str, Any]:
@@ -321,6 +341,8 @@ def load_model(path: str | Path) -> CouplingErrorModel:
         ) from None
     except RecursionError:
         raise ModelFileError(f"{path}: not a model file (JSON too deeply nested)") from None
+    except ValueError as err:  # e.g. an integer of more than 4300 digits
+        raise ModelFileError(f"{path}: not a model file ({err})") from None
     return model_from_dict(doc, str(path))
 
 
