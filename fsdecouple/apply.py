@@ -41,6 +41,8 @@ STATUSES = {
                  "was cut off, a number may be cut short): no forces",
     "not_finite": "the voltages are so large that eq. (11) overflows: no forces",
 }
+STATUS_NAMES = np.array(list(STATUSES), dtype=object)
+OK_, EXTRAPOLATED_, MISSING_, TRUNCATED_, NOT_FINITE_ = range(len(STATUSES))
 
 
 @dataclass
@@ -156,37 +158,36 @@ def apply_file(
         first_row = HEADER_ROW + 1
         for chunk, last in _with_last(_read_chunks(path, settings, chunk_rows, handle=raw)):
             u = _voltages(chunk, names, settings, path, first_row) - summary.offsets
-            status = np.full(len(chunk), "ok", dtype=object)
+            code = np.zeros(len(chunk), dtype=np.int8)  # index into STATUS_NAMES
             missing = np.isnan(u).any(axis=1)
+            code[missing] = MISSING_
             if last and cut_short and len(chunk):
                 # a writer that crashed mid-line: the fields may be complete but
                 # the last number cut short, so the row gets no forces
                 missing[-1] = True
-                status[-1] = "truncated"
-                summary.truncated_rows += 1
-            status[missing & (status != "truncated")] = "missing"
+                code[-1] = TRUNCATED_
             with np.errstate(over="ignore", invalid="ignore"):
                 f = model.decouple(np.where(missing[:, None], 0.0, u))
             huge = ~missing & ~np.isfinite(f).all(axis=1)
-            status[huge] = "not_finite"
-            summary.not_finite_rows += int(huge.sum())
+            code[huge] = NOT_FINITE_
             f[missing | huge] = np.nan
-            n_missing = int((status == "missing").sum())
-            if n_missing:
-                summary.missing_rows += n_missing
-                room = 10 - len(summary.first_missing)
+            outside = (code == OK_) & ((u < lo) | (u > hi)).any(axis=1)
+            code[outside] = EXTRAPOLATED_
+            counts = np.bincount(code, minlength=len(STATUS_NAMES))
+            for name, n in zip(STATUS_NAMES, counts, strict=True):
+                summary.status_counts[name] += int(n)
+            summary.missing_rows += int(counts[MISSING_])
+            summary.truncated_rows += int(counts[TRUNCATED_])
+            summary.not_finite_rows += int(counts[NOT_FINITE_])
+            summary.out_of_range_rows += int(counts[EXTRAPOLATED_])
+            room = 10 - len(summary.first_missing)
+            if counts[MISSING_] and room > 0:
                 summary.first_missing += [
-                    int(r) for r in np.flatnonzero(status == "missing")[:room] + first_row
+                    int(r) for r in np.flatnonzero(code == MISSING_)[:room] + first_row
                 ]
-            ok = status == "ok"
-            outside = ok & ((u < lo) | (u > hi)).any(axis=1)
-            status[outside] = "extrapolated"
-            summary.out_of_range_rows += int(outside.sum())
             for k, c in enumerate(FORCE_COLUMNS):
                 chunk[c] = f[:, k]
-            chunk[STATUS_COLUMN] = status
-            for name, n in zip(*np.unique(status.astype(str), return_counts=True), strict=True):
-                summary.status_counts[name] += int(n)
+            chunk[STATUS_COLUMN] = STATUS_NAMES[code]
             chunk.to_csv(
                 fh, index=False, header=summary.rows == 0, sep=settings.sep,
                 decimal=settings.decimal, lineterminator="\n",

@@ -72,6 +72,13 @@ def read_header(path: Path, settings: Settings) -> list[str]:
     return names
 
 
+def _strict(read):
+    # only around pandas' own work, not across a generator's yields
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", pd.errors.ParserWarning)
+        return read()
+
+
 def csv_chunks(source, path: Path, settings: Settings, **kw):
     """``pandas.read_csv`` of strings that never guesses, as an iterator of frames.
 
@@ -80,17 +87,16 @@ def csv_chunks(source, path: Path, settings: Settings, **kw):
     field more than the header, which is how ``1,5`` in a comma file looks.
     """
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("error", pd.errors.ParserWarning)
-            reader = pd.read_csv(
-                source, sep=settings.sep, dtype=str, keep_default_na=False, na_filter=False,
-                skip_blank_lines=False, encoding="utf-8-sig", index_col=False, **kw,
-            )
-            if isinstance(reader, pd.DataFrame):
-                yield reader
-                return
-            with reader:
-                yield from reader
+        reader = _strict(lambda: pd.read_csv(
+            source, sep=settings.sep, dtype=str, keep_default_na=False, na_filter=False,
+            skip_blank_lines=False, encoding="utf-8-sig", index_col=False, **kw,
+        ))
+        if isinstance(reader, pd.DataFrame):
+            yield reader
+            return
+        with reader:
+            while (chunk := _strict(lambda: next(reader, None))) is not None:
+                yield chunk
     except pd.errors.EmptyDataError:
         raise InputError(f"{path}: file is empty (no header row)") from None
     except pd.errors.ParserWarning:
