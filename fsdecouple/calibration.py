@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +10,7 @@ import pandas as pd
 
 from .config import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS, Settings
 from .errors import InputError
-from .io import calibration_files, read_calibration_table, sha256_file
+from .io import calibration_files, hidden_files, read_calibration_table, sha256_file
 from .zero import assign_sweeps, zero_correct
 
 
@@ -131,7 +131,9 @@ def load_calibration(path: str | Path, settings: Settings) -> CalibrationSet:
     """Read, validate and zero-correct a calibration set (a directory or one CSV)."""
     table, skipped = read_calibration_table(path, settings)
     files = tuple((str(f), sha256_file(f)) for f in calibration_files(path))
-    return from_table(table, settings, files, skipped)
+    cs = from_table(table, settings, files, skipped)
+    hidden = tuple(f"{f}: hidden file, not read as a repetition" for f in hidden_files(path))
+    return replace(cs, warnings=hidden + cs.warnings) if hidden else cs
 
 
 @dataclass(frozen=True)

@@ -180,13 +180,22 @@ def calibration_files(path: str | Path) -> list[Path]:
         raise InputError(f"{path}: calibration data not found")
     if path.is_dir():
         files = sorted(
-            (p for p in path.iterdir() if p.suffix.lower() == ".csv" and p.is_file()),
+            (p for p in path.iterdir()
+             if p.suffix.lower() == ".csv" and p.is_file() and not p.name.startswith(".")),
             key=lambda p: natural_key(p.name),
         )
         if not files:
             raise InputError(f"{path}: directory holds no .csv files")
         return files
     return [path]
+
+
+def hidden_files(path: str | Path) -> list[Path]:
+    """Hidden .csv files a directory holds (macOS ``._rep1.csv``, editor backups)."""
+    path = Path(path)
+    if not path.is_dir():
+        return []
+    return sorted(p for p in path.iterdir() if p.name.startswith(".") and p.suffix.lower() == ".csv")
 
 
 def read_calibration_table(path: str | Path, settings: Settings) -> tuple[pd.DataFrame, list[str]]:
