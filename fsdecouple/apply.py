@@ -47,6 +47,8 @@ OK_, EXTRAPOLATED_, MISSING_, TRUNCATED_, NOT_FINITE_ = range(len(STATUSES))
 
 @dataclass
 class ApplySummary:
+    """What ``apply`` did: rows written, per-status counts, the zero removed [V]."""
+
     rows: int = 0
     missing_rows: int = 0
     first_missing: list[int] = field(default_factory=list)

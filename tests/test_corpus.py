@@ -14,7 +14,8 @@ Commands that write (``output``, default true) get ``-o OUT`` appended.  The
 contract checked: exit 2, exactly one line on stderr starting ``error:``, no
 traceback, and OUT neither created nor, when it existed and ``--force`` was
 given, changed; no temporary file left.  A case with ``exit: 0`` is accepted
-input that must warn (``warn`` substrings).  Add a case by adding a directory.
+input that must warn (``warn`` substrings); for ``apply`` it may give the number
+of output ``rows`` and the ``last_status``.  Add a case by adding a directory.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
+import pandas as pd
 import pytest
 import yaml
 from conftest import SAMPLE, invoke
@@ -73,6 +75,10 @@ def test_bad_input(name, tmp_path, good_model):
         for needle in spec.get("warn", []):
             assert needle in r.stderr, (needle, r.stderr)
         assert "Traceback" not in r.stderr + r.stdout
+        if "rows" in spec:  # apply: every input row out, in order, with its status
+            f = pd.read_csv(out, dtype=str, keep_default_na=False)
+            assert len(f) == spec["rows"]
+            assert f["status"].iat[-1] == spec["last_status"]
         return
     r = invoke(full, code=2)
     msg = r.stderr.strip()
