@@ -315,6 +315,20 @@ class _NonFinite(ValueError):
     pass
 
 
+class _DuplicateKey(ValueError):
+    pass
+
+
+def _unique_keys(pairs):
+    # the digest covers the parsed document, so a second, shadowed key would
+    # pass it while showing a reader a value the model does not use
+    doc = dict(pairs)
+    if len(doc) != len(pairs):
+        seen = set()
+        raise _DuplicateKey(next(k for k, _ in pairs if k in seen or seen.add(k)))
+    return doc
+
+
 def _refuse_constant(name: str):
     # json accepts NaN/Infinity, which the writer never produces (allow_nan=False)
     raise _NonFinite(name)
@@ -330,10 +344,15 @@ def load_model(path: str | Path) -> CouplingErrorModel:
     except (OSError, UnicodeDecodeError) as err:
         raise ModelFileError(f"{path}: cannot read model file ({err})") from None
     try:
-        doc = json.loads(text, parse_constant=_refuse_constant)
+        doc = json.loads(text, parse_constant=_refuse_constant, object_pairs_hook=_unique_keys)
     except json.JSONDecodeError as err:
         raise ModelFileError(
             f"{path}, row {err.lineno}, column {err.colno}: not valid JSON (truncated?)"
+        ) from None
+    except _DuplicateKey as err:
+        raise ModelFileError(
+            f"{path}: key '{err.args[0]}' appears twice in one object (edited by hand?); "
+            "json would keep the last one silently"
         ) from None
     except _NonFinite as err:
         raise ModelFileError(
