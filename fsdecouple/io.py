@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import difflib
 import errno
 import hashlib
 import os
@@ -165,8 +166,11 @@ def require_columns(header: list[str], wanted: dict[str, str], path: Path) -> No
     for canonical, name in wanted.items():
         if name not in header:
             hint = f" (config maps '{canonical}' to it)" if name != canonical else ""
+            lower = {h.lower(): h for h in header}
+            close = [lower[m] for m in difflib.get_close_matches(name.lower(), list(lower), n=1)]
+            mean = f" (did you mean '{close[0]}'? map it under columns: in the config)" if close else ""
             raise InputError(
-                f"{where(path, HEADER_ROW)}: missing column '{name}'{hint}; "
+                f"{where(path, HEADER_ROW)}: missing column '{name}'{hint}{mean}; "
                 f"found {', '.join(header) or 'no columns'}"
             )
 
