@@ -216,6 +216,12 @@ def read_calibration_table(path: str | Path, settings: Settings) -> tuple[pd.Dat
     numeric = {c: cols[c] for c in (*FORCE_COLUMNS, *VOLTAGE_COLUMNS)}
     for rep_index, f in enumerate(files, start=1):
         header = read_header(f, settings)
+        if {"ux_raw", "uy_raw", "uz_raw"} <= set(header):
+            # the tidy CSV of `ingest -o`: zero-corrected already, and every repetition
+            raise InputError(
+                f"{where(f, HEADER_ROW)}: this is the output of 'fsdecouple ingest -o' (it has "
+                "ux_raw), not a repetition; move it out of the calibration directory"
+            )
         require_columns(header, numeric, f)
         if single:
             require_columns(header, {"repetition": cols["repetition"]}, f)
