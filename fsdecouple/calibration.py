@@ -124,6 +124,22 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=()) ->
                     f"repetition {ref_rep}; gamma compares repetitions at different loads"
                 )
                 break
+    for a, axis in enumerate(AXES):
+        # loads far from the full scale usually mean other units (kN, kgf) or a
+        # wrong full_scale, and gamma (eq. 12) is a fraction of the full scale
+        peak = float(np.abs(cs.sweep(axis)[FORCE_COLUMNS[a]]).max())
+        fs = settings.full_scale[a]
+        if peak > 1.05 * fs or peak < 0.2 * fs:
+            warnings.append(
+                f"the {axis} loads reach {peak:g} N, the full scale is {fs:g} N: check the "
+                "units (scale: in the config) and full_scale"
+            )
+    seen: dict[str, str] = {}
+    for name, digest in files:
+        if digest in seen:
+            warnings.append(f"{name} is byte for byte the same file as {seen[digest]}; "
+                            "a repetition copied twice counts twice")
+        seen.setdefault(digest, name)
     return CalibrationSet(points, offsets, tuple(files), tuple(skipped), tuple(warnings))
 
 
