@@ -338,7 +338,7 @@ def load_model(path: str | Path) -> CouplingErrorModel:
     """Read and verify a model file."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")  # a BOM from a Windows editor is not content
     except FileNotFoundError:
         raise ModelFileError(f"{path}: model file not found") from None
     except (OSError, UnicodeDecodeError) as err:

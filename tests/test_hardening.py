@@ -228,3 +228,14 @@ def test_only_safe_loaders_in_the_package():
                    "yaml.Loader", "UnsafeLoader", "marshal", "shelve"):
         assert unsafe not in src, unsafe
     assert issubclass(SafeUniqueLoader, yaml.SafeLoader)
+
+
+def test_model_file_through_windows_git_still_loads(tmp_path, sample_model_file):
+    """CRLF line endings and a BOM change bytes, not content: the digest still matches."""
+    m = tmp_path / "m.json"
+    m.write_bytes(b"\xef\xbb\xbf" + sample_model_file.read_bytes().replace(b"\n", b"\r\n"))
+    out = tmp_path / "f.csv"
+    invoke(["apply", m, LOG, "-o", out, "--tare", "200"])
+    ref = tmp_path / "ref.csv"
+    invoke(["apply", sample_model_file, LOG, "-o", ref, "--tare", "200"])
+    assert out.read_bytes() == ref.read_bytes()
