@@ -253,7 +253,11 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
             f"{source}: has no integrity digest, so it cannot be trusted (written by hand "
             "or by another tool?); refit the model"
         )
-    if digest != content_digest(doc):
+    try:
+        expected = content_digest(doc)
+    except (TypeError, ValueError) as err:  # NaN, inf or non-JSON values in a dict
+        raise ModelFileError(f"{source}: malformed model file ({err})") from None
+    if digest != expected:
         raise ModelFileError(
             f"{source}: integrity check failed: the content does not match its SHA-256 "
             "digest (edited by hand or corrupted); refit the model"
@@ -329,6 +333,13 @@ def _unique_keys(pairs):
     return doc
 
 
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not np.isfinite(value):  # 1e999 parses to inf
+        raise _NonFinite(text)
+    return value
+
+
 def _refuse_constant(name: str):
     # json accepts NaN/Infinity, which the writer never produces (allow_nan=False)
     raise _NonFinite(name)
@@ -344,7 +355,10 @@ def load_model(path: str | Path) -> CouplingErrorModel:
     except (OSError, UnicodeDecodeError) as err:
         raise ModelFileError(f"{path}: cannot read model file ({err})") from None
     try:
-        doc = json.loads(text, parse_constant=_refuse_constant, object_pairs_hook=_unique_keys)
+        doc = json.loads(
+            text, parse_constant=_refuse_constant, parse_float=_finite_float,
+            object_pairs_hook=_unique_keys,
+        )
     except json.JSONDecodeError as err:
         raise ModelFileError(
             f"{path}, row {err.lineno}, column {err.colno}: not valid JSON (truncated?)"
@@ -356,7 +370,7 @@ def load_model(path: str | Path) -> CouplingErrorModel:
         ) from None
     except _NonFinite as err:
         raise ModelFileError(
-            f"{path}: holds {err.args[0]}; NaN and infinity are not allowed in a model file"
+            f"{path}: holds {err.args[0]!r}; NaN and infinity are not allowed in a model file"
         ) from None
     except RecursionError:
         raise ModelFileError(f"{path}: not a model file (JSON too deeply nested)") from None
