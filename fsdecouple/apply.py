@@ -1,8 +1,10 @@
 """Decouple a logged voltage file into forces, in chunks (files larger than memory).
 
-Every input column is passed through as text, unchanged and in order; ``fx, fy,
-fz`` [N] are appended.  Rows with a missing voltage are kept with empty forces
-and counted.
+Every input row is kept, in order, and every input column is passed through as
+text, unchanged; ``fx, fy, fz`` [N] and ``status`` are appended.  ``status`` says
+what the forces of the row are worth (:data:`STATUSES`); rows that cannot be
+decoupled keep empty forces and are counted.  The output uses the log's CSV
+dialect (``sep``, ``decimal``).
 """
 
 from __future__ import annotations
@@ -16,21 +18,45 @@ import pandas as pd
 
 from .config import FORCE_COLUMNS, VOLTAGE_COLUMNS, Settings
 from .errors import InputError, where
-from .io import HEADER_ROW, atomic_write, parser_message, read_header, require_columns
+from .io import (
+    HEADER_ROW,
+    atomic_write,
+    csv_chunks,
+    read_header,
+    refuse_overwriting_input,
+    require_columns,
+)
 from .model import CouplingErrorModel
 from .zero import tare_offsets
 
 CHUNK_ROWS = 200_000
 RANGE_MARGIN = 0.01  # fraction of the calibrated voltage span
 MISSING = ("", "nan", "NaN", "NA", "N/A", "null")
+STATUS_COLUMN = "status"
+# What a row's forces are worth.  Only "ok" and "extrapolated" rows have forces.
+STATUSES = {
+    "ok": "decoupled by eq. (11), voltages inside the calibrated range",
+    "extrapolated": "decoupled, but a voltage lies outside the calibrated range",
+    "missing": "a voltage is empty or missing (blank or short row): no forces",
+    "truncated": "last line of a log that does not end with a newline (the writer "
+                 "was cut off, a number may be cut short): no forces",
+    "not_finite": "the voltages are so large that eq. (11) overflows: no forces",
+}
+STATUS_NAMES = np.array(list(STATUSES), dtype=object)
+OK_, EXTRAPOLATED_, MISSING_, TRUNCATED_, NOT_FINITE_ = range(len(STATUSES))
 
 
 @dataclass
 class ApplySummary:
+    """What ``apply`` did: rows written, per-status counts, the zero removed [V]."""
+
     rows: int = 0
     missing_rows: int = 0
     first_missing: list[int] = field(default_factory=list)
     out_of_range_rows: int = 0
+    truncated_rows: int = 0
+    not_finite_rows: int = 0
+    status_counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(STATUSES, 0))
     offsets: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
@@ -54,18 +80,31 @@ def _voltages(chunk: pd.DataFrame, names: list[str], settings: Settings, path, f
 
 
 def _read_chunks(path: Path, settings: Settings, chunk_rows: int, nrows=None, handle=None):
-    try:
-        yield from pd.read_csv(
-            handle if handle is not None else path, sep=settings.sep, dtype=str,
-            keep_default_na=False, na_filter=False, encoding="utf-8-sig",
-            chunksize=chunk_rows, nrows=nrows,
-        )
-    except pd.errors.EmptyDataError:
-        raise InputError(f"{path}: file is empty (no header row)") from None
-    except pd.errors.ParserError as err:
-        raise InputError(f"{path}: {parser_message(err)}") from None
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a UTF-8 text file") from None
+    for chunk in csv_chunks(
+        handle if handle is not None else path, path, settings, chunksize=chunk_rows, nrows=nrows
+    ):
+        chunk.columns = [str(c).strip() for c in chunk.columns]
+        yield chunk
+
+
+def _with_last(chunks):
+    """Yield (chunk, is_last): the last chunk is known only once the next read fails."""
+    prev = None
+    for chunk in chunks:
+        if prev is not None:
+            yield prev, False
+        prev = chunk
+    if prev is not None:
+        yield prev, True
+
+
+def ends_with_newline(path: Path) -> bool:
+    with open(path, "rb") as fh:
+        fh.seek(0, 2)
+        if fh.tell() == 0:
+            return True
+        fh.seek(-1, 2)
+        return fh.read(1) in (b"\n", b"\r")
 
 
 def apply_file(
@@ -98,9 +137,10 @@ def apply_file(
     if tare is not None and zero is not None:
         raise InputError("give either --tare or --zero, not both")
     header = read_header(path, settings)
+    refuse_overwriting_input(out, [path])
     names = [settings.columns[c] for c in VOLTAGE_COLUMNS]
     require_columns(header, dict(zip(VOLTAGE_COLUMNS, names, strict=True)), path)
-    clash = [c for c in FORCE_COLUMNS if c in header]
+    clash = [c for c in (*FORCE_COLUMNS, STATUS_COLUMN) if c in header]
     if clash:
         raise InputError(
             f"{where(path, HEADER_ROW, clash[0])}: the log already has a column named "
@@ -110,7 +150,7 @@ def apply_file(
     if tare is not None:
         head = pd.concat(list(_read_chunks(path, settings, chunk_rows, nrows=tare)))
         summary.offsets = tare_offsets(
-            _voltages(head, names, settings, path, HEADER_ROW + 1), tare
+            _voltages(head, names, settings, path, HEADER_ROW + 1), tare, source=path
         )
     elif zero is not None:
         summary.offsets = np.asarray(zero, dtype=float)
@@ -120,29 +160,49 @@ def apply_file(
     margin = RANGE_MARGIN * (hi - lo)
     lo, hi = lo - margin, hi + margin
     total = max(1, path.stat().st_size)
+    cut_short = not ends_with_newline(path)
     with atomic_write(out, force=force) as fh, open(path, "rb") as raw:
         first_row = HEADER_ROW + 1
-        wrote_header = False
-        for chunk in _read_chunks(path, settings, chunk_rows, handle=raw):
+        for chunk, last in _with_last(_read_chunks(path, settings, chunk_rows, handle=raw)):
             u = _voltages(chunk, names, settings, path, first_row) - summary.offsets
+            code = np.zeros(len(chunk), dtype=np.int8)  # index into STATUS_NAMES
             missing = np.isnan(u).any(axis=1)
-            f = model.decouple(u)
-            f[missing] = np.nan
-            n_missing = int(missing.sum())
-            if n_missing:
-                summary.missing_rows += n_missing
-                room = 10 - len(summary.first_missing)
-                summary.first_missing += [int(r) for r in np.flatnonzero(missing)[:room] + first_row]
-            ok = ~missing
-            summary.out_of_range_rows += int(((u[ok] < lo) | (u[ok] > hi)).any(axis=1).sum())
+            code[missing] = MISSING_
+            if last and cut_short and len(chunk):
+                # a writer that crashed mid-line: the fields may be complete but
+                # the last number cut short, so the row gets no forces
+                missing[-1] = True
+                code[-1] = TRUNCATED_
+            with np.errstate(over="ignore", invalid="ignore"):
+                f = model.decouple(np.where(missing[:, None], 0.0, u))
+            huge = ~missing & ~np.isfinite(f).all(axis=1)
+            code[huge] = NOT_FINITE_
+            f[missing | huge] = np.nan
+            outside = (code == OK_) & ((u < lo) | (u > hi)).any(axis=1)
+            code[outside] = EXTRAPOLATED_
+            counts = np.bincount(code, minlength=len(STATUS_NAMES))
+            for name, n in zip(STATUS_NAMES, counts, strict=True):
+                summary.status_counts[name] += int(n)
+            summary.missing_rows += int(counts[MISSING_])
+            summary.truncated_rows += int(counts[TRUNCATED_])
+            summary.not_finite_rows += int(counts[NOT_FINITE_])
+            summary.out_of_range_rows += int(counts[EXTRAPOLATED_])
+            room = 10 - len(summary.first_missing)
+            if counts[MISSING_] and room > 0:
+                summary.first_missing += [
+                    int(r) for r in np.flatnonzero(code == MISSING_)[:room] + first_row
+                ]
             for k, c in enumerate(FORCE_COLUMNS):
                 chunk[c] = f[:, k]
-            chunk.to_csv(fh, index=False, header=not wrote_header, lineterminator="\n")
-            wrote_header = True
+            chunk[STATUS_COLUMN] = STATUS_NAMES[code]
+            chunk.to_csv(
+                fh, index=False, header=summary.rows == 0, sep=settings.sep,
+                decimal=settings.decimal, lineterminator="\n",
+            )
             summary.rows += len(chunk)
             first_row += len(chunk)
             if progress is not None:
                 progress(min(total, raw.tell()), total)
-        if not wrote_header:
+        if summary.rows == 0:
             raise InputError(f"{path}: header only, no data rows")
     return summary

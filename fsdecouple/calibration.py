@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +10,7 @@ import pandas as pd
 
 from .config import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS, Settings
 from .errors import InputError
-from .io import calibration_files, read_calibration_table, sha256_file
+from .io import calibration_files, hidden_files, read_calibration_table, sha256_file
 from .zero import assign_sweeps, zero_correct
 
 
@@ -39,6 +39,11 @@ class CalibrationSet:
     files: tuple[tuple[str, str], ...] = ()
     skipped: tuple[str, ...] = ()
     warnings: tuple[str, ...] = field(default=())
+
+    @property
+    def source(self) -> str:
+        """The calibration file, or the directory of the files, for messages."""
+        return _source(self.files)
 
     @property
     def repetitions(self) -> list[int]:
@@ -79,13 +84,21 @@ class CalibrationSet:
         return {int(r): np.unique(g[col].to_numpy()) for r, g in s.groupby("repetition")}
 
 
+def _source(files) -> str:
+    if not files:
+        return "calibration set"
+    if len(files) == 1:
+        return str(files[0][0])
+    return str(Path(files[0][0]).parent)
+
+
 def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=()) -> CalibrationSet:
     """Validate a long table (as :func:`read_calibration_table` returns) and zero-correct it."""
     table = assign_sweeps(table)
     reps = sorted(table["repetition"].unique())
     if len(reps) < settings.min_repetitions:
         raise InputError(
-            f"{files[0][0] if len(files) == 1 else 'calibration set'}: {len(reps)} "
+            f"{_source(files)}: {len(reps)} "
             f"repetition{'s' if len(reps) != 1 else ''}, the config requires at least "
             f"{settings.min_repetitions} (min_repetitions)"
         )
@@ -111,6 +124,22 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=()) ->
                     f"repetition {ref_rep}; gamma compares repetitions at different loads"
                 )
                 break
+    for a, axis in enumerate(AXES):
+        # loads far from the full scale usually mean other units (kN, kgf) or a
+        # wrong full_scale, and gamma (eq. 12) is a fraction of the full scale
+        peak = float(np.abs(cs.sweep(axis)[FORCE_COLUMNS[a]]).max())
+        fs = settings.full_scale[a]
+        if peak > 1.05 * fs or peak < 0.2 * fs:
+            warnings.append(
+                f"the {axis} loads reach {peak:g} N, the full scale is {fs:g} N: check the "
+                "units (scale: in the config) and full_scale"
+            )
+    seen: dict[str, str] = {}
+    for name, digest in files:
+        if digest in seen:
+            warnings.append(f"{name} is byte for byte the same file as {seen[digest]}; "
+                            "a repetition copied twice counts twice")
+        seen.setdefault(digest, name)
     return CalibrationSet(points, offsets, tuple(files), tuple(skipped), tuple(warnings))
 
 
@@ -118,7 +147,9 @@ def load_calibration(path: str | Path, settings: Settings) -> CalibrationSet:
     """Read, validate and zero-correct a calibration set (a directory or one CSV)."""
     table, skipped = read_calibration_table(path, settings)
     files = tuple((str(f), sha256_file(f)) for f in calibration_files(path))
-    return from_table(table, settings, files, skipped)
+    cs = from_table(table, settings, files, skipped)
+    hidden = tuple(f"{f}: hidden file, not read as a repetition" for f in hidden_files(path))
+    return replace(cs, warnings=hidden + cs.warnings) if hidden else cs
 
 
 @dataclass(frozen=True)

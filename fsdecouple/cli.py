@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
+import signal
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -25,7 +27,7 @@ from .config import load_config
 from .cv import parse_folds, run_cv
 from .cv_report import cv_renderables
 from .errors import FsdecoupleError, InputError
-from .io import atomic_write
+from .io import atomic_write, calibration_files, check_output, refuse_overwriting_input
 from .model import fit as fit_model
 from .model import load_model
 from .report import apply_lines, apply_warnings, fit_tables, ingest_summary, ingest_tables
@@ -112,6 +114,9 @@ def ingest(
     """Validate and zero-correct a calibration set, and summarise it."""
     with user_errors():
         settings = load_config(config)
+        if output is not None:
+            check_output(output, force=force)
+            refuse_overwriting_input(output, [*calibration_files(calib), *_given(config)])
         cs = load_calibration(calib, settings)
         summary = ingest_summary(cs, settings)
         if output is not None:
@@ -149,8 +154,8 @@ def fit(
             config, C=C, epsilon=epsilon, gamma=gamma, delta2=delta2, tolerance=tolerance,
             scaling=scaling,
         )
-        if not force and output.exists():
-            raise InputError(f"{output}: already exists; pass --force to overwrite it")
+        check_output(output, force=force)
+        refuse_overwriting_input(output, [*calibration_files(calib), *_given(config)])
         model = fit_model(calib, settings)
         model.save(output, force=force)
     if json_out:
@@ -209,13 +214,15 @@ def report(
             if png.exists() and not png.is_dir():
                 raise InputError(f"--png {png}: exists and is not a directory")
             png.mkdir(parents=True, exist_ok=True)
+        inputs = [model_file, *_given(cv), *(calibration_files(calib) if calib else [])]
+        check_output(output, force=force)
+        refuse_overwriting_input(output, inputs)
         result = build_report(model, cv_doc, cs)
         if png is not None:
             targets += [png / f"{name}.png" for name in result.figures]
-        if not force:
-            for t in targets:
-                if t.exists():
-                    raise InputError(f"{t}: already exists; pass --force to overwrite it")
+        for t in targets:
+            check_output(t, force=force)
+            refuse_overwriting_input(t, inputs)
         with atomic_write(output, force=True) as fh:
             fh.write(result.html)
         for name, data in result.figures.items():
@@ -228,12 +235,16 @@ def report(
                       highlight=False)
 
 
+def _given(*paths):
+    return [p for p in paths if p is not None]
+
+
 def _parse_zero(text: str) -> tuple[float, float, float]:
     try:
         values = tuple(float(v) for v in text.split(","))
     except ValueError:
         values = ()
-    if len(values) != 3:
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
         raise InputError(f"--zero {text!r}: expected three voltages ux,uy,uz, e.g. 0.01,-0.02,0")
     return values  # type: ignore[return-value]
 
@@ -255,6 +266,8 @@ def apply(
         model = load_model(model_file)
         settings = load_config(config) if config is not None else None
         offsets = _parse_zero(zero) if zero is not None else None
+        check_output(output, force=force)
+        refuse_overwriting_input(output, [model_file, *_given(config)])
         with Progress(
             "[progress.description]{task.description}", BarColumn(), DownloadColumn(),
             TimeRemainingColumn(), console=err_console, disable=not interactive(),
@@ -323,8 +336,10 @@ def cv(
             raise InputError("--task-tare needs --task")
         if workers is not None and workers < 1:
             raise InputError(f"--workers {workers}: needs at least 1")
-        if output is not None and not force and output.exists():
-            raise InputError(f"{output}: already exists; pass --force to overwrite it")
+        if output is not None:
+            check_output(output, force=force)
+            refuse_overwriting_input(output, [*calibration_files(calib), *_given(config, task,
+                                                                                 task_forces)])
         with _bar() as bar:
             job = bar.add_task("training", total=None)
             doc = run_cv(
@@ -354,5 +369,11 @@ def cv(
         raise typer.Exit(1)
 
 
+def _terminate(signum, frame) -> None:
+    # SIGTERM (kill, CI timeouts) unwinds like Ctrl-C, so temporary files are removed
+    raise SystemExit(128 + signum)
+
+
 def main() -> None:
+    signal.signal(signal.SIGTERM, _terminate)
     app()

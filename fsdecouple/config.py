@@ -152,6 +152,36 @@ def _rotation(raw: Any, where: str) -> tuple[tuple[float, float, float], ...] | 
     return rows
 
 
+class SafeUniqueLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` (plain data only, no tags that build objects) that also
+    refuses a key given twice, which YAML itself resolves silently to the last."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":
+                continue
+            key = self.construct_object(key_node, deep=deep)
+            if not isinstance(key, str | int | float | bool):
+                continue  # unhashable keys: SafeLoader's own error
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"duplicate key '{key}'", key_node.start_mark
+                )
+            seen.add(key)
+        return super().construct_mapping(node, deep)
+
+
+def _yaml_problem(err: yaml.YAMLError) -> str:
+    problem = str(getattr(err, "problem", "") or "")
+    if problem.startswith("duplicate key"):
+        return problem
+    if "constructor for the tag" in problem:
+        tag = problem.split("tag", 1)[1].strip(" '")
+        return f"YAML tag '{tag}' is not allowed (only plain data is read)"
+    return f"not valid YAML ({problem})" if problem else "not valid YAML"
+
+
 def settings_from_dict(raw: Any, source: str = "config") -> Settings:
     """Validate a parsed YAML document into :class:`Settings` (unknown keys refused)."""
     if raw is None:
@@ -251,11 +281,11 @@ def load_config(path: str | Path | None = None, **overrides: Any) -> Settings:
         except (OSError, UnicodeDecodeError) as err:
             raise ConfigError(f"{path}: cannot read config ({err})") from None
         try:
-            raw = yaml.safe_load(text)
+            raw = yaml.load(text, Loader=SafeUniqueLoader)  # noqa: S506 (a SafeLoader)
         except yaml.YAMLError as err:
             mark = getattr(err, "problem_mark", None)
             loc = f", row {mark.line + 1}, column {mark.column + 1}" if mark else ""
-            raise ConfigError(f"{path}{loc}: not valid YAML") from None
+            raise ConfigError(f"{path}{loc}: {_yaml_problem(err)}") from None
         settings = settings_from_dict(raw, str(path))
     return apply_overrides(settings, **overrides)
 

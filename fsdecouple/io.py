@@ -8,10 +8,13 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import difflib
+import errno
 import hashlib
 import os
 import re
 import tempfile
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -48,7 +51,11 @@ def read_header(path: Path, settings: Settings) -> list[str]:
         raise InputError(f"{path}: is a directory, expected a CSV file") from None
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a UTF-8 text file") from None
+    except OSError as err:
+        raise InputError(f"{path}: cannot read ({err.strerror})") from None
     if not first.strip():
+        if path.stat().st_size > len(first.encode("utf-8")):
+            raise InputError(f"{where(path, HEADER_ROW)}: blank, expected the header row")
         raise InputError(f"{path}: file is empty (no header row)")
     names = [n.strip() for n in next(csv.reader([first], delimiter=settings.sep))]
     seen: set[str] = set()
@@ -58,7 +65,7 @@ def read_header(path: Path, settings: Settings) -> list[str]:
         seen.add(n)
         if not n:
             raise InputError(f"{where(path, HEADER_ROW)}: column {i + 1} has no name")
-    if len(names) == 1 and settings.sep == "," and ";" in names[0]:
+    if settings.sep != ";" and any(";" in n for n in names):
         raise InputError(
             f"{where(path, HEADER_ROW)}: looks like a ';'-separated CSV; set "
             "csv: {sep: ';', decimal: ','} in the config to read it"
@@ -66,28 +73,63 @@ def read_header(path: Path, settings: Settings) -> list[str]:
     return names
 
 
-def read_csv_text(path: Path, settings: Settings, **kw) -> pd.DataFrame:
-    """Read a whole CSV as strings, blank lines kept so that row numbers stay true."""
+def _strict(read):
+    # only around pandas' own work, not across a generator's yields
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", pd.errors.ParserWarning)
+        return read()
+
+
+def csv_chunks(source, path: Path, settings: Settings, **kw):
+    """``pandas.read_csv`` of strings that never guesses, as an iterator of frames.
+
+    Blank lines are kept (row numbers stay true) and the first column is never
+    taken as an index: pandas does that silently when the first data row has one
+    field more than the header, which is how ``1,5`` in a comma file looks.
+    """
     try:
-        df = pd.read_csv(
-            path, sep=settings.sep, dtype=str, keep_default_na=False, na_filter=False,
-            skip_blank_lines=False, encoding="utf-8-sig", skipinitialspace=True, **kw,
-        )
+        reader = _strict(lambda: pd.read_csv(
+            source, sep=settings.sep, dtype=str, keep_default_na=False, na_filter=False,
+            skip_blank_lines=False, encoding="utf-8-sig", index_col=False, **kw,
+        ))
+        if isinstance(reader, pd.DataFrame):
+            yield reader
+            return
+        with reader:
+            while (chunk := _strict(lambda: next(reader, None))) is not None:
+                yield chunk
     except pd.errors.EmptyDataError:
         raise InputError(f"{path}: file is empty (no header row)") from None
+    except pd.errors.ParserWarning:
+        raise InputError(
+            f"{where(path, HEADER_ROW + 1)}: more fields than the header's "
+            f"(a decimal comma in a '{settings.sep}'-separated file?)"
+        ) from None
     except pd.errors.ParserError as err:
         raise InputError(f"{path}: {parser_message(err)}") from None
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a UTF-8 text file") from None
+
+
+def read_csv_text(path: Path, settings: Settings, **kw) -> pd.DataFrame:
+    """Read a whole CSV as strings, blank lines kept so that row numbers stay true."""
+    df = next(csv_chunks(path, path, settings, skipinitialspace=True, **kw))
     df.columns = [str(c).strip() for c in df.columns]
     return df
 
 
 def parser_message(err: Exception) -> str:
-    m = re.search(r"Expected (\d+) fields in line (\d+), saw (\d+)", str(err))
+    text = str(err)
+    m = re.search(r"Expected (\d+) fields in line (\d+), saw (\d+)", text)
     if m:
-        return f"row {m.group(2)}: {m.group(3)} fields, expected {m.group(1)} as in the header"
-    return f"cannot parse CSV ({str(err).strip().splitlines()[-1]})"
+        return (
+            f"row {m.group(2)}: {m.group(3)} fields, expected {m.group(1)} as in the header "
+            "(a decimal comma, or a separator inside a value?)"
+        )
+    m = re.search(r"EOF inside string starting at row (\d+)", text)
+    if m:  # pandas counts lines from 0 here
+        return f"row {int(m.group(1)) + 1}: a quote (\") opens a value that never closes"
+    return f"cannot parse CSV ({text.strip().splitlines()[-1]})"
 
 
 def to_numbers(
@@ -107,17 +149,28 @@ def to_numbers(
         elif np.isnan(nums[i]) and cell.lower() not in ("nan", "na", "n/a", "null", "none"):
             what = f"is {cell!r}"
         else:
-            what = f"is {cell!r}, not a finite number"
-        raise InputError(f"{where(path, first_row + i, column)}: {what}, expected a number")
+            what = f"is {cell!r}"
+        raise InputError(f"{where(path, first_row + i, column)}: {what}, expected a finite number")
     return nums
+
+
+def refuse_overwriting_input(out: str | Path, inputs) -> None:
+    """Refuse an output path that is one of the inputs, even with ``--force``."""
+    target = Path(out).resolve()
+    for f in inputs:
+        if Path(f).resolve() == target:
+            raise InputError(f"{out}: is also an input file; write the output somewhere else")
 
 
 def require_columns(header: list[str], wanted: dict[str, str], path: Path) -> None:
     for canonical, name in wanted.items():
         if name not in header:
             hint = f" (config maps '{canonical}' to it)" if name != canonical else ""
+            lower = {h.lower(): h for h in header}
+            close = [lower[m] for m in difflib.get_close_matches(name.lower(), list(lower), n=1)]
+            mean = f" (did you mean '{close[0]}'? map it under columns: in the config)" if close else ""
             raise InputError(
-                f"{where(path, HEADER_ROW)}: missing column '{name}'{hint}; "
+                f"{where(path, HEADER_ROW)}: missing column '{name}'{hint}{mean}; "
                 f"found {', '.join(header) or 'no columns'}"
             )
 
@@ -131,13 +184,22 @@ def calibration_files(path: str | Path) -> list[Path]:
         raise InputError(f"{path}: calibration data not found")
     if path.is_dir():
         files = sorted(
-            (p for p in path.iterdir() if p.suffix.lower() == ".csv" and p.is_file()),
+            (p for p in path.iterdir()
+             if p.suffix.lower() == ".csv" and p.is_file() and not p.name.startswith(".")),
             key=lambda p: natural_key(p.name),
         )
         if not files:
             raise InputError(f"{path}: directory holds no .csv files")
         return files
     return [path]
+
+
+def hidden_files(path: str | Path) -> list[Path]:
+    """Hidden .csv files a directory holds (macOS ``._rep1.csv``, editor backups)."""
+    path = Path(path)
+    if not path.is_dir():
+        return []
+    return sorted(p for p in path.iterdir() if p.name.startswith(".") and p.suffix.lower() == ".csv")
 
 
 def read_calibration_table(path: str | Path, settings: Settings) -> tuple[pd.DataFrame, list[str]]:
@@ -154,6 +216,12 @@ def read_calibration_table(path: str | Path, settings: Settings) -> tuple[pd.Dat
     numeric = {c: cols[c] for c in (*FORCE_COLUMNS, *VOLTAGE_COLUMNS)}
     for rep_index, f in enumerate(files, start=1):
         header = read_header(f, settings)
+        if {"ux_raw", "uy_raw", "uz_raw"} <= set(header):
+            # the tidy CSV of `ingest -o`: zero-corrected already, and every repetition
+            raise InputError(
+                f"{where(f, HEADER_ROW)}: this is the output of 'fsdecouple ingest -o' (it has "
+                "ux_raw), not a repetition; move it out of the calibration directory"
+            )
         require_columns(header, numeric, f)
         if single:
             require_columns(header, {"repetition": cols["repetition"]}, f)
@@ -209,20 +277,39 @@ def read_calibration_table(path: str | Path, settings: Settings) -> tuple[pd.Dat
 
 # --- atomic output ------------------------------------------------------------
 
-@contextlib.contextmanager
-def atomic_write(path: str | Path, mode: str = "w", *, force: bool = True) -> Iterator:
-    """Write to a temporary file beside ``path`` and rename it into place on success.
+# errors of a write that a user can act on (free space, permissions): not bugs
+_WRITE_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EACCES, errno.EPERM}
 
-    An exception or interruption leaves any previous file untouched and removes
-    the temporary file.
-    """
+
+def check_output(path: str | Path, *, force: bool) -> None:
+    """Refuse, before any work is done, an output that cannot or may not be written."""
     path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{path}: is a directory, expected a file name for the output")
     if not force and path.exists():
         raise InputError(f"{path}: already exists; pass --force to overwrite it")
     directory = path.parent if str(path.parent) else Path(".")
     if not directory.is_dir():
         raise InputError(f"{path}: directory {directory} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
+
+
+@contextlib.contextmanager
+def atomic_write(path: str | Path, mode: str = "w", *, force: bool = True) -> Iterator:
+    """Write to a temporary file beside ``path`` and rename it into place on success.
+
+    The temporary file is hidden (``.NAME.XXXX.tmp``) in the same directory, so the
+    rename is atomic.  An exception, Ctrl-C or SIGTERM leaves any previous file
+    untouched and removes the temporary file; a full disk is reported as an
+    :class:`InputError`.  Only SIGKILL (or a power cut) can leave the hidden
+    temporary file behind, never a partial ``path``.
+    """
+    path = Path(path)
+    check_output(path, force=force)
+    directory = path.parent if str(path.parent) else Path(".")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
+    except OSError as err:
+        raise InputError(f"{path}: cannot write in {directory} ({err.strerror})") from None
     try:
         # mkstemp creates the file 0600; give the output the mode a plain open() would
         umask = os.umask(0)
@@ -233,9 +320,13 @@ def atomic_write(path: str | Path, mode: str = "w", *, force: bool = True) -> It
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        if isinstance(err, OSError) and err.errno in _WRITE_ERRNOS:
+            raise InputError(
+                f"{path}: cannot write ({err.strerror}); any previous file is unchanged"
+            ) from None
         raise
 
 

@@ -95,10 +95,18 @@ class Chi:
         if sv.ndim != 1 or sv.shape != coef.shape:
             raise ValueError("support_vectors and dual_coef differ in length")
         lo, hi = (float(v) for v in d["input_range"])
-        return cls(
+        chi = cls(
             name, float(d["gamma"]), sv, coef, float(d["rho"]), float(d["input_scale"]),
             float(d["output_scale"]), (lo, hi), int(d["n_points"]),
         )
+        if not (np.isfinite(chi.gamma) and chi.gamma > 0):
+            raise ValueError(f"gamma = {chi.gamma!r}, expected a positive number")
+        if not (np.isfinite(sv).all() and np.isfinite(coef).all() and np.isfinite(chi.rho)):
+            raise ValueError("support vectors, dual coefficients and rho must be finite")
+        for scale in (chi.input_scale, chi.output_scale):
+            if not (np.isfinite(scale) and scale != 0):
+                raise ValueError(f"scale {scale!r}, expected a finite non-zero number")
+        return chi
 
 
 @dataclass
@@ -227,15 +235,29 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise ModelFileError(f"{source}: not an fsdecouple model file (format is not '{FORMAT}')")
     version = doc.get("format_version")
-    if not isinstance(version, int):
-        raise ModelFileError(f"{source}: format_version is missing or not a number")
+    if not isinstance(version, int) or isinstance(version, bool):
+        raise ModelFileError(
+            f"{source}: format_version is missing or not a whole number ({version!r})"
+        )
+    if version < 1:
+        raise ModelFileError(f"{source}: format_version {version} is unknown (versions start at 1)")
     if version > FORMAT_VERSION:
         raise ModelFileError(
             f"{source}: format_version {version} was written by a newer fsdecouple "
             f"({doc.get('fsdecouple_version', '?')}); this one reads up to {FORMAT_VERSION}"
         )
-    digest = (doc.get("integrity") or {}).get("digest")
-    if digest != content_digest(doc):
+    integrity = doc.get("integrity")
+    digest = integrity.get("digest") if isinstance(integrity, dict) else None
+    if not isinstance(digest, str):
+        raise ModelFileError(
+            f"{source}: has no integrity digest, so it cannot be trusted (written by hand "
+            "or by another tool?); refit the model"
+        )
+    try:
+        expected = content_digest(doc)
+    except (TypeError, ValueError) as err:  # NaN, inf or non-JSON values in a dict
+        raise ModelFileError(f"{source}: malformed model file ({err})") from None
+    if digest != expected:
         raise ModelFileError(
             f"{source}: integrity check failed: the content does not match its SHA-256 "
             "digest (edited by hand or corrupted); refit the model"
@@ -243,12 +265,47 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
     try:
         settings = settings_from_dict(_settings_yaml_form(doc["settings"]), f"{source}: settings")
         k = np.array([float(doc["omega"][a]["k"]) for a in AXES])
-        chi = {name: Chi.from_dict(name, doc["chi"][name]) for name in CHI_NAMES}
+        chi = {}
+        for name in CHI_NAMES:
+            if name not in doc["chi"]:
+                raise ModelFileError(f"{source}: malformed model file (chi '{name}' is missing)")
+            try:
+                chi[name] = Chi.from_dict(name, doc["chi"][name])
+            except (KeyError, TypeError, ValueError) as err:
+                raise ModelFileError(
+                    f"{source}: malformed model file (chi '{name}': {err})"
+                ) from None
     except (KeyError, TypeError, ValueError) as err:
         raise ModelFileError(f"{source}: malformed model file ({type(err).__name__}: {err})") from None
+    bad = [a for a, v in zip(AXES, k, strict=True) if not (np.isfinite(v) and v != 0.0)]
+    if bad:
+        raise ModelFileError(
+            f"{source}: omega {bad[0]}: slope k = {float(k[AXES.index(bad[0])])!r}, expected a finite "
+            "non-zero number"
+        )
+    report = doc.get("report")
+    _check_report(report, source)
     return CouplingErrorModel(
-        settings, k, chi, doc.get("report", {}), doc.get("provenance", {}), doc.get("created", "")
+        settings, k, chi, report, doc.get("provenance", {}), doc.get("created", "")
     )
+
+
+def _check_report(report: Any, source: str) -> None:
+    """The fit figures ``show`` prints: per-axis numbers and a list of warnings."""
+    def number(v):
+        return isinstance(v, int | float) and not isinstance(v, bool)
+
+    if not isinstance(report, dict):
+        raise ModelFileError(f"{source}: malformed model file (report is not a mapping)")
+    for key in ("r2", "n_points", "gamma_before", "gamma_after"):
+        table = report.get(key)
+        if not (isinstance(table, dict) and all(number(table.get(a)) for a in AXES)):
+            raise ModelFileError(
+                f"{source}: malformed model file (report: {key} needs a number per axis)"
+            )
+    warnings = report.get("warnings", [])
+    if not (isinstance(warnings, list) and all(isinstance(w, str) for w in warnings)):
+        raise ModelFileError(f"{source}: malformed model file (report: warnings is not a list of text)")
 
 
 def _settings_yaml_form(d: dict[str, Any]) -> dict[str, Any]:
@@ -258,21 +315,67 @@ def _settings_yaml_form(d: dict[str, Any]) -> dict[str, Any]:
     return {**d, "svr": svr}
 
 
+class _NonFinite(ValueError):
+    pass
+
+
+class _DuplicateKey(ValueError):
+    pass
+
+
+def _unique_keys(pairs):
+    # the digest covers the parsed document, so a second, shadowed key would
+    # pass it while showing a reader a value the model does not use
+    doc = dict(pairs)
+    if len(doc) != len(pairs):
+        seen = set()
+        raise _DuplicateKey(next(k for k, _ in pairs if k in seen or seen.add(k)))
+    return doc
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not np.isfinite(value):  # 1e999 parses to inf
+        raise _NonFinite(text)
+    return value
+
+
+def _refuse_constant(name: str):
+    # json accepts NaN/Infinity, which the writer never produces (allow_nan=False)
+    raise _NonFinite(name)
+
+
 def load_model(path: str | Path) -> CouplingErrorModel:
     """Read and verify a model file."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")  # a BOM from a Windows editor is not content
     except FileNotFoundError:
         raise ModelFileError(f"{path}: model file not found") from None
     except (OSError, UnicodeDecodeError) as err:
         raise ModelFileError(f"{path}: cannot read model file ({err})") from None
     try:
-        doc = json.loads(text)
+        doc = json.loads(
+            text, parse_constant=_refuse_constant, parse_float=_finite_float,
+            object_pairs_hook=_unique_keys,
+        )
     except json.JSONDecodeError as err:
         raise ModelFileError(
             f"{path}, row {err.lineno}, column {err.colno}: not valid JSON (truncated?)"
         ) from None
+    except _DuplicateKey as err:
+        raise ModelFileError(
+            f"{path}: key '{err.args[0]}' appears twice in one object (edited by hand?); "
+            "json would keep the last one silently"
+        ) from None
+    except _NonFinite as err:
+        raise ModelFileError(
+            f"{path}: holds {err.args[0]!r}; NaN and infinity are not allowed in a model file"
+        ) from None
+    except RecursionError:
+        raise ModelFileError(f"{path}: not a model file (JSON too deeply nested)") from None
+    except ValueError as err:  # e.g. an integer of more than 4300 digits
+        raise ModelFileError(f"{path}: not a model file ({err})") from None
     return model_from_dict(doc, str(path))
 
 
@@ -329,7 +432,7 @@ def fit(
     for a, axis in enumerate(AXES):
         if not np.isfinite(omega.k[a]) or omega.k[a] == 0.0:
             raise InputError(
-                f"the {axis} sweeps' prime voltage u{axis} does not change with f{axis}; "
+                f"{calib.source}: the {axis} sweeps' prime voltage u{axis} does not change with f{axis}; "
                 f"cannot fit omega_{axis} (eq. 2)"
             )
         if not omega.r2[a] >= settings.min_r2:

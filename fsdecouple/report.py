@@ -98,7 +98,8 @@ def fit_tables(model) -> list:
 
 
 def apply_lines(summary, out) -> list[str]:
-    lines = [f"decoupled {summary.rows} rows into {out}"]
+    counts = ", ".join(f"{n} {name}" for name, n in summary.status_counts.items() if n)
+    lines = [f"decoupled {summary.rows} rows into {out} (status: {counts})"]
     if np.any(summary.offsets):
         lines.append("zero removed [V]: " + ", ".join(
             f"{c}={v:+.6f}" for c, v in zip(VOLTAGE_COLUMNS, summary.offsets, strict=True)))
@@ -111,8 +112,15 @@ def apply_warnings(summary) -> list[str]:
         rows = ", ".join(map(str, summary.first_missing))
         more = ", ..." if summary.missing_rows > len(summary.first_missing) else ""
         w.append(f"{summary.missing_rows} rows have a missing voltage; kept with empty "
-                 f"forces (rows {rows}{more})")
+                 f"forces and status 'missing' (rows {rows}{more})")
+    if summary.truncated_rows:
+        w.append(f"row {summary.rows + 1}, the last, does not end with a newline (the writer was "
+                 "cut off?); kept with empty forces and status 'truncated'")
+    if summary.not_finite_rows:
+        w.append(f"{summary.not_finite_rows} rows have voltages so large that eq. (11) "
+                 "overflows; kept with empty forces and status 'not_finite'")
     if summary.out_of_range_rows:
         w.append(f"{summary.out_of_range_rows} rows have a voltage more than 1 % of the span "
-                 "outside the calibrated range; their forces are extrapolated")
+                 "outside the calibrated range; their forces are extrapolated (status "
+                 "'extrapolated')")
     return w

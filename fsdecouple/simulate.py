@@ -16,7 +16,8 @@ import pandas as pd
 
 from .calibration import GrossError
 from .config import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
-from .io import atomic_write
+from .errors import InputError
+from .io import atomic_write, check_output
 
 # Section 3 and eq. (13)
 PAPER_INVERSE_SLOPES = (75.065, 77.788, 125.17)  # [N/V]
@@ -150,6 +151,13 @@ def simulate(
     """
     sensor = sensor or SimulatedSensor()
     out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out}: is a file, expected a directory to write into")
+    n_reps = 6
+    for path in (*(out / "calibration" / f"rep{r}.csv" for r in range(1, n_reps + 1)),
+                 out / "task_voltages.csv", out / "task_forces.csv"):
+        if path.parent.is_dir():  # all or nothing: refuse before the first file is written
+            check_output(path, force=force)
     (out / "calibration").mkdir(parents=True, exist_ok=True)
     table = simulate_calibration(sensor, seed=seed)
     if gross_error is not None:

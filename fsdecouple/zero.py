@@ -113,13 +113,18 @@ def zero_correct(table: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
     return points, pd.DataFrame(offsets)
 
 
-def tare_offsets(u: np.ndarray, n: int) -> np.ndarray:
+def tare_offsets(u: np.ndarray, n: int, source=None) -> np.ndarray:
     """Mean of the first ``n`` voltage rows, the zero of a task log [V]."""
+    src = f"{source}: " if source is not None else ""
     if n < 1:
         raise InputError(f"--tare: needs at least 1 row, got {n}")
     if len(u) < n:
-        raise InputError(f"--tare {n}: the log has only {len(u)} rows")
+        raise InputError(f"{src}--tare {n}: the log has only {len(u)} rows")
     head = u[:n]
     if not np.isfinite(head).all():
-        raise InputError(f"--tare {n}: the first {n} rows contain missing values")
+        bad = int(np.argmax(~np.isfinite(head).all(axis=1))) + 2
+        raise InputError(
+            f"{src}--tare {n}: the first {n} rows contain missing values (row {bad}); "
+            "the zero needs complete rows"
+        )
     return head.mean(axis=0)

@@ -20,7 +20,8 @@ def test_fit_apply_round_trip(tmp_path, sim_dir):
     invoke(["apply", model, sim_dir / "task_voltages.csv", "-o", out, "--tare", "200"])
     forces = pd.read_csv(out)
     log = pd.read_csv(sim_dir / "task_voltages.csv", dtype=str)
-    assert list(forces.columns) == [*log.columns, "fx", "fy", "fz"]
+    assert list(forces.columns) == [*log.columns, "fx", "fy", "fz", "status"]
+    assert set(forces["status"]) <= {"ok", "extrapolated"}
     # input columns pass through as text, unchanged and in order
     pd.testing.assert_frame_equal(pd.read_csv(out, dtype=str)[list(log.columns)], log)
     truth = pd.read_csv(sim_dir / "task_forces.csv")
@@ -126,6 +127,7 @@ def test_apply_keeps_rows_with_missing_values(tmp_path, sim_dir):
     assert "1 rows have a missing voltage" in r.stderr and "rows 3" in r.stderr
     f = pd.read_csv(out)
     assert len(f) == 3 and f["fx"].isna().tolist() == [False, True, False]
+    assert f["status"].tolist() == ["ok", "missing", "ok"]
 
 
 def test_apply_chunks_give_same_result(tmp_path, model, sim_dir):

@@ -175,7 +175,9 @@ def test_fit_mentions_the_report_command(tmp_path):
 def test_readme_ends_its_main_command_with_a_report_and_shows_a_figure():
     readme = (SAMPLE.parent / "README.md").read_text(encoding="utf-8")
     main = next(ln for ln in readme.splitlines() if ln.startswith("python3 -m venv") and " fit " in ln)
-    assert main.endswith("report model.json --calib sample_data/calibration -o report.html --force")
+    assert main.endswith(
+        "report model.json --cv cv.json --calib sample_data/calibration -o report.html --force"
+    )
     assert "](docs/figure7.png)" in readme
     assert_figure_ok(imread(SAMPLE.parent / "docs" / "figure7.png"))
 
