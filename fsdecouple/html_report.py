@@ -313,7 +313,7 @@ def _gross_tables(cv) -> str:
         for a in AXES:
             c, w = clean.get((r, t, "svr", a)), gross.get((r, t, "svr", a))
             cells += [cell(pct(c)), cell(pct(w), worse(w, gross.get((r, t, "initial", a))))]
-        rows.append(tr(cell(str(r)), cell(TEST_NAMES.get(t, str(t))), *cells))
+        rows.append(tr(cell(str(r)), cell(f"{_test_name(cv, r, t)} (rep {t})"), *cells))
     head = [tr(th("round", rowspan=2), th("held out", rowspan=2),
                *(th(f"γ{a} (ε-SVR)", span=2) for a in AXES)),
             tr(*(th(x) for _ in AXES for x in ("without", "with gross error")))]

@@ -201,3 +201,12 @@ def test_report_copes_with_a_minimal_cv_and_absent_methods(tmp_path, sample_mode
     tree = parse(text)
     assert {"table-gamma-methods", "table-gamma-svr", "fig-residuals"} <= set(tree.ids)
     assert "No gross-error run" in text and "No combined-load validation" in text
+
+
+def test_held_out_labels_name_the_repetition(tmp_path, sample_model, cv_json):
+    """test_set is the held-out repetition's number: round 2 holds out reps 3 and 4."""
+    doc = json.loads(cv_json.read_text())
+    assert doc["folds"][1] == [3, 4]
+    invoke(["report", sample_model, "--cv", cv_json, "-o", tmp_path / "r.html"])
+    text = (tmp_path / "r.html").read_text(encoding="utf-8")
+    assert "test I (rep 3)" in text and "test II (rep 4)" in text
