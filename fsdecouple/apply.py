@@ -7,21 +7,35 @@ and counted.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import os
+from collections import deque
+from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from .config import FORCE_COLUMNS, VOLTAGE_COLUMNS, Settings
 from .errors import InputError, where
-from .io import HEADER_ROW, atomic_write, parser_message, read_header, require_columns
+from .io import HEADER_ROW, atomic_write, read_header, require_columns
 from .model import CouplingErrorModel
+from .stream import (
+    Block,
+    CsvParser,
+    CsvSink,
+    ParquetSink,
+    csv_bodies,
+    csv_eol,
+    is_parquet,
+    parquet_blocks,
+    parquet_header,
+)
 from .zero import tare_offsets
 
-CHUNK_ROWS = 200_000
-MISSING = ("", "nan", "NaN", "NA", "N/A", "null")
+CHUNK_ROWS = 1 << 20  # rows per block at most; blocks are cut at ~4 MB anyway
+MAX_WORKERS = 4
 
 
 @dataclass
@@ -31,40 +45,6 @@ class ApplySummary:
     first_missing: list[int] = field(default_factory=list)
     out_of_range_rows: int = 0
     offsets: np.ndarray = field(default_factory=lambda: np.zeros(3))
-
-
-def _voltages(chunk: pd.DataFrame, names: list[str], settings: Settings, path, first_row: int):
-    """Voltages [V] of a chunk of strings; missing cells become NaN, junk is an error."""
-    u = np.empty((len(chunk), 3))
-    for k, name in enumerate(names):
-        text = chunk[name].str.strip()
-        if settings.decimal != ".":
-            text = text.str.replace(settings.decimal, ".", regex=False)
-        vals = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
-        bad = np.isnan(vals) & ~text.isin(MISSING).to_numpy()
-        bad |= np.isinf(vals)
-        if bad.any():
-            i = int(np.argmax(bad))
-            raise InputError(
-                f"{where(path, first_row + i, name)}: {chunk[name].iloc[i]!r}, expected a number"
-            )
-        u[:, k] = vals * settings.scale[VOLTAGE_COLUMNS[k]]
-    return u
-
-
-def _read_chunks(path: Path, settings: Settings, chunk_rows: int, nrows=None, handle=None):
-    try:
-        yield from pd.read_csv(
-            handle if handle is not None else path, sep=settings.sep, dtype=str,
-            keep_default_na=False, na_filter=False, encoding="utf-8-sig",
-            chunksize=chunk_rows, nrows=nrows,
-        )
-    except pd.errors.EmptyDataError:
-        raise InputError(f"{path}: file is empty (no header row)") from None
-    except pd.errors.ParserError as err:
-        raise InputError(f"{path}: {parser_message(err)}") from None
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a UTF-8 text file") from None
 
 
 def apply_file(
@@ -78,6 +58,7 @@ def apply_file(
     force: bool = False,
     chunk_rows: int = CHUNK_ROWS,
     progress: Callable[[int, int], None] | None = None,
+    workers: int | None = None,
 ) -> ApplySummary:
     """Decouple the voltage log ``voltages`` into ``out`` by eq. (11).
 
@@ -90,13 +71,20 @@ def apply_file(
     zero : (float, float, float), optional
         Subtract these voltages [V] instead.
     progress : callable, optional
-        Called as ``progress(bytes_done, bytes_total)``.
+        Called as ``progress(done, total)`` in bytes (CSV) or rows (Parquet).
+    workers : int, optional
+        Threads parsing, decoupling and formatting blocks; default: the cores.
+
+    The input and output formats follow the file suffixes: ``.parquet`` (or
+    ``.pq``) is Parquet, anything else CSV.  CSV lines pass through byte for
+    byte; Parquet columns keep their types (CSV columns become strings).
     """
-    path = Path(voltages)
+    path, out = Path(voltages), Path(out)
     settings = settings or model.settings
     if tare is not None and zero is not None:
         raise InputError("give either --tare or --zero, not both")
-    header = read_header(path, settings)
+    parquet_in = is_parquet(path)
+    header = parquet_header(path) if parquet_in else read_header(path, settings)
     names = [settings.columns[c] for c in VOLTAGE_COLUMNS]
     require_columns(header, dict(zip(VOLTAGE_COLUMNS, names, strict=True)), path)
     clash = [c for c in FORCE_COLUMNS if c in header]
@@ -105,39 +93,77 @@ def apply_file(
             f"{where(path, HEADER_ROW, clash[0])}: the log already has a column named "
             f"'{clash[0]}', which the output would overwrite"
         )
+    scale = np.array([settings.scale[c] for c in VOLTAGE_COLUMNS])
+
+    def jobs() -> Iterator[Callable[[], Block]]:
+        """Blocks to parse, in file order; CSV blocks are parsed by the workers."""
+        if parquet_in:
+            for b in parquet_blocks(path, names, settings, chunk_rows=chunk_rows):
+                yield lambda b=b: b
+            return
+        parse = CsvParser(path, header, names, settings, csv_eol(path), is_parquet(out))
+        for body in csv_bodies(path, chunk_rows=chunk_rows):
+            yield partial(parse, body)
+
     summary = ApplySummary()
     if tare is not None:
-        head = pd.concat(list(_read_chunks(path, settings, chunk_rows, nrows=tare)))
-        summary.offsets = tare_offsets(
-            _voltages(head, names, settings, path, HEADER_ROW + 1), tare
-        )
+        head, n = [], 0
+        for job in jobs():
+            head.append(job().u[:tare - n] * scale)
+            n += len(head[-1])
+            if n >= tare:
+                break
+        summary.offsets = tare_offsets(np.concatenate(head) if head else np.empty((0, 3)), tare)
     elif zero is not None:
         summary.offsets = np.asarray(zero, dtype=float)
     lo, hi = model.calibrated_range.T
-    total = max(1, path.stat().st_size)
-    with atomic_write(out, force=force) as fh, open(path, "rb") as raw:
-        first_row = HEADER_ROW + 1
-        wrote_header = False
-        for chunk in _read_chunks(path, settings, chunk_rows, handle=raw):
-            u = _voltages(chunk, names, settings, path, first_row) - summary.offsets
+    # blocks in flight bound the memory (~60 MB each), so not every core of a big box
+    workers = workers or min(MAX_WORKERS, os.cpu_count() or 1)
+
+    with atomic_write(out, "wb", force=force) as fh:
+        if is_parquet(out):
+            sink = ParquetSink(fh)
+        else:
+            sink = CsvSink(fh, header, None if parquet_in else _header_line(path))
+
+        def work(job):
+            # parse, eq. (11) and format one block; numpy and pyarrow release the
+            # GIL, so blocks overlap on the cores while the main thread writes
+            block = job()
+            u = block.u * scale - summary.offsets
             missing = np.isnan(u).any(axis=1)
-            f = model.decouple(u)
-            f[missing] = np.nan
-            n_missing = int(missing.sum())
-            if n_missing:
-                summary.missing_rows += n_missing
-                room = 10 - len(summary.first_missing)
-                summary.first_missing += [int(r) for r in np.flatnonzero(missing)[:room] + first_row]
+            f = model.decouple(u, workers=1)
             ok = ~missing
-            summary.out_of_range_rows += int(((u[ok] < lo) | (u[ok] > hi)).any(axis=1).sum())
-            for k, c in enumerate(FORCE_COLUMNS):
-                chunk[c] = f[:, k]
-            chunk.to_csv(fh, index=False, header=not wrote_header, lineterminator="\n")
-            wrote_header = True
-            summary.rows += len(chunk)
-            first_row += len(chunk)
-            if progress is not None:
-                progress(min(total, raw.tell()), total)
-        if not wrote_header:
+            outside = int(((u[ok] < lo) | (u[ok] > hi)).any(axis=1).sum())
+            rows = np.flatnonzero(missing)[:10] + block.first_row
+            return len(block), int(missing.sum()), rows, outside, block.done, block.total, \
+                sink.encode(block, f, missing)
+
+        with ThreadPoolExecutor(workers) as pool:
+            pending: deque = deque()
+            for job in jobs():
+                pending.append(pool.submit(work, job))
+                while len(pending) > workers or (pending and pending[0].done()):
+                    _collect(pending.popleft().result(), sink, summary, progress)
+            while pending:
+                _collect(pending.popleft().result(), sink, summary, progress)
+        sink.close()
+        if summary.rows == 0:
             raise InputError(f"{path}: header only, no data rows")
     return summary
+
+
+def _collect(result, sink, summary: ApplySummary, progress) -> None:
+    n, n_missing, rows, outside, done, total, payload = result
+    sink.write(payload)
+    summary.rows += n
+    summary.missing_rows += n_missing
+    summary.first_missing += [int(r) for r in rows[:10 - len(summary.first_missing)]]
+    summary.out_of_range_rows += outside
+    if progress is not None:
+        progress(done, total)
+
+
+def _header_line(path: Path) -> bytes:
+    with open(path, "rb") as fh:
+        return fh.readline().removeprefix(b"\xef\xbb\xbf").rstrip(b"\r\n")
