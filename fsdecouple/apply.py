@@ -28,6 +28,7 @@ from .stream import (
     ParquetSink,
     csv_bodies,
     csv_eol,
+    force_decimals,
     is_parquet,
     parquet_blocks,
     parquet_header,
@@ -59,6 +60,7 @@ def apply_file(
     chunk_rows: int = CHUNK_ROWS,
     progress: Callable[[int, int], None] | None = None,
     workers: int | None = None,
+    round_trip: bool = False,
 ) -> ApplySummary:
     """Decouple the voltage log ``voltages`` into ``out`` by eq. (11).
 
@@ -74,6 +76,12 @@ def apply_file(
         Called as ``progress(done, total)`` in bytes (CSV) or rows (Parquet).
     workers : int, optional
         Threads parsing, decoupling and formatting blocks; default: the cores.
+    round_trip : bool
+        CSV output: write each force as the shortest text that reads back as
+        the same double.  By default forces are rounded to the decimals that
+        keep them within 1e-10 V-equivalent (:func:`~fsdecouple.stream.force_decimals`,
+        8 decimals for the paper's sensor), a tenth of the fast path's 1e-9 V.
+        Parquet output always stores the doubles.
 
     The input and output formats follow the file suffixes: ``.parquet`` (or
     ``.pq``) is Parquet, anything else CSV.  CSV lines pass through byte for
@@ -124,7 +132,8 @@ def apply_file(
         if is_parquet(out):
             sink = ParquetSink(fh)
         else:
-            sink = CsvSink(fh, header, None if parquet_in else _header_line(path))
+            decimals = None if round_trip else force_decimals(model.k)
+            sink = CsvSink(fh, header, None if parquet_in else _header_line(path), decimals)
 
         def work(job):
             # parse, eq. (11) and format one block; numpy and pyarrow release the
