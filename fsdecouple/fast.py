@@ -87,6 +87,7 @@ class FastDecoupler:
         self.offsets = np.concatenate([[0], np.cumsum(n)[:-1]]).astype(np.intp)
         self.tab_a = [np.concatenate(t) for t in tab_a]
         self.tab_b = [np.concatenate(t) for t in tab_b]
+        self.tab_ab = [a + 1j * b for a, b in zip(self.tab_a, self.tab_b, strict=True)]
         self._lo, self._inv_step, self._intervals, self._inv_k = (
             v.reshape(3, 1) for v in (self.lo, self.inv_step, self.intervals, self.inv_k)
         )
@@ -112,7 +113,8 @@ class FastDecoupler:
         # which costs more than the arithmetic.
         ws = getattr(self._local, "ws", None)
         if ws is None or ws["t"].shape[1] < n:
-            ws = {k: np.empty((3, n)) for k in ("ut", "t", "s", "ga", "gb", "c")}
+            ws = {k: np.empty((3, n)) for k in ("ut", "t", "s")}
+            ws.update({k: np.empty((3, n, 2)) for k in ("g", "c", "s2")})
             ws["i"] = np.empty((3, n), dtype=np.intp)
             self._local.ws = ws
         return {k: v[:, :n] for k, v in ws.items()}
@@ -133,17 +135,20 @@ class FastDecoupler:
         np.copyto(i, t, casting="unsafe")  # truncation = floor, as t >= 0
         np.subtract(t, i, out=s)
         i += self._offsets
-        for tab, g in ((self.tab_a, w["ga"]), (self.tab_b, w["gb"])):
-            np.take(tab[3], i, out=g, mode="clip")
-            for j in (2, 1, 0):
-                g *= s
-                np.take(tab[j], i, out=c, mode="clip")
-                g += c
+        # one complex look-up fetches coefficient j of both chi fed by this input
+        g, c, s2 = w["g"], w["c"], w["s2"]
+        s2[..., 0] = s
+        s2[..., 1] = s
+        tab = self.tab_ab
+        np.take(tab[3], i, out=g.view(np.complex128)[..., 0], mode="clip")
+        for j in (2, 1, 0):
+            g *= s2
+            np.take(tab[j], i, out=c.view(np.complex128)[..., 0], mode="clip")
+            g += c
         ut *= self._inv_k
-        ga, gb = w["ga"], w["gb"]
         for a in range(3):
-            ut[a] += ga[_FROM_A[a]]
-            ut[a] += gb[_FROM_B[a]]
+            ut[a] += g[_FROM_A[a], :, 0]
+            ut[a] += g[_FROM_B[a], :, 1]
         if rotate and self.rotation is not None:
             ut = self.rotation @ ut
         for a in range(3):  # column by column: 3x faster than out[:] = ut.T
