@@ -8,6 +8,8 @@ and counted.
 from __future__ import annotations
 
 import os
+import queue
+import threading
 from collections import deque
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
@@ -150,7 +152,7 @@ def apply_file(
 
         with ThreadPoolExecutor(workers) as pool:
             pending: deque = deque()
-            for job in jobs():
+            for job in _prefetch(jobs(), workers + 1):
                 pending.append(pool.submit(work, job))
                 while len(pending) > workers or (pending and pending[0].done()):
                     _collect(pending.popleft().result(), sink, summary, progress)
@@ -160,6 +162,46 @@ def apply_file(
         if summary.rows == 0:
             raise InputError(f"{path}: header only, no data rows")
     return summary
+
+
+def _prefetch(items: Iterator, depth: int) -> Iterator:
+    """``items`` produced by a background thread, at most ``depth`` ahead.
+
+    Reading the next block (file I/O, Parquet decoding) then overlaps with
+    writing the last one on the main thread.
+    """
+    q: queue.Queue = queue.Queue(depth)
+    stop = threading.Event()
+    end = object()
+
+    def produce() -> None:
+        try:
+            for item in items:
+                while not stop.is_set():
+                    try:
+                        q.put((item, None), timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+            q.put((end, None))
+        except BaseException as err:  # noqa: B036 - handed over to the consumer as is
+            q.put((end, err))
+
+    thread = threading.Thread(target=produce, name="fsdecouple-read", daemon=True)
+    thread.start()
+    try:
+        while True:
+            item, err = q.get()
+            if err is not None:
+                raise err
+            if item is end:
+                return
+            yield item
+    finally:
+        stop.set()
+        thread.join()
 
 
 def _collect(result, sink, summary: ApplySummary, progress) -> None:
