@@ -174,20 +174,23 @@ def _prefetch(items: Iterator, depth: int) -> Iterator:
     stop = threading.Event()
     end = object()
 
+    def put(entry) -> bool:
+        while not stop.is_set():  # never block for good: the consumer may be gone
+            try:
+                q.put(entry, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
     def produce() -> None:
         try:
             for item in items:
-                while not stop.is_set():
-                    try:
-                        q.put((item, None), timeout=0.1)
-                        break
-                    except queue.Full:
-                        continue
-                if stop.is_set():
+                if not put((item, None)):
                     return
-            q.put((end, None))
+            put((end, None))
         except BaseException as err:  # noqa: B036 - handed over to the consumer as is
-            q.put((end, err))
+            put((end, err))
 
     thread = threading.Thread(target=produce, name="fsdecouple-read", daemon=True)
     thread.start()
