@@ -77,7 +77,8 @@ def apply_file(
     progress : callable, optional
         Called as ``progress(done, total)`` in bytes (CSV) or rows (Parquet).
     workers : int, optional
-        Threads parsing, decoupling and formatting blocks; default: the cores.
+        Threads parsing, decoupling and formatting blocks; default: the cores, at
+        most 4 (each block in flight holds ~60 MB).
     round_trip : bool
         CSV output: write each force as the shortest text that reads back as
         the same double.  By default forces are rounded to the decimals that

@@ -349,8 +349,8 @@ class ParquetSink:
 
     def write(self, table: pa.Table) -> None:
         if self.writer is None:
-            # dictionary-encoding doubles that never repeat is wasted work
-            keep = [n for n in table.column_names if n not in FORCE_COLUMNS]
+            # dictionary-encoding measured doubles, which seldom repeat, is wasted work
+            keep = [f.name for f in table.schema if not pa.types.is_floating(f.type)]
             self.writer = pq.ParquetWriter(self.fh, table.schema, use_dictionary=keep)
         self.writer.write_table(table)
 
