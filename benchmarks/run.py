@@ -202,7 +202,7 @@ def main() -> int:
         s = model.chi[name].surrogate
         vals, _, _ = svmutil.svm_predict(zeros, cols[name], libsvm[name], "-q")
         lib_err = max(lib_err, float(np.abs(s(cols[name][:, 0]) - np.asarray(vals)).max()))
-    row("1c. max |fast - exact| in range", err_v, "V", lib_err, "max |surrogate - libsvm| [V]",
+    row("1c. max abs(fast - exact) in range", err_v, "V", lib_err, "max abs(surrogate - libsvm) [V]",
         max(err_v, lib_err) / 1e-9, "both <= 1e-9 V", max(err_v, lib_err) <= 1e-9)
 
     # --- 2. one vector at a time -----------------------------------------------------
@@ -274,7 +274,7 @@ def main() -> int:
         d_exact = float((np.abs(fc - model.decouple(uc, exact=True)) * model.k).max())
         d_exact = max(d_exact, float((np.abs(fp - model.decouple(uc, exact=True)) * model.k).max()))
         row("3d. apply CSV vs Parquet [V-equiv.]", d_fmt, "V", d_exact,
-            "max |apply - exact| [V-equivalent]", d_exact / 1e-9, "<= 1e-10 V; <= 1e-9 V",
+            "max abs(apply - exact) [V-equivalent]", d_exact / 1e-9, "<= 1e-10 V; <= 1e-9 V",
             d_fmt <= 1e-10 and d_exact <= 1e-9)
 
     print("\n| target | measured (median) | baseline (median) | ratio | goal | |")
