@@ -1,110 +1,53 @@
 """Decouple a logged voltage file into forces, in chunks (files larger than memory).
 
-Every input row is kept, in order, and every input column is passed through as
-text, unchanged; ``fx, fy, fz`` [N] and ``status`` are appended.  ``status`` says
-what the forces of the row are worth (:data:`STATUSES`); rows that cannot be
-decoupled keep empty forces and are counted.  The output uses the log's CSV
-dialect (``sep``, ``decimal``).
+Every input column is passed through as text, unchanged and in order; ``fx, fy,
+fz`` [N] are appended.  Rows with a missing voltage are kept with empty forces
+and counted.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import os
+import queue
+import threading
+from collections import deque
+from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from .config import FORCE_COLUMNS, VOLTAGE_COLUMNS, Settings
 from .errors import InputError, where
-from .io import (
-    HEADER_ROW,
-    atomic_write,
-    csv_chunks,
-    read_header,
-    refuse_overwriting_input,
-    require_columns,
-)
+from .io import HEADER_ROW, atomic_write, read_header, require_columns
 from .model import CouplingErrorModel
+from .stream import (
+    Block,
+    CsvParser,
+    CsvSink,
+    ParquetSink,
+    csv_bodies,
+    csv_eol,
+    force_decimals,
+    is_parquet,
+    parquet_blocks,
+    parquet_header,
+)
 from .zero import tare_offsets
 
-CHUNK_ROWS = 200_000
-RANGE_MARGIN = 0.01  # fraction of the calibrated voltage span
-MISSING = ("", "nan", "NaN", "NA", "N/A", "null")
-STATUS_COLUMN = "status"
-# What a row's forces are worth.  Only "ok" and "extrapolated" rows have forces.
-STATUSES = {
-    "ok": "decoupled by eq. (11), voltages inside the calibrated range",
-    "extrapolated": "decoupled, but a voltage lies outside the calibrated range",
-    "missing": "a voltage is empty or missing (blank or short row): no forces",
-    "truncated": "last line of a log that does not end with a newline (the writer "
-                 "was cut off, a number may be cut short): no forces",
-    "not_finite": "the voltages are so large that eq. (11) overflows: no forces",
-}
-STATUS_NAMES = np.array(list(STATUSES), dtype=object)
-OK_, EXTRAPOLATED_, MISSING_, TRUNCATED_, NOT_FINITE_ = range(len(STATUSES))
+CHUNK_ROWS = 1 << 20  # rows per block at most; blocks are cut at ~4 MB anyway
+MAX_WORKERS = 4
 
 
 @dataclass
 class ApplySummary:
-    """What ``apply`` did: rows written, per-status counts, the zero removed [V]."""
-
     rows: int = 0
     missing_rows: int = 0
     first_missing: list[int] = field(default_factory=list)
     out_of_range_rows: int = 0
-    truncated_rows: int = 0
-    not_finite_rows: int = 0
-    status_counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(STATUSES, 0))
     offsets: np.ndarray = field(default_factory=lambda: np.zeros(3))
-
-
-def _voltages(chunk: pd.DataFrame, names: list[str], settings: Settings, path, first_row: int):
-    """Voltages [V] of a chunk of strings; missing cells become NaN, junk is an error."""
-    u = np.empty((len(chunk), 3))
-    for k, name in enumerate(names):
-        text = chunk[name].str.strip()
-        if settings.decimal != ".":
-            text = text.str.replace(settings.decimal, ".", regex=False)
-        vals = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
-        bad = np.isnan(vals) & ~text.isin(MISSING).to_numpy()
-        bad |= np.isinf(vals)
-        if bad.any():
-            i = int(np.argmax(bad))
-            raise InputError(
-                f"{where(path, first_row + i, name)}: {chunk[name].iloc[i]!r}, expected a number"
-            )
-        u[:, k] = vals * settings.scale[VOLTAGE_COLUMNS[k]]
-    return u
-
-
-def _read_chunks(path: Path, settings: Settings, chunk_rows: int, nrows=None, handle=None):
-    for chunk in csv_chunks(
-        handle if handle is not None else path, path, settings, chunksize=chunk_rows, nrows=nrows
-    ):
-        chunk.columns = [str(c).strip() for c in chunk.columns]
-        yield chunk
-
-
-def _with_last(chunks):
-    """Yield (chunk, is_last): the last chunk is known only once the next read fails."""
-    prev = None
-    for chunk in chunks:
-        if prev is not None:
-            yield prev, False
-        prev = chunk
-    if prev is not None:
-        yield prev, True
-
-
-def ends_with_newline(path: Path) -> bool:
-    with open(path, "rb") as fh:
-        fh.seek(0, 2)
-        if fh.tell() == 0:
-            return True
-        fh.seek(-1, 2)
-        return fh.read(1) in (b"\n", b"\r")
 
 
 def apply_file(
@@ -118,6 +61,8 @@ def apply_file(
     force: bool = False,
     chunk_rows: int = CHUNK_ROWS,
     progress: Callable[[int, int], None] | None = None,
+    workers: int | None = None,
+    round_trip: bool = False,
 ) -> ApplySummary:
     """Decouple the voltage log ``voltages`` into ``out`` by eq. (11).
 
@@ -130,79 +75,150 @@ def apply_file(
     zero : (float, float, float), optional
         Subtract these voltages [V] instead.
     progress : callable, optional
-        Called as ``progress(bytes_done, bytes_total)``.
+        Called as ``progress(done, total)`` in bytes (CSV) or rows (Parquet).
+    workers : int, optional
+        Threads parsing, decoupling and formatting blocks; default: the cores, at
+        most 4 (each block in flight holds ~60 MB).
+    round_trip : bool
+        CSV output: write each force as the shortest text that reads back as
+        the same double.  By default forces are rounded to the decimals that
+        keep them within 1e-10 V-equivalent (:func:`~fsdecouple.stream.force_decimals`,
+        8 decimals for the paper's sensor), a tenth of the fast path's 1e-9 V.
+        Parquet output always stores the doubles.
+
+    The input and output formats follow the file suffixes: ``.parquet`` (or
+    ``.pq``) is Parquet, anything else CSV.  CSV lines pass through byte for
+    byte; Parquet columns keep their types (CSV columns become strings).
     """
-    path = Path(voltages)
+    path, out = Path(voltages), Path(out)
     settings = settings or model.settings
     if tare is not None and zero is not None:
         raise InputError("give either --tare or --zero, not both")
-    header = read_header(path, settings)
-    refuse_overwriting_input(out, [path])
+    parquet_in = is_parquet(path)
+    header = parquet_header(path) if parquet_in else read_header(path, settings)
     names = [settings.columns[c] for c in VOLTAGE_COLUMNS]
     require_columns(header, dict(zip(VOLTAGE_COLUMNS, names, strict=True)), path)
-    clash = [c for c in (*FORCE_COLUMNS, STATUS_COLUMN) if c in header]
+    clash = [c for c in FORCE_COLUMNS if c in header]
     if clash:
         raise InputError(
             f"{where(path, HEADER_ROW, clash[0])}: the log already has a column named "
             f"'{clash[0]}', which the output would overwrite"
         )
+    scale = np.array([settings.scale[c] for c in VOLTAGE_COLUMNS])
+
+    def jobs() -> Iterator[Callable[[], Block]]:
+        """Blocks to parse, in file order; CSV blocks are parsed by the workers."""
+        if parquet_in:
+            for b in parquet_blocks(path, names, settings, chunk_rows=chunk_rows):
+                yield lambda b=b: b
+            return
+        parse = CsvParser(path, header, names, settings, csv_eol(path), is_parquet(out))
+        for body in csv_bodies(path, chunk_rows=chunk_rows):
+            yield partial(parse, body)
+
     summary = ApplySummary()
     if tare is not None:
-        head = pd.concat(list(_read_chunks(path, settings, chunk_rows, nrows=tare)))
-        summary.offsets = tare_offsets(
-            _voltages(head, names, settings, path, HEADER_ROW + 1), tare, source=path
-        )
+        head, n = [], 0
+        for job in jobs():
+            head.append(job().u[:tare - n] * scale)
+            n += len(head[-1])
+            if n >= tare:
+                break
+        summary.offsets = tare_offsets(np.concatenate(head) if head else np.empty((0, 3)), tare)
     elif zero is not None:
         summary.offsets = np.asarray(zero, dtype=float)
     lo, hi = model.calibrated_range.T
-    # Noise around an end of the range (e.g. Z's 0 N end at rest) is not
-    # extrapolation worth a warning: allow 1 % of the calibrated span.
-    margin = RANGE_MARGIN * (hi - lo)
-    lo, hi = lo - margin, hi + margin
-    total = max(1, path.stat().st_size)
-    cut_short = not ends_with_newline(path)
-    with atomic_write(out, force=force) as fh, open(path, "rb") as raw:
-        first_row = HEADER_ROW + 1
-        for chunk, last in _with_last(_read_chunks(path, settings, chunk_rows, handle=raw)):
-            u = _voltages(chunk, names, settings, path, first_row) - summary.offsets
-            code = np.zeros(len(chunk), dtype=np.int8)  # index into STATUS_NAMES
+    # blocks in flight bound the memory (~60 MB each), so not every core of a big box
+    workers = workers or min(MAX_WORKERS, os.cpu_count() or 1)
+
+    with atomic_write(out, "wb", force=force) as fh:
+        if is_parquet(out):
+            sink = ParquetSink(fh)
+        else:
+            decimals = None if round_trip else force_decimals(model.k)
+            sink = CsvSink(fh, header, None if parquet_in else _header_line(path), decimals)
+
+        def work(job):
+            # parse, eq. (11) and format one block; numpy and pyarrow release the
+            # GIL, so blocks overlap on the cores while the main thread writes
+            block = job()
+            u = block.u * scale - summary.offsets
             missing = np.isnan(u).any(axis=1)
-            code[missing] = MISSING_
-            if last and cut_short and len(chunk):
-                # a writer that crashed mid-line: the fields may be complete but
-                # the last number cut short, so the row gets no forces
-                missing[-1] = True
-                code[-1] = TRUNCATED_
-            with np.errstate(over="ignore", invalid="ignore"):
-                f = model.decouple(np.where(missing[:, None], 0.0, u))
-            huge = ~missing & ~np.isfinite(f).all(axis=1)
-            code[huge] = NOT_FINITE_
-            f[missing | huge] = np.nan
-            outside = (code == OK_) & ((u < lo) | (u > hi)).any(axis=1)
-            code[outside] = EXTRAPOLATED_
-            counts = np.bincount(code, minlength=len(STATUS_NAMES))
-            for name, n in zip(STATUS_NAMES, counts, strict=True):
-                summary.status_counts[name] += int(n)
-            summary.missing_rows += int(counts[MISSING_])
-            summary.truncated_rows += int(counts[TRUNCATED_])
-            summary.not_finite_rows += int(counts[NOT_FINITE_])
-            summary.out_of_range_rows += int(counts[EXTRAPOLATED_])
-            room = 10 - len(summary.first_missing)
-            if counts[MISSING_] and room > 0:
-                summary.first_missing += [
-                    int(r) for r in np.flatnonzero(code == MISSING_)[:room] + first_row
-                ]
-            for k, c in enumerate(FORCE_COLUMNS):
-                chunk[c] = f[:, k]
-            chunk[STATUS_COLUMN] = STATUS_NAMES[code]
-            chunk.to_csv(
-                fh, index=False, header=summary.rows == 0, sep=settings.sep,
-                decimal=settings.decimal, lineterminator="\n",
-            )
-            summary.rows += len(chunk)
-            first_row += len(chunk)
-            if progress is not None:
-                progress(min(total, raw.tell()), total)
+            f = model.decouple(u, workers=1)
+            ok = ~missing
+            outside = int(((u[ok] < lo) | (u[ok] > hi)).any(axis=1).sum())
+            rows = np.flatnonzero(missing)[:10] + block.first_row
+            return len(block), int(missing.sum()), rows, outside, block.done, block.total, \
+                sink.encode(block, f, missing)
+
+        with ThreadPoolExecutor(workers) as pool:
+            pending: deque = deque()
+            for job in _prefetch(jobs(), workers + 1):
+                pending.append(pool.submit(work, job))
+                while len(pending) > workers or (pending and pending[0].done()):
+                    _collect(pending.popleft().result(), sink, summary, progress)
+            while pending:
+                _collect(pending.popleft().result(), sink, summary, progress)
+        sink.close()
         if summary.rows == 0:
             raise InputError(f"{path}: header only, no data rows")
     return summary
+
+
+def _prefetch(items: Iterator, depth: int) -> Iterator:
+    """``items`` produced by a background thread, at most ``depth`` ahead.
+
+    Reading the next block (file I/O, Parquet decoding) then overlaps with
+    writing the last one on the main thread.
+    """
+    q: queue.Queue = queue.Queue(depth)
+    stop = threading.Event()
+    end = object()
+
+    def put(entry) -> bool:
+        while not stop.is_set():  # never block for good: the consumer may be gone
+            try:
+                q.put(entry, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def produce() -> None:
+        try:
+            for item in items:
+                if not put((item, None)):
+                    return
+            put((end, None))
+        except BaseException as err:  # noqa: B036 - handed over to the consumer as is
+            put((end, err))
+
+    thread = threading.Thread(target=produce, name="fsdecouple-read", daemon=True)
+    thread.start()
+    try:
+        while True:
+            item, err = q.get()
+            if err is not None:
+                raise err
+            if item is end:
+                return
+            yield item
+    finally:
+        stop.set()
+        thread.join()
+
+
+def _collect(result, sink, summary: ApplySummary, progress) -> None:
+    n, n_missing, rows, outside, done, total, payload = result
+    sink.write(payload)
+    summary.rows += n
+    summary.missing_rows += n_missing
+    summary.first_missing += [int(r) for r in rows[:10 - len(summary.first_missing)]]
+    summary.out_of_range_rows += outside
+    if progress is not None:
+        progress(done, total)
+
+
+def _header_line(path: Path) -> bytes:
+    with open(path, "rb") as fh:
+        return fh.readline().removeprefix(b"\xef\xbb\xbf").rstrip(b"\r\n")

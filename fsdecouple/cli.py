@@ -252,13 +252,20 @@ def _parse_zero(text: str) -> tuple[float, float, float]:
 @app.command()
 def apply(
     model_file: Annotated[Path, typer.Argument(help="Model file (JSON).")],
-    voltages: Annotated[Path, typer.Argument(help="Voltage log (CSV) with ux, uy, uz.")],
-    output: Annotated[Path, typer.Option("--output", "-o", help="Forces CSV to write.")],
+    voltages: Annotated[
+        Path, typer.Argument(help="Voltage log with ux, uy, uz: CSV, or Parquet (.parquet).")
+    ],
+    output: Annotated[
+        Path, typer.Option("--output", "-o", help="Forces file to write: CSV, or Parquet (.parquet).")
+    ],
     config: ConfigOpt = None,
     tare: Annotated[
         int | None, typer.Option(help="Subtract the mean voltages of the first N rows.")
     ] = None,
     zero: Annotated[str | None, typer.Option(help="Subtract offsets ux,uy,uz [V].")] = None,
+    round_trip: Annotated[
+        bool, typer.Option("--round-trip", help="CSV: write forces as round-trip exact text.")
+    ] = False,
     force: ForceOpt = False,
 ) -> None:
     """Decouple logged voltages into forces fx, fy, fz [N] by eq. (11)."""
@@ -276,8 +283,8 @@ def apply(
             task = bar.add_task("decoupling", total=None)
             summary = apply_file(
                 model, voltages, output, settings=settings, tare=tare, zero=offsets,
-                force=force, progress=lambda done, total: bar.update(task, completed=done,
-                                                                     total=total),
+                force=force, round_trip=round_trip,
+                progress=lambda done, total: bar.update(task, completed=done, total=total),
             )
     for line in apply_lines(summary, output):
         console.print(line, highlight=False)

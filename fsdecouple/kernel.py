@@ -27,3 +27,15 @@ def rbf_sum(
         out[start:start + step] = (np.exp(-gamma * (d * d)) * coef).sum(axis=1)
     out += bias
     return out.reshape(x.shape)
+
+
+def rbf_sum_slope(x: np.ndarray, centres: np.ndarray, coef: np.ndarray, gamma: float) -> np.ndarray:
+    """d/dx of :func:`rbf_sum`: ``sum_i coef_i (-2 gamma (x - c_i)) exp(-gamma (x - c_i)^2)``."""
+    x = np.asarray(x, dtype=float)
+    flat = x.ravel()
+    out = np.empty(flat.size)
+    step = max(1, _CHUNK_ELEMENTS // max(1, centres.size))
+    for start in range(0, flat.size, step):
+        d = flat[start:start + step, None] - centres[None, :]
+        out[start:start + step] = (np.exp(-gamma * (d * d)) * (-2.0 * gamma) * d * coef).sum(axis=1)
+    return out.reshape(x.shape)

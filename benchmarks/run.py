@@ -1,0 +1,294 @@
+"""Benchmarks of issue 4: every target with its median, its baseline measured in
+the same run, the ratio and pass/fail.
+
+    PYTHONPATH=. python benchmarks/run.py            # full: 10 M-row log, ~3 min
+    PYTHONPATH=. python benchmarks/run.py --quick    # 1 M-row log, fewer repeats
+
+Timings are medians of ``--repeats`` runs.  On a shared machine, other load
+inflates both a measurement and its baseline; the load average is printed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from fsdecouple import load_calibration, load_config  # noqa: E402
+from fsdecouple.model import CHI_NAMES, chi_training_data, fit  # noqa: E402
+
+PYARROW_CSV_COPY = """
+import sys, pyarrow.csv as c
+r = c.open_csv(sys.argv[1])
+with c.CSVWriter(sys.argv[2], r.schema) as w:
+    for b in r:
+        w.write_batch(b)
+"""
+PYARROW_PARQUET_COPY = """
+import sys, pyarrow.parquet as pq
+f = pq.ParquetFile(sys.argv[1])
+with pq.ParquetWriter(sys.argv[2], f.schema_arrow) as w:
+    for b in f.iter_batches():
+        w.write_batch(b)
+"""
+
+
+def median_time(fn, repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def _hwm_kb(pid: int) -> int:
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1])
+    except (OSError, ValueError):
+        pass
+    return 0
+
+
+def run_child(args: list[str]) -> tuple[float, float]:
+    """Wall time [s] and peak RSS [MB] of one child process.
+
+    The peak is the child's own VmHWM, polled every 10 ms: getrusage's
+    ru_maxrss of a child also counts this (large) parent's RSS at fork.
+    """
+    env = {**os.environ, "CI": "1", "PYTHONPATH": str(ROOT)}
+    t0 = time.perf_counter()
+    p = subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    peak = 0
+    while p.poll() is None:
+        peak = max(peak, _hwm_kb(p.pid))
+        time.sleep(0.01)
+    wall = time.perf_counter() - t0
+    err = p.stderr.read().decode()
+    p.stderr.close()
+    if p.returncode != 0:
+        raise RuntimeError(f"{' '.join(map(str, args))} failed:\n{err}")
+    return wall, peak / 1024
+
+
+def median_child(args, repeats):
+    runs = [run_child(args) for _ in range(repeats)]
+    return statistics.median(w for w, _ in runs), max(m for _, m in runs)
+
+
+def machine() -> str:
+    cpu = "unknown CPU"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    import numpy
+    import pyarrow
+
+    load = ", ".join(f"{v:.2f}" for v in os.getloadavg())
+    return (f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; {os.cpu_count()} cores, {cpu}; "
+            f"Python {platform.python_version()}, numpy {numpy.__version__}, "
+            f"pyarrow {pyarrow.__version__}; load average before: {load}")
+
+
+def write_log(path: Path, rows: int, model) -> None:
+    """A 1 kHz log ``t,ux,uy,uz`` in the calibrated range, 7 decimals like the sample."""
+    import pyarrow as pa
+    import pyarrow.csv as pcsv
+
+    rng = np.random.default_rng(0)
+    r = model.calibrated_range
+    with open(path, "wb") as fh:
+        fh.write(b"t,ux,uy,uz\n")
+        step = 1_000_000
+        for a in range(0, rows, step):
+            n = min(step, rows - a)
+            u = np.round(rng.uniform(r[:, 0], r[:, 1], (n, 3)), 7)
+            t = np.round(np.arange(a, a + n) / 1000, 3)
+            table = pa.table({"t": t, "ux": u[:, 0], "uy": u[:, 1], "uz": u[:, 2]})
+            pcsv.write_csv(table, fh, pcsv.WriteOptions(include_header=False))
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rows", type=int, help="rows of the apply log (default 10 M, quick 1 M)")
+    ap.add_argument("--repeats", type=int, help="runs per median (default 5, quick 3)")
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--json", type=Path, help="also write the results here")
+    args = ap.parse_args()
+    rows = args.rows or (1_000_000 if args.quick else 10_000_000)
+    repeats = args.repeats or (3 if args.quick else 5)
+    print(f"machine: {machine()}\n", flush=True)
+
+    from fsdecouple.svr import train
+
+    settings = load_config()
+    calib = load_calibration(ROOT / "sample_data" / "calibration", settings)
+    results = []
+
+    def row(name, value, unit, base, base_name, ratio, goal, ok):
+        results.append(dict(target=name, measured=value, unit=unit, baseline=base,
+                            baseline_name=base_name, ratio=ratio, goal=goal, ok=ok))
+        print(f"  {name}: {value:.4g} {unit}; {base_name} {base:.4g}; ratio {ratio:.3g} "
+              f"({goal}): {'PASS' if ok else 'FAIL'}", flush=True)
+
+    # --- 4. fitting: six SVRs in parallel threads ------------------------------------
+    print("fit (sample data, six SVRs + surrogates)")
+    seq = median_time(lambda: fit(calib, settings, workers=1), repeats)
+    par = median_time(lambda: fit(calib, settings), repeats)
+    a, b = fit(calib, settings, workers=1).to_dict(), fit(calib, settings).to_dict()
+    a.pop("created"), b.pop("created")
+    same = json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
+    row("4. fit, parallel", par, "s", seq, "sequential (workers=1)", seq / par,
+        "speed-up > 1, identical model", same and seq / par > 1.0)
+    model = fit(calib, settings)
+
+    # --- 1. in-memory decoupling of (N, 3) -------------------------------------------
+    print("in-memory decoupling, N = 1e6")
+    n = 1_000_000
+    r = model.calibrated_range
+    u = np.random.default_rng(1).uniform(r[:, 0], r[:, 1], (n, 3))
+    model.decouple(u[:1000])  # build the tables
+    fast_t = median_time(lambda: model.decouple(u), max(repeats, 5))
+    fast_rate = n / fast_t
+    libsvm = {}
+    for name in CHI_NAMES:
+        x, y = chi_training_data(calib, name)
+        libsvm[name] = train(x, y, settings.svr)
+    from libsvm import svmutil
+
+    m_lib = 20_000
+    cols = {name: u[:m_lib, "xyz".index(name[1])].reshape(-1, 1) for name in CHI_NAMES}
+    dicts = {name: [{1: v} for v in cols[name][:, 0].tolist()] for name in CHI_NAMES}
+    zeros = np.zeros(m_lib)
+
+    def libsvm_batch(inputs):
+        for name in CHI_NAMES:
+            svmutil.svm_predict(zeros, inputs[name], libsvm[name], "-q")
+
+    libsvm_batch(cols)  # warm-up: the first numpy call imports scipy
+    # the faster of libsvm's input formats (numpy array or its native dicts)
+    lib_rate = m_lib / min(median_time(lambda: libsvm_batch(cols), 3),
+                           median_time(lambda: libsvm_batch(dicts), 3))
+    row("1. decouple (N,3), fast path", fast_rate / 1e6, "M vectors/s", lib_rate / 1e6,
+        "libsvm batch svm_predict, six chi [M/s]", fast_rate / lib_rate, ">= 20 M/s and >= 1000x",
+        fast_rate >= 20e6 and fast_rate / lib_rate >= 1000)
+    m_ex = 100_000
+    exact_rate = m_ex / median_time(lambda: model.decouple(u[:m_ex], exact=True), 3)
+    row("1b. same vs numpy kernel sum", fast_rate / 1e6, "M vectors/s", exact_rate / 1e6,
+        "exact numpy kernel sum [M/s]", fast_rate / exact_rate, "info", True)
+    m_chk = 200_000
+    err_v = float((np.abs(model.decouple(u[:m_chk]) - model.decouple(u[:m_chk], exact=True))
+                   * model.k).max())
+    lib_err = 0.0
+    for name in CHI_NAMES:
+        s = model.chi[name].surrogate
+        vals, _, _ = svmutil.svm_predict(zeros, cols[name], libsvm[name], "-q")
+        lib_err = max(lib_err, float(np.abs(s(cols[name][:, 0]) - np.asarray(vals)).max()))
+    row("1c. max abs(fast - exact) in range", err_v, "V", lib_err, "max abs(surrogate - libsvm) [V]",
+        max(err_v, lib_err) / 1e-9, "both <= 1e-9 V", max(err_v, lib_err) <= 1e-9)
+
+    # --- 2. one vector at a time -----------------------------------------------------
+    print("one vector at a time")
+    one = model.decoupler()
+    vecs = [tuple(v) for v in u[:20_000].tolist()]
+
+    def loop():
+        for v in vecs:
+            one(*v)
+
+    one_us = median_time(loop, max(repeats, 5)) / len(vecs) * 1e6
+    few = u[:500].tolist()
+    axis = {name: "xyz".index(name[1]) for name in CHI_NAMES}
+
+    def libsvm_one():
+        for v in few:
+            for name in CHI_NAMES:
+                svmutil.svm_predict([0.0], [{1: v[axis[name]]}], libsvm[name], "-q")
+
+    lib_one_us = median_time(libsvm_one, 3) / len(few) * 1e6
+    row("2. model.decoupler()(ux, uy, uz)", one_us, "us/call", lib_one_us,
+        "libsvm svm_predict x6 per vector [us]", lib_one_us / one_us, "<= 5 us", one_us <= 5.0)
+
+    # --- 3. apply on a log -------------------------------------------------------------
+    with tempfile.TemporaryDirectory(prefix="fsdecouple-bench-") as tmp:
+        tmp = Path(tmp)
+        mfile, log = tmp / "model.json", tmp / "log.csv"
+        model.save(mfile)
+        print(f"writing a {rows:,}-row CSV log", flush=True)
+        write_log(log, rows, model)
+        size = log.stat().st_size / 1e6
+        print(f"apply on {rows:,} rows ({size:.0f} MB)", flush=True)
+        py = sys.executable
+        base_t, base_mb = median_child([py, "-c", PYARROW_CSV_COPY, log, tmp / "copy.csv"],
+                                       repeats)
+        apply_args = [py, "-m", "fsdecouple", "apply", mfile, log, "-o", tmp / "f.csv", "--force"]
+        app_t, app_mb = median_child(apply_args, repeats)
+        row("3. fsdecouple apply, CSV -> CSV", app_t, "s", base_t,
+            "pyarrow CSV read + write [s]", app_t / base_t, "<= 1.5x", app_t / base_t <= 1.5)
+        row("3b. apply peak memory", app_mb, "MB", base_mb, "read + write peak [MB]",
+            app_mb / base_mb, "< 500 MB", app_mb < 500)
+        rate = rows / app_t
+        print(f"  (apply throughput {rate / 1e6:.2f} M rows/s, {size / app_t:.0f} MB/s)")
+        plog = tmp / "log.parquet"
+        subprocess.run([py, "-c", "import sys, pyarrow.csv as c, pyarrow.parquet as pq; "
+                        "pq.write_table(c.read_csv(sys.argv[1]), sys.argv[2])", log, plog],
+                       check=True)
+        pbase_t, _ = median_child([py, "-c", PYARROW_PARQUET_COPY, plog, tmp / "copy.parquet"],
+                                  repeats)
+        papp_t, papp_mb = median_child(
+            [py, "-m", "fsdecouple", "apply", mfile, plog, "-o", tmp / "f.parquet", "--force"],
+            repeats)
+        row("3c. apply, Parquet -> Parquet", papp_t, "s", pbase_t,
+            "pyarrow Parquet read + write [s]", papp_t / pbase_t, "<= 1.5x, < 500 MB",
+            papp_t / pbase_t <= 1.5 and papp_mb < 500)
+        # the same forces whatever the format: CSV text is shortest round-trip
+        import pandas as pd
+        import pyarrow.parquet as pq
+
+        head = 200_000
+        fc = pd.read_csv(tmp / "f.csv", nrows=head)[["fx", "fy", "fz"]].to_numpy()
+        batch = next(pq.ParquetFile(tmp / "f.parquet").iter_batches(batch_size=head))
+        fp = batch.to_pandas()[["fx", "fy", "fz"]].to_numpy()
+        uc = pd.read_csv(log, nrows=len(fp))[["ux", "uy", "uz"]].to_numpy()
+        fc = fc[:len(fp)]
+        # CSV forces are rounded to 1e-10 V-equivalent; Parquet holds the doubles
+        d_fmt = float((np.abs(fc - fp) * model.k).max())
+        d_exact = float((np.abs(fc - model.decouple(uc, exact=True)) * model.k).max())
+        d_exact = max(d_exact, float((np.abs(fp - model.decouple(uc, exact=True)) * model.k).max()))
+        row("3d. apply CSV vs Parquet [V-equiv.]", d_fmt, "V", d_exact,
+            "max abs(apply - exact) [V-equivalent]", d_exact / 1e-9, "<= 1e-10 V; <= 1e-9 V",
+            d_fmt <= 1e-10 and d_exact <= 1e-9)
+
+    print("\n| target | measured (median) | baseline (median) | ratio | goal | |")
+    print("|---|---|---|---|---|---|")
+    for r_ in results:
+        print(f"| {r_['target']} | {r_['measured']:.4g} {r_['unit']} | {r_['baseline']:.4g} "
+              f"({r_['baseline_name']}) | {r_['ratio']:.3g} | {r_['goal']} | "
+              f"{'PASS' if r_['ok'] else 'FAIL'} |")
+    print(f"\n{machine()}; log {rows:,} rows; {repeats} repeats")
+    if args.json:
+        args.json.write_text(json.dumps({"machine": machine(), "rows": rows, "results": results},
+                                        indent=1))
+    return 0 if all(r_["ok"] for r_ in results) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,226 @@
+"""The fast path: chi surrogates, the table evaluator, the single-vector call, and
+apply in CSV and Parquet.  Accuracy bounds only; speed is for benchmarks/run.py."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from fsdecouple.apply import apply_file
+from fsdecouple.errors import ModelFileError
+from fsdecouple.fast import PROMISE
+from fsdecouple.model import CHI_NAMES, CouplingErrorModel, chi_training_data, load_model
+from fsdecouple.stream import force_decimals
+from fsdecouple.svr import predict, train
+
+# The promise: the fast path is within 1e-9 V of the exact kernel sum for every
+# chi; an output adds two chi and divides by k, so forces agree to 1e-9 / k N
+# (each chi is built to 1e-10 V, which leaves the factor 2 far inside).
+BOUND_V = 1e-9
+
+
+def dense_points(lo, hi, n, seed):
+    """Random points plus an 8192-step grid (every knot and midpoint of tables up to
+    4096 intervals) in [lo, hi)."""
+    rng = np.random.default_rng(seed)
+    grid = lo + (hi - lo) * np.arange(8192) / 8192
+    return np.concatenate([rng.uniform(lo, hi, n), grid])
+
+
+def in_range_voltages(model, n, seed=0):
+    r = model.calibrated_range
+    return np.random.default_rng(seed).uniform(r[:, 0], r[:, 1], (n, 3))
+
+
+def test_every_chi_has_a_verified_surrogate(model):
+    for name, c in model.chi.items():
+        s = c.surrogate
+        assert s is not None, name
+        assert s.max_error <= 1e-10 < PROMISE, name
+        lo, hi = c.input_range
+        assert s.lo < lo and s.hi > hi  # the calibrated range plus a margin
+
+
+def test_surrogate_equals_kernel_sum_on_dense_points(model):
+    for name, c in model.chi.items():
+        s = c.surrogate
+        x = dense_points(s.lo, s.hi, 200_000, seed=1)
+        np.testing.assert_allclose(s(x), c(x), rtol=0, atol=BOUND_V, err_msg=name)
+
+
+def test_surrogate_equals_libsvm_prediction(calib, model, settings):
+    """The chain surrogate -> kernel sum -> libsvm, checked end to end."""
+    for name in CHI_NAMES:
+        x, y = chi_training_data(calib, name)
+        libsvm_model = train(x, y, settings.svr)
+        s = model.chi[name].surrogate
+        pts = dense_points(s.lo, s.hi, 20_000, seed=2)
+        np.testing.assert_allclose(s(pts), predict(libsvm_model, pts), rtol=0, atol=BOUND_V,
+                                   err_msg=name)
+
+
+def test_fast_decouple_equals_exact_in_range(model):
+    u = in_range_voltages(model, 300_000)
+    fast, exact = model.decouple(u), model.decouple(u, exact=True)
+    np.testing.assert_array_less(np.abs(fast - exact) * model.k, BOUND_V)
+
+
+def test_fast_decouple_does_not_depend_on_blocks_or_threads(model):
+    u = in_range_voltages(model, 100_003)
+    fd = model.fast_decoupler()
+    ref = fd.decouple(u, workers=1)
+    np.testing.assert_array_equal(fd.decouple(u, workers=2, block_rows=997), ref)
+    np.testing.assert_array_equal(model.decouple(u[:5]), ref[:5])
+
+
+def test_out_of_range_and_nan_use_the_exact_kernel_sum(model):
+    u = in_range_voltages(model, 1000)
+    s = model.chi["xy"].surrogate
+    u[::7, 1] = s.hi + np.linspace(0, 2, u[::7].shape[0])  # beyond the table
+    u[3::11, 0] = -50.0
+    u[5, 2] = np.nan
+    fast, exact = model.decouple(u), model.decouple(u, exact=True)
+    bad = np.zeros(len(u), bool)
+    bad[::7] = bad[3::11] = bad[5] = True
+    np.testing.assert_array_equal(fast[bad], exact[bad])
+    assert np.isnan(fast[5]).all() and not np.isnan(fast[~bad]).any()
+    np.testing.assert_array_less(np.abs(fast[~bad] - exact[~bad]) * model.k, BOUND_V)
+    # the upper end of a table is outside it (half-open), and exact
+    edge = np.array([[0.1, s.hi, -0.3]])
+    np.testing.assert_array_equal(model.decouple(edge), model.decouple(edge, exact=True))
+
+
+def test_single_vector_call_equals_vectorised(model):
+    one = model.decoupler()
+    u = in_range_voltages(model, 2000, seed=3)
+    u[::50, 0] = 9.0  # outside: exact path in both
+    vec = model.decouple(u)
+    got = np.array([one(*row) for row in u.tolist()])
+    np.testing.assert_allclose(got, vec, rtol=0, atol=1e-12)
+    assert all(type(v) is float for v in one(0.1, 0.2, -0.3))
+    assert np.isnan(one(float("nan"), 0.0, 0.0)).all()
+    assert model.decouple_one(*u[1]) == one(*u[1])
+
+
+def test_single_vector_call_with_rotation(model):
+    rot = ((0.0, -1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0))
+    rotated = replace(model, settings=replace(model.settings, rotation=rot))
+    u = in_range_voltages(model, 200, seed=4)
+    vec = rotated.decouple(u)
+    np.testing.assert_allclose(vec, model.decouple(u) @ np.asarray(rot).T, rtol=0, atol=1e-12)
+    one = rotated.decoupler()
+    np.testing.assert_allclose([one(*r) for r in u.tolist()], vec, rtol=0, atol=1e-12)
+
+
+def test_model_without_surrogates_is_exact(model):
+    bare = replace(model, chi={n: replace(c, surrogate=None) for n, c in model.chi.items()})
+    assert bare.fast_decoupler() is None
+    u = in_range_voltages(model, 100)
+    np.testing.assert_array_equal(bare.decouple(u), model.decouple(u, exact=True))
+    np.testing.assert_allclose([bare.decouple_one(*r) for r in u.tolist()],
+                               model.decouple(u, exact=True), rtol=0, atol=1e-12)
+
+
+def test_surrogate_round_trips_through_the_model_file(model, tmp_path):
+    path = tmp_path / "m.json"
+    model.save(path)
+    doc = json.loads(path.read_text())
+    for name in CHI_NAMES:
+        rec = doc["chi"][name]["surrogate"]
+        assert rec["kind"] == "hermite3-uniform" and rec["max_error"] <= 1e-9
+        assert len(rec["values"]) == rec["intervals"] + 1
+    again = load_model(path)
+    u = in_range_voltages(model, 50_000, seed=5)
+    np.testing.assert_array_equal(again.decouple(u), model.decouple(u))
+    one, again_one = model.decoupler(), again.decoupler()
+    assert [one(*r) for r in u[:100].tolist()] == [again_one(*r) for r in u[:100].tolist()]
+
+
+def test_edited_surrogate_fails_the_integrity_check(model, tmp_path):
+    doc = model.to_dict()
+    doc["chi"]["zy"]["surrogate"]["values"][3] += 1e-6
+    path = tmp_path / "edited.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ModelFileError, match="integrity check failed"):
+        load_model(path)
+
+
+def test_surrogate_with_a_poor_bound_is_not_used(model):
+    doc = model.to_dict()
+    doc["chi"]["yz"]["surrogate"]["max_error"] = 1e-6
+    from fsdecouple.model import content_digest
+
+    doc["integrity"]["digest"] = content_digest(doc)
+    m = CouplingErrorModel.from_dict(doc)
+    assert m.fast_decoupler() is None
+
+
+# --- apply: formats and paths -------------------------------------------------------
+
+
+def _forces(path):
+    if str(path).endswith(".parquet"):
+        return pq.read_table(path).to_pandas()
+    return pd.read_csv(path, dtype={"t": str})
+
+
+def test_apply_csv_and_parquet_give_the_same_forces(model, sim_dir, tmp_path):
+    log = sim_dir / "task_voltages.csv"
+    plog = tmp_path / "log.parquet"
+    pq.write_table(pa.Table.from_pandas(pd.read_csv(log), preserve_index=False), plog)
+    outs = {}
+    for src in (log, plog):
+        for suffix in (".csv", ".parquet"):
+            out = tmp_path / f"{src.stem}-{src.suffix[1:]}{suffix}"
+            apply_file(model, src, out, tare=200)
+            outs[(src.suffix, suffix)] = _forces(out)
+    ref = outs[(".csv", ".parquet")][["fx", "fy", "fz"]].to_numpy()  # the doubles
+    step = 10.0 ** -force_decimals(model.k)
+    assert step / 2 * model.k.max() <= 1e-10  # CSV rounding: a tenth of the 1e-9 V
+    for key, df in outs.items():
+        assert list(df.columns) == ["t", "ux", "uy", "uz", "fx", "fy", "fz"], key
+        got = df[["fx", "fy", "fz"]].to_numpy()
+        if key[1] == ".csv":
+            np.testing.assert_allclose(got, ref, rtol=0, atol=step / 2 * (1 + 1e-6), err_msg=str(key))
+        else:
+            np.testing.assert_array_equal(got, ref, err_msg=str(key))
+    # round-trip text: the CSV forces are the very same doubles
+    exact_text = tmp_path / "rt.csv"
+    apply_file(model, log, exact_text, tare=200, round_trip=True)
+    np.testing.assert_array_equal(_forces(exact_text)[["fx", "fy", "fz"]].to_numpy(), ref)
+    # CSV -> Parquet keeps the input columns as their text
+    text = pd.read_csv(log, dtype=str)
+    pd.testing.assert_frame_equal(outs[(".csv", ".parquet")][list(text.columns)], text)
+
+
+def test_apply_fast_path_equals_exact_path(model, sim_dir, tmp_path):
+    log = sim_dir / "task_voltages.csv"
+    out = tmp_path / "f.csv"
+    summary = apply_file(model, log, out, tare=200)
+    u = pd.read_csv(log)[["ux", "uy", "uz"]].to_numpy() - summary.offsets
+    got = pd.read_csv(out)[["fx", "fy", "fz"]].to_numpy()
+    np.testing.assert_array_less(np.abs(got - model.decouple(u, exact=True)) * model.k, BOUND_V)
+
+
+def test_apply_crlf_blank_lines_and_missing(model, tmp_path):
+    rows = ["t,ux,uy,uz", "0,0.1,0.0,-0.1", "", "1,,0.0,-0.1", "2, 0.2 ,0.1,-0.2", "3,0.3,0.1,-0.3"]
+    lf, crlf = tmp_path / "lf.csv", tmp_path / "crlf.csv"
+    lf.write_bytes("\n".join(rows).encode())  # no final line end either
+    crlf.write_bytes("\r\n".join(rows).encode() + b"\r\n")
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    sa = apply_file(model, lf, a)
+    sb = apply_file(model, crlf, b, chunk_rows=2)
+    assert a.read_bytes() == b.read_bytes()
+    assert sa.rows == 4 and sa.missing_rows == 1 and sa.first_missing == sb.first_missing
+    lines = a.read_text().splitlines()
+    assert lines[0] == "t,ux,uy,uz,fx,fy,fz" and lines[3].startswith("2, 0.2 ,0.1,-0.2,")
+    assert lines[2] == "1,,0.0,-0.1,,,"
+    u = np.array([[0.1, 0.0, -0.1], [0.2, 0.1, -0.2], [0.3, 0.1, -0.3]])
+    got = pd.read_csv(a)[["fx", "fy", "fz"]].dropna().to_numpy()
+    np.testing.assert_array_equal(got, np.round(model.decouple(u), force_decimals(model.k)))
