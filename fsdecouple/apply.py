@@ -1,8 +1,10 @@
-"""Decouple a logged voltage file into forces, in chunks (files larger than memory).
+"""Decouple a logged voltage file into forces, in blocks (files larger than memory).
 
-Every input column is passed through as text, unchanged and in order; ``fx, fy,
-fz`` [N] are appended.  Rows with a missing voltage are kept with empty forces
-and counted.
+Every input row is kept, in order, and every input column is passed through as
+text, unchanged; ``fx, fy, fz`` [N] and ``status`` are appended.  ``status`` says
+what the forces of the row are worth (:data:`STATUSES`); rows that cannot be
+decoupled keep empty forces and are counted.  CSV output uses the log's dialect
+(``sep``, ``decimal``).
 """
 
 from __future__ import annotations
@@ -18,10 +20,12 @@ from functools import partial
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
 
 from .config import FORCE_COLUMNS, VOLTAGE_COLUMNS, Settings
 from .errors import InputError, where
-from .io import HEADER_ROW, atomic_write, read_header, require_columns
+from .io import HEADER_ROW, atomic_write, read_header, refuse_overwriting_input, require_columns
 from .model import CouplingErrorModel
 from .stream import (
     Block,
@@ -39,14 +43,32 @@ from .zero import tare_offsets
 
 CHUNK_ROWS = 1 << 20  # rows per block at most; blocks are cut at ~4 MB anyway
 MAX_WORKERS = 4
+RANGE_MARGIN = 0.01  # fraction of the calibrated voltage span
+STATUS_COLUMN = "status"
+# What a row's forces are worth.  Only "ok" and "extrapolated" rows have forces.
+STATUSES = {
+    "ok": "decoupled by eq. (11), voltages inside the calibrated range",
+    "extrapolated": "decoupled, but a voltage lies outside the calibrated range",
+    "missing": "a voltage is empty or missing (blank or short row): no forces",
+    "truncated": "last line of a log that does not end with a newline (the writer "
+                 "was cut off, a number may be cut short): no forces",
+    "not_finite": "the voltages are so large that eq. (11) overflows: no forces",
+}
+STATUS_NAMES = pa.array(list(STATUSES), pa.string())
+OK_, EXTRAPOLATED_, MISSING_, TRUNCATED_, NOT_FINITE_ = range(len(STATUSES))
 
 
 @dataclass
 class ApplySummary:
+    """What ``apply`` did: rows written, per-status counts, the zero removed [V]."""
+
     rows: int = 0
     missing_rows: int = 0
     first_missing: list[int] = field(default_factory=list)
     out_of_range_rows: int = 0
+    truncated_rows: int = 0
+    not_finite_rows: int = 0
+    status_counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(STATUSES, 0))
     offsets: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
@@ -96,9 +118,10 @@ def apply_file(
         raise InputError("give either --tare or --zero, not both")
     parquet_in = is_parquet(path)
     header = parquet_header(path) if parquet_in else read_header(path, settings)
+    refuse_overwriting_input(out, [path])
     names = [settings.columns[c] for c in VOLTAGE_COLUMNS]
     require_columns(header, dict(zip(VOLTAGE_COLUMNS, names, strict=True)), path)
-    clash = [c for c in FORCE_COLUMNS if c in header]
+    clash = [c for c in (*FORCE_COLUMNS, STATUS_COLUMN) if c in header]
     if clash:
         raise InputError(
             f"{where(path, HEADER_ROW, clash[0])}: the log already has a column named "
@@ -124,32 +147,54 @@ def apply_file(
             n += len(head[-1])
             if n >= tare:
                 break
-        summary.offsets = tare_offsets(np.concatenate(head) if head else np.empty((0, 3)), tare)
+        summary.offsets = tare_offsets(np.concatenate(head) if head else np.empty((0, 3)), tare,
+                                       source=path)
     elif zero is not None:
         summary.offsets = np.asarray(zero, dtype=float)
     lo, hi = model.calibrated_range.T
+    # Noise around an end of the range (e.g. Z's 0 N end at rest) is not
+    # extrapolation worth a warning: allow 1 % of the calibrated span.
+    margin = RANGE_MARGIN * (hi - lo)
+    lo, hi = lo - margin, hi + margin
     # blocks in flight bound the memory (~60 MB each), so not every core of a big box
     workers = workers or min(MAX_WORKERS, os.cpu_count() or 1)
 
     with atomic_write(out, "wb", force=force) as fh:
         if is_parquet(out):
-            sink = ParquetSink(fh)
+            sink = ParquetSink(fh, (STATUS_COLUMN,))
         else:
             decimals = None if round_trip else force_decimals(model.k)
-            sink = CsvSink(fh, header, None if parquet_in else _header_line(path), decimals)
+            sink = CsvSink(fh, header, None if parquet_in else _header_line(path), decimals,
+                           sep=settings.sep, decimal=settings.decimal, extra=(STATUS_COLUMN,))
 
         def work(job):
             # parse, eq. (11) and format one block; numpy and pyarrow release the
             # GIL, so blocks overlap on the cores while the main thread writes
             block = job()
             u = block.u * scale - summary.offsets
-            missing = np.isnan(u).any(axis=1)
-            f = model.decouple(u, workers=1)
-            ok = ~missing
-            outside = int(((u[ok] < lo) | (u[ok] > hi)).any(axis=1).sum())
-            rows = np.flatnonzero(missing)[:10] + block.first_row
-            return len(block), int(missing.sum()), rows, outside, block.done, block.total, \
-                sink.encode(block, f, missing)
+            code = np.zeros(len(block), dtype=np.int8)  # index into STATUSES
+            empty = np.isnan(u).any(axis=1)
+            code[empty] = MISSING_
+            if block.truncated:
+                # a writer that crashed mid-line: the fields may look complete but
+                # the last number be cut short, so the row gets no forces
+                empty[:] = True
+                code[:] = TRUNCATED_
+            with np.errstate(over="ignore", invalid="ignore"):
+                f = model.decouple(np.where(empty[:, None], 0.0, u) if empty.any() else u,
+                                   workers=1)
+                huge = ~np.isfinite(f).all(axis=1) & ~empty
+                if huge.any():
+                    code[huge] = NOT_FINITE_
+                    empty |= huge
+                outside = ((u < lo) | (u > hi)).any(axis=1) & ~empty
+            code[outside] = EXTRAPOLATED_
+            counts = np.bincount(code, minlength=len(STATUSES))
+            first = np.flatnonzero(code == MISSING_)[:10] + block.first_row if counts[MISSING_] \
+                else ()
+            status = pc.take(STATUS_NAMES, pa.array(code))
+            return len(block), counts, first, block.done, block.total, \
+                sink.encode(block, f, empty, (status,))
 
         with ThreadPoolExecutor(workers) as pool:
             pending: deque = deque()
@@ -209,12 +254,16 @@ def _prefetch(items: Iterator, depth: int) -> Iterator:
 
 
 def _collect(result, sink, summary: ApplySummary, progress) -> None:
-    n, n_missing, rows, outside, done, total, payload = result
+    n, counts, first, done, total, payload = result
     sink.write(payload)
     summary.rows += n
-    summary.missing_rows += n_missing
-    summary.first_missing += [int(r) for r in rows[:10 - len(summary.first_missing)]]
-    summary.out_of_range_rows += outside
+    for name, k in zip(STATUSES, counts, strict=True):
+        summary.status_counts[name] += int(k)
+    summary.missing_rows += int(counts[MISSING_])
+    summary.truncated_rows += int(counts[TRUNCATED_])
+    summary.not_finite_rows += int(counts[NOT_FINITE_])
+    summary.out_of_range_rows += int(counts[EXTRAPOLATED_])
+    summary.first_missing += [int(r) for r in first[:10 - len(summary.first_missing)]]
     if progress is not None:
         progress(done, total)
 

@@ -11,6 +11,7 @@ by pandas, which either reads it or names the file, row and column at fault.
 
 from __future__ import annotations
 
+import csv
 import io
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -53,38 +54,13 @@ class Block:
     done: int = 0  # progress: bytes (CSV) or rows (Parquet) consumed
     total: int = 1
     joined: bool = False  # lines carry the line feed before them (see _lines)
+    truncated: bool = False  # the last line of a log cut off mid-write
 
     def __len__(self) -> int:
         return self.u.shape[0]
 
 
 # --- reading ------------------------------------------------------------------
-
-
-def _pandas_voltages(text: bytes, header: list[str], names: list[str], settings: Settings,
-                     path: Path, first_row: int) -> np.ndarray:
-    """The slow, careful parse of one block: returns voltages or raises InputError."""
-    from .io import parser_message
-
-    try:
-        df = pd.read_csv(
-            io.BytesIO(text), sep=settings.sep, dtype=str, keep_default_na=False,
-            na_filter=False, header=None, names=header, encoding="utf-8",
-        )
-    except pd.errors.ParserError as err:
-        msg = parser_message(err)
-        # pandas counts lines of this block; report file rows
-        msg = _shift_row(msg, first_row - 1)
-        raise InputError(f"{path}: {msg}") from None
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a UTF-8 text file") from None
-    return voltages_from_text(df, names, settings, path, first_row)
-
-
-def _shift_row(msg: str, by: int) -> str:
-    import re
-
-    return re.sub(r"row (\d+)", lambda m: f"row {int(m.group(1)) + by}", msg, count=1)
 
 
 def voltages_from_text(chunk: pd.DataFrame, names: list[str], settings: Settings, path,
@@ -120,60 +96,66 @@ class CsvBody:
 
     body: bytes
     first_row: int
-    rows: int  # non-blank lines
+    rows: int  # lines, blank ones included: every line is a row
     done: int
     total: int
-
-
-def _count_rows(body: bytes, eol: bytes, feeds: int) -> int:
-    n = feeds + (0 if body.endswith(b"\n") else 1)
-    if body.startswith(eol) or eol + eol in body:  # blank lines, which are skipped
-        lines = body.split(eol)
-        n = sum(1 for line in lines if line)
-    return n
+    truncated: bool = False  # the log's last line, which has no line end
 
 
 def csv_bodies(path: Path, *, chunk_rows: int, block_bytes: int = BLOCK_BYTES) -> Iterator[CsvBody]:
-    """Cut the data lines of a CSV log into blocks of whole lines (at most ``chunk_rows``)."""
+    """Cut the data lines of a CSV log into blocks of whole lines (at most ``chunk_rows``).
+
+    A last line without a line end comes alone, as a ``truncated`` body.
+    """
     total = max(1, path.stat().st_size)
     with open(path, "rb") as fh:
-        first = fh.readline()
-        eol = b"\r\n" if first.endswith(b"\r\n") else b"\n"
-        done = len(first)
+        done = len(fh.readline())
         row = HEADER_ROW + 1  # spreadsheet row of the next data line
         carry = b""
         while True:
             data = fh.read(block_bytes)
             buf = carry + data
-            if not buf:
+            if not data:
+                if buf:  # the writer was cut off mid-line (or left NUL padding)
+                    yield CsvBody(buf, row, 1, total, total, truncated=True)
                 return
-            if data:
-                end = buf.rfind(b"\n") + 1
-                if end == 0:  # a line longer than the block: read on
-                    carry = buf
-                    continue
-            else:
-                end = len(buf)  # last line without a line end
+            end = buf.rfind(b"\n") + 1
+            if end == 0:  # a line longer than the block: read on
+                carry = buf
+                continue
             body, carry = buf[:end], buf[end:]
-            feeds = body.count(b"\n")
-            if feeds > chunk_rows:
-                cut = int(np.flatnonzero(np.frombuffer(body, np.uint8) == 10)[chunk_rows - 1]) + 1
-                body, carry = body[:cut], body[cut:] + carry
-                feeds = chunk_rows
-            done += len(body)
-            rows = _count_rows(body, eol, feeds)
-            if rows:
-                yield CsvBody(body, row, rows, min(done, total), total)
-            row += rows
+            while body:
+                feeds = body.count(b"\n")
+                if feeds > chunk_rows:
+                    nl = np.flatnonzero(np.frombuffer(body, np.uint8) == 10)
+                    cut = int(nl[chunk_rows - 1]) + 1
+                    piece, body, feeds = body[:cut], body[cut:], chunk_rows
+                else:
+                    piece, body = body, b""
+                done += len(piece)
+                yield CsvBody(piece, row, feeds, min(done, total), total)
+                row += feeds
+
+
+def _has_blank_line(body: bytes) -> bool:
+    return (body.startswith((b"\n", b"\r\n")) or b"\n\n" in body or b"\n\r\n" in body)
 
 
 class CsvParser:
-    """Parses :class:`CsvBody` blocks; thread-safe, so blocks can be parsed in parallel."""
+    """Parses :class:`CsvBody` blocks; thread-safe, so blocks can be parsed in parallel.
+
+    The common block (no blank line, every row complete and numeric) is parsed by
+    pyarrow and its lines passed through without a copy.  Any other block takes
+    :meth:`exact`, a line-by-line parse that keeps every line as a row (blank and
+    short ones padded with separators to the header's width) or names the row at
+    fault.
+    """
 
     def __init__(self, path: Path, header: list[str], names: list[str], settings: Settings,
                  eol: bytes, want_table: bool):
         self.path, self.header, self.names, self.settings = path, header, names, settings
         self.eol = eol
+        self.want_table = want_table
         self.float_opts = pcsv.ConvertOptions(
             include_columns=names, column_types={n: pa.float64() for n in names},
             null_values=list(MISSING), decimal_point=settings.decimal, check_utf8=False,
@@ -187,30 +169,68 @@ class CsvParser:
 
     def __call__(self, chunk: CsvBody) -> Block:
         body, row = chunk.body, chunk.first_row
+        if chunk.truncated or _has_blank_line(body):
+            return self.exact(chunk)
         buffer = pa.py_buffer(body)
-        lines, joined = _lines(body, buffer, chunk.rows) if self.eol == b"\n" else (None, False)
-        if lines is None:  # CRLF or blank lines (skipped, as pandas does): copy the lines
-            lines = pc.split_pattern(pa.array([body], pa.binary()), self.eol).flatten()
-            lines = lines.filter(pc.not_equal(pc.binary_length(lines), 0))
         try:
             tab = pcsv.read_csv(buffer, read_options=self.read_opts, parse_options=self.parse_opts,
                                 convert_options=self.float_opts)
-            u = np.column_stack([_column_floats(tab.column(n)) for n in self.names])
-            if np.isinf(u).any():
-                raise pa.ArrowInvalid("infinite voltage")
-        except pa.ArrowInvalid:
-            u = _pandas_voltages(body, self.header, self.names, self.settings, self.path, row)
-        if u.shape[0] != len(lines):
-            raise InputError(
-                f"{self.path}, rows {row} to {row + len(lines) - 1}: {u.shape[0]} records in "
-                f"{len(lines)} lines; quoted line breaks are not supported in voltage logs"
-            )
+        except pa.ArrowInvalid:  # short or long rows, junk, an open quote: look closer
+            return self.exact(chunk)
+        u = np.column_stack([_column_floats(tab.column(n)) for n in self.names])
+        if u.shape[0] != chunk.rows or np.isinf(u).any():
+            return self.exact(chunk)
+        if self.eol == b"\n":
+            lines, joined = _lines(body, buffer, chunk.rows)
+        else:
+            lines, joined = pc.split_pattern(pa.array([body], pa.binary()), self.eol).flatten(), False
+            if len(lines) != chunk.rows + 1:  # mixed line ends
+                return self.exact(chunk)
+            lines = lines.slice(0, chunk.rows)
         table = None
         if self.text_opts is not None:
             table = pcsv.read_csv(buffer, read_options=self.read_opts,
                                   parse_options=self.parse_opts, convert_options=self.text_opts)
         return Block(row, u, lines=lines, table=table, done=chunk.done, total=chunk.total,
                      joined=joined)
+
+    def exact(self, chunk: CsvBody) -> Block:
+        """Parse a block line by line: slower, but every line is a row, as it is in the file."""
+        row, sep = chunk.first_row, self.settings.sep
+        raw = chunk.body.split(b"\n")
+        if not chunk.truncated:
+            raw.pop()  # after the final line feed
+        width = len(self.header)
+        pad = sep.encode()
+        lines, cells = [], []
+        for i, line in enumerate(raw):
+            line = line.removesuffix(b"\r")
+            if line.count(b'"') % 2 and not chunk.truncated:
+                raise InputError(
+                    f"{where(self.path, row + i)}: a quote (\") opens a value that never closes"
+                    " (line breaks inside quoted values are not supported)"
+                )
+            text = line.decode("utf-8", "surrogateescape")
+            fields = next(csv.reader([text], delimiter=sep)) if text else []
+            if len(fields) > width:
+                raise InputError(
+                    f"{where(self.path, row + i)}: {len(fields)} fields, expected {width} as in the header "
+                    "(a decimal comma, or a separator inside a value?)"
+                )
+            lines.append(line + pad * (width - max(1, len(fields))))
+            cells.append(fields + [""] * (width - len(fields)))
+        cols = list(zip(*cells, strict=True))
+        frame = pd.DataFrame({n: list(cols[self.header.index(n)]) for n in self.names})
+        if chunk.truncated:  # no forces whatever it holds: the last number may be cut short
+            u = np.full((len(lines), 3), np.nan)
+        else:
+            u = voltages_from_text(frame, self.names, self.settings, self.path, row)
+        table = None
+        if self.want_table:
+            table = pa.table({n: pa.array(list(cols[j]), pa.string())
+                              for j, n in enumerate(self.header)})
+        return Block(row, u, lines=pa.array(lines, pa.binary()), table=table, done=chunk.done,
+                     total=chunk.total, truncated=chunk.truncated)
 
 
 def _lines(body: bytes, buffer: pa.Buffer, rows: int) -> tuple[pa.Array | None, bool]:
@@ -273,8 +293,8 @@ def parquet_header(path: Path) -> list[str]:
 # --- writing ------------------------------------------------------------------
 
 
-def _forces_table(f: np.ndarray, missing: np.ndarray) -> list[pa.Array]:
-    mask = missing if missing.any() else None
+def _forces_table(f: np.ndarray, empty: np.ndarray) -> list[pa.Array]:
+    mask = empty if empty.any() else None
     return [pa.array(f[:, k], pa.float64(), mask=mask) for k in range(3)]
 
 
@@ -290,29 +310,43 @@ def force_decimals(k: np.ndarray, budget: float = 1e-10) -> int:
 
 
 class CsvSink:
-    """Writes blocks as CSV: the input line (or columns) then ``fx, fy, fz``.
+    """Writes blocks as CSV: the input line (or columns), ``fx, fy, fz``, ``status``.
 
+    Written in the log's dialect: fields joined by ``sep``, forces with ``decimal``.
     ``decimals``: forces are rounded to this many decimals before their
     shortest text is written; None writes round-trip text of the doubles.
     """
 
     def __init__(self, fh, header: list[str], header_line: bytes | None,
-                 decimals: int | None = None):
+                 decimals: int | None = None, *, sep: str = ",", decimal: str = ".",
+                 extra: tuple[str, ...] = ()):
         self.fh = fh
         self.header = header
         self.decimals = decimals
-        line = header_line if header_line is not None else ",".join(header).encode()
-        fh.write(line + b"," + ",".join(FORCE_COLUMNS).encode() + b"\n")
+        self.sep, self.decimal = sep, decimal
+        line = header_line if header_line is not None else sep.join(header).encode()
+        fh.write(sep.join([line.decode("utf-8", "surrogateescape"), *FORCE_COLUMNS, *extra])
+                 .encode("utf-8", "surrogateescape") + b"\n")
 
-    def encode(self, block: Block, f: np.ndarray, missing: np.ndarray):
-        """The block's output bytes; thread-safe, so blocks can be encoded in parallel."""
+    def _text(self, a: pa.Array) -> pa.Array:
+        text = pc.cast(a, pa.string())
+        if self.decimal != ".":
+            text = pc.replace_substring(text, ".", self.decimal)
+        return text
+
+    def encode(self, block: Block, f: np.ndarray, empty: np.ndarray, extra: tuple = ()):
+        """The block's output bytes; thread-safe, so blocks can be encoded in parallel.
+
+        ``empty``: rows written with empty forces; ``extra``: string arrays appended.
+        """
         if self.decimals is not None:
             f = np.round(f, self.decimals)
-        forces = _forces_table(f, missing)
+        text = [self._text(a) for a in _forces_table(f, empty)]
         if block.lines is not None:
-            text = [pc.cast(a, pa.string()).cast(pa.binary()) for a in forces]
+            parts = [a.cast(pa.binary()) for a in (*text, *extra)]
             out = pc.binary_join_element_wise(
-                block.lines, *text, b",", null_handling="replace", null_replacement=b"",
+                block.lines, *parts, self.sep.encode(), null_handling="replace",
+                null_replacement=b"",
             )
             if not block.joined:
                 out = pc.binary_join_element_wise(out, b"", b"\n")
@@ -320,10 +354,17 @@ class CsvSink:
             data = memoryview(out.buffers()[2])[offsets[0]:offsets[-1]]
             return [data, b"\n"] if block.joined else [data]
         table = block.table
-        for c, a in zip(FORCE_COLUMNS, forces, strict=True):
+        if self.decimal != ".":  # pass-through floats (Parquet input) in the log's dialect too
+            for i, fld in enumerate(table.schema):
+                if pa.types.is_floating(fld.type):
+                    table = table.set_column(i, fld.name, self._text(table.column(i)))
+        for c, a in zip(FORCE_COLUMNS, text, strict=True):
             table = table.append_column(c, a)
+        for k, a in enumerate(extra):
+            table = table.append_column(f"_extra{k}", a)
         sink = io.BytesIO()
-        pcsv.write_csv(table, sink, pcsv.WriteOptions(include_header=False))
+        pcsv.write_csv(table, sink, pcsv.WriteOptions(
+            include_header=False, delimiter=self.sep, quoting_style="needed"))
         return [sink.getbuffer()]
 
     def write(self, payload) -> None:
@@ -335,15 +376,18 @@ class CsvSink:
 
 
 class ParquetSink:
-    """Writes blocks as Parquet: the input columns then ``fx, fy, fz`` [N] as doubles."""
+    """Writes blocks as Parquet: the input columns, ``fx, fy, fz`` [N] as doubles, extras."""
 
-    def __init__(self, fh):
+    def __init__(self, fh, extra: tuple[str, ...] = ()):
         self.fh = fh
+        self.extra = extra
         self.writer: pq.ParquetWriter | None = None
 
-    def encode(self, block: Block, f: np.ndarray, missing: np.ndarray) -> pa.Table:
+    def encode(self, block: Block, f: np.ndarray, empty: np.ndarray, extra: tuple = ()) -> pa.Table:
         table = block.table
-        for c, a in zip(FORCE_COLUMNS, _forces_table(f, missing), strict=True):
+        for c, a in zip(FORCE_COLUMNS, _forces_table(f, empty), strict=True):
+            table = table.append_column(c, a)
+        for c, a in zip(self.extra, extra, strict=True):
             table = table.append_column(c, a)
         return table
 

@@ -184,7 +184,8 @@ def test_apply_csv_and_parquet_give_the_same_forces(model, sim_dir, tmp_path):
     step = 10.0 ** -force_decimals(model.k)
     assert step / 2 * model.k.max() <= 1e-10  # CSV rounding: a tenth of the 1e-9 V
     for key, df in outs.items():
-        assert list(df.columns) == ["t", "ux", "uy", "uz", "fx", "fy", "fz"], key
+        assert list(df.columns) == ["t", "ux", "uy", "uz", "fx", "fy", "fz", "status"], key
+        assert set(df["status"]) <= {"ok", "extrapolated"}, key
         got = df[["fx", "fy", "fz"]].to_numpy()
         if key[1] == ".csv":
             np.testing.assert_allclose(got, ref, rtol=0, atol=step / 2 * (1 + 1e-6), err_msg=str(key))
@@ -209,18 +210,25 @@ def test_apply_fast_path_equals_exact_path(model, sim_dir, tmp_path):
 
 
 def test_apply_crlf_blank_lines_and_missing(model, tmp_path):
+    # blank lines are rows (issue 5's contract): kept, padded to the header, 'missing'
     rows = ["t,ux,uy,uz", "0,0.1,0.0,-0.1", "", "1,,0.0,-0.1", "2, 0.2 ,0.1,-0.2", "3,0.3,0.1,-0.3"]
     lf, crlf = tmp_path / "lf.csv", tmp_path / "crlf.csv"
-    lf.write_bytes("\n".join(rows).encode())  # no final line end either
+    lf.write_bytes("\n".join(rows).encode() + b"\n")
     crlf.write_bytes("\r\n".join(rows).encode() + b"\r\n")
     a, b = tmp_path / "a.csv", tmp_path / "b.csv"
     sa = apply_file(model, lf, a)
     sb = apply_file(model, crlf, b, chunk_rows=2)
     assert a.read_bytes() == b.read_bytes()
-    assert sa.rows == 4 and sa.missing_rows == 1 and sa.first_missing == sb.first_missing
+    assert sa.rows == 5 and sa.missing_rows == 2 and sa.first_missing == sb.first_missing == [3, 4]
     lines = a.read_text().splitlines()
-    assert lines[0] == "t,ux,uy,uz,fx,fy,fz" and lines[3].startswith("2, 0.2 ,0.1,-0.2,")
-    assert lines[2] == "1,,0.0,-0.1,,,"
+    assert lines[0] == "t,ux,uy,uz,fx,fy,fz,status" and lines[4].startswith("2, 0.2 ,0.1,-0.2,")
+    assert lines[2] == ",,,,,,,missing" and lines[3] == "1,,0.0,-0.1,,,,missing"
+    # no final line end: the last row is kept without forces, 'truncated'
+    cut = tmp_path / "cut.csv"
+    cut.write_bytes("\n".join(rows).encode())
+    sc = apply_file(model, cut, tmp_path / "c.csv", chunk_rows=2)
+    assert sc.rows == 5 and sc.truncated_rows == 1
+    assert (tmp_path / "c.csv").read_text().splitlines()[-1] == "3,0.3,0.1,-0.3,,,,truncated"
     u = np.array([[0.1, 0.0, -0.1], [0.2, 0.1, -0.2], [0.3, 0.1, -0.3]])
     got = pd.read_csv(a)[["fx", "fy", "fz"]].dropna().to_numpy()
     np.testing.assert_array_equal(got, np.round(model.decouple(u), force_decimals(model.k)))
