@@ -363,8 +363,12 @@ class CsvSink:
         for k, a in enumerate(extra):
             table = table.append_column(f"_extra{k}", a)
         sink = io.BytesIO()
-        pcsv.write_csv(table, sink, pcsv.WriteOptions(
-            include_header=False, delimiter=self.sep, quoting_style="needed"))
+        try:  # plain text as a CSV log has it; quotes only if a value needs them
+            pcsv.write_csv(table, sink, pcsv.WriteOptions(
+                include_header=False, delimiter=self.sep, quoting_style="none"))
+        except pa.ArrowInvalid:
+            sink = io.BytesIO()
+            pcsv.write_csv(table, sink, pcsv.WriteOptions(include_header=False, delimiter=self.sep))
         return [sink.getbuffer()]
 
     def write(self, payload) -> None:
