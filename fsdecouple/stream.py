@@ -137,10 +137,6 @@ def csv_bodies(path: Path, *, chunk_rows: int, block_bytes: int = BLOCK_BYTES) -
                 row += feeds
 
 
-def _has_blank_line(body: bytes) -> bool:
-    return (body.startswith((b"\n", b"\r\n")) or b"\n\n" in body or b"\n\r\n" in body)
-
-
 class CsvParser:
     """Parses :class:`CsvBody` blocks; thread-safe, so blocks can be parsed in parallel.
 
@@ -169,7 +165,9 @@ class CsvParser:
 
     def __call__(self, chunk: CsvBody) -> Block:
         body, row = chunk.body, chunk.first_row
-        if chunk.truncated or _has_blank_line(body):
+        # A carriage return in an LF log could split a row for pyarrow and make up
+        # for a blank line it skips; such blocks are read line by line.
+        if chunk.truncated or (self.eol == b"\n" and b"\r" in body):
             return self.exact(chunk)
         buffer = pa.py_buffer(body)
         try:
@@ -178,11 +176,14 @@ class CsvParser:
         except pa.ArrowInvalid:  # short or long rows, junk, an open quote: look closer
             return self.exact(chunk)
         u = np.column_stack([_column_floats(tab.column(n)) for n in self.names])
+        # pyarrow skips blank lines, but each is a row of the log: fewer rows than lines
         if u.shape[0] != chunk.rows or np.isinf(u).any():
             return self.exact(chunk)
         if self.eol == b"\n":
-            lines, joined = _lines(body, buffer, chunk.rows)
+            lines, joined = _lines(body, buffer, chunk.rows), True
         else:
+            if body.count(b"\r") != chunk.rows:  # a lone CR: pyarrow's rows may not be the lines
+                return self.exact(chunk)
             lines, joined = pc.split_pattern(pa.array([body], pa.binary()), self.eol).flatten(), False
             if len(lines) != chunk.rows + 1:  # mixed line ends
                 return self.exact(chunk)
@@ -210,6 +211,11 @@ class CsvParser:
                     f"{where(self.path, row + i)}: a quote (\") opens a value that never closes"
                     " (line breaks inside quoted values are not supported)"
                 )
+            if b"\r" in line:
+                raise InputError(
+                    f"{where(self.path, row + i)}: a carriage return (\\r) inside the line "
+                    "(old Mac line ends, or a corrupt log?); lines must end with \\n or \\r\\n"
+                )
             text = line.decode("utf-8", "surrogateescape")
             fields = next(csv.reader([text], delimiter=sep)) if text else []
             if len(fields) > width:
@@ -233,20 +239,17 @@ class CsvParser:
                      total=chunk.total, truncated=chunk.truncated)
 
 
-def _lines(body: bytes, buffer: pa.Buffer, rows: int) -> tuple[pa.Array | None, bool]:
-    """The lines of ``body`` as a binary array that shares its memory, or None.
+def _lines(body: bytes, buffer: pa.Buffer, rows: int) -> pa.Array:
+    """The ``rows`` lines of ``body`` (whole lines, LF ends) as a binary array sharing its memory.
 
-    Element 0 is the first line, element i > 0 the line-feed before line i and
+    Element 0 is the first line, element i > 0 the line feed before line i and
     line i: contiguous slices of the block, so no copy is made.  Joined in
     order they give the block minus its final line feed.
     """
-    nl = np.flatnonzero(np.frombuffer(body, np.uint8) == 10)
-    ends = nl if body.endswith(b"\n") else np.append(nl, len(body))
-    if ends.size != rows:  # blank lines
-        return None, False
-    offsets = np.concatenate([[0], ends]).astype(np.int32)
-    arr = pa.Array.from_buffers(pa.binary(), rows, [None, pa.py_buffer(offsets), buffer])
-    return arr, True
+    offsets = np.empty(rows + 1, np.int32)
+    offsets[0] = 0
+    offsets[1:] = np.flatnonzero(np.frombuffer(body, np.uint8) == 10)
+    return pa.Array.from_buffers(pa.binary(), rows, [None, pa.py_buffer(offsets), buffer])
 
 
 def csv_eol(path: Path) -> bytes:

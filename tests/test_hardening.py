@@ -75,6 +75,23 @@ def test_blank_and_short_rows_are_kept_as_missing(tmp_path, sample_model_file):
     assert "1 extrapolated" in r.stdout and set(f["status"]) <= set(STATUSES)
 
 
+@pytest.mark.parametrize("eol", ["\n", "\r\n"])
+def test_a_lone_blank_line_keeps_every_row_in_place(tmp_path, sample_model, eol):
+    """A block that is numeric apart from one blank line: pyarrow skips the line, we must not."""
+    lines = LOG.read_text().splitlines()
+    lines.insert(1500, "")
+    log = tmp_path / "log.csv"
+    log.write_bytes(eol.join([*lines, ""]).encode())
+    out = tmp_path / "f.csv"
+    apply_file(sample_model, log, out, round_trip=True)
+    f = pd.read_csv(out, dtype={"status": str}, keep_default_na=False, skip_blank_lines=False)
+    assert len(f) == len(lines) - 1 and f["status"].iat[1499] == "missing"
+    good = f.drop(index=1499)
+    u = good[["ux", "uy", "uz"]].astype(float).to_numpy()
+    np.testing.assert_allclose(good[["fx", "fy", "fz"]].astype(float), sample_model.decouple(u),
+                               rtol=0, atol=1e-9)
+
+
 def test_status_summary_counts_every_row(tmp_path, sample_model):
     out = tmp_path / "f.csv"
     s = apply_file(sample_model, LOG, out, tare=200)
