@@ -76,12 +76,22 @@ class ChiSurrogate:
         d0, d1 = h * self.slopes[:-1], h * self.slopes[1:]
         return np.stack([y0, d0, 3.0 * (y1 - y0) - 2.0 * d0 - d1, 2.0 * (y0 - y1) + d0 + d1])
 
+    def covers(self, u: np.ndarray) -> np.ndarray:
+        """Where the table serves ``u``: 0 <= (u - lo) * inv_step < intervals.
+
+        The evaluators use this very expression, so a voltage a hair below
+        ``hi`` whose index rounds up to ``intervals`` is left to the exact path
+        here too.
+        """
+        t = (np.asarray(u, dtype=float) - self.lo) * self.inv_step
+        return (t >= 0) & (t < self.intervals)
+
     def __call__(self, u: np.ndarray) -> np.ndarray:
-        """Surrogate chi [V] at prime voltages ``u`` [V] inside [lo, hi); NaN elsewhere."""
+        """Surrogate chi [V] at prime voltages ``u`` [V] the table covers; NaN elsewhere."""
         u = np.asarray(u, dtype=float)
         c = self.coefficients()
         t = (u - self.lo) * self.inv_step
-        inside = (t >= 0) & (t < self.intervals)
+        inside = self.covers(u)
         i = np.where(inside, t, 0).astype(np.intp)
         s = t - i
         out = ((c[3, i] * s + c[2, i]) * s + c[1, i]) * s + c[0, i]
@@ -150,8 +160,10 @@ def build_pair(chis, lo: float, hi: float, tolerance: float = TOLERANCE) -> list
             values, slopes = _build(exact, slope, lo, hi, n)
             s = ChiSurrogate(lo, hi, values, slopes, 0.0)
             x = check_points(lo, hi, n, CHECKS_PER_INTERVAL)
-            x = x[x < hi]  # hi itself belongs to the exact path
+            x = x[s.covers(x)]  # hi, and any point whose index rounds to it, go the exact path
             err = float(np.max(np.abs(s(x) - exact(x))))
+            if not np.isfinite(err):
+                raise FloatingPointError(f"chi_{chis[len(out)].name}: surrogate error is {err}")
             out.append(ChiSurrogate(lo, hi, values, slopes, err))
         if all(s.max_error <= tolerance for s in out) or n >= MAX_INTERVALS:
             return out

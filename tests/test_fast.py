@@ -11,12 +11,15 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
+from conftest import SAMPLE
 
+from fsdecouple import load_calibration
 from fsdecouple.apply import apply_file
 from fsdecouple.errors import ModelFileError
-from fsdecouple.fast import PROMISE
-from fsdecouple.model import CHI_NAMES, CouplingErrorModel, chi_training_data, load_model
+from fsdecouple.fast import PROMISE, FastDecoupler
+from fsdecouple.model import CHI_NAMES, CouplingErrorModel, chi_training_data, fit, load_model
 from fsdecouple.stream import force_decimals
+from fsdecouple.surrogate import MAX_INTERVALS
 from fsdecouple.svr import predict, train
 
 # The promise: the fast path is within 1e-9 V of the exact kernel sum for every
@@ -45,6 +48,26 @@ def test_every_chi_has_a_verified_surrogate(model):
         assert s.max_error <= 1e-10 < PROMISE, name
         lo, hi = c.input_range
         assert s.lo < lo and s.hi > hi  # the calibrated range plus a margin
+
+
+@pytest.mark.parametrize("train", [[3, 4, 5, 6], [1, 2, 5, 6], [1, 2, 3, 4]])
+def test_every_cv_round_of_the_sample_data_gets_a_usable_surrogate(train, settings):
+    """Round 1 once measured a NaN error (a check point whose table index rounded up
+    to the end of the table), refined to 131072 intervals for 10 s and fell back to
+    the exact path: cv's training rounds are the models users actually fit."""
+    m = fit(load_calibration(SAMPLE / "calibration", settings).subset(train), settings)
+    for name, c in m.chi.items():
+        assert c.surrogate.max_error <= 1e-10 and c.surrogate.intervals < MAX_INTERVALS, name
+    assert FastDecoupler.from_model(m) is not None
+
+
+def test_surrogate_covers_exactly_where_its_index_is_inside(model):
+    s = next(iter(model.chi.values())).surrogate
+    below_hi = np.nextafter(s.hi, -np.inf) - np.arange(64) * np.spacing(s.hi)
+    x = np.concatenate([below_hi, [s.lo, s.hi, np.nextafter(s.lo, -np.inf), np.nan]])
+    t = (x - s.lo) * s.inv_step
+    np.testing.assert_array_equal(s.covers(x), (t >= 0) & (t < s.intervals))
+    np.testing.assert_array_equal(np.isnan(s(x)), ~s.covers(x))
 
 
 def test_surrogate_equals_kernel_sum_on_dense_points(model):
