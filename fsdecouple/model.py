@@ -7,6 +7,7 @@ The model file is one JSON document that needs numpy, not libsvm, to evaluate.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -438,6 +439,12 @@ def load_model(path: str | Path) -> CouplingErrorModel:
 
 
 def _library_versions() -> dict[str, str]:
+    return dict(_installed_versions())  # a copy: each model owns its provenance
+
+
+@functools.cache
+def _installed_versions() -> dict[str, str]:
+    # reading package metadata costs ~5 ms; cv fits dozens of models
     out = {"python": platform.python_version()}
     for dist in ("numpy", "scipy", "pandas", "libsvm-official"):
         try:
