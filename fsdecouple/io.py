@@ -132,25 +132,36 @@ def parser_message(err: Exception) -> str:
     return f"cannot parse CSV ({text.strip().splitlines()[-1]})"
 
 
+# cells of a log that mean "no sample" (a missing voltage, not an error)
+MISSING_CELLS = ("", "nan", "NaN", "NA", "N/A", "null")
+
+
 def to_numbers(
-    values: pd.Series, path: Path, column: str, first_row: int, decimal: str
+    values, path: Path, column: str, rows, decimal: str = ".", *, allow_missing: bool = False
 ) -> np.ndarray:
-    """Convert a column of strings to finite floats, or name the first bad cell."""
+    """Convert a column of strings to finite floats, or name the first bad cell.
+
+    ``rows``: the spreadsheet row of each value, or (an int) of the first value
+    when the rows are consecutive.  ``allow_missing``: cells in
+    :data:`MISSING_CELLS` become NaN (a log's missing samples) instead of an
+    error (a calibration point must have every number).  Infinities are errors.
+    """
+    import pandas as pd
+
+    values = pd.Series(values, dtype=object) if not isinstance(values, pd.Series) else values
     text = values.astype(str).str.strip()
     if decimal != ".":
         text = text.str.replace(decimal, ".", regex=False)
     nums = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
     bad = ~np.isfinite(nums)
+    if allow_missing and bad.any():
+        bad &= ~(np.isnan(nums) & text.isin(MISSING_CELLS).to_numpy())
     if bad.any():
         i = int(np.argmax(bad))
+        row = int(rows[i]) if np.ndim(rows) else int(rows) + i
         cell = str(values.iloc[i]).strip()
-        if cell == "":
-            what = "is empty"
-        elif np.isnan(nums[i]) and cell.lower() not in ("nan", "na", "n/a", "null", "none"):
-            what = f"is {cell!r}"
-        else:
-            what = f"is {cell!r}"
-        raise InputError(f"{where(path, first_row + i, column)}: {what}, expected a finite number")
+        what = "is empty" if cell == "" else f"is {cell!r}"
+        raise InputError(f"{where(path, row, column)}: {what}, expected a finite number")
     return nums
 
 
@@ -238,10 +249,9 @@ def read_calibration_table(path: str | Path, settings: Settings) -> tuple[pd.Dat
         raw, rows = raw[~blank], rows[~blank]
         if raw.empty:
             raise InputError(f"{f}: header only, no data rows")
-        first = int(rows[0])
         out = pd.DataFrame({"file": str(f), "row": rows})
         if single:
-            reps = to_numbers(raw[cols["repetition"]], f, cols["repetition"], first, ".")
+            reps = to_numbers(raw[cols["repetition"]], f, cols["repetition"], rows)
             bad = (reps != np.round(reps)) | (reps < 1)
             if bad.any():
                 i = int(np.argmax(bad))
@@ -265,7 +275,7 @@ def read_calibration_table(path: str | Path, settings: Settings) -> tuple[pd.Dat
         else:
             out["axis"] = ""
         for canonical, name in numeric.items():
-            values = to_numbers(raw[name], f, name, first, settings.decimal)
+            values = to_numbers(raw[name], f, name, rows, settings.decimal)
             # check each cell before scaling so the message quotes the file's value
             out[canonical] = values * settings.scale[canonical]
         frames.append(out)

@@ -1,12 +1,14 @@
 """Stream a voltage log in blocks, CSV or Parquet, and write it back with forces.
 
 CSV blocks are cut from the raw bytes at line ends.  The three voltage columns
-are parsed by pyarrow's multi-threaded CSV reader; every input line is passed
-through byte for byte (no re-quoting, no re-formatting) and the forces are
-appended as text by pyarrow's shortest round-trip float formatting, so the
-output costs little more than reading and writing the file.  A block pyarrow
-cannot parse (a non-numeric cell, a short row, padded numbers) is parsed again
-by pandas, which either reads it or names the file, row and column at fault.
+are parsed by pyarrow's CSV reader; every input line is passed through byte for
+byte (no re-quoting, no re-formatting) and the forces are appended as text by
+pyarrow's shortest float formatting (after rounding, see :func:`force_decimals`),
+so the output costs little more than reading and writing the file.  A block
+pyarrow cannot parse, or whose rows it might not count as the file's lines (a
+non-numeric cell, a short or blank row, a stray carriage return), is parsed
+again line by line, which either reads it or names the file, row and column at
+fault.
 """
 
 from __future__ import annotations
@@ -18,7 +20,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.csv as pcsv
@@ -26,10 +27,9 @@ import pyarrow.parquet as pq
 
 from .config import FORCE_COLUMNS, Settings
 from .errors import InputError, where
-from .io import HEADER_ROW
+from .io import HEADER_ROW, MISSING_CELLS, to_numbers
 
 BLOCK_BYTES = 4 << 20  # ~100 K rows of a 4-column log; a block in flight costs ~15x this
-MISSING = ("", "nan", "NaN", "NA", "N/A", "null")
 PARQUET_SUFFIXES = (".parquet", ".pq")
 PARQUET_BATCH_ROWS = 1 << 17  # ~15 MB of blocks in flight each
 
@@ -61,26 +61,6 @@ class Block:
 
 
 # --- reading ------------------------------------------------------------------
-
-
-def voltages_from_text(chunk: pd.DataFrame, names: list[str], settings: Settings, path,
-                       first_row: int) -> np.ndarray:
-    """Voltages (file units) of a chunk of strings; missing cells become NaN, junk is an error."""
-    u = np.empty((len(chunk), 3))
-    for k, name in enumerate(names):
-        text = chunk[name].str.strip()
-        if settings.decimal != ".":
-            text = text.str.replace(settings.decimal, ".", regex=False)
-        vals = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
-        bad = np.isnan(vals) & ~text.isin(MISSING).to_numpy()
-        bad |= np.isinf(vals)
-        if bad.any():
-            i = int(np.argmax(bad))
-            raise InputError(
-                f"{where(path, first_row + i, name)}: {chunk[name].iloc[i]!r}, expected a number"
-            )
-        u[:, k] = vals
-    return u
 
 
 def _column_floats(col: pa.ChunkedArray | pa.Array) -> np.ndarray:
@@ -154,7 +134,7 @@ class CsvParser:
         self.want_table = want_table
         self.float_opts = pcsv.ConvertOptions(
             include_columns=names, column_types={n: pa.float64() for n in names},
-            null_values=list(MISSING), decimal_point=settings.decimal, check_utf8=False,
+            null_values=list(MISSING_CELLS), decimal_point=settings.decimal, check_utf8=False,
         )
         self.text_opts = pcsv.ConvertOptions(
             column_types={n: pa.string() for n in header}, strings_can_be_null=False,
@@ -226,11 +206,14 @@ class CsvParser:
             lines.append(line + pad * (width - max(1, len(fields))))
             cells.append(fields + [""] * (width - len(fields)))
         cols = list(zip(*cells, strict=True))
-        frame = pd.DataFrame({n: list(cols[self.header.index(n)]) for n in self.names})
         if chunk.truncated:  # no forces whatever it holds: the last number may be cut short
             u = np.full((len(lines), 3), np.nan)
         else:
-            u = voltages_from_text(frame, self.names, self.settings, self.path, row)
+            u = np.column_stack([
+                to_numbers(cols[self.header.index(n)], self.path, n, row, self.settings.decimal,
+                           allow_missing=True)
+                for n in self.names
+            ])
         table = None
         if self.want_table:
             table = pa.table({n: pa.array(list(cols[j]), pa.string())
@@ -272,8 +255,8 @@ def parquet_blocks(path: Path, names: list[str], settings: Settings, *,
         for n in names:
             col = table.column(n)
             if pa.types.is_string(col.type) or pa.types.is_large_string(col.type):
-                df = pd.DataFrame({n: col.fill_null("").to_pylist()})
-                cols.append(voltages_from_text(df, [n], settings, path, row)[:, 0])
+                cols.append(to_numbers(col.fill_null("").to_pylist(), path, n, row, settings.decimal,
+                                       allow_missing=True))
             elif pa.types.is_integer(col.type) or pa.types.is_floating(col.type):
                 cols.append(_column_floats(col))
             else:
