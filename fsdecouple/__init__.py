@@ -23,18 +23,30 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"):
 
 __version__ = "0.1.0"
 
-from .calibration import CalibrationSet, load_calibration  # noqa: E402
-from .config import Settings, load_config  # noqa: E402
-from .errors import FsdecoupleError  # noqa: E402
-from .model import CouplingErrorModel, fit, load_model  # noqa: E402
+# The public names load on first use (PEP 562): ``fsdecouple apply`` and a
+# control loop that loads a model need numpy and pyarrow, not pandas or libsvm.
+_PUBLIC = {
+    "CalibrationSet": "calibration",
+    "load_calibration": "calibration",
+    "Settings": "config",
+    "load_config": "config",
+    "FsdecoupleError": "errors",
+    "CouplingErrorModel": "model",
+    "fit": "model",
+    "load_model": "model",
+}
+__all__ = sorted(_PUBLIC)
 
-__all__ = [
-    "CalibrationSet",
-    "CouplingErrorModel",
-    "FsdecoupleError",
-    "Settings",
-    "fit",
-    "load_calibration",
-    "load_config",
-    "load_model",
-]
+
+def __getattr__(name: str):
+    if name not in _PUBLIC:
+        raise AttributeError(f"module 'fsdecouple' has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(f".{_PUBLIC[name]}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted([*globals(), *_PUBLIC])

@@ -21,17 +21,14 @@ from rich.console import Console
 from rich.progress import BarColumn, DownloadColumn, Progress, TimeRemainingColumn
 
 from . import __version__
-from .apply import apply_file
-from .calibration import GrossError, load_calibration
 from .config import load_config
-from .cv import parse_folds, run_cv
-from .cv_report import cv_renderables
 from .errors import FsdecoupleError, InputError
 from .io import atomic_write, calibration_files, check_output, refuse_overwriting_input
-from .model import fit as fit_model
 from .model import load_model
 from .report import apply_lines, apply_warnings, fit_tables, ingest_summary, ingest_tables
-from .simulate import simulate as simulate_sensor
+
+# Each command imports what only it needs (pandas, libsvm, scipy, matplotlib),
+# so that `apply` and `show` start in a fraction of a second.
 
 app = typer.Typer(
     add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -95,6 +92,9 @@ def simulate(
     force: ForceOpt = False,
 ) -> None:
     """Write a simulated six-repetition calibration set and a combined-load task log."""
+    from .calibration import GrossError
+    from .simulate import simulate as simulate_sensor
+
     with user_errors():
         ge = GrossError.parse(gross_error) if gross_error else None
         files = simulate_sensor(out_dir, seed=seed, gross_error=ge, force=force)
@@ -112,6 +112,8 @@ def ingest(
     json_out: JsonOpt = False,
 ) -> None:
     """Validate and zero-correct a calibration set, and summarise it."""
+    from .calibration import load_calibration
+
     with user_errors():
         settings = load_config(config)
         if output is not None:
@@ -149,6 +151,8 @@ def fit(
     json_out: JsonOpt = False,
 ) -> None:
     """Fit the coupling error model and write it as one JSON file."""
+    from .model import fit as fit_model
+
     with user_errors():
         settings = load_config(
             config, C=C, epsilon=epsilon, gamma=gamma, delta2=delta2, tolerance=tolerance,
@@ -202,7 +206,7 @@ def report(
     force: ForceOpt = False,
 ) -> None:
     """Write a self-contained HTML calibration report (figures, gamma tables, checks)."""
-    # imported here so that the other commands do not pay for loading matplotlib
+    from .calibration import load_calibration
     from .html_report import build_report, load_cv_results
 
     with user_errors():
@@ -269,6 +273,8 @@ def apply(
     force: ForceOpt = False,
 ) -> None:
     """Decouple logged voltages into forces fx, fy, fz [N] by eq. (11)."""
+    from .apply import apply_file
+
     with user_errors():
         model = load_model(model_file)
         settings = load_config(config) if config is not None else None
@@ -335,6 +341,10 @@ def cv(
     json_out: JsonOpt = False,
 ) -> None:
     """Cross-validate the model against the baselines of Section 4 (Tables 1, 3, 4, 5)."""
+    from .calibration import GrossError
+    from .cv import parse_folds, run_cv
+    from .cv_report import cv_renderables
+
     with user_errors():
         settings = load_config(config)
         if (task is None) != (task_forces is None):

@@ -17,12 +17,15 @@ import tempfile
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from .config import FORCE_COLUMNS, VOLTAGE_COLUMNS, Settings
 from .errors import InputError, where
+
+if TYPE_CHECKING:  # pandas loads on first use: apply and show never need it
+    import pandas as pd
 
 HEADER_ROW = 1  # data row i (0-based) is spreadsheet row i + 2
 
@@ -75,6 +78,8 @@ def read_header(path: Path, settings: Settings) -> list[str]:
 
 def _strict(read):
     # only around pandas' own work, not across a generator's yields
+    import pandas as pd
+
     with warnings.catch_warnings():
         warnings.simplefilter("error", pd.errors.ParserWarning)
         return read()
@@ -87,6 +92,8 @@ def csv_chunks(source, path: Path, settings: Settings, **kw):
     taken as an index: pandas does that silently when the first data row has one
     field more than the header, which is how ``1,5`` in a comma file looks.
     """
+    import pandas as pd
+
     try:
         reader = _strict(lambda: pd.read_csv(
             source, sep=settings.sep, dtype=str, keep_default_na=False, na_filter=False,
@@ -220,6 +227,8 @@ def read_calibration_table(path: str | Path, settings: Settings) -> tuple[pd.Dat
     in N and voltages in V after the config's ``scale``; ``axis`` is empty when the
     files have no axis column) and the list of skipped blank rows.
     """
+    import pandas as pd
+
     files = calibration_files(path)
     single = len(files) == 1 and not Path(path).is_dir()
     frames, skipped = [], []

@@ -17,12 +17,11 @@ from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from . import __version__
-from .calibration import CalibrationSet, load_calibration
 from .config import AXES, VOLTAGE_COLUMNS, Settings, settings_from_dict
 from .errors import InputError, ModelFileError
 from .io import atomic_write
@@ -30,6 +29,9 @@ from .kernel import rbf_sum
 from .linear import fit_omega
 from .metrics import interference_errors
 from .surrogate import ChiSurrogate, build_pair, table_interval
+
+if TYPE_CHECKING:
+    from .calibration import CalibrationSet
 
 FORMAT = "fsdecouple.model"
 FORMAT_VERSION = 1
@@ -484,7 +486,9 @@ def fit(
         Threads training the six SVRs (libsvm releases the GIL); default: the
         number of cores.  The result does not depend on it.
     """
-    from .svr import fit_svr  # the only libsvm user; apply never imports it
+    # fitting needs pandas (calibration) and libsvm; loading and applying a model do not
+    from .calibration import CalibrationSet, load_calibration
+    from .svr import fit_svr  # the only libsvm user
 
     settings = settings or Settings()
     if not isinstance(calib, CalibrationSet):

@@ -7,11 +7,15 @@ voltages of its zero-load rows; task data are zeroed by a tare or by given offse
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import pandas as pd
 
 from .config import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .errors import InputError, where
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 
 def loaded_axes(forces: np.ndarray) -> np.ndarray:
@@ -110,6 +114,8 @@ def zero_correct(table: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
             points.iloc[idx, points.columns.get_loc(c)] -= mean[k]
         offsets.append({"repetition": rep, "axis": axis, "n_zero": int(z.size),
                         **{c: float(mean[k]) for k, c in enumerate(VOLTAGE_COLUMNS)}})
+    import pandas as pd
+
     return points, pd.DataFrame(offsets)
 
 

@@ -255,3 +255,21 @@ def test_apply_crlf_blank_lines_and_missing(model, tmp_path):
     u = np.array([[0.1, 0.0, -0.1], [0.2, 0.1, -0.2], [0.3, 0.1, -0.3]])
     got = pd.read_csv(a)[["fx", "fy", "fz"]].dropna().to_numpy()
     np.testing.assert_array_equal(got, np.round(model.decouple(u), force_decimals(model.k)))
+
+
+def test_a_control_loop_loads_numpy_only(model, tmp_path):
+    """Loading a model and decoupling needs neither pandas, libsvm, scipy nor pyarrow."""
+    import subprocess
+    import sys
+
+    path = tmp_path / "m.json"
+    model.save(path)
+    code = (
+        "import sys, fsdecouple\n"
+        f"m = fsdecouple.load_model({str(path)!r})\n"
+        "f = m.decoupler()(0.1, 0.0, -0.1), m.decouple([[0.1, 0.0, -0.1]])\n"
+        "print(sorted(n for n in ('pandas', 'libsvm', 'scipy', 'pyarrow', 'matplotlib')"
+        " if n in sys.modules))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
