@@ -1,8 +1,9 @@
 """Benchmarks of issue 4: every target with its median, its baseline measured in
 the same run, the ratio and pass/fail.
 
-    PYTHONPATH=. python benchmarks/run.py            # full: 10 M-row log, ~3 min
+    PYTHONPATH=. python benchmarks/run.py            # full: 10 M-row log, ~5 min
     PYTHONPATH=. python benchmarks/run.py --quick    # 1 M-row log, fewer repeats
+    PYTHONPATH=. python benchmarks/run.py --readme   # also rewrite README's results block
 
 Timings are medians of ``--repeats`` runs.  On a shared machine, other load
 inflates both a measurement and its baseline; the load average is printed.
@@ -25,6 +26,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "docs"))
 
 from fsdecouple import load_calibration, load_config  # noqa: E402
 from fsdecouple.model import CHI_NAMES, chi_training_data, fit  # noqa: E402
@@ -132,10 +134,13 @@ def main() -> int:
     ap.add_argument("--repeats", type=int, help="runs per median (default 5, quick 3)")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--json", type=Path, help="also write the results here")
+    ap.add_argument("--readme", action="store_true",
+                    help="write the results table into README.md (between the benchmarks markers)")
     args = ap.parse_args()
     rows = args.rows or (1_000_000 if args.quick else 10_000_000)
     repeats = args.repeats or (3 if args.quick else 5)
-    print(f"machine: {machine()}\n", flush=True)
+    started = machine()
+    print(f"machine: {started}\n", flush=True)
 
     from fsdecouple.svr import train
 
@@ -159,6 +164,24 @@ def main() -> int:
     row("4. fit, parallel", par, "s", seq, "sequential (workers=1)", seq / par,
         "speed-up > 1, identical model", same and seq / par > 1.0)
     model = fit(calib, settings)
+
+    # --- 4b. the cv command on the sample data -----------------------------------------
+    print("fsdecouple cv on the sample data")
+    py = sys.executable
+    with tempfile.TemporaryDirectory(prefix="fsdecouple-bench-cv-") as tmp:
+        doc = Path(tmp) / "cv.json"
+        cv_args = [py, "-m", "fsdecouple", "cv", ROOT / "sample_data" / "calibration", "-o", doc,
+                   "--force"]
+        walls, speedups = [], []
+        for _ in range(repeats):
+            walls.append(run_child(cv_args)[0])
+            speedups.append(json.loads(doc.read_text())["timing"]["parallel"]["speedup"])
+        seq_wall = median_child([*cv_args, "--workers", "1"], repeats)[0]
+    cv_wall = statistics.median(walls)
+    row("4b. fsdecouple cv, sample data", cv_wall, "s wall", seq_wall, "cv --workers 1 [s]",
+        seq_wall / cv_wall, "<= 2 s", cv_wall <= 2.0)
+    row("4c. cv training, parallel vs sequential", statistics.median(speedups), "x speed-up", 1.0,
+        "sequential training in the same run (cv.json)", statistics.median(speedups), "info", True)
 
     # --- 1. in-memory decoupling of (N, 3) -------------------------------------------
     print("in-memory decoupling, N = 1e6")
@@ -236,15 +259,25 @@ def main() -> int:
         write_log(log, rows, model)
         size = log.stat().st_size / 1e6
         print(f"apply on {rows:,} rows ({size:.0f} MB)", flush=True)
-        py = sys.executable
         base_t, base_mb = median_child([py, "-c", PYARROW_CSV_COPY, log, tmp / "copy.csv"],
                                        repeats)
         apply_args = [py, "-m", "fsdecouple", "apply", mfile, log, "-o", tmp / "f.csv", "--force"]
         app_t, app_mb = median_child(apply_args, repeats)
+        # the goal is set for a 10 M-row log; on a smaller one the ~0.5 s of imports
+        # weigh more, so the ratio is shown but does not fail the run
+        full = rows >= 10_000_000
+        goal = "<= 1.5x" if full else "info (<= 1.5x at 10 M rows)"
         row("3. fsdecouple apply, CSV -> CSV", app_t, "s", base_t,
-            "pyarrow CSV read + write [s]", app_t / base_t, "<= 1.5x", app_t / base_t <= 1.5)
+            "pyarrow CSV read + write [s]", app_t / base_t, goal, app_t / base_t <= 1.5 or not full)
         row("3b. apply peak memory", app_mb, "MB", base_mb, "read + write peak [MB]",
             app_mb / base_mb, "< 500 MB", app_mb < 500)
+        tiny = tmp / "tiny.csv"
+        tiny.write_bytes(b"t,ux,uy,uz\n0,0.1,0,-0.1\n")
+        start_t, _ = median_child([py, "-m", "fsdecouple", "apply", mfile, tiny, "-o", tmp / "t.csv",
+                                   "--force"], repeats)
+        copy_start_t, _ = median_child([py, "-c", PYARROW_CSV_COPY, tiny, tmp / "t2.csv"], repeats)
+        row("3e. apply on a 1-row log (start-up)", start_t, "s", copy_start_t,
+            "pyarrow read + write of it [s]", start_t / copy_start_t, "info", True)
         rate = rows / app_t
         print(f"  (apply throughput {rate / 1e6:.2f} M rows/s, {size / app_t:.0f} MB/s)")
         plog = tmp / "log.parquet"
@@ -257,8 +290,8 @@ def main() -> int:
             [py, "-m", "fsdecouple", "apply", mfile, plog, "-o", tmp / "f.parquet", "--force"],
             repeats)
         row("3c. apply, Parquet -> Parquet", papp_t, "s", pbase_t,
-            "pyarrow Parquet read + write [s]", papp_t / pbase_t, "<= 1.5x, < 500 MB",
-            papp_t / pbase_t <= 1.5 and papp_mb < 500)
+            "pyarrow Parquet read + write [s]", papp_t / pbase_t, f"{goal}, < 500 MB",
+            (papp_t / pbase_t <= 1.5 or not full) and papp_mb < 500)
         # the same forces whatever the format: CSV text is shortest round-trip
         import pandas as pd
         import pyarrow.parquet as pq
@@ -277,13 +310,20 @@ def main() -> int:
             "max abs(apply - exact) [V-equivalent]", d_exact / 1e-9, "<= 1e-10 V; <= 1e-9 V",
             d_fmt <= 1e-10 and d_exact <= 1e-9)
 
-    print("\n| target | measured (median) | baseline (median) | ratio | goal | |")
-    print("|---|---|---|---|---|---|")
-    for r_ in results:
-        print(f"| {r_['target']} | {r_['measured']:.4g} {r_['unit']} | {r_['baseline']:.4g} "
-              f"({r_['baseline_name']}) | {r_['ratio']:.3g} | {r_['goal']} | "
-              f"{'PASS' if r_['ok'] else 'FAIL'} |")
-    print(f"\n{machine()}; log {rows:,} rows; {repeats} repeats")
+    table = "\n".join([
+        "| target | measured (median) | baseline (median) | ratio | goal | |",
+        "|---|---|---|---|---|---|",
+        *(f"| {r_['target']} | {r_['measured']:.4g} {r_['unit']} | {r_['baseline']:.4g} "
+          f"({r_['baseline_name']}) | {r_['ratio']:.3g} | {r_['goal']} | "
+          f"{'PASS' if r_['ok'] else 'FAIL'} |" for r_ in results),
+    ])
+    print(f"\n{table}\n\n{machine()}; log {rows:,} rows; {repeats} repeats")
+    if args.readme:
+        from readme_blocks import replace_block
+
+        replace_block("benchmarks", f"Measured by `benchmarks/run.py` ({rows:,}-row log of "
+                      f"{size:.0f} MB; {repeats} repeats): {started}.\n\n{table}")
+        print("README.md: benchmarks block rewritten")
     if args.json:
         args.json.write_text(json.dumps({"machine": machine(), "rows": rows, "results": results},
                                         indent=1))

@@ -10,20 +10,21 @@ repository root instead.
 from __future__ import annotations
 
 import os
-import re
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "docs"))
+from readme_blocks import replace_block  # noqa: E402
+
 ARGS = [
     "cv", "sample_data/calibration",
     "--task", "sample_data/task_voltages.csv", "--task-forces", "sample_data/task_forces.csv",
     "--task-tare", "200", "--gross-error", "x:1:5:0.2", "--max-gamma", "0.016",
 ]
 WIDTH = 132
-START, END = "<!-- cv-sample-output:start -->", "<!-- cv-sample-output:end -->"
 
 
 def main() -> int:
@@ -39,14 +40,7 @@ def main() -> int:
     lines = [line for line in lines if not line.startswith("cv document written to")]
     text = "$ fsdecouple " + " ".join(ARGS) + " -o cv.json\n" + "\n".join(lines).rstrip() + "\n"
     (ROOT / "docs" / "cv-sample-output.txt").write_text(text, encoding="utf-8")
-    readme = ROOT / "README.md"
-    body = readme.read_text(encoding="utf-8")
-    block = f"{START}\n```text\n{text}```\n{END}"
-    new, n = re.subn(re.escape(START) + r".*?" + re.escape(END), lambda _: block, body, flags=re.S)
-    if n != 1:
-        sys.stderr.write(f"README.md: expected one {START} ... {END} block, found {n}\n")
-        return 2
-    readme.write_text(new, encoding="utf-8")
+    replace_block("cv-sample-output", f"```text\n{text}```")
     print(f"wrote docs/cv-sample-output.txt and README.md ({len(lines)} lines)")
     return 0
 
