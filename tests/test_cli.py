@@ -175,3 +175,46 @@ def test_outputs_get_the_usual_file_mode(tmp_path):
     finally:
         os.umask(old)
     assert out.stat().st_mode & 0o777 == 0o644
+
+
+def _on_a_terminal(args, env):
+    """Run ``python -m fsdecouple ARGS`` with a pseudo-terminal as stdout and stderr."""
+    import os
+    import pty
+    import subprocess
+    import sys
+
+    master, slave = pty.openpty()
+    proc = subprocess.Popen([sys.executable, "-m", "fsdecouple", *map(str, args)],
+                            stdin=slave, stdout=slave, stderr=slave, env=env)
+    os.close(slave)
+    chunks = []
+    while True:
+        try:
+            data = os.read(master, 1 << 16)
+        except OSError:  # EIO: the child closed the terminal
+            break
+        if not data:
+            break
+        chunks.append(data)
+    os.close(master)
+    assert proc.wait(timeout=60) == 0, b"".join(chunks).decode(errors="replace")
+    return b"".join(chunks).decode(errors="replace")
+
+
+def test_progress_bars_show_on_a_terminal_and_never_in_ci(tmp_path, sample_model):
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k != "CI"}
+    env.update(TERM="xterm-256color", COLUMNS="100")
+    cal = SAMPLE / "calibration"
+    log = SAMPLE / "task_voltages.csv"
+    apply_args = ["apply", sample_model, log, "-o", tmp_path / "f.csv", "--force"]
+    cv_args = ["cv", cal, "-o", tmp_path / "cv.json", "--force"]
+    hide_cursor = "\x1b[?25l"  # rich hides the cursor while a live bar is drawn
+    for args, label in ((apply_args, "decoupling"), (cv_args, "training")):
+        out = _on_a_terminal(args, env)
+        assert hide_cursor in out and label in out, out
+    env["CI"] = "true"
+    assert "decoupling" not in (out := _on_a_terminal(apply_args, env)) and hide_cursor not in out
+    assert hide_cursor not in _on_a_terminal(cv_args, env)
