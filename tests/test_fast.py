@@ -102,6 +102,20 @@ def test_fast_decouple_does_not_depend_on_blocks_or_threads(model):
     np.testing.assert_array_equal(model.decouple(u[:5]), ref[:5])
 
 
+def test_small_calls_are_bit_identical_to_the_block_path(model):
+    """Up to SMALL_ROWS rows go row by row (fast for one vector); same bits as a big call."""
+    from fsdecouple.fast import SMALL_ROWS
+
+    u = in_range_voltages(model, 200, seed=11)
+    u[::9, 2] = 7.5  # outside a table: exact in both
+    u[4, 0] = np.nan
+    ref = model.fast_decoupler().decouple(u, block_rows=64)
+    for n in (1, 2, SMALL_ROWS, SMALL_ROWS + 1):
+        for a in (0, 3, 100):
+            np.testing.assert_array_equal(model.decouple(u[a:a + n]), ref[a:a + n])
+    assert model.decouple(np.empty((0, 3))).shape == (0, 3)
+
+
 def test_out_of_range_and_nan_use_the_exact_kernel_sum(model):
     u = in_range_voltages(model, 1000)
     s = model.chi["xy"].surrogate
