@@ -393,4 +393,21 @@ def _terminate(signum, frame) -> None:
 
 def main() -> None:
     signal.signal(signal.SIGTERM, _terminate)
-    app()
+    try:
+        code = app(standalone_mode=False)
+    except typer.Abort:
+        err_console.print("[red]error:[/red] aborted", highlight=False)
+        code = 1
+    except Exception as err:
+        # Click's usage errors (a missing argument, `--tare abc`, an unknown
+        # command) get one line like every other bad input, not a framed box
+        if not (hasattr(err, "format_message") and hasattr(err, "exit_code")):
+            raise
+        ctx = getattr(err, "ctx", None)
+        command = ctx.command_path if ctx is not None else "fsdecouple"
+        message = " ".join(err.format_message().split())
+        if message:  # none when the help was printed for a bare `fsdecouple`
+            err_console.print(f"[red]error:[/red] {command}: {message} (see '{command} --help')",
+                              highlight=False, soft_wrap=True)
+        code = err.exit_code
+    sys.exit(code if isinstance(code, int) else 0)

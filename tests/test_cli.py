@@ -218,3 +218,24 @@ def test_progress_bars_show_on_a_terminal_and_never_in_ci(tmp_path, sample_model
     env["CI"] = "true"
     assert "decoupling" not in (out := _on_a_terminal(apply_args, env)) and hide_cursor not in out
     assert hide_cursor not in _on_a_terminal(cv_args, env)
+
+
+def test_usage_errors_are_one_line_and_exit_2(sample_model):
+    """A missing argument, a bad option value or an unknown command: bad input like any other."""
+    import subprocess
+    import sys
+
+    log = SAMPLE / "task_voltages.csv"
+    cases = {
+        "Missing argument 'voltages'": ["apply", sample_model],
+        "Invalid value for '--tare'": ["apply", sample_model, log, "-o", "x.csv", "--tare", "abc"],
+        "Did you mean 'apply'?": ["aply"],
+        "No such option: --bogus": ["cv", SAMPLE / "calibration", "--bogus"],
+    }
+    for expected, args in cases.items():
+        r = subprocess.run([sys.executable, "-m", "fsdecouple", *map(str, args)],
+                           capture_output=True, text=True)
+        lines = r.stderr.splitlines()
+        assert r.returncode == 2 and len(lines) == 1, r.stderr
+        assert lines[0].startswith("error: ") and expected in lines[0] and "--help" in lines[0]
+        assert "Traceback" not in r.stderr and r.stdout == ""
