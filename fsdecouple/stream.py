@@ -32,6 +32,10 @@ from .io import HEADER_ROW, MISSING_CELLS, to_numbers
 BLOCK_BYTES = 4 << 20  # ~100 K rows of a 4-column log; a block in flight costs ~15x this
 PARQUET_SUFFIXES = (".parquet", ".pq")
 PARQUET_BATCH_ROWS = 1 << 17  # ~15 MB of blocks in flight each
+# Column chunks are read through a buffer of this size rather than whole: a file
+# written as one huge row group would otherwise be held in memory column by column.
+# (Pre-buffering, pyarrow's default, would double the peak memory too.)
+PARQUET_READ_BUFFER = 1 << 20
 
 
 def is_parquet(path: str | Path) -> bool:
@@ -244,7 +248,7 @@ def parquet_blocks(path: Path, names: list[str], settings: Settings, *,
                    chunk_rows: int) -> Iterator[Block]:
     """The rows of a Parquet log in record batches of at most ``chunk_rows`` rows."""
     try:
-        pf = pq.ParquetFile(path, pre_buffer=False)  # pre-buffering doubles the peak memory
+        pf = pq.ParquetFile(path, pre_buffer=False, buffer_size=PARQUET_READ_BUFFER)
     except (pa.ArrowInvalid, OSError) as err:
         raise InputError(f"{path}: not a readable Parquet file ({err})") from None
     total = max(1, pf.metadata.num_rows)
