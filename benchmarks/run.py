@@ -1,9 +1,9 @@
 """Benchmarks of issue 4: every target with its median, its baseline measured in
 the same run, the ratio and pass/fail.
 
-    PYTHONPATH=. python benchmarks/run.py            # full: 10 M-row log, ~5 min
-    PYTHONPATH=. python benchmarks/run.py --quick    # 1 M-row log, fewer repeats
-    PYTHONPATH=. python benchmarks/run.py --readme   # also rewrite README's results block
+    python benchmarks/run.py            # full: 10 M-row log, ~6 min
+    python benchmarks/run.py --quick    # 1 M-row log, fewer repeats
+    python benchmarks/run.py --readme   # also rewrite README's results block
 
 Timings are medians of ``--repeats`` runs.  On a shared machine, other load
 inflates both a measurement and its baseline; the load average is printed.
