@@ -30,6 +30,7 @@ from .errors import InputError, where
 from .io import HEADER_ROW, MISSING_CELLS, to_numbers
 
 BLOCK_BYTES = 4 << 20  # ~100 K rows of a 4-column log; a block in flight costs ~15x this
+MAX_LINE_BYTES = 16 << 20  # a log line is tens of bytes
 PARQUET_SUFFIXES = (".parquet", ".pq")
 PARQUET_BATCH_ROWS = 1 << 17  # ~15 MB of blocks in flight each
 # Column chunks are read through a buffer of this size rather than whole: a file
@@ -86,10 +87,12 @@ class CsvBody:
     truncated: bool = False  # the log's last line, which has no line end
 
 
-def csv_bodies(path: Path, *, chunk_rows: int, block_bytes: int = BLOCK_BYTES) -> Iterator[CsvBody]:
+def csv_bodies(path: Path, *, chunk_rows: int, block_bytes: int = BLOCK_BYTES,
+               max_line: int = MAX_LINE_BYTES) -> Iterator[CsvBody]:
     """Cut the data lines of a CSV log into blocks of whole lines (at most ``chunk_rows``).
 
-    A last line without a line end comes alone, as a ``truncated`` body.
+    A last line without a line end comes alone, as a ``truncated`` body.  A line
+    longer than ``max_line`` bytes is an error: memory stays bounded whatever the file.
     """
     total = max(1, path.stat().st_size)
     with open(path, "rb") as fh:
@@ -105,6 +108,10 @@ def csv_bodies(path: Path, *, chunk_rows: int, block_bytes: int = BLOCK_BYTES) -
                 return
             end = buf.rfind(b"\n") + 1
             if end == 0:  # a line longer than the block: read on
+                if len(buf) > max_line:
+                    raise InputError(
+                        f"{where(path, row)}: no line end in {max_line:,} bytes; not a CSV log?"
+                    )
                 carry = buf
                 continue
             body, carry = buf[:end], buf[end:]

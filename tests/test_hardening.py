@@ -256,3 +256,13 @@ def test_model_file_through_windows_git_still_loads(tmp_path, sample_model_file)
     ref = tmp_path / "ref.csv"
     invoke(["apply", sample_model_file, LOG, "-o", ref, "--tare", "200"])
     assert out.read_bytes() == ref.read_bytes()
+
+
+def test_a_log_without_line_ends_is_refused_not_read_into_memory(tmp_path):
+    from fsdecouple.stream import csv_bodies
+
+    log = tmp_path / "log.csv"
+    log.write_bytes(b"t,ux,uy,uz\n0,0.1,0,0\n" + b"1," * 5000)
+    with pytest.raises(InputError, match=r"log\.csv, row 3: no line end"):
+        list(csv_bodies(log, chunk_rows=100, block_bytes=1024, max_line=4096))
+    assert len(list(csv_bodies(log, chunk_rows=100, block_bytes=1024, max_line=1 << 20))) == 2
