@@ -552,6 +552,15 @@ def fit(
         chis = [one(j) for j in jobs]
         done = [c for axis in AXES for c in tables(axis)]
     by_name = {c.name: c for c in done}
+    from .fast import MAX_SURROGATE_ERROR
+
+    for c in done:
+        if not c.surrogate.max_error <= MAX_SURROGATE_ERROR:
+            warnings.append(
+                f"chi_{c.name}: its surrogate table reaches only {c.surrogate.max_error:.2g} V of "
+                f"the kernel sum (needs <= {MAX_SURROGATE_ERROR:g} V); this model decouples by the "
+                "exact kernel sum, about 100x slower"
+            )
     model = CouplingErrorModel(settings, omega.k, {name: by_name[name] for name in CHI_NAMES})
     u = calib.voltages
     before = interference_errors(calib.points, model.initial_forces(u), settings.full_scale)

@@ -16,7 +16,7 @@ from conftest import SAMPLE
 from fsdecouple import load_calibration
 from fsdecouple.apply import apply_file
 from fsdecouple.errors import ModelFileError
-from fsdecouple.fast import PROMISE, FastDecoupler
+from fsdecouple.fast import MAX_SURROGATE_ERROR, PROMISE, FastDecoupler
 from fsdecouple.model import CHI_NAMES, CouplingErrorModel, chi_training_data, fit, load_model
 from fsdecouple.stream import force_decimals
 from fsdecouple.surrogate import MAX_INTERVALS
@@ -188,14 +188,17 @@ def test_edited_surrogate_fails_the_integrity_check(model, tmp_path):
         load_model(path)
 
 
-def test_surrogate_with_a_poor_bound_is_not_used(model):
+@pytest.mark.parametrize("recorded", [1e-6, 1e-9, 2 * MAX_SURROGATE_ERROR])
+def test_surrogate_with_a_poor_bound_is_not_used(model, recorded):
+    """Two chi add up per output, so even a recorded 1e-9 V per chi could break the promise."""
     doc = model.to_dict()
-    doc["chi"]["yz"]["surrogate"]["max_error"] = 1e-6
+    doc["chi"]["yz"]["surrogate"]["max_error"] = recorded
     from fsdecouple.model import content_digest
 
     doc["integrity"]["digest"] = content_digest(doc)
     m = CouplingErrorModel.from_dict(doc)
     assert m.fast_decoupler() is None
+    assert 2 * MAX_SURROGATE_ERROR < PROMISE
 
 
 # --- apply: formats and paths -------------------------------------------------------
@@ -287,3 +290,18 @@ def test_a_control_loop_loads_numpy_only(model, tmp_path):
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_fit_warns_when_a_surrogate_misses_its_bound(calib, settings, monkeypatch):
+    import fsdecouple.model as model_module
+
+    real = model_module.build_pair
+
+    def poor(chis, lo, hi):
+        return [replace(s, max_error=1e-8) if c.name == "zx" else s
+                for c, s in zip(chis, real(chis, lo, hi), strict=True)]
+
+    monkeypatch.setattr(model_module, "build_pair", poor)
+    m = fit(calib, settings)
+    assert any("chi_zx" in w and "exact kernel sum" in w for w in m.warnings)
+    assert m.fast_decoupler() is None
