@@ -139,7 +139,11 @@ def parser_message(err: Exception) -> str:
     return f"cannot parse CSV ({text.strip().splitlines()[-1]})"
 
 
-# cells of a log that mean "no sample" (a missing voltage, not an error)
+# Cells of a log that mean "no sample" (a missing voltage, not an error): these
+# spellings in any case, with or without a sign (pyarrow reads "NAN" and "-nan"
+# as NaN, so the line-by-line reader must agree).  MISSING_CELLS are the exact
+# spellings pyarrow is told are null.
+MISSING_WORDS = frozenset({"", "nan", "na", "n/a", "null"})
 MISSING_CELLS = ("", "nan", "NaN", "NA", "N/A", "null")
 
 
@@ -149,8 +153,8 @@ def to_numbers(
     """Convert a column of strings to finite floats, or name the first bad cell.
 
     ``rows``: the spreadsheet row of each value, or (an int) of the first value
-    when the rows are consecutive.  ``allow_missing``: cells in
-    :data:`MISSING_CELLS` become NaN (a log's missing samples) instead of an
+    when the rows are consecutive.  ``allow_missing``: empty cells and the words
+    of :data:`MISSING_WORDS` become NaN (a log's missing samples) instead of an
     error (a calibration point must have every number).  Infinities are errors.
     """
     import pandas as pd
@@ -162,7 +166,8 @@ def to_numbers(
     nums = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
     bad = ~np.isfinite(nums)
     if allow_missing and bad.any():
-        bad &= ~(np.isnan(nums) & text.isin(MISSING_CELLS).to_numpy())
+        missing = text.str.lower().str.lstrip("+-").isin(MISSING_WORDS).to_numpy()
+        bad &= ~(np.isnan(nums) & missing)
     if bad.any():
         i = int(np.argmax(bad))
         row = int(rows[i]) if np.ndim(rows) else int(rows) + i

@@ -266,3 +266,17 @@ def test_a_log_without_line_ends_is_refused_not_read_into_memory(tmp_path):
     with pytest.raises(InputError, match=r"log\.csv, row 3: no line end"):
         list(csv_bodies(log, chunk_rows=100, block_bytes=1024, max_line=4096))
     assert len(list(csv_bodies(log, chunk_rows=100, block_bytes=1024, max_line=1 << 20))) == 2
+
+
+@pytest.mark.parametrize("cell", ["NAN", "-nan", "+nan", "nAn", "nan", "NaN", "NA", "na", "N/A",
+                                  "null", "Null", ""])
+def test_a_nan_cell_is_missing_whichever_reader_takes_its_block(tmp_path, sample_model, cell):
+    """pyarrow reads the block unless something else in it (here a blank line) needs the
+    line-by-line reader; a cell's status must not depend on its neighbours."""
+    statuses = []
+    for extra in ("", "\n"):
+        log = tmp_path / "log.csv"
+        log.write_text(f"t,ux,uy,uz\n0,0.1,0,-0.1\n1,{cell},0,0\n2,0.2,0,0\n{extra}")
+        apply_file(sample_model, log, tmp_path / "f.csv", force=True)
+        statuses.append(forces(tmp_path / "f.csv")["status"].tolist()[:3])
+    assert statuses[0] == statuses[1] == ["ok", "missing", "ok"]
