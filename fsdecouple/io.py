@@ -43,11 +43,15 @@ def natural_key(name: str) -> list:
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", name)]
 
 
+MAX_HEADER_CHARS = 1 << 20
+
+
 def read_header(path: Path, settings: Settings) -> list[str]:
     """The header row as written, refusing empty files and duplicated names."""
     try:
         with open(path, encoding="utf-8-sig", newline="") as fh:
-            first = fh.readline()
+            first = fh.readline(MAX_HEADER_CHARS)  # any line end: \n, \r\n or \r
+            more = bool(fh.read(1))
     except FileNotFoundError:
         raise InputError(f"{path}: file not found") from None
     except IsADirectoryError:
@@ -56,6 +60,14 @@ def read_header(path: Path, settings: Settings) -> list[str]:
         raise InputError(f"{path}: not a UTF-8 text file") from None
     except OSError as err:
         raise InputError(f"{path}: cannot read ({err.strerror})") from None
+    if first.endswith("\r") and not first.endswith("\r\n"):
+        raise InputError(
+            f"{where(path, HEADER_ROW)}: lines end with a carriage return only (old Mac line "
+            "ends); convert them to \\n or \\r\\n"
+        )
+    if more and not first.endswith("\n"):
+        raise InputError(f"{where(path, HEADER_ROW)}: no line end in {MAX_HEADER_CHARS:,} "
+                         "characters; not a CSV file?")
     if not first.strip():
         if path.stat().st_size > len(first.encode("utf-8")):
             raise InputError(f"{where(path, HEADER_ROW)}: blank, expected the header row")
