@@ -18,7 +18,13 @@ from typing import Annotated
 
 import typer
 from rich.console import Console
-from rich.progress import BarColumn, DownloadColumn, Progress, TimeRemainingColumn
+from rich.progress import (
+    BarColumn,
+    DownloadColumn,
+    MofNCompleteColumn,
+    Progress,
+    TimeRemainingColumn,
+)
 
 from . import __version__
 from .config import load_config
@@ -274,6 +280,7 @@ def apply(
 ) -> None:
     """Decouple logged voltages into forces fx, fy, fz [N] by eq. (11)."""
     from .apply import apply_file
+    from .stream import is_parquet
 
     with user_errors():
         model = load_model(model_file)
@@ -281,8 +288,10 @@ def apply(
         offsets = _parse_zero(zero) if zero is not None else None
         check_output(output, force=force)
         refuse_overwriting_input(output, [model_file, *_given(config)])
+        # apply counts progress in bytes of a CSV log, in rows of a Parquet one
+        done = MofNCompleteColumn() if is_parquet(voltages) else DownloadColumn()
         with Progress(
-            "[progress.description]{task.description}", BarColumn(), DownloadColumn(),
+            "[progress.description]{task.description}", BarColumn(), done,
             TimeRemainingColumn(), console=err_console, disable=not interactive(),
             transient=True,
         ) as bar:

@@ -1,9 +1,10 @@
 """Stream a voltage log in blocks, CSV or Parquet, and write it back with forces.
 
 CSV blocks are cut from the raw bytes at line ends.  The three voltage columns
-are parsed by pyarrow's CSV reader; every input line is passed through byte for
-byte (no re-quoting, no re-formatting) and the forces are appended as text by
-pyarrow's shortest float formatting (after rounding, see :func:`force_decimals`),
+are parsed by pyarrow's CSV reader; every input line is passed through as it is
+(no re-quoting, no re-formatting; only its line end becomes \n) and the forces
+are appended as text by pyarrow's shortest float formatting (after rounding, see
+:func:`force_decimals`),
 so the output costs little more than reading and writing the file.  A block
 pyarrow cannot parse, or whose rows it might not count as the file's lines (a
 non-numeric cell, a short or blank row, a stray carriage return), is parsed
