@@ -4,8 +4,8 @@ CSV blocks are cut from the raw bytes at line ends.  The three voltage columns
 are parsed by pyarrow's CSV reader; every input line is passed through as it is
 (no re-quoting, no re-formatting; only its line end becomes \n) and the forces
 are appended as text by pyarrow's shortest float formatting (after rounding, see
-:func:`force_decimals`),
-so the output costs little more than reading and writing the file.  A block
+:func:`force_decimals`), so the output costs little more than reading and
+writing the file.  A block
 pyarrow cannot parse, or whose rows it might not count as the file's lines (a
 non-numeric cell, a short or blank row, a stray carriage return), is parsed
 again line by line, which either reads it or names the file, row and column at
