@@ -290,11 +290,7 @@ def apply(
         refuse_overwriting_input(output, [model_file, *_given(config)])
         # apply counts progress in bytes of a CSV log, in rows of a Parquet one
         done = MofNCompleteColumn() if is_parquet(voltages) else DownloadColumn()
-        with Progress(
-            "[progress.description]{task.description}", BarColumn(), done,
-            TimeRemainingColumn(), console=err_console, disable=not interactive(),
-            transient=True,
-        ) as bar:
+        with _bar(done, TimeRemainingColumn()) as bar:
             task = bar.add_task("decoupling", total=None)
             summary = apply_file(
                 model, voltages, output, settings=settings, tare=tare, zero=offsets,
@@ -306,11 +302,11 @@ def apply(
     warn(apply_warnings(summary))
 
 
-def _bar():
+def _bar(*columns) -> Progress:
+    """A progress bar on stderr, drawn on a terminal only (never with CI set), erased when done."""
     return Progress(
-        "[progress.description]{task.description}", BarColumn(),
-        "{task.completed}/{task.total}", console=err_console, disable=not interactive(),
-        transient=True,
+        "[progress.description]{task.description}", BarColumn(), *columns, console=err_console,
+        disable=not interactive(), transient=True,
     )
 
 
@@ -366,7 +362,7 @@ def cv(
             check_output(output, force=force)
             refuse_overwriting_input(output, [*calibration_files(calib), *_given(config, task,
                                                                                  task_forces)])
-        with _bar() as bar:
+        with _bar(MofNCompleteColumn()) as bar:
             job = bar.add_task("training", total=None)
             doc = run_cv(
                 calib, settings, folds=parse_folds(folds) if folds is not None else None,

@@ -41,6 +41,13 @@ _OUT_B = [(b + 2) % 3 for b in range(3)]
 _FROM_A = [2, 0, 1]
 _FROM_B = [1, 2, 0]
 
+
+
+def usable(surrogate) -> bool:
+    """Whether the fast path may use a chi surrogate: present, and recorded within the gate."""
+    return surrogate is not None and surrogate.max_error <= MAX_SURROGATE_ERROR
+
+
 _pool: ThreadPoolExecutor | None = None
 _pool_lock = threading.Lock()
 
@@ -108,7 +115,7 @@ class FastDecoupler:
 
         for axis in AXES:
             pair = [c.surrogate for c in model.chi.values() if c.name[1] == axis]
-            if any(s is None or not s.max_error <= MAX_SURROGATE_ERROR for s in pair):
+            if not all(usable(s) for s in pair):
                 return None
             if len({(s.lo, s.hi, s.intervals) for s in pair}) != 1:
                 return None  # the evaluator shares one index per input voltage

@@ -24,6 +24,7 @@ import numpy as np
 from . import __version__
 from .config import AXES, VOLTAGE_COLUMNS, Settings, settings_from_dict
 from .errors import InputError, ModelFileError
+from .fast import MAX_SURROGATE_ERROR, FastDecoupler, usable
 from .io import atomic_write
 from .kernel import rbf_sum
 from .linear import fit_omega
@@ -208,8 +209,6 @@ class CouplingErrorModel:
     def fast_decoupler(self):
         """The table evaluator of :mod:`fsdecouple.fast`, or None without surrogates."""
         if self._fast is None:
-            from .fast import FastDecoupler
-
             self._fast = FastDecoupler.from_model(self) or False
         return self._fast or None
 
@@ -552,10 +551,8 @@ def fit(
         chis = [one(j) for j in jobs]
         done = [c for axis in AXES for c in tables(axis)]
     by_name = {c.name: c for c in done}
-    from .fast import MAX_SURROGATE_ERROR
-
     for c in done:
-        if not c.surrogate.max_error <= MAX_SURROGATE_ERROR:
+        if not usable(c.surrogate):
             warnings.append(
                 f"chi_{c.name}: its surrogate table reaches only {c.surrogate.max_error:.2g} V of "
                 f"the kernel sum (needs <= {MAX_SURROGATE_ERROR:g} V); this model decouples by the "

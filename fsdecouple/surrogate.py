@@ -4,7 +4,7 @@ Each chi (eq. 4) is a smooth function of one prime voltage, but its exact value 
 a sum of ~100 Gaussians whose dual coefficients reach C = 1000 and cancel to a
 result of a few 10 mV.  A cubic Hermite interpolant on a uniform grid (values and
 exact slopes of the kernel sum at the knots) reproduces it to ~1e-11 V with a few
-thousand intervals and costs four table look-ups and a Horner step per input.
+hundred intervals and costs four table look-ups and a Horner step per input.
 
 The grid is refined (interval count doubled) until the error measured on a dense
 check grid is at most :data:`TOLERANCE`; that measured maximum is stored in the
