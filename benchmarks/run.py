@@ -29,7 +29,9 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "docs"))
 
 from fsdecouple import load_calibration, load_config  # noqa: E402
-from fsdecouple.model import CHI_NAMES, chi_training_data, fit  # noqa: E402
+from fsdecouple.fit import chi_training_data, fit  # noqa: E402
+from fsdecouple.model import CHI_NAMES  # noqa: E402
+from fsdecouple.modelfile import model_to_dict, save_model  # noqa: E402
 
 PYARROW_CSV_COPY = """
 import sys, pyarrow.csv as c
@@ -177,7 +179,7 @@ def main() -> int:
     print("fit (sample data, six SVRs + surrogates)")
     seq = median_time(lambda: fit(calib, settings, workers=1), repeats)
     par = median_time(lambda: fit(calib, settings), repeats)
-    a, b = fit(calib, settings, workers=1).to_dict(), fit(calib, settings).to_dict()
+    a, b = model_to_dict(fit(calib, settings, workers=1)), model_to_dict(fit(calib, settings))
     a.pop("created"), b.pop("created")
     same = json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
     row("4. fit, parallel", par, "s", seq, "sequential (workers=1)", seq / par,
@@ -285,7 +287,7 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="fsdecouple-bench-") as tmp:
         tmp = Path(tmp)
         mfile, log = tmp / "model.json", tmp / "log.csv"
-        model.save(mfile)
+        save_model(model, mfile)
         print(f"writing a {rows:,}-row CSV log", flush=True)
         write_log(log, rows, model)
         size = log.stat().st_size / 1e6

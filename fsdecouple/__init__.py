@@ -1,25 +1,16 @@
-"""fsdecouple: static decoupling of 3-axis force sensors.
+"""fsdecouple: static decoupling of multi-axis force sensors.
 
-The method is the coupling error model with six epsilon-SVRs of Ma et al.,
+The method is the coupling error model with epsilon-SVRs of Ma et al.,
 "A Robust Static Decoupling Algorithm for 3-Axis Force Sensors Based on Coupling
-Error Model and epsilon-SVR" (Sensors, 2012).
+Error Model and epsilon-SVR" (Sensors, 2012).  Every command of the CLI is a
+plain Python call here:
 
 >>> import fsdecouple
 >>> calib = fsdecouple.load_calibration("sample_data/calibration", fsdecouple.load_config())
 >>> model = fsdecouple.fit(calib)
->>> forces = model.decouple([[0.5, 0.01, -0.2]])
+>>> fsdecouple.save_model(model, "model.json")
+>>> forces = fsdecouple.load_model("model.json").decouple([[0.5, 0.01, -0.2]])
 """
-
-import os as _os
-
-# Every matrix here is small (hundreds of rows) and fsdecouple parallelises over
-# whole jobs (the six SVRs of a fit, the models of cv) with its own threads.
-# OpenBLAS's and libsvm's OpenMP worker threads would only compete with those
-# threads for the cores, and their spin-waiting made cv up to 10x slower on a
-# loaded 2-core machine.  Set before numpy and libsvm load; a value the user
-# set wins.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"):
-    _os.environ.setdefault(_var, "1")
 
 __version__ = "0.1.0"
 
@@ -28,14 +19,24 @@ __version__ = "0.1.0"
 _PUBLIC = {
     "CalibrationSet": "calibration",
     "load_calibration": "calibration",
+    "ingest_summary": "calibration",
     "Settings": "config",
     "load_config": "config",
     "FsdecoupleError": "errors",
     "CouplingErrorModel": "model",
-    "fit": "model",
-    "load_model": "model",
+    "FitReport": "model",
+    "load_model": "modelfile",
+    "save_model": "modelfile",
+    "apply_file": "apply",
+    "run_cv": "cv",
+    "load_cv_results": "cv_doc",
+    "build_report": "report",
 }
-__all__ = sorted(_PUBLIC)
+__all__ = sorted([*_PUBLIC, "fit"])  # noqa: F822
+
+# Bound now, not on first use: the submodule of the same name would otherwise take
+# the attribute when anything imports it.  It needs numpy only until it is called.
+from .fit import fit as fit  # noqa: E402
 
 
 def __getattr__(name: str):

@@ -23,22 +23,14 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from .config import FORCE_COLUMNS, VOLTAGE_COLUMNS, Settings
+from .axes import FORCE_COLUMNS, VOLTAGE_COLUMNS
+from .config import Settings
 from .errors import InputError, where
-from .io import HEADER_ROW, atomic_write, read_header, refuse_overwriting_input, require_columns
+from .iotools.files import atomic_write, refuse_overwriting_input
+from .iotools.logs import Block, CsvParser, csv_bodies, csv_eol, is_parquet, parquet_blocks, parquet_header
+from .iotools.sinks import CsvSink, ParquetSink, force_decimals
+from .iotools.text import HEADER_ROW, read_header, require_columns
 from .model import CouplingErrorModel
-from .stream import (
-    Block,
-    CsvParser,
-    CsvSink,
-    ParquetSink,
-    csv_bodies,
-    csv_eol,
-    force_decimals,
-    is_parquet,
-    parquet_blocks,
-    parquet_header,
-)
 from .zero import tare_offsets
 
 CHUNK_ROWS = 1 << 20  # rows per block at most; blocks are cut at ~4 MB anyway

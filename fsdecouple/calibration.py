@@ -4,13 +4,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from .config import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS, Settings
+from .axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
+from .config import Settings
 from .errors import InputError
-from .io import calibration_files, hidden_files, read_calibration_table, sha256_file
+from .iotools.calibration import calibration_files, hidden_files, read_calibration_table
+from .iotools.files import sha256_file
 from .zero import assign_sweeps, zero_correct
 
 
@@ -197,3 +200,30 @@ class GrossError:
         col = out.columns.get_loc(VOLTAGE_COLUMNS[AXES.index(self.axis)])
         out.iloc[idx[self.point - 1], col] += self.offset
         return out
+
+
+def ingest_summary(calib, settings) -> dict[str, Any]:
+    """Everything ``ingest`` reports, as plain data (also the ``--json`` document)."""
+    axes = {}
+    for a, axis in enumerate(AXES):
+        s = calib.sweep(axis)
+        grid = np.unique(s[FORCE_COLUMNS[a]].to_numpy())
+        axes[axis] = {
+            "points": int(len(s)),
+            "points_per_repetition": {
+                int(r): int(n) for r, n in s.groupby("repetition").size().items()
+            },
+            "load_min": float(grid.min()),
+            "load_max": float(grid.max()),
+            "load_levels": int(grid.size),
+            "full_scale": settings.full_scale[a],
+        }
+    return {
+        "sensor": settings.sensor,
+        "files": [{"path": p, "sha256": h} for p, h in calib.files],
+        "repetitions": calib.repetitions,
+        "axes": axes,
+        "offsets": calib.offsets.to_dict(orient="records"),
+        "skipped": list(calib.skipped),
+        "warnings": list(calib.warnings),
+    }

@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .config import AXES
+from .axes import AXES
 
 COUPLING_LIMIT = 0.05  # fraction of full-scale output (Section 2.1)
 SLOPE_LIMIT = 0.05  # |d chi/du| (Section 2.1)
@@ -64,7 +64,7 @@ def assumption_checks(model) -> list[Check]:
     u_fs = np.abs(model.k) * np.asarray(model.settings.full_scale)
     checks = []
     for axis in AXES:
-        r2 = float(model.report.get("r2", {}).get(axis, np.nan))
+        r2 = float(model.report.r2.get(axis, np.nan)) if model.report else np.nan
         limit = model.settings.min_r2
         checks.append(Check("linearity", axis, r2, limit, "pass" if r2 >= limit else "warn"))
     peak = {name: float(np.abs(c(_grid(c))).max()) for name, c in model.chi.items()}

@@ -28,10 +28,11 @@ from rich.progress import (
 
 from . import __version__
 from .config import load_config
+from .console import apply_lines, apply_warnings, fit_tables, ingest_tables
 from .errors import FsdecoupleError, InputError
-from .io import atomic_write, calibration_files, check_output, refuse_overwriting_input
-from .model import load_model
-from .report import apply_lines, apply_warnings, fit_tables, ingest_summary, ingest_tables
+from .iotools.calibration import calibration_files
+from .iotools.files import atomic_write, check_output, refuse_overwriting_input
+from .modelfile import load_model, save_model
 
 # Each command imports what only it needs (pandas, libsvm, scipy, matplotlib),
 # so that `apply` and `show` start in a fraction of a second.
@@ -118,7 +119,7 @@ def ingest(
     json_out: JsonOpt = False,
 ) -> None:
     """Validate and zero-correct a calibration set, and summarise it."""
-    from .calibration import load_calibration
+    from .calibration import ingest_summary, load_calibration
 
     with user_errors():
         settings = load_config(config)
@@ -157,7 +158,7 @@ def fit(
     json_out: JsonOpt = False,
 ) -> None:
     """Fit the coupling error model and write it as one JSON file."""
-    from .model import fit as fit_model
+    from .fit import fit as fit_model
 
     with user_errors():
         settings = load_config(
@@ -167,9 +168,9 @@ def fit(
         check_output(output, force=force)
         refuse_overwriting_input(output, [*calibration_files(calib), *_given(config)])
         model = fit_model(calib, settings)
-        model.save(output, force=force)
+        save_model(model, output, force=force)
     if json_out:
-        print_json({"model": str(output), **model.report})
+        print_json({"model": str(output), **model.report.to_dict()})
     else:
         for t in fit_tables(model):
             console.print(t)
@@ -177,7 +178,7 @@ def fit(
         console.print(f"calibration report: fsdecouple report {output} -o report.html", highlight=False)
     warn(model.warnings)
     if max_gamma is not None:
-        worst = max(model.report["gamma_after"].values())
+        worst = max(model.report.gamma_after.values())
         if worst > max_gamma:
             err_console.print(
                 f"[red]gate failed:[/red] gamma after decoupling {100 * worst:.3f} % F.S. "
@@ -213,7 +214,8 @@ def report(
 ) -> None:
     """Write a self-contained HTML calibration report (figures, gamma tables, checks)."""
     from .calibration import load_calibration
-    from .html_report import build_report, load_cv_results
+    from .cv_doc import load_cv_results
+    from .report import build_report
 
     with user_errors():
         model = load_model(model_file)
@@ -280,7 +282,7 @@ def apply(
 ) -> None:
     """Decouple logged voltages into forces fx, fy, fz [N] by eq. (11)."""
     from .apply import apply_file
-    from .stream import is_parquet
+    from .iotools.logs import is_parquet
 
     with user_errors():
         model = load_model(model_file)
@@ -347,8 +349,8 @@ def cv(
 ) -> None:
     """Cross-validate the model against the baselines of Section 4 (Tables 1, 3, 4, 5)."""
     from .calibration import GrossError
+    from .console import cv_renderables
     from .cv import parse_folds, run_cv
-    from .cv_report import cv_renderables
 
     with user_errors():
         settings = load_config(config)

@@ -16,12 +16,9 @@ from typing import Any
 
 import yaml
 
+from .axes import AXES, CANONICAL_COLUMNS, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .errors import ConfigError
 
-AXES = ("x", "y", "z")
-FORCE_COLUMNS = ("fx", "fy", "fz")
-VOLTAGE_COLUMNS = ("ux", "uy", "uz")
-CANONICAL_COLUMNS = ("repetition", "axis", *FORCE_COLUMNS, *VOLTAGE_COLUMNS)
 SCALINGS = ("none", "full_scale")
 
 

@@ -1,7 +1,7 @@
 """The cross-validation protocol of Section 4, against the baselines of Tables 1 and 3.
 
 In each round two repetitions are held out ("test data I" and "test data II") and
-the others train every method of :mod:`fsdecouple.methods` (initial, linear,
+the others train every method of :mod:`fsdecouple.baselines` (initial, linear,
 rbf-mimo, rbf-siso, svr).  Each is scored by the interference error gamma of eq. (12) on each held-out
 repetition's sweeps; optionally also on a combined-load task log with true forces,
 with one calibration point moved (Section 4.4, Table 5), and timed (Table 4).
@@ -21,20 +21,20 @@ import numpy as np
 
 from . import __version__
 from . import svr as _svr
+from .axes import AXES, CHI_NAMES, FORCE_COLUMNS
+from .baselines import METHODS, establish, train_all
 from .calibration import CalibrationSet, GrossError, load_calibration
 from .checks import assumption_checks
-from .config import AXES, FORCE_COLUMNS, Settings
+from .config import Settings
+from .cv_doc import FORMAT, FORMAT_VERSION
 from .errors import InputError
-from .io import read_task_log
+from .iotools.calibration import read_task_log
 from .linear import fit_omega
-from .methods import METHODS, establish, train_all
 from .metrics import interference_error
-from .model import CHI_NAMES
+from .parallel import single_threaded_libraries
 from .rbf import B_FACTOR, MSE_GOAL, OUTPUT_LAYER, SPREAD, basic_solution
 from .zero import tare_offsets
 
-FORMAT = "fsdecouple.cv"
-FORMAT_VERSION = 1
 ROUNDS = 3  # Section 4.1: "the cross validation is repeated three times"
 HELD_OUT = 2  # "test data I" and "test data II"
 CURVE_POINTS = 201
@@ -213,6 +213,14 @@ def run_cv(
     progress : callable(done, total), optional
         Called as training jobs finish.
     """
+    with single_threaded_libraries():
+        return _run_cv(calib, settings, folds=folds, task=task, task_tare=task_tare,
+                       gross_error=gross_error, max_gamma=max_gamma, workers=workers,
+                       repeats=repeats, progress=progress)
+
+
+def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, workers, repeats,
+            progress) -> dict[str, Any]:
     settings = settings or Settings()
     calib_path = None
     if not isinstance(calib, CalibrationSet):

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
+from .axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .config import AXES
+from .axes import AXES
 
 
 def interference_error(forces: np.ndarray, axis: int, full_scale: float) -> float:
@@ -35,3 +35,8 @@ def interference_errors(points, forces: np.ndarray, full_scale) -> dict[str, flo
         for i, a in enumerate(AXES)
         if (axis == a).any()
     }
+
+
+def pct(fraction: float | None, digits: int = 2) -> str:
+    """A fraction of full scale as percent text, ``0.0123`` -> ``1.23 %``; ``–`` for none."""
+    return "–" if fraction is None else f"{100.0 * fraction:.{digits}f} %"

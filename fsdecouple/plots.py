@@ -15,8 +15,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from .config import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
-from .model import CHI_NAMES
+from .axes import AXES, CHI_NAMES, FORCE_COLUMNS, VOLTAGE_COLUMNS
 
 MV = 1e3  # V -> mV: the coupling error elements are a few mV
 OMEGA, CHI = r"\omega", r"\chi"  # mathtext symbols
@@ -105,7 +104,7 @@ def omega_figure(model, points: pd.DataFrame | None = None) -> Figure:
         else:
             ax.set_xlabel(f"prime force {_sub('f', axis)} [N]")
         ax.plot(f_line, k * f_line, label="fitted line u = k·f", **SVR_STYLE)
-        r2 = model.report.get("r2", {}).get(axis)
+        r2 = (model.report.r2.get(axis) if model.report else None)
         text = f"{_sub('k', axis + axis)} = {k:.6g} V/N\n1/{_sub('k', axis + axis)} = {1 / k:.3f} N/V"
         if r2 is not None:
             text += f"\nR² = {r2:.6f}"

@@ -31,6 +31,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import qr, solve_triangular
 
+from .axes import AXES
+from .decouple import decouple_exact
+
 SPREAD = 1.0  # Section 4.1: "the variance is set to 1"
 MSE_GOAL = 2.4e-6  # Section 4.1
 B_FACTOR = float(np.sqrt(-np.log(0.5)))  # 0.8326: radbas(b * spread) = 0.5
@@ -204,11 +207,11 @@ class SisoChi:
 
     @property
     def output_axis(self) -> int:
-        return "xyz".index(self.name[0])
+        return AXES.index(self.name[0])
 
     @property
     def input_axis(self) -> int:
-        return "xyz".index(self.name[1])
+        return AXES.index(self.name[1])
 
     def __call__(self, u: np.ndarray) -> np.ndarray:
         u = np.asarray(u, dtype=float)
@@ -225,11 +228,8 @@ class SisoRBFModel:
     def decouple(self, u: np.ndarray, *, rotate: bool = False) -> np.ndarray:
         """Eq. (11) with the RBF chi: f_a = (u_a - chi_ab(u_b) - chi_ac(u_c)) / k_aa."""
         del rotate
-        u = np.asarray(u, dtype=float).reshape(-1, 3)
-        e = np.zeros_like(u)
-        for c in self.chi.values():
-            e[:, c.output_axis] += c(u[:, c.input_axis])
-        return (u - e) / self.k
+        return decouple_exact(np.asarray(u, dtype=float).reshape(-1, len(self.k)), self.k,
+                              self.chi.values())
 
 
 def fit_siso(
@@ -242,6 +242,6 @@ def fit_siso(
     """
     chi = {}
     for name, (x, y) in data.items():
-        s = None if input_scale is None else [float(input_scale["xyz".index(name[1])])]
+        s = None if input_scale is None else [float(input_scale[AXES.index(name[1])])]
         chi[name] = SisoChi(name, fit_rbf(x, y, spread=spread, input_scale=s, goal=goal))
     return SisoRBFModel(np.asarray(k, dtype=float), chi)

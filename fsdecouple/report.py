@@ -1,126 +1,468 @@
-"""Rich tables built from result objects (no computation here)."""
+"""The calibration report: one self-contained HTML file a technician can open offline.
+
+:func:`build_report` gathers the evidence for one sensor from a model file, the
+optional cross-validation document of ``fsdecouple cv`` (cv.json) and the
+optional calibration set: figures as base64 PNG, tables as HTML tables, the
+assumption checks as pass/warn badges.  It reads only the keys that cv.json's
+layout documents, and every part that needs data which is not there is replaced
+by a note that says what to pass.
+"""
 
 from __future__ import annotations
 
-from typing import Any
+import base64
+import json
+from dataclasses import dataclass, field
+from html import escape
 
 import numpy as np
-from rich.table import Table
-from rich.text import Text
+import pandas as pd
 
-from .config import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
+from . import __version__
+from .axes import AXES, CHI_NAMES, FORCE_COLUMNS, VOLTAGE_COLUMNS
+from .checks import assumption_checks
+from .cv_doc import gamma_index, test_name
+from .metrics import pct
+from .plots import chi_figure, omega_figure, residual_figure, to_png
+
+METHOD_NAMES = {"initial": "initial (ω⁻¹ only)", "linear": "linear matrix",
+                "rbf-mimo": "MIMO RBF NN", "rbf-siso": "SISO RBF NN", "svr": "ε-SVR"}
 
 
-def pct(fraction: float | None, digits: int = 2) -> str:
-    return "-" if fraction is None else f"{100.0 * fraction:.{digits}f} %"
+@dataclass
+class Report:
+    """A rendered report: the HTML text and each figure as PNG bytes (by file stem)."""
+
+    html: str
+    figures: dict[str, bytes] = field(default_factory=dict)
 
 
-def ingest_summary(calib, settings) -> dict[str, Any]:
-    """Everything ``ingest`` reports, as plain data (also the ``--json`` document)."""
-    axes = {}
+# --- small HTML helpers -------------------------------------------------------------
+
+def worse(value: float | None, initial: float | None) -> bool:
+    """True when a method did worse than the initial data (the paper's bold cells)."""
+    return value is not None and initial is not None and value > initial
+
+
+def cell(text: str, worse: bool = False) -> str:
+    if worse:
+        return f'<td class="worse"><span aria-label="worse than initial">▲</span> {escape(text)}</td>'
+    return f"<td>{escape(text)}</td>"
+
+
+def table(tid: str, caption: str, head: list[str], rows: list[str]) -> str:
+    """``head`` holds ready ``<tr>`` rows, ``rows`` ready ``<tr>`` body rows."""
+    return (f'<table id="{tid}"><caption>{escape(caption)}</caption>\n<thead>{"".join(head)}'
+            f'</thead>\n<tbody>{"".join(rows)}</tbody></table>\n')
+
+
+def tr(*cells: str) -> str:
+    return "<tr>" + "".join(cells) + "</tr>\n"
+
+
+def th(text: str, span: int = 1, rowspan: int = 1) -> str:
+    attrs = (f' colspan="{span}"' if span > 1 else "") + (f' rowspan="{rowspan}"' if rowspan > 1 else "")
+    return f"<th{attrs}>{escape(text)}</th>"
+
+
+def note(text: str) -> str:
+    return f'<p class="note">{escape(text)}</p>\n'
+
+
+def badge_span(status: str) -> str:
+    """A pass/warn badge: the word and the symbol carry it, the colour only helps."""
+    ok = status == "pass"
+    return f'<span class="badge {"pass" if ok else "warn"}">{"✔ PASS" if ok else "⚠ WARN"}</span>'
+
+
+def badge(status: str) -> str:
+    return f"<td>{badge_span(status)}</td>"
+
+
+def figure_html(fid: str, png: bytes, alt: str, caption: str) -> str:
+    data = base64.b64encode(png).decode("ascii")
+    return (f'<figure id="{fid}"><img alt="{escape(alt)}" src="data:image/png;base64,{data}">'
+            f"<figcaption>{escape(caption)}</figcaption></figure>\n")
+
+
+# --- the data behind the figures -------------------------------------------------------
+
+def _point_roles(model, calib, cv) -> tuple[pd.DataFrame, str]:
+    pts = calib.points.copy()
+    curves = (cv or {}).get("curves")
+    if curves:
+        train, test = set(curves["train"]), list(curves["test"])
+        role = {r: "training" for r in train}
+        role.update({r: f"test {test_name(i)}" if i < 2 else "not used" for i, r in enumerate(test)})
+        where = (f"marked as in cross-validation round {curves['round']}: trained on "
+                 f"repetitions {_reps(train)}, held out {_reps(test)}")
+    else:
+        used = set((model.report.repetitions if model.report else None) or calib.repetitions)
+        role = {r: "training" for r in used}
+        where = f"the model was fitted on repetitions {_reps(used)}"
+    pts["role"] = [role.get(int(r), "not used") for r in pts["repetition"]]
+    return pts, where
+
+
+def _reps(reps) -> str:
+    return ", ".join(str(r) for r in sorted(reps))
+
+
+def _test_name(cv, rnd: int, test_set: int) -> str:
+    """'test I' / 'test II': the held-out repetition's place in its round's fold.
+
+    ``test_set`` is the held-out repetition's number (README, cv.json).
+    """
+    try:
+        return f"test {test_name(cv['folds'][rnd - 1].index(test_set))}"
+    except (KeyError, IndexError, ValueError, TypeError):
+        return "test"
+
+
+def _cv_residuals(cv) -> pd.DataFrame | None:
+    pts = [p for p in cv.get("points") or [] if p.get("method") == "svr"]
+    if not pts:
+        return None
+    df = pd.DataFrame(pts)
+    df["rep"] = df["test_set"]
+    df["label"] = [f"rep {t} (round {r}, {_test_name(cv, r, t)})"
+                   for r, t in zip(df["round"], df["test_set"], strict=True)]
+    df = df.sort_values(["rep", "round"], kind="stable")
     for a, axis in enumerate(AXES):
-        s = calib.sweep(axis)
-        grid = np.unique(s[FORCE_COLUMNS[a]].to_numpy())
-        axes[axis] = {
-            "points": int(len(s)),
-            "points_per_repetition": {
-                int(r): int(n) for r, n in s.groupby("repetition").size().items()
-            },
-            "load_min": float(grid.min()),
-            "load_max": float(grid.max()),
-            "load_levels": int(grid.size),
-            "full_scale": settings.full_scale[a],
-        }
-    return {
-        "sensor": settings.sensor,
-        "files": [{"path": p, "sha256": h} for p, h in calib.files],
-        "repetitions": calib.repetitions,
-        "axes": axes,
-        "offsets": calib.offsets.to_dict(orient="records"),
-        "skipped": list(calib.skipped),
-        "warnings": list(calib.warnings),
-    }
+        applied = np.where(df["axis"] == axis, df["load"], 0.0)
+        df[f"e{axis}"] = df[FORCE_COLUMNS[a]] - applied
+    return df
 
 
-def ingest_tables(summary: dict[str, Any]) -> list:
-    t = Table(title=f"Calibration set: {summary['sensor']}, "
-                    f"{len(summary['repetitions'])} repetitions")
-    t.add_column("axis")
-    t.add_column("points", justify="right")
-    t.add_column("per repetition", justify="right")
-    t.add_column("load grid [N]", justify="right")
-    t.add_column("levels", justify="right")
-    t.add_column("F.S. [N]", justify="right")
-    for axis, d in summary["axes"].items():
-        per = sorted(set(d["points_per_repetition"].values()))
-        t.add_row(axis, str(d["points"]), "/".join(map(str, per)),
-                  f"{d['load_min']:g} .. {d['load_max']:g}", str(d["load_levels"]),
-                  f"{d['full_scale']:g}")
-    o = Table(title="Zero offsets removed \\[mV] (mean of each sweep's zero-load rows)")
-    for col in ("repetition", "axis", "zero rows", *VOLTAGE_COLUMNS):
-        o.add_column(col, justify="right")
-    for r in summary["offsets"]:
-        o.add_row(str(r["repetition"]), r["axis"], str(r["n_zero"]),
-                  *(f"{1e3 * r[c]:+.3f}" for c in VOLTAGE_COLUMNS))
-    out = [t, o]
-    skipped = summary["skipped"]
-    out.append(Text(f"rows skipped: {len(skipped)}" + "".join(f"\n  {s}" for s in skipped)))
+def _calib_residuals(model, calib) -> pd.DataFrame:
+    p = calib.points
+    f = model.decouple(p[list(VOLTAGE_COLUMNS)].to_numpy(), rotate=False)
+    df = pd.DataFrame({"axis": p["axis"], "label": [f"rep {r} (in-sample)" for r in p["repetition"]]})
+    applied = p[list(FORCE_COLUMNS)].to_numpy()
+    df["load"] = applied[np.arange(len(p)), [AXES.index(a) for a in p["axis"]]]
+    for a, axis in enumerate(AXES):
+        df[f"e{axis}"] = f[:, a] - p[FORCE_COLUMNS[a]].to_numpy()
+    return df
+
+
+# --- sections --------------------------------------------------------------------------
+
+def _header(model, cv) -> str:
+    rows = [tr(th("sensor"), cell(model.settings.sensor)),
+            tr(th("model fitted"), cell(model.created or "–")),
+            tr(th("repetitions in the model"), cell(_reps(model.report.repetitions if model.report else []))),
+            tr(th("report written by"), cell(f"fsdecouple {__version__}"))]
+    if cv:
+        rows.append(tr(th("cross-validation"), cell(f"{cv.get('created', '?')}, fsdecouple "
+                                                     f"{cv.get('fsdecouple_version', '?')}")))
+    checks = assumption_checks(model)
+    warns = [f"{c.name} {c.subject}" for c in checks if c.status != "pass"]
+    summary = f" {len(checks) - len(warns)} pass, {len(warns)} warn"
+    if warns:
+        summary += f" ({', '.join(warns)})"
+    status = badge_span("warn" if warns else "pass")
+    rows.append(tr(th("assumption checks"), f"<td>{status}{escape(summary)}</td>"))
+    g = gamma_index((cv or {}).get("records"))
+    svr = [v for (_, _, m, _), v in g.items() if m == "svr"]
+    if svr:
+        rows.append(tr(th("worst held-out γ, ε-SVR"), cell(pct(max(svr)))))
+    return table("table-summary", "Sensor and report", [], rows)
+
+
+def _provenance(model, cv, calib) -> str:
+    out = ""
+    files = [("model", f["path"], f["sha256"]) for f in model.provenance.get("files", [])]
+    if cv:
+        files += [("cv", f["path"], f["sha256"]) for f in cv.get("calibration", {}).get("files", [])]
+    if calib is not None:
+        files += [("plotted", p, h) for p, h in calib.files]
+    out += table("table-provenance", "Data provenance: files and their SHA-256",
+                 [tr(th("used by"), th("file"), th("sha256"))],
+                 [tr(cell(u), cell(p), f'<td class="mono">{escape(h)}</td>') for u, p, h in files])
+    model_digests = {f["sha256"] for f in model.provenance.get("files", [])}
+    if calib is not None and {h for _, h in calib.files} != model_digests:
+        out += note("The calibration files plotted here are not exactly the files the model "
+                    "was fitted on (digests differ): the points may not match the curves.")
+    libs = model.provenance.get("libraries", {})
+    if libs:
+        out += note("Libraries at fit time: " + ", ".join(f"{k} {v}" for k, v in sorted(libs.items())))
+    rows = []
+    for key, value in sorted(model.settings.to_dict().items()):
+        if isinstance(value, dict):
+            text = ", ".join(f"{k}={json.dumps(v)}" for k, v in sorted(_flatten(value).items()))
+        else:
+            text = json.dumps(value)
+        rows.append(tr(cell(key), f'<td class="mono">{escape(text)}</td>'))
+    out += table("table-settings", "Settings the model was fitted with",
+                 [tr(th("setting"), th("value"))], rows)
     return out
 
 
-def fit_tables(model) -> list:
-    rep = model.report
-    t = Table(title=f"Non-coupling functions omega (eq. 2), sensor {model.settings.sensor}")
-    for col in ("axis", "k [V/N]", "1/k [N/V] (eq. 13)", "R^2", "points"):
-        t.add_column(col, justify="right")
-    for a, axis in enumerate(AXES):
-        r2 = rep["r2"][axis]
-        r2_text = Text(f"{r2:.6f}", style="" if r2 >= model.settings.min_r2 else "bold red")
-        t.add_row(axis, f"{model.k[a]:.6g}", f"{1.0 / model.k[a]:.5f}", r2_text,
-                  str(rep["n_points"][axis]))
-    s = model.settings.svr
-    c = Table(title=f"Corrected coupling functions chi (eq. 4): eps-SVR, gamma={s.gamma:g} "
-                    f"C={s.C:g} eps={s.epsilon:g} tol={s.tolerance:g}")
-    for col in ("chi", "input", "support vectors", "input range [V]"):
-        c.add_column(col, justify="right")
-    for name, chi in model.chi.items():
-        lo, hi = chi.input_range
-        c.add_row(f"chi_{name}", f"u{name[1]}", f"{chi.support_vectors.size} / {chi.n_points}",
-                  f"{lo:+.4f} .. {hi:+.4f}")
-    g = Table(title="Interference error gamma (eq. 12) on the calibration data, % F.S.")
-    for col in ("loaded axis", "before (omega^-1 only)", "after (eq. 11)"):
-        g.add_column(col, justify="right")
-    for axis in AXES:
-        before, after = rep["gamma_before"].get(axis), rep["gamma_after"].get(axis)
-        style = "bold red" if after is not None and before is not None and after > before else ""
-        g.add_row(axis, pct(before), Text(pct(after), style=style))
-    return [t, c, g]
+def _flatten(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(_flatten(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
 
 
-def apply_lines(summary, out) -> list[str]:
-    counts = ", ".join(f"{n} {name}" for name, n in summary.status_counts.items() if n)
-    lines = [f"decoupled {summary.rows} rows into {out} (status: {counts})"]
-    if np.any(summary.offsets):
-        lines.append("zero removed [V]: " + ", ".join(
-            f"{c}={v:+.6f}" for c, v in zip(VOLTAGE_COLUMNS, summary.offsets, strict=True)))
-    return lines
+def _model_tables(model) -> str:
+    rep = model.report.to_dict() if model.report else {}
+    rows = [tr(cell(a), cell(f"{model.k[i]:.6g}"), cell(f"{1 / model.k[i]:.4f}"),
+               cell(f"{rep.get('r2', {}).get(a, float('nan')):.6f}"),
+               cell(str(rep.get("n_points", {}).get(a, "–")))) for i, a in enumerate(AXES)]
+    out = table("table-omega", "Non-coupling functions ω (eq. 2) of the model file",
+                [tr(th("axis"), th("k [V/N]"), th("1/k [N/V] (eq. 13)"), th("R²"), th("points"))], rows)
+    rows = []
+    for name in CHI_NAMES:
+        c = model.chi[name]
+        rows.append(tr(cell(f"χ{name}"), cell(f"u{name[1]}"),
+                       cell(f"{c.support_vectors.size} / {c.n_points}"),
+                       cell(f"{c.input_range[0]:+.4f} … {c.input_range[1]:+.4f}")))
+    out += table("table-chi", "Corrected coupling functions χ (eq. 4): ε-SVRs",
+                 [tr(th("χ"), th("input"), th("support vectors / points"), th("input range [V]"))], rows)
+    rows = []
+    for a in AXES:
+        b, g = rep.get("gamma_before", {}).get(a), rep.get("gamma_after", {}).get(a)
+        rows.append(tr(cell(a), cell(pct(b)), cell(pct(g), worse(g, b))))
+    out += table("table-gamma-fit", "Interference error γ (eq. 12) on the calibration data "
+                 "(in-sample, all repetitions pooled), % F.S.",
+                 [tr(th("loaded axis"), th("initial (ω⁻¹ only)"), th("after decoupling (eq. 11)"))], rows)
+    return out
 
 
-def apply_warnings(summary) -> list[str]:
-    w = []
-    if summary.missing_rows:
-        rows = ", ".join(map(str, summary.first_missing))
-        more = ", ..." if summary.missing_rows > len(summary.first_missing) else ""
-        w.append(f"{summary.missing_rows} rows have a missing voltage; kept with empty "
-                 f"forces and status 'missing' (rows {rows}{more})")
-    if summary.truncated_rows:
-        w.append(f"row {summary.rows + 1}, the last, does not end with a newline (the writer was "
-                 "cut off?); kept with empty forces and status 'truncated'")
-    if summary.not_finite_rows:
-        w.append(f"{summary.not_finite_rows} rows have voltages so large that eq. (11) "
-                 "overflows; kept with empty forces and status 'not_finite'")
-    if summary.out_of_range_rows:
-        w.append(f"{summary.out_of_range_rows} rows have a voltage more than 1 % of the span "
-                 "outside the calibrated range; their forces are extrapolated (status "
-                 "'extrapolated')")
-    return w
+def _gamma_tables(cv) -> str:
+    g = gamma_index(cv.get("records"))
+    keys = sorted({(r, t) for r, t, _, _ in g})
+    methods = [m for m in cv.get("methods", []) if any(k[2] == m for k in g)]
+
+    def held(r, t):
+        return f"{_test_name(cv, r, t)} (rep {t})"
+
+    def val(r, t, m, a, base="initial"):
+        v, b = g.get((r, t, m, a)), g.get((r, t, base, a))
+        return cell(pct(v), m != base and worse(v, b))
+
+    head = [tr(th("round", rowspan=2), th("held out", rowspan=2),
+               *(th(f"γ{a}", span=len(methods)) for a in AXES)),
+            tr(*(th(METHOD_NAMES.get(m, m)) for _ in AXES for m in methods))]
+    rows = [tr(cell(str(r)), cell(held(r, t)), *(val(r, t, m, a) for a in AXES for m in methods))
+            for r, t in keys]
+    out = table("table-gamma-methods", "Table 1 analogue: interference error γ (eq. 12) of the "
+                "held-out repetitions, every method, % F.S.", head, rows)
+    absent = [METHOD_NAMES[m] for m in METHOD_NAMES if m not in methods]
+    if absent:
+        out += note("Not in cv.json (not run): " + ", ".join(absent) + ".")
+    if "svr" in methods:
+        rows = [tr(cell(str(r)), cell(held(r, t)), *(val(r, t, "svr", a) for a in AXES)) for r, t in keys]
+        worst = [max((g.get((r, t, "svr", a)) or 0.0) for r, t in keys) for a in AXES]
+        rows.append(tr(th("worst"), cell(""), *(cell(pct(w)) for w in worst)))
+        out += table("table-gamma-svr", "Table 3 analogue: γ after decoupling by the coupling "
+                     "error model and ε-SVRs, % F.S.",
+                     [tr(th("round"), th("held out"), *(th(f"γ{a}") for a in AXES))], rows)
+    return out
+
+
+def _gross_tables(cv) -> str:
+    ge = cv.get("gross_error")
+    if not ge:
+        return note("No gross-error run in cv.json (fsdecouple cv --gross-error AXIS:REP:POINT:OFFSET "
+                    "adds Table 5).")
+    spec = ge.get("spec", {})
+    clean, gross = gamma_index(cv.get("records")), gamma_index(ge.get("records"))
+    keys = sorted({(r, t) for r, t, m, _ in gross if m == "svr"})
+    rows = []
+    for r, t in keys:
+        cells = []
+        for a in AXES:
+            c, w = clean.get((r, t, "svr", a)), gross.get((r, t, "svr", a))
+            cells += [cell(pct(c)), cell(pct(w), worse(w, gross.get((r, t, "initial", a))))]
+        rows.append(tr(cell(str(r)), cell(f"{_test_name(cv, r, t)} (rep {t})"), *cells))
+    head = [tr(th("round", rowspan=2), th("held out", rowspan=2),
+               *(th(f"γ{a} (ε-SVR)", span=2) for a in AXES)),
+            tr(*(th(x) for _ in AXES for x in ("without", "with gross error")))]
+    out = note(f"Gross error: prime voltage of point {spec.get('point')} of the {spec.get('axis')} sweep "
+               f"of repetition {spec.get('repetition')} moved by {spec.get('offset')} V (Section 4.4).")
+    out += table("table-gross-error", "Table 5 analogue: γ with and without the gross error, % F.S.",
+                 head, rows)
+    rows = []
+    for o in ge.get("omega", []):
+        change = o["inverse_gross"] / o["inverse_clean"] - 1.0
+        rows.append(tr(cell(str(o["round"])), cell(o["axis"]), cell(f"{o['k_clean']:.6g}"),
+                       cell(f"{o['k_gross']:.6g}"), cell(f"{o['inverse_clean']:.3f}"),
+                       cell(f"{o['inverse_gross']:.3f}"), cell(f"{100 * change:+.2f} %")))
+    out += table("table-omega-gross", "ω with and without the gross error (eq. 13 vs eq. 14)",
+                 [tr(*(th(h) for h in ("round", "axis", "k clean [V/N]", "k gross [V/N]",
+                                       "1/k clean [N/V] (eq. 13)", "1/k gross [N/V] (eq. 14)",
+                                       "change of 1/k")))], rows)
+    return out
+
+
+def _task_table(cv) -> str:
+    task = cv.get("task")
+    if not task:
+        return note("No combined-load validation in cv.json (fsdecouple cv --task VOLTAGES "
+                    "--task-forces FORCES adds it).")
+    v = {(r["round"], r["method"], r["axis"], r["metric"]): r["value"] for r in task.get("records", [])}
+    rounds = sorted({k[0] for k in v})
+    methods = [m for m in cv.get("methods", []) if any(k[1] == m for k in v)]
+    rows = []
+    for r in rounds:
+        for m in methods:
+            cells = []
+            for a in AXES:
+                for metric in ("max_error", "rms_error"):
+                    x, b = v.get((r, m, a, metric)), v.get((r, "initial", a, metric))
+                    cells.append(cell(pct(x, 3), m != "initial" and worse(x, b)))
+            rows.append(tr(cell(str(r)), cell(METHOD_NAMES.get(m, m)), *cells))
+    head = [tr(th("round", rowspan=2), th("method", rowspan=2), *(th(f"f{a}", span=2) for a in AXES)),
+            tr(*(th(x) for _ in AXES for x in ("max error", "rms error")))]
+    out = note(f"Combined loads: {task.get('voltages')} against {task.get('forces')}, "
+               f"{task.get('rows')} rows, tare {task.get('tare')}.")
+    return out + table("table-task", "Combined-load comparison: error as % of each axis's full scale",
+                       head, rows)
+
+
+def _fmt_check(c: dict) -> tuple[str, str]:
+    if c["name"] == "linearity":
+        return f"{c['value']:.6f}", f"≥ {c['limit']:g}"
+    if c["name"] == "slope":
+        return f"{c['value']:.4f}", f"≤ {c['limit']:g}"
+    return pct(c["value"], 3), f"≤ {pct(c['limit'], 2)}"
+
+
+CHECK_NAMES = {"linearity": "linearity of ω, R² (assumption 1)",
+               "coupling": "coupling error / F.S. output",
+               "slope": "max |dχ/du|",
+               "second_order": "second-order bound, eq. (6)"}
+
+
+def _checks(model, cv) -> str:
+    rows = []
+    order = list(CHECK_NAMES)
+    checks = sorted((c.to_dict() for c in assumption_checks(model)),
+                    key=lambda c: (order.index(c["name"]) if c["name"] in order else len(order)))
+    for c in checks:
+        value, limit = _fmt_check(c)
+        rows.append(tr(cell(CHECK_NAMES.get(c["name"], c["name"])), cell(c["subject"]),
+                       cell(value), cell(limit), badge(c["status"])))
+    out = table("table-checks", "Assumption checks of Section 2.1 on the model file",
+                [tr(th("check"), th("subject"), th("value"), th("limit"), th("status"))], rows)
+    checks = (cv or {}).get("checks") or []
+    if checks:
+        rows = []
+        for r in sorted({c.get("round") for c in checks}):
+            cs = [c for c in checks if c.get("round") == r]
+            warns = [f"{c['name']} {c['subject']}" for c in cs if c["status"] != "pass"]
+            rows.append(tr(cell(str(r)), cell(str(len(cs) - len(warns))), cell(str(len(warns))),
+                           badge("warn" if warns else "pass"), cell(", ".join(warns) or "–")))
+        out += table("table-cv-checks", "The same checks on each cross-validation round's model",
+                     [tr(th("round"), th("pass"), th("warn"), th("status"), th("warnings"))], rows)
+    return out
+
+
+CSS = """
+body{font-family:system-ui,-apple-system,"Segoe UI",sans-serif;max-width:1200px;margin:1.5em auto;
+padding:0 1em;color:#111;line-height:1.4}
+h1{font-size:1.6em;margin-bottom:.2em}h2{border-bottom:2px solid #444;padding-bottom:.2em;margin-top:1.8em}
+table{border-collapse:collapse;margin:.8em 0 1.2em;font-size:.92em}
+caption{text-align:left;font-weight:600;padding:.3em 0;white-space:nowrap}
+th,td{border:1px solid #999;padding:.25em .6em;text-align:right}th{background:#eee}
+td:first-child{text-align:left}
+.mono{font-family:ui-monospace,monospace;font-size:.85em;text-align:left}
+td.worse{font-weight:700;background:#fdd;border:2px solid #000}
+.badge{display:inline-block;padding:.05em .5em;border-radius:.6em;font-weight:700;border:1.5px solid}
+.badge.pass{color:#064;border-color:#064}.badge.warn{color:#930;border-color:#930;background:#fec}
+figure{margin:1em 0}figure img{max-width:100%;height:auto;border:1px solid #ccc}
+figcaption{font-size:.9em;color:#333}.note{color:#333;font-style:italic}
+@media print{body{max-width:none}h2{page-break-before:auto}figure,table{page-break-inside:avoid}}
+"""
+
+
+def build_report(model, cv: dict | None = None, calib=None) -> Report:
+    """Render the calibration report of ``model``.
+
+    Parameters
+    ----------
+    model : CouplingErrorModel
+    cv : dict, optional
+        A cv.json document (:func:`load_cv_results`).
+    calib : CalibrationSet, optional
+        The calibration set, to plot its points.
+    """
+    figs: dict[str, bytes] = {}
+    body = [f"<h1>Calibration report: {escape(model.settings.sensor)}</h1>\n",
+            _header(model, cv)]
+    if model.warnings:
+        body.append("<ul>" + "".join(f"<li>warning: {escape(w)}</li>" for w in model.warnings) + "</ul>\n")
+
+    points, where = _point_roles(model, calib, cv) if calib is not None else (None, "")
+    body.append("<h2>Non-coupling functions ω (Figure 6)</h2>\n")
+    figs["figure6_omega"] = to_png(omega_figure(model, points))
+    body.append(figure_html(
+        "fig-omega", figs["figure6_omega"], "Figure 6: prime voltage against prime force per axis",
+        "Per axis: prime voltage against prime force of that axis's sweeps and the fitted line of "
+        "the model file (eq. 2); slope k, 1/k (eq. 13) and R². "
+        + (f"Points {where}; lower row: deviation from the line [mV]." if calib is not None
+           else "No calibration points: pass --calib CALIB to plot them.")))
+    body.append(_model_tables(model))
+
+    body.append("<h2>Corrected coupling functions χ (Figure 7)</h2>\n")
+    curves = (cv or {}).get("curves") or {}
+    chi_curves = curves.get("chi")
+    figs["figure7_chi"] = to_png(chi_figure(model, points, chi_curves))
+    if chi_curves:
+        src = (f"ε-SVR curves (solid) of cross-validation round {curves.get('round')}"
+               + (", SISO RBF NN curves dashed" if any(c.get("rbf-siso") for c in chi_curves.values())
+                  else "; no SISO RBF NN curves in cv.json (not run), so no dashed curve"))
+    else:
+        src = "ε-SVR curves (solid) of the model file"
+    body.append(figure_html(
+        "fig-chi", figs["figure7_chi"], "Figure 7: the six corrected coupling functions",
+        f"Each χab: coupling error eab on channel a [mV] against the prime voltage ub [V]. {src}. "
+        + (f"Points {where}." if calib is not None else "No calibration points: pass --calib CALIB "
+           "to plot the training and held-out points.")))
+
+    body.append("<h2>Interference error γ (Tables 1, 3 and 5)</h2>\n")
+    if cv:
+        body.append(note("Cells marked ▲ (bold, boxed) are worse than the initial data of the same "
+                         "held-out repetition."))
+        body.append(_gamma_tables(cv))
+        body.append(_gross_tables(cv))
+        body.append("<h2>Combined loads</h2>\n")
+        body.append(_task_table(cv))
+    else:
+        body.append(note("No cross-validation results: run fsdecouple cv CALIB -o cv.json and pass "
+                         "--cv cv.json to add Tables 1, 3 and 5 and the combined-load comparison."))
+
+    body.append("<h2>Assumption checks</h2>\n")
+    body.append(_checks(model, cv))
+
+    body.append("<h2>Residuals</h2>\n")
+    residuals = _cv_residuals(cv) if cv else None
+    if residuals is not None:
+        title = "Decoupled force error of each held-out repetition (ε-SVR, cross-validation)"
+        cap = ("Decoupled minus applied force [N] against the applied load, per loaded axis (rows) "
+               "and force component (columns); one series per held-out repetition, each decoupled "
+               "by the model of the round that held it out.")
+    elif calib is not None:
+        residuals = _calib_residuals(model, calib)
+        title = "Decoupled force error on the calibration data (in-sample, not held out)"
+        cap = ("Decoupled minus applied force [N] against the applied load, per loaded axis (rows) "
+               "and force component (columns), one series per repetition. These points trained the "
+               "model: pass --cv cv.json for held-out residuals.")
+    if residuals is not None:
+        figs["residuals"] = to_png(residual_figure(residuals, title))
+        body.append(figure_html("fig-residuals", figs["residuals"], "Residual plot", cap))
+    else:
+        body.append(note("No residual plot: pass --cv cv.json or --calib CALIB."))
+
+    body.append("<h2>Provenance and settings</h2>\n")
+    body.append(_provenance(model, cv, calib))
+
+    html = ("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
+            f"<title>fsdecouple calibration report: {escape(model.settings.sensor)}</title>\n"
+            f"<style>{CSS}</style>\n</head>\n<body>\n" + "".join(body) + "</body>\n</html>\n")
+    return Report(html, figs)

@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .calibration import GrossError
-from .config import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .errors import InputError
-from .io import atomic_write, check_output
+from .iotools.files import atomic_write, check_output
 
 # Section 3 and eq. (13)
 PAPER_INVERSE_SLOPES = (75.065, 77.788, 125.17)  # [N/V]

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .config import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
+from .axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .errors import InputError, where
 
 if TYPE_CHECKING:

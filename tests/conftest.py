@@ -6,7 +6,7 @@ import pytest
 from typer.testing import CliRunner
 
 from fsdecouple import load_calibration, load_config
-from fsdecouple.model import fit
+from fsdecouple.fit import fit
 from fsdecouple.simulate import SimulatedSensor, simulate
 
 ROOT = Path(__file__).resolve().parent.parent

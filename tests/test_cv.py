@@ -11,8 +11,8 @@ import pandas as pd
 import pytest
 from conftest import ROOT, SAMPLE, invoke
 
+from fsdecouple.axes import VOLTAGE_COLUMNS
 from fsdecouple.calibration import GrossError
-from fsdecouple.config import VOLTAGE_COLUMNS
 from fsdecouple.cv import METHODS, check_folds, default_folds, parse_folds, run_cv
 from fsdecouple.errors import InputError
 from fsdecouple.linear import fit_omega
@@ -219,7 +219,7 @@ def test_cv_needs_three_repetitions(tmp_path):
 def test_cells_worse_than_initial_are_marked(doc):
     from rich.console import Console
 
-    from fsdecouple.cv_report import gamma_table, summary_lines, task_table
+    from fsdecouple.console import gamma_table, summary_lines, task_table
 
     bad = json.loads(json.dumps(doc))
     for r in bad["records"]:

@@ -8,7 +8,8 @@ import pytest
 
 from fsdecouple import load_calibration, load_config, load_model
 from fsdecouple.errors import InputError
-from fsdecouple.model import fit
+from fsdecouple.fit import fit
+from fsdecouple.modelfile import save_model
 from fsdecouple.simulate import SimulatedSensor, simulate
 
 ZERO = ((0.0, 0.0, 0.0),) * 3
@@ -22,7 +23,7 @@ def fit_and_decouple(tmp_path, sensor):
     u = log[["ux", "uy", "uz"]].to_numpy()
     f = model.decouple(u - u[:200].mean(axis=0))
     truth = pd.read_csv(tmp_path / "task_forces.csv")[["fx", "fy", "fz"]].to_numpy()
-    model.save(tmp_path / "m.json")
+    save_model(model, tmp_path / "m.json")
     again = load_model(tmp_path / "m.json")
     np.testing.assert_array_equal(again.decouple(u), model.decouple(u))
     return model, f, truth
@@ -33,7 +34,7 @@ def assert_finite_model(model):
     for chi in model.chi.values():
         assert np.isfinite(chi.support_vectors).all() and np.isfinite(chi.dual_coef).all()
         assert np.isfinite(chi.rho)
-    assert all(np.isfinite(v) for v in model.report["gamma_after"].values())
+    assert all(np.isfinite(v) for v in model.report.gamma_after.values())
 
 
 def test_all_zero_coupling_perfectly_linear_sensor(tmp_path):

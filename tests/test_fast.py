@@ -15,10 +15,12 @@ from conftest import SAMPLE
 
 from fsdecouple import load_calibration
 from fsdecouple.apply import apply_file
+from fsdecouple.axes import CHI_NAMES
+from fsdecouple.decouple import MAX_SURROGATE_ERROR, PROMISE
 from fsdecouple.errors import ModelFileError
-from fsdecouple.fast import MAX_SURROGATE_ERROR, PROMISE, FastDecoupler
-from fsdecouple.model import CHI_NAMES, CouplingErrorModel, chi_training_data, fit, load_model
-from fsdecouple.stream import force_decimals
+from fsdecouple.fit import chi_training_data, fit
+from fsdecouple.iotools.sinks import force_decimals
+from fsdecouple.modelfile import load_model, model_from_dict, model_to_dict, save_model
 from fsdecouple.surrogate import MAX_INTERVALS, check_points
 from fsdecouple.svr import predict, train
 
@@ -58,7 +60,7 @@ def test_every_cv_round_of_the_sample_data_gets_a_usable_surrogate(train, settin
     m = fit(load_calibration(SAMPLE / "calibration", settings).subset(train), settings)
     for name, c in m.chi.items():
         assert c.surrogate.max_error <= 1e-10 and c.surrogate.intervals < MAX_INTERVALS, name
-    assert FastDecoupler.from_model(m) is not None
+    assert m.fast_decoupler() is not None
 
 
 def test_surrogate_covers_exactly_where_its_index_is_inside(model):
@@ -116,7 +118,7 @@ def test_fast_decouple_does_not_depend_on_blocks_or_threads(model):
 
 def test_small_calls_are_bit_identical_to_the_block_path(model):
     """Up to SMALL_ROWS rows go row by row (fast for one vector); same bits as a big call."""
-    from fsdecouple.fast import SMALL_ROWS
+    from fsdecouple.decouple import SMALL_ROWS
 
     u = in_range_voltages(model, 200, seed=11)
     u[::9, 2] = 7.5  # outside a table: exact in both
@@ -178,7 +180,7 @@ def test_model_without_surrogates_is_exact(model):
 
 def test_surrogate_round_trips_through_the_model_file(model, tmp_path):
     path = tmp_path / "m.json"
-    model.save(path)
+    save_model(model, path)
     doc = json.loads(path.read_text())
     for name in CHI_NAMES:
         rec = doc["chi"][name]["surrogate"]
@@ -192,7 +194,7 @@ def test_surrogate_round_trips_through_the_model_file(model, tmp_path):
 
 
 def test_edited_surrogate_fails_the_integrity_check(model, tmp_path):
-    doc = model.to_dict()
+    doc = model_to_dict(model)
     doc["chi"]["zy"]["surrogate"]["values"][3] += 1e-6
     path = tmp_path / "edited.json"
     path.write_text(json.dumps(doc))
@@ -203,12 +205,12 @@ def test_edited_surrogate_fails_the_integrity_check(model, tmp_path):
 @pytest.mark.parametrize("recorded", [1e-6, 1e-9, 2 * MAX_SURROGATE_ERROR])
 def test_surrogate_with_a_poor_bound_is_not_used(model, recorded):
     """Two chi add up per output, so even a recorded 1e-9 V per chi could break the promise."""
-    doc = model.to_dict()
+    doc = model_to_dict(model)
     doc["chi"]["yz"]["surrogate"]["max_error"] = recorded
-    from fsdecouple.model import content_digest
+    from fsdecouple.modelfile import content_digest
 
     doc["integrity"]["digest"] = content_digest(doc)
-    m = CouplingErrorModel.from_dict(doc)
+    m = model_from_dict(doc)
     assert m.fast_decoupler() is None
     assert 2 * MAX_SURROGATE_ERROR < PROMISE
 
@@ -292,7 +294,7 @@ def test_a_control_loop_loads_numpy_only(model, tmp_path):
     import sys
 
     path = tmp_path / "m.json"
-    model.save(path)
+    save_model(model, path)
     code = (
         "import sys, fsdecouple\n"
         f"m = fsdecouple.load_model({str(path)!r})\n"
@@ -305,7 +307,9 @@ def test_a_control_loop_loads_numpy_only(model, tmp_path):
 
 
 def test_fit_warns_when_a_surrogate_misses_its_bound(calib, settings, monkeypatch):
-    import fsdecouple.model as model_module
+    import importlib
+
+    model_module = importlib.import_module("fsdecouple.fit")  # the module, not fsdecouple.fit()
 
     real = model_module.build_pair
 

@@ -11,8 +11,9 @@ import pytest
 from conftest import SAMPLE, invoke
 
 from fsdecouple import load_calibration, load_config, load_model
-from fsdecouple import model as model_module
-from fsdecouple.model import FORMAT_VERSION, fit
+from fsdecouple import modelfile as model_module
+from fsdecouple.fit import fit
+from fsdecouple.modelfile import FORMAT_VERSION
 
 GOLDEN = sorted((Path(__file__).parent / "data" / "golden").glob("model-v*.json"))
 

@@ -13,7 +13,8 @@ import pytest
 from conftest import ROOT, SAMPLE
 
 from fsdecouple import load_calibration, load_config
-from fsdecouple.model import fit
+from fsdecouple.fit import fit
+from fsdecouple.modelfile import save_model
 
 
 @pytest.fixture(scope="module")
@@ -29,7 +30,7 @@ def big_log(tmp_path_factory):
         for _ in range(100):
             fh.write(body)
     model = d / "model.json"
-    fit(load_calibration(SAMPLE / "calibration", load_config())).save(model)
+    save_model(fit(load_calibration(SAMPLE / "calibration", load_config())), model)
     return log, model
 
 

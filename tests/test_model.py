@@ -7,10 +7,11 @@ import json
 import numpy as np
 import pytest
 
-from fsdecouple.config import AXES, VOLTAGE_COLUMNS
+from fsdecouple.axes import AXES, CHI_NAMES, VOLTAGE_COLUMNS
 from fsdecouple.errors import ModelFileError
+from fsdecouple.fit import chi_training_data, fit
 from fsdecouple.linear import fit_omega
-from fsdecouple.model import CHI_NAMES, CouplingErrorModel, chi_training_data, fit, load_model
+from fsdecouple.modelfile import load_model, model_from_dict, model_to_dict, save_model
 from fsdecouple.svr import predict, train
 
 
@@ -47,7 +48,7 @@ def test_omega_is_least_squares_through_origin(calib):
 
 def test_decoupling_reduces_interference_error(model):
     for axis in AXES:
-        assert model.report["gamma_after"][axis] < 0.5 * model.report["gamma_before"][axis]
+        assert model.report.gamma_after[axis] < 0.5 * model.report.gamma_before[axis]
 
 
 def test_eq11_by_hand(model):
@@ -82,14 +83,14 @@ def test_task_forces_close_to_truth(model, sim_dir):
 
 def test_fit_is_deterministic_and_thread_independent(calib, settings, model):
     sequential = fit(calib, settings, workers=1)
-    a, b = sequential.to_dict(), model.to_dict()
+    a, b = model_to_dict(sequential), model_to_dict(model)
     a.pop("created"), b.pop("created")
     assert json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
 
 
 def test_model_file_round_trip(model, tmp_path):
     path = tmp_path / "m.json"
-    model.save(path)
+    save_model(model, path)
     again = load_model(path)
     u = np.random.default_rng(0).uniform(-1.2, 1.2, size=(500, 3))
     np.testing.assert_array_equal(again.decouple(u), model.decouple(u))
@@ -97,7 +98,7 @@ def test_model_file_round_trip(model, tmp_path):
 
 
 def test_model_file_integrity(model, tmp_path):
-    doc = model.to_dict()
+    doc = model_to_dict(model)
     doc["chi"]["xy"]["rho"] += 1e-6
     path = tmp_path / "edited.json"
     path.write_text(json.dumps(doc))
@@ -106,10 +107,10 @@ def test_model_file_integrity(model, tmp_path):
 
 
 def test_model_file_newer_version_refused(model):
-    doc = model.to_dict()
+    doc = model_to_dict(model)
     doc["format_version"] = 99
     with pytest.raises(ModelFileError, match="newer fsdecouple"):
-        CouplingErrorModel.from_dict(doc)
+        model_from_dict(doc)
 
 
 def test_full_scale_scaling_handles_millivolts(sim_dir, settings):
@@ -132,4 +133,4 @@ def test_full_scale_scaling_handles_millivolts(sim_dir, settings):
     # lets such solutions differ by up to ~0.1 N (0.1 % F.S.), so allow 0.2 N.
     np.testing.assert_allclose(scaled.decouple(u * 1e3), v_model.decouple(u), atol=0.2)
     for axis in AXES:
-        assert scaled.report["gamma_after"][axis] < 0.5 * scaled.report["gamma_before"][axis]
+        assert scaled.report.gamma_after[axis] < 0.5 * scaled.report.gamma_before[axis]

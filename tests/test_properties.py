@@ -22,7 +22,7 @@ from fsdecouple import FsdecoupleError, load_calibration, load_config
 from fsdecouple.apply import STATUSES, apply_file
 from fsdecouple.calibration import from_table
 from fsdecouple.config import Settings
-from fsdecouple.model import fit
+from fsdecouple.fit import fit
 
 SETTINGS = settings(
     max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from fsdecouple.axes import CHI_NAMES
+from fsdecouple.fit import chi_training_data
 from fsdecouple.linear import fit_calibration_matrix
-from fsdecouple.model import CHI_NAMES, chi_training_data
 from fsdecouple.rbf import B_FACTOR, MSE_GOAL, basic_solution, fit_mimo, fit_rbf, fit_siso
 
 

@@ -17,7 +17,8 @@ import os
 from pathlib import Path
 
 from fsdecouple import FsdecoupleError, load_calibration, load_config
-from fsdecouple.model import FORMAT_VERSION, fit
+from fsdecouple.fit import fit
+from fsdecouple.modelfile import FORMAT_VERSION, save_model
 
 ROOT = Path(__file__).resolve().parents[2]
 CREATED = "2026-01-01T00:00:00+00:00"
@@ -33,7 +34,7 @@ def main() -> None:
     model.created = CREATED
     out = Path("tests/data/golden") / f"model-v{FORMAT_VERSION}.json"
     try:
-        model.save(out, force=args.force)
+        save_model(model, out, force=args.force)
     except FsdecoupleError as err:
         raise SystemExit(f"error: {err}") from None
     print(f"wrote {out}")

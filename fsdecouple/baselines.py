@@ -17,10 +17,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .axes import CHI_NAMES
 from .calibration import CalibrationSet
 from .config import Settings
+from .decouple import initial_forces
+from .fit import chi_training_data, fit
 from .linear import fit_calibration_matrix, fit_omega
-from .model import CHI_NAMES, chi_training_data, fit
+from .parallel import single_threaded_libraries
 from .rbf import SPREAD, fit_mimo, fit_siso
 
 METHODS = ("initial", "linear", "rbf-mimo", "rbf-siso", "svr")
@@ -34,7 +37,7 @@ class InitialMethod:
 
     def decouple(self, u: np.ndarray, *, rotate: bool = False) -> np.ndarray:
         del rotate
-        return np.asarray(u, dtype=float).reshape(-1, 3) / self.k
+        return initial_forces(u, self.k)
 
 
 def input_scale(train: CalibrationSet, settings: Settings) -> np.ndarray | None:
@@ -68,6 +71,11 @@ def train_all(jobs, settings, workers, progress) -> tuple[dict, float]:
     libsvm and LAPACK release the GIL, so threads train in parallel; each model
     depends only on its own job, so the results equal sequential training.
     """
+    with single_threaded_libraries():
+        return _train_all(jobs, settings, workers, progress)
+
+
+def _train_all(jobs, settings, workers, progress) -> tuple[dict, float]:
     models = {}
     t0 = time.perf_counter()
     if workers <= 1:

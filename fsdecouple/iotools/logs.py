@@ -15,7 +15,6 @@ fault.
 from __future__ import annotations
 
 import csv
-import io
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,9 +25,9 @@ import pyarrow.compute as pc
 import pyarrow.csv as pcsv
 import pyarrow.parquet as pq
 
-from .config import FORCE_COLUMNS, Settings
-from .errors import InputError, where
-from .io import HEADER_ROW, MISSING_CELLS, to_numbers
+from ..config import Settings
+from ..errors import InputError, where
+from .text import HEADER_ROW, MISSING_CELLS, to_numbers
 
 BLOCK_BYTES = 4 << 20  # ~100 K rows of a 4-column log; a block in flight costs ~15x this
 MAX_LINE_BYTES = 16 << 20  # a log line is tens of bytes
@@ -288,118 +287,3 @@ def parquet_header(path: Path) -> list[str]:
         raise InputError(f"{path}: not a readable Parquet file ({err})") from None
 
 
-# --- writing ------------------------------------------------------------------
-
-
-def _forces_table(f: np.ndarray, empty: np.ndarray) -> list[pa.Array]:
-    mask = empty if empty.any() else None
-    return [pa.array(f[:, k], pa.float64(), mask=mask) for k in range(3)]
-
-
-def force_decimals(k: np.ndarray, budget: float = 1e-10) -> int:
-    """Decimals [N] that round a force by at most ``budget`` [V] times 1/k.
-
-    Forces written to 1e-10 V-equivalent keep the 1e-9 V promise of the fast
-    path with room to spare, and are 30 % shorter than round-trip text: on a
-    10 M-row log that is 200 MB less to write.
-    """
-    step = 2.0 * budget / float(np.max(np.abs(k)))  # rounding error <= step / 2
-    return max(0, int(np.ceil(-np.log10(step))))
-
-
-class CsvSink:
-    """Writes blocks as CSV: the input line (or columns), ``fx, fy, fz``, ``status``.
-
-    Written in the log's dialect: fields joined by ``sep``, forces with ``decimal``.
-    ``decimals``: forces are rounded to this many decimals before their
-    shortest text is written; None writes round-trip text of the doubles.
-    """
-
-    def __init__(self, fh, header: list[str], header_line: bytes | None,
-                 decimals: int | None = None, *, sep: str = ",", decimal: str = ".",
-                 extra: tuple[str, ...] = ()):
-        self.fh = fh
-        self.header = header
-        self.decimals = decimals
-        self.sep, self.decimal = sep, decimal
-        line = header_line if header_line is not None else sep.join(header).encode()
-        fh.write(sep.join([line.decode("utf-8", "surrogateescape"), *FORCE_COLUMNS, *extra])
-                 .encode("utf-8", "surrogateescape") + b"\n")
-
-    def _text(self, a: pa.Array) -> pa.Array:
-        text = pc.cast(a, pa.string())
-        if self.decimal != ".":
-            text = pc.replace_substring(text, ".", self.decimal)
-        return text
-
-    def encode(self, block: Block, f: np.ndarray, empty: np.ndarray, extra: tuple = ()):
-        """The block's output bytes; thread-safe, so blocks can be encoded in parallel.
-
-        ``empty``: rows written with empty forces; ``extra``: string arrays appended.
-        """
-        if self.decimals is not None:
-            f = np.round(f, self.decimals)
-        text = [self._text(a) for a in _forces_table(f, empty)]
-        if block.lines is not None:
-            parts = [a.cast(pa.binary()) for a in (*text, *extra)]
-            out = pc.binary_join_element_wise(
-                block.lines, *parts, self.sep.encode(), null_handling="replace",
-                null_replacement=b"",
-            )
-            if not block.joined:
-                out = pc.binary_join_element_wise(out, b"", b"\n")
-            offsets = np.frombuffer(out.buffers()[1], np.int32)[out.offset:out.offset + len(out) + 1]
-            data = memoryview(out.buffers()[2])[offsets[0]:offsets[-1]]
-            return [data, b"\n"] if block.joined else [data]
-        table = block.table
-        if self.decimal != ".":  # pass-through floats (Parquet input) in the log's dialect too
-            for i, fld in enumerate(table.schema):
-                if pa.types.is_floating(fld.type):
-                    table = table.set_column(i, fld.name, self._text(table.column(i)))
-        for c, a in zip(FORCE_COLUMNS, text, strict=True):
-            table = table.append_column(c, a)
-        for k, a in enumerate(extra):
-            table = table.append_column(f"_extra{k}", a)
-        sink = io.BytesIO()
-        try:  # plain text as a CSV log has it; quotes only if a value needs them
-            pcsv.write_csv(table, sink, pcsv.WriteOptions(
-                include_header=False, delimiter=self.sep, quoting_style="none"))
-        except pa.ArrowInvalid:
-            sink = io.BytesIO()
-            pcsv.write_csv(table, sink, pcsv.WriteOptions(include_header=False, delimiter=self.sep))
-        return [sink.getbuffer()]
-
-    def write(self, payload) -> None:
-        for part in payload:
-            self.fh.write(part)
-
-    def close(self) -> None:
-        pass
-
-
-class ParquetSink:
-    """Writes blocks as Parquet: the input columns, ``fx, fy, fz`` [N] as doubles, extras."""
-
-    def __init__(self, fh, extra: tuple[str, ...] = ()):
-        self.fh = fh
-        self.extra = extra
-        self.writer: pq.ParquetWriter | None = None
-
-    def encode(self, block: Block, f: np.ndarray, empty: np.ndarray, extra: tuple = ()) -> pa.Table:
-        table = block.table
-        for c, a in zip(FORCE_COLUMNS, _forces_table(f, empty), strict=True):
-            table = table.append_column(c, a)
-        for c, a in zip(self.extra, extra, strict=True):
-            table = table.append_column(c, a)
-        return table
-
-    def write(self, table: pa.Table) -> None:
-        if self.writer is None:
-            # dictionary-encoding measured doubles, which seldom repeat, is wasted work
-            keep = [f.name for f in table.schema if not pa.types.is_floating(f.type)]
-            self.writer = pq.ParquetWriter(self.fh, table.schema, use_dictionary=keep)
-        self.writer.write_table(table)
-
-    def close(self) -> None:
-        if self.writer is not None:
-            self.writer.close()

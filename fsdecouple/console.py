@@ -1,23 +1,112 @@
-"""Rich tables for ``fsdecouple cv``, built from the cv.json document (no computation here
-beyond picking numbers out of its records)."""
+"""Every rich table and console line the commands print (sqlfluff's ``formatters.py``).
+
+Built from result objects and documents; no computation here beyond picking
+numbers out of them.
+"""
 
 from __future__ import annotations
 
 from collections import defaultdict
 from typing import Any
 
+import numpy as np
 from rich import box
 from rich.table import Table
 from rich.text import Text
 
-from .config import AXES
+from .axes import AXES, VOLTAGE_COLUMNS
+from .cv_doc import gamma_index, test_name
+from .metrics import pct
 
-TEST_NAMES = ("I", "II", "III", "IV")
+# --- ingest, fit, show, apply ------------------------------------------------------
+
+def ingest_tables(summary: dict[str, Any]) -> list:
+    t = Table(title=f"Calibration set: {summary['sensor']}, "
+                    f"{len(summary['repetitions'])} repetitions")
+    t.add_column("axis")
+    t.add_column("points", justify="right")
+    t.add_column("per repetition", justify="right")
+    t.add_column("load grid [N]", justify="right")
+    t.add_column("levels", justify="right")
+    t.add_column("F.S. [N]", justify="right")
+    for axis, d in summary["axes"].items():
+        per = sorted(set(d["points_per_repetition"].values()))
+        t.add_row(axis, str(d["points"]), "/".join(map(str, per)),
+                  f"{d['load_min']:g} .. {d['load_max']:g}", str(d["load_levels"]),
+                  f"{d['full_scale']:g}")
+    o = Table(title="Zero offsets removed \\[mV] (mean of each sweep's zero-load rows)")
+    for col in ("repetition", "axis", "zero rows", *VOLTAGE_COLUMNS):
+        o.add_column(col, justify="right")
+    for r in summary["offsets"]:
+        o.add_row(str(r["repetition"]), r["axis"], str(r["n_zero"]),
+                  *(f"{1e3 * r[c]:+.3f}" for c in VOLTAGE_COLUMNS))
+    out = [t, o]
+    skipped = summary["skipped"]
+    out.append(Text(f"rows skipped: {len(skipped)}" + "".join(f"\n  {s}" for s in skipped)))
+    return out
+
+
+def fit_tables(model) -> list:
+    rep = model.report
+    t = Table(title=f"Non-coupling functions omega (eq. 2), sensor {model.settings.sensor}")
+    for col in ("axis", "k [V/N]", "1/k [N/V] (eq. 13)", "R^2", "points"):
+        t.add_column(col, justify="right")
+    for a, axis in enumerate(AXES):
+        r2 = rep.r2[axis]
+        r2_text = Text(f"{r2:.6f}", style="" if r2 >= model.settings.min_r2 else "bold red")
+        t.add_row(axis, f"{model.k[a]:.6g}", f"{1.0 / model.k[a]:.5f}", r2_text,
+                  str(rep.n_points[axis]))
+    s = model.settings.svr
+    c = Table(title=f"Corrected coupling functions chi (eq. 4): eps-SVR, gamma={s.gamma:g} "
+                    f"C={s.C:g} eps={s.epsilon:g} tol={s.tolerance:g}")
+    for col in ("chi", "input", "support vectors", "input range [V]"):
+        c.add_column(col, justify="right")
+    for name, chi in model.chi.items():
+        lo, hi = chi.input_range
+        c.add_row(f"chi_{name}", f"u{name[1]}", f"{chi.support_vectors.size} / {chi.n_points}",
+                  f"{lo:+.4f} .. {hi:+.4f}")
+    g = Table(title="Interference error gamma (eq. 12) on the calibration data, % F.S.")
+    for col in ("loaded axis", "before (omega^-1 only)", "after (eq. 11)"):
+        g.add_column(col, justify="right")
+    for axis in AXES:
+        before, after = rep.gamma_before.get(axis), rep.gamma_after.get(axis)
+        style = "bold red" if after is not None and before is not None and after > before else ""
+        g.add_row(axis, pct(before), Text(pct(after), style=style))
+    return [t, c, g]
+
+
+def apply_lines(summary, out) -> list[str]:
+    counts = ", ".join(f"{n} {name}" for name, n in summary.status_counts.items() if n)
+    lines = [f"decoupled {summary.rows} rows into {out} (status: {counts})"]
+    if np.any(summary.offsets):
+        lines.append("zero removed [V]: " + ", ".join(
+            f"{c}={v:+.6f}" for c, v in zip(VOLTAGE_COLUMNS, summary.offsets, strict=True)))
+    return lines
+
+
+def apply_warnings(summary) -> list[str]:
+    w = []
+    if summary.missing_rows:
+        rows = ", ".join(map(str, summary.first_missing))
+        more = ", ..." if summary.missing_rows > len(summary.first_missing) else ""
+        w.append(f"{summary.missing_rows} rows have a missing voltage; kept with empty "
+                 f"forces and status 'missing' (rows {rows}{more})")
+    if summary.truncated_rows:
+        w.append(f"row {summary.rows + 1}, the last, does not end with a newline (the writer was "
+                 "cut off?); kept with empty forces and status 'truncated'")
+    if summary.not_finite_rows:
+        w.append(f"{summary.not_finite_rows} rows have voltages so large that eq. (11) "
+                 "overflows; kept with empty forces and status 'not_finite'")
+    if summary.out_of_range_rows:
+        w.append(f"{summary.out_of_range_rows} rows have a voltage more than 1 % of the span "
+                 "outside the calibrated range; their forces are extrapolated (status "
+                 "'extrapolated')")
+    return w
+
+
+# --- cv -----------------------------------------------------------------------------
+
 WORSE = "bold red"  # Table 1 sets cells worse than the initial data in bold
-
-
-def _index(records) -> dict[tuple, float]:
-    return {(r["round"], r["test_set"], r["method"], r["axis"]): r["value"] for r in records}
 
 
 def _num(fraction: float) -> str:
@@ -31,8 +120,8 @@ def gamma_table(doc: dict[str, Any], records=None, title=None, clean=None) -> Ta
     bold red, as Table 1 sets them in bold.  With ``clean`` records (Table 5), a
     cell that differs from its clean value carries a ``*``.
     """
-    idx = _index(doc["records"] if records is None else records)
-    ref = _index(clean) if clean is not None else None
+    idx = gamma_index(doc["records"] if records is None else records)
+    ref = gamma_index(clean) if clean is not None else None
     t = Table(title=title or "Interference error gamma (eq. 12) on held-out repetitions, % F.S. "
                              "(! and bold red: worse than initial)", box=box.SIMPLE_HEAD,
               pad_edge=False, padding=(0, 0, 0, 1))
@@ -55,7 +144,7 @@ def gamma_table(doc: dict[str, Any], records=None, title=None, clean=None) -> Ta
                     # "!" keeps the paper's bold visible in plain-text CI logs
                     cells.append(Text(_num(v) + mark + ("!" if worse else ""),
                                       style=WORSE if worse else ""))
-            name = TEST_NAMES[i] if i < len(TEST_NAMES) else str(i + 1)
+            name = test_name(i)
             t.add_row(str(r) if i == 0 else "", f"{name} ({rep})", *cells)
         if r < len(doc["folds"]):
             t.add_section()
@@ -65,7 +154,7 @@ def gamma_table(doc: dict[str, Any], records=None, title=None, clean=None) -> Ta
 def summary_lines(doc: dict[str, Any]) -> list[str]:
     worst = defaultdict(float)
     worse = defaultdict(int)
-    base = _index(doc["records"])
+    base = gamma_index(doc["records"])
     for rec in doc["records"]:
         m = rec["method"]
         worst[m] = max(worst[m], rec["value"])
@@ -123,14 +212,14 @@ def gross_tables(doc: dict[str, Any]) -> list[Table]:
         for a in AXES:
             side.add_column(f"{label if a == 'x' else ''}\nγ{a}", justify="right")
     side.add_column("largest\nchange", justify="right")
-    clean, moved = _index(doc["records"]), _index(g["records"])
+    clean, moved = gamma_index(doc["records"]), gamma_index(g["records"])
     for r in g["rounds_affected"]:
         for i, rep in enumerate(doc["folds"][r - 1]):
             c = [clean[(r, rep, "svr", a)] for a in AXES]
             m = [moved[(r, rep, "svr", a)] for a in AXES]
             change = max(abs(x - y) for x, y in zip(c, m, strict=True))
             side.add_row(str(r) if i == 0 else "",
-                         f"{TEST_NAMES[i] if i < len(TEST_NAMES) else i + 1} ({rep})",
+                         f"{test_name(i)} ({rep})",
                          *(_num(v) for v in c + m), _num(change))
     o = Table(title="omega^-1 \\[N/V]: clean (eq. 13) vs with the gross error (eq. 14)")
     for col in ("round", "axis", "clean", "gross", "change"):

@@ -1,0 +1,186 @@
+"""Establish the coupling error model from a calibration set (Section 2.3, steps 1-4).
+
+Step 2 fits the omega slopes (eq. 2, :mod:`fsdecouple.linear`); step 3 fits each
+corrected coupling function chi_ab (eq. 4) by its own epsilon-SVR on the b sweeps
+(:mod:`fsdecouple.svr`, Table 2); the chi tables of the fast path are built after
+the fit (:mod:`fsdecouple.surrogate`).  The result carries a :class:`FitReport`.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import platform
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
+from datetime import UTC, datetime
+from importlib import metadata
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .axes import AXES, CHI_NAMES, VOLTAGE_COLUMNS
+from .config import Settings
+from .decouple import MAX_SURROGATE_ERROR, usable
+from .errors import InputError
+from .linear import fit_omega
+from .metrics import interference_errors
+from .model import Chi, CouplingErrorModel, FitReport
+from .parallel import single_threaded_libraries
+from .surrogate import build_pair, table_interval
+
+if TYPE_CHECKING:
+    from .calibration import CalibrationSet
+
+# Kernel input span, in kernel widths delta, outside which Table 2's gamma is a
+# poor match for the data's units (volts of order 1 give a span of about 3).
+KERNEL_SPAN_RANGE = (0.1, 30.0)
+
+
+def _library_versions() -> dict[str, str]:
+    return dict(_installed_versions())  # a copy: each model owns its provenance
+
+
+@functools.cache
+def _installed_versions() -> dict[str, str]:
+    # reading package metadata costs ~5 ms; cv fits dozens of models
+    out = {"python": platform.python_version()}
+    for dist in ("numpy", "scipy", "pandas", "libsvm-official"):
+        try:
+            out[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            out[dist] = "not installed"
+    return out
+
+
+def chi_training_data(calib: CalibrationSet, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(prime voltage, coupling error element) of chi_ab from the b sweeps, file order.
+
+    Section 2.1: in the b-direction calibration data u_b = u_bb and u_a = e_ab.
+    """
+    s = calib.sweep(name[1])
+    return (
+        s[VOLTAGE_COLUMNS[AXES.index(name[1])]].to_numpy(dtype=float),
+        s[VOLTAGE_COLUMNS[AXES.index(name[0])]].to_numpy(dtype=float),
+    )
+
+
+def fit(
+    calib: CalibrationSet | str | Path,
+    settings: Settings | None = None,
+    *,
+    workers: int | None = None,
+) -> CouplingErrorModel:
+    """Establish the coupling error model (Section 2.3, steps 1-4).
+
+    Parameters
+    ----------
+    calib : CalibrationSet or path
+        Zero-corrected calibration set, or a path to read one from.
+    settings : Settings, optional
+        Defaults to the paper's sensor and Table 2.
+    workers : int, optional
+        Threads training the six SVRs (libsvm releases the GIL); default: the
+        number of cores.  The result does not depend on it.
+    """
+    # fitting needs pandas (calibration) and libsvm; loading and applying a model do not
+    from .calibration import CalibrationSet, load_calibration
+    from .svr import fit_svr  # the only libsvm user
+
+    settings = settings or Settings()
+    if not isinstance(calib, CalibrationSet):
+        calib = load_calibration(calib, settings)
+    with single_threaded_libraries():
+        return _establish(calib, settings, workers, fit_svr)
+
+
+def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
+               fit_svr) -> CouplingErrorModel:
+    omega = fit_omega(calib.points)
+    warnings = list(calib.warnings)
+    for a, axis in enumerate(AXES):
+        if not np.isfinite(omega.k[a]) or omega.k[a] == 0.0:
+            raise InputError(
+                f"{calib.source}: the {axis} sweeps' prime voltage u{axis} does not change with f{axis}; "
+                f"cannot fit omega_{axis} (eq. 2)"
+            )
+        if not omega.r2[a] >= settings.min_r2:
+            warnings.append(
+                f"omega_{axis}: R^2 = {omega.r2[a]:.5f} is below {settings.min_r2} "
+                "(assumption 1 of Section 2.1: prime force and voltage are linear)"
+            )
+    # Kernel scaling: "full_scale" divides inputs and targets by each axis's
+    # full-scale output |k| F_FS [V], so Table 2's gamma suits mV or ADC counts too.
+    if settings.scaling == "full_scale":
+        scale = np.abs(omega.k) * np.asarray(settings.full_scale)
+    else:
+        scale = np.ones(3)
+    jobs = []
+    for name in CHI_NAMES:
+        x, y = chi_training_data(calib, name)
+        o, i = AXES.index(name[0]), AXES.index(name[1])
+        jobs.append((name, x, y, float(scale[i]), float(scale[o])))
+    for a, axis in enumerate(AXES):
+        x = calib.sweep(axis)[VOLTAGE_COLUMNS[a]].to_numpy() / scale[a]
+        span = (x.max() - x.min()) * np.sqrt(2.0 * settings.svr.gamma)
+        lo, hi = KERNEL_SPAN_RANGE
+        if not lo <= span <= hi:
+            warnings.append(
+                f"chi inputs from u{axis} span {span:.3g} kernel widths (expected "
+                f"{lo:g} to {hi:g} for delta^2 = {settings.svr.delta2:g}); the voltages may "
+                "be in mV or ADC counts: set 'scaling: full_scale' in the config"
+            )
+
+    def one(job):
+        name, x, y, in_scale, out_scale = job
+        s = fit_svr(x / in_scale, y / out_scale, settings.svr)
+        return Chi(
+            name, s.gamma, s.support_vectors, s.dual_coef, s.rho, in_scale, out_scale,
+            (float(x.min()), float(x.max())), int(x.size),
+        )
+
+    def tables(axis: str) -> list[Chi]:
+        # both chi fed by one input axis share one grid (one index per voltage)
+        pair = [c for c in chis if c.name[1] == axis]
+        lo, hi = table_interval(min(c.input_range[0] for c in pair),
+                                max(c.input_range[1] for c in pair))
+        return [replace(c, surrogate=s) for c, s in zip(pair, build_pair(pair, lo, hi), strict=True)]
+
+    n_workers = workers or min(len(jobs), os.cpu_count() or 1)
+    if n_workers > 1:
+        with ThreadPoolExecutor(n_workers) as pool:
+            chis = list(pool.map(one, jobs))
+            done = [c for pair in pool.map(tables, AXES) for c in pair]
+    else:
+        chis = [one(j) for j in jobs]
+        done = [c for axis in AXES for c in tables(axis)]
+    by_name = {c.name: c for c in done}
+    for c in done:
+        if not usable(c.surrogate):
+            warnings.append(
+                f"chi_{c.name}: its surrogate table reaches only {c.surrogate.max_error:.2g} V of "
+                f"the kernel sum (needs <= {MAX_SURROGATE_ERROR:g} V); this model decouples by the "
+                "exact kernel sum, about 100x slower"
+            )
+    model = CouplingErrorModel(settings, omega.k, {name: by_name[name] for name in CHI_NAMES})
+    u = calib.voltages
+    before = interference_errors(calib.points, model.initial_forces(u), settings.full_scale)
+    after = interference_errors(calib.points, model.decouple(u, rotate=False, exact=True),
+                                settings.full_scale)
+    model.report = FitReport(
+        r2=dict(zip(AXES, map(float, omega.r2), strict=True)),
+        n_points=dict(zip(AXES, map(int, omega.n), strict=True)),
+        n_support_vectors={c.name: int(c.support_vectors.size) for c in chis},
+        surrogate_max_error={n: c.surrogate.max_error for n, c in model.chi.items()},
+        gamma_before=before,
+        gamma_after=after,
+        repetitions=calib.repetitions,
+        warnings=warnings,
+    )
+    model.provenance = {
+        "files": [{"path": p, "sha256": h} for p, h in calib.files],
+        "libraries": _library_versions(),
+    }
+    model.created = datetime.now(UTC).replace(microsecond=0).isoformat()
+    return model

@@ -1,0 +1,1 @@
+"""File formats: calibration sets, voltage logs, atomic output."""

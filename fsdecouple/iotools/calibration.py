@@ -1,0 +1,145 @@
+"""Calibration files: the CSVs of a calibration set and task logs with true forces."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..axes import FORCE_COLUMNS, VOLTAGE_COLUMNS
+from ..config import Settings
+from ..errors import InputError, where
+from .files import natural_key
+from .text import HEADER_ROW, read_csv_text, read_header, require_columns, to_numbers
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+
+def calibration_files(path: str | Path) -> list[Path]:
+    """The CSV files of a calibration set: a directory (sorted naturally) or one file."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: calibration data not found")
+    if path.is_dir():
+        files = sorted(
+            (p for p in path.iterdir()
+             if p.suffix.lower() == ".csv" and p.is_file() and not p.name.startswith(".")),
+            key=lambda p: natural_key(p.name),
+        )
+        if not files:
+            raise InputError(f"{path}: directory holds no .csv files")
+        return files
+    return [path]
+
+
+def hidden_files(path: str | Path) -> list[Path]:
+    """Hidden .csv files a directory holds (macOS ``._rep1.csv``, editor backups)."""
+    path = Path(path)
+    if not path.is_dir():
+        return []
+    return sorted(p for p in path.iterdir() if p.name.startswith(".") and p.suffix.lower() == ".csv")
+
+
+def read_calibration_table(path: str | Path, settings: Settings) -> tuple[pd.DataFrame, list[str]]:
+    """Read a calibration set into one long table in file order.
+
+    Returns the table (columns ``repetition, axis, file, row, fx..uz`` with forces
+    in N and voltages in V after the config's ``scale``; ``axis`` is empty when the
+    files have no axis column) and the list of skipped blank rows.
+    """
+    import pandas as pd
+
+    files = calibration_files(path)
+    single = len(files) == 1 and not Path(path).is_dir()
+    frames, skipped = [], []
+    cols = settings.columns
+    numeric = {c: cols[c] for c in (*FORCE_COLUMNS, *VOLTAGE_COLUMNS)}
+    for rep_index, f in enumerate(files, start=1):
+        header = read_header(f, settings)
+        if {"ux_raw", "uy_raw", "uz_raw"} <= set(header):
+            # the tidy CSV of `ingest -o`: zero-corrected already, and every repetition
+            raise InputError(
+                f"{where(f, HEADER_ROW)}: this is the output of 'fsdecouple ingest -o' (it has "
+                "ux_raw), not a repetition; move it out of the calibration directory"
+            )
+        require_columns(header, numeric, f)
+        if single:
+            require_columns(header, {"repetition": cols["repetition"]}, f)
+        raw = read_csv_text(f, settings)
+        if raw.empty:
+            raise InputError(f"{f}: header only, no data rows")
+        rows = np.arange(len(raw)) + HEADER_ROW + 1
+        used = [cols[c] for c in numeric] + (
+            [cols["axis"]] if cols["axis"] in header else []
+        ) + ([cols["repetition"]] if single else [])
+        blank = np.logical_and.reduce([raw[c].str.strip().eq("").to_numpy() for c in used])
+        for r in rows[blank]:
+            skipped.append(f"{f}, row {r}: blank row skipped")
+        raw, rows = raw[~blank], rows[~blank]
+        if raw.empty:
+            raise InputError(f"{f}: header only, no data rows")
+        out = pd.DataFrame({"file": str(f), "row": rows})
+        if single:
+            reps = to_numbers(raw[cols["repetition"]], f, cols["repetition"], rows)
+            bad = (reps != np.round(reps)) | (reps < 1)
+            if bad.any():
+                i = int(np.argmax(bad))
+                raise InputError(
+                    f"{where(f, int(rows[i]), cols['repetition'])}: "
+                    f"{raw[cols['repetition']].iloc[i]!r} is not a repetition number (1, 2, ...)"
+                )
+            out["repetition"] = reps.astype(int)
+        else:
+            out["repetition"] = rep_index
+        if cols["axis"] in header:
+            axis = raw[cols["axis"]].str.strip().str.lower()
+            bad = ~axis.isin(["x", "y", "z"])
+            if bad.any():
+                i = int(np.argmax(bad.to_numpy()))
+                raise InputError(
+                    f"{where(f, int(rows[i]), cols['axis'])}: "
+                    f"{raw[cols['axis']].iloc[i]!r}, expected x, y or z"
+                )
+            out["axis"] = axis.to_numpy()
+        else:
+            out["axis"] = ""
+        for canonical, name in numeric.items():
+            values = to_numbers(raw[name], f, name, rows, settings.decimal)
+            # check each cell before scaling so the message quotes the file's value
+            out[canonical] = values * settings.scale[canonical]
+        frames.append(out)
+    table = pd.concat(frames, ignore_index=True)
+    # training order is file order: repetition, then row (stable)
+    table = table.sort_values(["repetition"], kind="stable").reset_index(drop=True)
+    return table[["repetition", "axis", "file", "row", *FORCE_COLUMNS, *VOLTAGE_COLUMNS]], skipped
+
+
+
+def read_task_log(
+    voltages: str | Path, forces: str | Path, settings: Settings
+) -> tuple[np.ndarray, np.ndarray]:
+    """A voltage log and its true forces, as ``simulate`` writes them, row for row.
+
+    Returns ``(u, f)``, shape (n, 3) each, in V and N (config columns and scales).
+    """
+    out = []
+    for path, canon in ((Path(voltages), VOLTAGE_COLUMNS), (Path(forces), FORCE_COLUMNS)):
+        header = read_header(path, settings)
+        names = {c: settings.columns[c] for c in canon}
+        require_columns(header, names, path)
+        raw = read_csv_text(path, settings)
+        if raw.empty:
+            raise InputError(f"{path}: header only, no data rows")
+        out.append(np.column_stack([
+            to_numbers(raw[n], path, n, HEADER_ROW + 1, settings.decimal) * settings.scale[c]
+            for c, n in names.items()
+        ]))
+    u, f = out
+    if len(u) != len(f):
+        raise InputError(
+            f"{forces}: {len(f)} rows, but {voltages} has {len(u)}; the true forces must "
+            "match the voltage log row for row"
+        )
+    return u, f

@@ -1,0 +1,183 @@
+"""Text tables: the header row, pandas reads that never guess, numbers from cells.
+
+Every reader turns a problem into an :class:`~fsdecouple.errors.InputError` that
+names the file, the row (header = row 1, as a spreadsheet counts) and the column.
+"""
+
+from __future__ import annotations
+
+import csv
+import difflib
+import re
+import warnings
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..config import Settings
+from ..errors import InputError, where
+
+if TYPE_CHECKING:  # pandas loads on first use: apply and show never need it
+    import pandas as pd
+
+HEADER_ROW = 1  # data row i (0-based) is spreadsheet row i + 2
+
+MAX_HEADER_CHARS = 1 << 20
+
+
+def read_header(path: Path, settings: Settings) -> list[str]:
+    """The header row as written, refusing empty files and duplicated names."""
+    try:
+        with open(path, encoding="utf-8-sig", newline="") as fh:
+            first = fh.readline(MAX_HEADER_CHARS)  # any line end: \n, \r\n or \r
+            more = bool(fh.read(1))
+    except FileNotFoundError:
+        raise InputError(f"{path}: file not found") from None
+    except IsADirectoryError:
+        raise InputError(f"{path}: is a directory, expected a CSV file") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a UTF-8 text file") from None
+    except OSError as err:
+        raise InputError(f"{path}: cannot read ({err.strerror})") from None
+    if first.endswith("\r") and not first.endswith("\r\n"):
+        raise InputError(
+            f"{where(path, HEADER_ROW)}: lines end with a carriage return only (old Mac line "
+            "ends); convert them to \\n or \\r\\n"
+        )
+    if more and not first.endswith("\n"):
+        raise InputError(f"{where(path, HEADER_ROW)}: no line end in {MAX_HEADER_CHARS:,} "
+                         "characters; not a CSV file?")
+    if not first.strip():
+        if path.stat().st_size > len(first.encode("utf-8")):
+            raise InputError(f"{where(path, HEADER_ROW)}: blank, expected the header row")
+        raise InputError(f"{path}: file is empty (no header row)")
+    names = [n.strip() for n in next(csv.reader([first], delimiter=settings.sep))]
+    seen: set[str] = set()
+    for i, n in enumerate(names):
+        if n in seen:
+            raise InputError(f"{where(path, HEADER_ROW, n)}: duplicated column name")
+        seen.add(n)
+        if not n:
+            raise InputError(f"{where(path, HEADER_ROW)}: column {i + 1} has no name")
+    if settings.sep != ";" and any(";" in n for n in names):
+        raise InputError(
+            f"{where(path, HEADER_ROW)}: looks like a ';'-separated CSV; set "
+            "csv: {sep: ';', decimal: ','} in the config to read it"
+        )
+    return names
+
+
+def _strict(read):
+    # only around pandas' own work, not across a generator's yields
+    import pandas as pd
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", pd.errors.ParserWarning)
+        return read()
+
+
+def csv_chunks(source, path: Path, settings: Settings, **kw):
+    """``pandas.read_csv`` of strings that never guesses, as an iterator of frames.
+
+    Blank lines are kept (row numbers stay true) and the first column is never
+    taken as an index: pandas does that silently when the first data row has one
+    field more than the header, which is how ``1,5`` in a comma file looks.
+    """
+    import pandas as pd
+
+    try:
+        reader = _strict(lambda: pd.read_csv(
+            source, sep=settings.sep, dtype=str, keep_default_na=False, na_filter=False,
+            skip_blank_lines=False, encoding="utf-8-sig", index_col=False, **kw,
+        ))
+        if isinstance(reader, pd.DataFrame):
+            yield reader
+            return
+        with reader:
+            while (chunk := _strict(lambda: next(reader, None))) is not None:
+                yield chunk
+    except pd.errors.EmptyDataError:
+        raise InputError(f"{path}: file is empty (no header row)") from None
+    except pd.errors.ParserWarning:
+        raise InputError(
+            f"{where(path, HEADER_ROW + 1)}: more fields than the header's "
+            f"(a decimal comma in a '{settings.sep}'-separated file?)"
+        ) from None
+    except pd.errors.ParserError as err:
+        raise InputError(f"{path}: {parser_message(err)}") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a UTF-8 text file") from None
+
+
+def read_csv_text(path: Path, settings: Settings, **kw) -> pd.DataFrame:
+    """Read a whole CSV as strings, blank lines kept so that row numbers stay true."""
+    df = next(csv_chunks(path, path, settings, skipinitialspace=True, **kw))
+    df.columns = [str(c).strip() for c in df.columns]
+    return df
+
+
+def parser_message(err: Exception) -> str:
+    text = str(err)
+    m = re.search(r"Expected (\d+) fields in line (\d+), saw (\d+)", text)
+    if m:
+        return (
+            f"row {m.group(2)}: {m.group(3)} fields, expected {m.group(1)} as in the header "
+            "(a decimal comma, or a separator inside a value?)"
+        )
+    m = re.search(r"EOF inside string starting at row (\d+)", text)
+    if m:  # pandas counts lines from 0 here
+        return f"row {int(m.group(1)) + 1}: a quote (\") opens a value that never closes"
+    return f"cannot parse CSV ({text.strip().splitlines()[-1]})"
+
+
+# Cells of a log that mean "no sample" (a missing voltage, not an error): these
+# spellings in any case, with or without a sign (pyarrow reads "NAN" and "-nan"
+# as NaN, so the line-by-line reader must agree).  MISSING_CELLS are the exact
+# spellings pyarrow is told are null.
+MISSING_WORDS = frozenset({"", "nan", "na", "n/a", "null"})
+MISSING_CELLS = ("", "nan", "NaN", "NA", "N/A", "null")
+
+
+def to_numbers(
+    values, path: Path, column: str, rows, decimal: str = ".", *, allow_missing: bool = False
+) -> np.ndarray:
+    """Convert a column of strings to finite floats, or name the first bad cell.
+
+    ``rows``: the spreadsheet row of each value, or (an int) of the first value
+    when the rows are consecutive.  ``allow_missing``: empty cells and the words
+    of :data:`MISSING_WORDS` become NaN (a log's missing samples) instead of an
+    error (a calibration point must have every number).  Infinities are errors.
+    """
+    import pandas as pd
+
+    values = pd.Series(values, dtype=object) if not isinstance(values, pd.Series) else values
+    text = values.astype(str).str.strip()
+    if decimal != ".":
+        text = text.str.replace(decimal, ".", regex=False)
+    nums = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
+    bad = ~np.isfinite(nums)
+    if allow_missing and bad.any():
+        missing = text.str.lower().str.lstrip("+-").isin(MISSING_WORDS).to_numpy()
+        bad &= ~(np.isnan(nums) & missing)
+    if bad.any():
+        i = int(np.argmax(bad))
+        row = int(rows[i]) if np.ndim(rows) else int(rows) + i
+        cell = str(values.iloc[i]).strip()
+        what = "is empty" if cell == "" else f"is {cell!r}"
+        raise InputError(f"{where(path, row, column)}: {what}, expected a finite number")
+    return nums
+
+
+
+def require_columns(header: list[str], wanted: dict[str, str], path: Path) -> None:
+    for canonical, name in wanted.items():
+        if name not in header:
+            hint = f" (config maps '{canonical}' to it)" if name != canonical else ""
+            lower = {h.lower(): h for h in header}
+            close = [lower[m] for m in difflib.get_close_matches(name.lower(), list(lower), n=1)]
+            mean = f" (did you mean '{close[0]}'? map it under columns: in the config)" if close else ""
+            raise InputError(
+                f"{where(path, HEADER_ROW)}: missing column '{name}'{hint}{mean}; "
+                f"found {', '.join(header) or 'no columns'}"
+            )

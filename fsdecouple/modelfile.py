@@ -1,0 +1,213 @@
+"""The model file: one JSON document, versioned apart from the package, with a digest.
+
+Like skops, the file carries ``format`` and a ``format_version`` of its own and
+refuses files from a newer format; a SHA-256 over its canonical content catches
+hand edits and corrupted transfers.  Written sorted, without NaN, atomically.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import __version__
+from .axes import AXES, CHI_NAMES
+from .config import settings_from_dict
+from .errors import ModelFileError
+from .iotools.files import atomic_write
+from .model import Chi, CouplingErrorModel, FitReport
+
+FORMAT = "fsdecouple.model"
+FORMAT_VERSION = 1
+
+
+def model_to_dict(model: CouplingErrorModel) -> dict[str, Any]:
+    """The model file's document, ``integrity`` digest included."""
+    doc = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "fsdecouple_version": __version__,
+        "created": model.created,
+        "sensor": model.settings.sensor,
+        "settings": model.settings.to_dict(),
+        "omega": {
+            axis: {"k": float(model.k[a]), "inverse": float(1.0 / model.k[a]),
+                   "r2": model.report.r2.get(axis) if model.report else None}
+            for a, axis in enumerate(AXES)
+        },
+        "chi": {name: c.to_dict() for name, c in model.chi.items()},
+        "provenance": model.provenance,
+        "report": model.report.to_dict() if model.report else {},
+    }
+    doc["integrity"] = {"algorithm": "sha256", "digest": content_digest(doc)}
+    return doc
+
+
+def save_model(model: CouplingErrorModel, path: str | Path, *, force: bool = True) -> None:
+    """Write the model file atomically (sorted keys, no NaN)."""
+    text = json.dumps(model_to_dict(model), indent=1, sort_keys=True, allow_nan=False)
+    with atomic_write(path, force=force) as fh:
+        fh.write(text + "\n")
+
+
+def content_digest(doc: dict[str, Any]) -> str:
+    """SHA-256 of the canonical JSON of everything but ``integrity`` and ``created``.
+
+    Leaving out the creation time makes refits of the same data byte-identical
+    in everything but that one field.
+    """
+    body = {k: v for k, v in doc.items() if k not in ("integrity", "created")}
+    canonical = json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(canonical.encode("utf-8")).hexdigest()
+
+
+def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise ModelFileError(f"{source}: not an fsdecouple model file (format is not '{FORMAT}')")
+    version = doc.get("format_version")
+    if not isinstance(version, int) or isinstance(version, bool):
+        raise ModelFileError(
+            f"{source}: format_version is missing or not a whole number ({version!r})"
+        )
+    if version < 1:
+        raise ModelFileError(f"{source}: format_version {version} is unknown (versions start at 1)")
+    if version > FORMAT_VERSION:
+        raise ModelFileError(
+            f"{source}: format_version {version} was written by a newer fsdecouple "
+            f"({doc.get('fsdecouple_version', '?')}); this one reads up to {FORMAT_VERSION}"
+        )
+    integrity = doc.get("integrity")
+    digest = integrity.get("digest") if isinstance(integrity, dict) else None
+    if not isinstance(digest, str):
+        raise ModelFileError(
+            f"{source}: has no integrity digest, so it cannot be trusted (written by hand "
+            "or by another tool?); refit the model"
+        )
+    try:
+        expected = content_digest(doc)
+    except (TypeError, ValueError) as err:  # NaN, inf or non-JSON values in a dict
+        raise ModelFileError(f"{source}: malformed model file ({err})") from None
+    if digest != expected:
+        raise ModelFileError(
+            f"{source}: integrity check failed: the content does not match its SHA-256 "
+            "digest (edited by hand or corrupted); refit the model"
+        )
+    try:
+        settings = settings_from_dict(_settings_yaml_form(doc["settings"]), f"{source}: settings")
+        k = np.array([float(doc["omega"][a]["k"]) for a in AXES])
+        chi = {}
+        for name in CHI_NAMES:
+            if name not in doc["chi"]:
+                raise ModelFileError(f"{source}: malformed model file (chi '{name}' is missing)")
+            try:
+                chi[name] = Chi.from_dict(name, doc["chi"][name])
+            except (KeyError, TypeError, ValueError) as err:
+                raise ModelFileError(
+                    f"{source}: malformed model file (chi '{name}': {err})"
+                ) from None
+    except (KeyError, TypeError, ValueError) as err:
+        raise ModelFileError(f"{source}: malformed model file ({type(err).__name__}: {err})") from None
+    bad = [a for a, v in zip(AXES, k, strict=True) if not (np.isfinite(v) and v != 0.0)]
+    if bad:
+        raise ModelFileError(
+            f"{source}: omega {bad[0]}: slope k = {float(k[AXES.index(bad[0])])!r}, expected a finite "
+            "non-zero number"
+        )
+    report = doc.get("report")
+    _check_report(report, source)
+    return CouplingErrorModel(
+        settings, k, chi, FitReport.from_dict(report), doc.get("provenance", {}), doc.get("created", "")
+    )
+
+
+def _check_report(report: Any, source: str) -> None:
+    """The fit figures ``show`` prints: per-axis numbers and a list of warnings."""
+    def number(v):
+        return isinstance(v, int | float) and not isinstance(v, bool)
+
+    if not isinstance(report, dict):
+        raise ModelFileError(f"{source}: malformed model file (report is not a mapping)")
+    for key in ("r2", "n_points", "gamma_before", "gamma_after"):
+        table = report.get(key)
+        if not (isinstance(table, dict) and all(number(table.get(a)) for a in AXES)):
+            raise ModelFileError(
+                f"{source}: malformed model file (report: {key} needs a number per axis)"
+            )
+    warnings = report.get("warnings", [])
+    if not (isinstance(warnings, list) and all(isinstance(w, str) for w in warnings)):
+        raise ModelFileError(f"{source}: malformed model file (report: warnings is not a list of text)")
+
+
+def _settings_yaml_form(d: dict[str, Any]) -> dict[str, Any]:
+    """Settings.to_dict() output back into the YAML config's shape."""
+    d = dict(d)
+    svr = dict(d.pop("svr"))
+    return {**d, "svr": svr}
+
+
+class _NonFinite(ValueError):
+    pass
+
+
+class _DuplicateKey(ValueError):
+    pass
+
+
+def _unique_keys(pairs):
+    # the digest covers the parsed document, so a second, shadowed key would
+    # pass it while showing a reader a value the model does not use
+    doc = dict(pairs)
+    if len(doc) != len(pairs):
+        seen = set()
+        raise _DuplicateKey(next(k for k, _ in pairs if k in seen or seen.add(k)))
+    return doc
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not np.isfinite(value):  # 1e999 parses to inf
+        raise _NonFinite(text)
+    return value
+
+
+def _refuse_constant(name: str):
+    # json accepts NaN/Infinity, which the writer never produces (allow_nan=False)
+    raise _NonFinite(name)
+
+
+def load_model(path: str | Path) -> CouplingErrorModel:
+    """Read and verify a model file."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")  # a BOM from a Windows editor is not content
+    except FileNotFoundError:
+        raise ModelFileError(f"{path}: model file not found") from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise ModelFileError(f"{path}: cannot read model file ({err})") from None
+    try:
+        doc = json.loads(
+            text, parse_constant=_refuse_constant, parse_float=_finite_float,
+            object_pairs_hook=_unique_keys,
+        )
+    except json.JSONDecodeError as err:
+        raise ModelFileError(
+            f"{path}, row {err.lineno}, column {err.colno}: not valid JSON (truncated?)"
+        ) from None
+    except _DuplicateKey as err:
+        raise ModelFileError(
+            f"{path}: key '{err.args[0]}' appears twice in one object (edited by hand?); "
+            "json would keep the last one silently"
+        ) from None
+    except _NonFinite as err:
+        raise ModelFileError(
+            f"{path}: holds {err.args[0]!r}; NaN and infinity are not allowed in a model file"
+        ) from None
+    except RecursionError:
+        raise ModelFileError(f"{path}: not a model file (JSON too deeply nested)") from None
+    except ValueError as err:  # e.g. an integer of more than 4300 digits
+        raise ModelFileError(f"{path}: not a model file ({err})") from None
+    return model_from_dict(doc, str(path))

@@ -1,0 +1,26 @@
+"""Threads: fsdecouple parallelises over whole jobs, and keeps BLAS and OpenMP to one thread.
+
+Every matrix here is small (hundreds of rows) and fsdecouple runs whole jobs (the
+SVRs of a fit, the models of cv, the blocks of a log) on its own threads.
+OpenBLAS's and OpenMP's worker threads would only compete with those threads for
+the cores, and their spin-waiting made cv up to 10x slower on a loaded 2-core
+machine; a multi-threaded BLAS also changes the last digits of a least-squares
+solve with the thread count.  So the heavy calls run inside
+:func:`single_threaded_libraries`, which limits the native thread pools for its
+duration only (threadpoolctl, as scikit-learn does) instead of setting
+``OMP_NUM_THREADS`` for the whole process.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+
+
+@contextlib.contextmanager
+def single_threaded_libraries() -> Iterator[None]:
+    """BLAS and OpenMP pools at one thread inside the block, as they were after it."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1):
+        yield
