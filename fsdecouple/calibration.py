@@ -12,8 +12,7 @@ import pandas as pd
 from .axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .config import Settings
 from .errors import InputError
-from .iotools.calibration import calibration_files, hidden_files, read_calibration_table
-from .iotools.files import sha256_file
+from .iotools.calibration import read_calibration_table
 from .zero import assign_sweeps, zero_correct
 
 
@@ -148,10 +147,9 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=()) ->
 
 def load_calibration(path: str | Path, settings: Settings) -> CalibrationSet:
     """Read, validate and zero-correct a calibration set (a directory or one CSV)."""
-    table, skipped = read_calibration_table(path, settings)
-    files = tuple((str(f), sha256_file(f)) for f in calibration_files(path))
-    cs = from_table(table, settings, files, skipped)
-    hidden = tuple(f"{f}: hidden file, not read as a repetition" for f in hidden_files(path))
+    read = read_calibration_table(path, settings)
+    cs = from_table(read.table, settings, read.files, read.skipped)
+    hidden = tuple(f"{f}: hidden file, not read as a repetition" for f in read.hidden)
     return replace(cs, warnings=hidden + cs.warnings) if hidden else cs
 
 

@@ -30,7 +30,6 @@ from . import __version__
 from .config import load_config
 from .console import apply_lines, apply_warnings, fit_tables, ingest_tables
 from .errors import FsdecoupleError, InputError
-from .iotools.calibration import calibration_files
 from .iotools.files import atomic_write, check_output, refuse_overwriting_input
 from .modelfile import load_model, save_model
 
@@ -125,8 +124,9 @@ def ingest(
         settings = load_config(config)
         if output is not None:
             check_output(output, force=force)
-            refuse_overwriting_input(output, [*calibration_files(calib), *_given(config)])
         cs = load_calibration(calib, settings)
+        if output is not None:
+            refuse_overwriting_input(output, [*_read(cs), *_given(config)])
         summary = ingest_summary(cs, settings)
         if output is not None:
             with atomic_write(output, force=force) as fh:
@@ -158,6 +158,7 @@ def fit(
     json_out: JsonOpt = False,
 ) -> None:
     """Fit the coupling error model and write it as one JSON file."""
+    from .calibration import load_calibration
     from .fit import fit as fit_model
 
     with user_errors():
@@ -166,8 +167,9 @@ def fit(
             scaling=scaling,
         )
         check_output(output, force=force)
-        refuse_overwriting_input(output, [*calibration_files(calib), *_given(config)])
-        model = fit_model(calib, settings)
+        cs = load_calibration(calib, settings)
+        refuse_overwriting_input(output, [*_read(cs), *_given(config)])
+        model = fit_model(cs, settings)
         save_model(model, output, force=force)
     if json_out:
         print_json({"model": str(output), **model.report.to_dict()})
@@ -226,7 +228,7 @@ def report(
             if png.exists() and not png.is_dir():
                 raise InputError(f"--png {png}: exists and is not a directory")
             png.mkdir(parents=True, exist_ok=True)
-        inputs = [model_file, *_given(cv), *(calibration_files(calib) if calib else [])]
+        inputs = [model_file, *_given(cv), *(_read(cs) if cs is not None else [])]
         check_output(output, force=force)
         refuse_overwriting_input(output, inputs)
         result = build_report(model, cv_doc, cs)
@@ -245,6 +247,11 @@ def report(
     if png is not None:
         console.print(f"figures written to {png}/: " + ", ".join(f"{n}.png" for n in result.figures),
                       highlight=False)
+
+
+def _read(calib) -> list[Path]:
+    """The files a calibration set was read from."""
+    return [Path(f) for f, _ in calib.files]
 
 
 def _given(*paths):
@@ -348,7 +355,7 @@ def cv(
     json_out: JsonOpt = False,
 ) -> None:
     """Cross-validate the model against the baselines of Section 4 (Tables 1, 3, 4, 5)."""
-    from .calibration import GrossError
+    from .calibration import GrossError, load_calibration
     from .console import cv_renderables
     from .cv import parse_folds, run_cv
 
@@ -362,12 +369,13 @@ def cv(
             raise InputError(f"--workers {workers}: needs at least 1")
         if output is not None:
             check_output(output, force=force)
-            refuse_overwriting_input(output, [*calibration_files(calib), *_given(config, task,
-                                                                                 task_forces)])
+        cs = load_calibration(calib, settings)
+        if output is not None:
+            refuse_overwriting_input(output, [*_read(cs), *_given(config, task, task_forces)])
         with _bar(MofNCompleteColumn()) as bar:
             job = bar.add_task("training", total=None)
             doc = run_cv(
-                calib, settings, folds=parse_folds(folds) if folds is not None else None,
+                cs, settings, folds=parse_folds(folds) if folds is not None else None,
                 task=(task, task_forces) if task is not None else None, task_tare=task_tare,
                 gross_error=GrossError.parse(gross_error) if gross_error else None,
                 max_gamma=max_gamma, workers=workers, repeats=repeats,

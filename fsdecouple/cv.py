@@ -222,10 +222,9 @@ def run_cv(
 def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, workers, repeats,
             progress) -> dict[str, Any]:
     settings = settings or Settings()
-    calib_path = None
     if not isinstance(calib, CalibrationSet):
-        calib_path = str(calib)
         calib = load_calibration(calib, settings)
+    calib_path = calib.source
     reps = calib.repetitions
     if folds is None:
         if len(reps) < HELD_OUT + 1:
@@ -270,28 +269,19 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
     points: list[dict] = []
     records = _score(tests, forces, settings, points)
 
-    # Table 4: each method established again, sequentially and alone, `repeats` times
+    # Table 4: a sample of the models established again, sequentially and alone:
+    # each method on round 1's training set, `repeats` times.  (That parallel
+    # training gives the same models as sequential training is proven by the
+    # tests, not re-checked here at the cost of training everything twice.)
     establish_times: dict[str, list[float]] = {m: [] for m in METHODS}
-    passes = []
-    seq_models = {}
     for _ in range(repeats):
-        t_pass = time.perf_counter()
-        for key, method, train in jobs + gross_jobs:  # the same jobs as the parallel run
+        for _key, method, train in jobs[:len(METHODS)]:  # round 1, one job per method
             t0 = time.perf_counter()
-            seq_models[key] = establish(method, train, settings, workers=1)
-            if key[0] != "gross":
-                establish_times[method].append(time.perf_counter() - t0)
-        passes.append(time.perf_counter() - t_pass)
-    sequential = float(np.median(passes))
-    # parallel training must not change a single bit of any decoupled force
-    identical = all(
-        all(np.array_equal(a[k], b[k]) for k in a)
-        for a, b in [
-            (_decouple_held_out(tests, folds, _models_for(all_models, g)),
-             _decouple_held_out(tests, folds, _models_for(seq_models, g)))
-            for g in ([False, True] if gross_jobs else [False])
-        ]
-    )
+            establish(method, train, settings, workers=1)
+            establish_times[method].append(time.perf_counter() - t0)
+    # the whole training run done sequentially, estimated from the sample
+    count = {m: sum(1 for _, jm, _ in jobs + gross_jobs if jm == m) for m in METHODS}
+    sequential = float(sum(np.median(establish_times[m]) * count[m] for m in METHODS))
     first_test = calib.subset(folds[0]).voltages
     vectors = [first_test[i:i + 1] for i in range(min(TIMING_VECTORS, len(first_test)))]
     timing_records = []
@@ -330,13 +320,14 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
         "timing": {
             "records": timing_records,
             "repeats": repeats,
-            "establish": "each method fitted alone, sequentially, once per round and repeat "
-                         "after the parallel run; median over rounds and repeats",
+            "establish": "each method fitted alone, sequentially, on round 1's training set, "
+                         "once per repeat after the parallel run; median over repeats",
             "decouple": f"{len(vectors)} single-vector calls on round 1's model; median over "
                         "repeats of the mean time per call",
             "parallel": {"workers": workers, "wall_seconds": wall, "sequential_seconds": sequential,
-                         "speedup": sequential / wall if wall > 0 else None,
-                         "identical": identical},
+                         "sequential": "estimated: median establish time of each method x its "
+                                       "number of training jobs",
+                         "speedup": sequential / wall if wall > 0 else None},
         },
         "checks": [{**c.to_dict(), "round": r} for r in trains
                    for c in assumption_checks(models[(r, "svr")])],

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import hashlib
+import io
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -17,47 +20,74 @@ if TYPE_CHECKING:
     import pandas as pd
 
 
-def calibration_files(path: str | Path) -> list[Path]:
-    """The CSV files of a calibration set: a directory (sorted naturally) or one file."""
+def list_calibration(path: str | Path) -> tuple[list[Path], list[Path]]:
+    """The CSV files of a calibration set, and the hidden CSVs it skips, from one listing.
+
+    A directory's files are sorted naturally (``rep2`` before ``rep10``); hidden
+    ones (macOS ``._rep1.csv``, editor backups) are returned apart.  A file is a
+    set of its own.
+    """
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: calibration data not found")
-    if path.is_dir():
-        files = sorted(
-            (p for p in path.iterdir()
-             if p.suffix.lower() == ".csv" and p.is_file() and not p.name.startswith(".")),
-            key=lambda p: natural_key(p.name),
-        )
-        if not files:
-            raise InputError(f"{path}: directory holds no .csv files")
-        return files
-    return [path]
-
-
-def hidden_files(path: str | Path) -> list[Path]:
-    """Hidden .csv files a directory holds (macOS ``._rep1.csv``, editor backups)."""
-    path = Path(path)
     if not path.is_dir():
-        return []
-    return sorted(p for p in path.iterdir() if p.name.startswith(".") and p.suffix.lower() == ".csv")
+        return [path], []
+    entries = [p for p in path.iterdir() if p.suffix.lower() == ".csv"]
+    files = sorted((p for p in entries if not p.name.startswith(".") and p.is_file()),
+                   key=lambda p: natural_key(p.name))
+    if not files:
+        raise InputError(f"{path}: directory holds no .csv files")
+    return files, sorted(p for p in entries if p.name.startswith("."))
 
 
-def read_calibration_table(path: str | Path, settings: Settings) -> tuple[pd.DataFrame, list[str]]:
+def calibration_files(path: str | Path) -> list[Path]:
+    """The CSV files of a calibration set: a directory (sorted naturally) or one file."""
+    return list_calibration(path)[0]
+
+
+@dataclass(frozen=True)
+class CalibrationTable:
+    """A calibration set as read: one long table in file order, and what was seen on the way.
+
+    ``table`` has columns ``repetition, axis, file, row, fx..uz`` with forces in N
+    and voltages in V after the config's ``scale``; ``axis`` is empty when the
+    files have no axis column.
+    """
+
+    table: pd.DataFrame
+    skipped: list[str]
+    files: tuple[tuple[str, str], ...]  # (path, SHA-256) of every file read
+    hidden: list[Path]
+
+
+def _read_bytes(f: Path) -> bytes:
+    try:
+        return f.read_bytes()
+    except FileNotFoundError:
+        raise InputError(f"{f}: file not found") from None
+    except IsADirectoryError:
+        raise InputError(f"{f}: is a directory, expected a CSV file") from None
+    except OSError as err:
+        raise InputError(f"{f}: cannot read ({err.strerror})") from None
+
+
+def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationTable:
     """Read a calibration set into one long table in file order.
 
-    Returns the table (columns ``repetition, axis, file, row, fx..uz`` with forces
-    in N and voltages in V after the config's ``scale``; ``axis`` is empty when the
-    files have no axis column) and the list of skipped blank rows.
+    The directory is listed once and each file read once (its digest, header
+    and cells all come from the same bytes).
     """
     import pandas as pd
 
-    files = calibration_files(path)
+    files, hidden = list_calibration(path)
     single = len(files) == 1 and not Path(path).is_dir()
-    frames, skipped = [], []
+    frames, skipped, digests = [], [], []
     cols = settings.columns
     numeric = {c: cols[c] for c in (*FORCE_COLUMNS, *VOLTAGE_COLUMNS)}
     for rep_index, f in enumerate(files, start=1):
-        header = read_header(f, settings)
+        data = _read_bytes(f)
+        digests.append((str(f), hashlib.sha256(data).hexdigest()))
+        header = read_header(f, settings, data)
         if {"ux_raw", "uy_raw", "uz_raw"} <= set(header):
             # the tidy CSV of `ingest -o`: zero-corrected already, and every repetition
             raise InputError(
@@ -67,7 +97,7 @@ def read_calibration_table(path: str | Path, settings: Settings) -> tuple[pd.Dat
         require_columns(header, numeric, f)
         if single:
             require_columns(header, {"repetition": cols["repetition"]}, f)
-        raw = read_csv_text(f, settings)
+        raw = read_csv_text(io.BytesIO(data), settings, path=f)
         if raw.empty:
             raise InputError(f"{f}: header only, no data rows")
         rows = np.arange(len(raw)) + HEADER_ROW + 1
@@ -113,7 +143,8 @@ def read_calibration_table(path: str | Path, settings: Settings) -> tuple[pd.Dat
     table = pd.concat(frames, ignore_index=True)
     # training order is file order: repetition, then row (stable)
     table = table.sort_values(["repetition"], kind="stable").reset_index(drop=True)
-    return table[["repetition", "axis", "file", "row", *FORCE_COLUMNS, *VOLTAGE_COLUMNS]], skipped
+    table = table[["repetition", "axis", "file", "row", *FORCE_COLUMNS, *VOLTAGE_COLUMNS]]
+    return CalibrationTable(table, skipped, tuple(digests), hidden)
 
 
 

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import csv
 import difflib
+import io
+import os
 import re
 import warnings
 from pathlib import Path
@@ -26,12 +28,23 @@ HEADER_ROW = 1  # data row i (0-based) is spreadsheet row i + 2
 MAX_HEADER_CHARS = 1 << 20
 
 
-def read_header(path: Path, settings: Settings) -> list[str]:
-    """The header row as written, refusing empty files and duplicated names."""
+def read_header(path: Path, settings: Settings, data: bytes | None = None) -> list[str]:
+    """The header row as written, refusing empty files and duplicated names.
+
+    ``data``: the file's bytes when the caller has read them already (a file is
+    read once per command).
+    """
     try:
-        with open(path, encoding="utf-8-sig", newline="") as fh:
-            first = fh.readline(MAX_HEADER_CHARS)  # any line end: \n, \r\n or \r
+        if data is None:
+            with open(path, encoding="utf-8-sig", newline="") as fh:
+                first = fh.readline(MAX_HEADER_CHARS)  # any line end: \n, \r\n or \r
+                more = bool(fh.read(1))
+                size = os.fstat(fh.fileno()).st_size
+        else:
+            fh = io.TextIOWrapper(io.BytesIO(data), encoding="utf-8-sig", newline="")
+            first = fh.readline(MAX_HEADER_CHARS)
             more = bool(fh.read(1))
+            size = len(data)
     except FileNotFoundError:
         raise InputError(f"{path}: file not found") from None
     except IsADirectoryError:
@@ -49,7 +62,7 @@ def read_header(path: Path, settings: Settings) -> list[str]:
         raise InputError(f"{where(path, HEADER_ROW)}: no line end in {MAX_HEADER_CHARS:,} "
                          "characters; not a CSV file?")
     if not first.strip():
-        if path.stat().st_size > len(first.encode("utf-8")):
+        if size > len(first.encode("utf-8")):
             raise InputError(f"{where(path, HEADER_ROW)}: blank, expected the header row")
         raise InputError(f"{path}: file is empty (no header row)")
     names = [n.strip() for n in next(csv.reader([first], delimiter=settings.sep))]
@@ -110,9 +123,13 @@ def csv_chunks(source, path: Path, settings: Settings, **kw):
         raise InputError(f"{path}: not a UTF-8 text file") from None
 
 
-def read_csv_text(path: Path, settings: Settings, **kw) -> pd.DataFrame:
-    """Read a whole CSV as strings, blank lines kept so that row numbers stay true."""
-    df = next(csv_chunks(path, path, settings, skipinitialspace=True, **kw))
+def read_csv_text(source, settings: Settings, *, path: Path | None = None, **kw) -> pd.DataFrame:
+    """Read a whole CSV (a path, or a buffer read from ``path``) as strings.
+
+    Blank lines are kept so that row numbers stay true.
+    """
+    path = Path(source) if path is None else path
+    df = next(csv_chunks(source, path, settings, skipinitialspace=True, **kw))
     df.columns = [str(c).strip() for c in df.columns]
     return df
 
