@@ -9,6 +9,7 @@ decoupled keep empty forces and are counted.  CSV output uses the log's dialect
 
 from __future__ import annotations
 
+import itertools
 import os
 import queue
 import threading
@@ -16,7 +17,6 @@ from collections import deque
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -27,9 +27,9 @@ from .axes import FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .config import Settings
 from .errors import InputError, where
 from .iotools.files import atomic_write, refuse_overwriting_input
-from .iotools.logs import Block, CsvParser, csv_bodies, csv_eol, is_parquet, parquet_blocks, parquet_header
+from .iotools.logs import Block, LogFile, is_parquet
 from .iotools.sinks import CsvSink, ParquetSink, force_decimals
-from .iotools.text import HEADER_ROW, read_header, require_columns
+from .iotools.text import HEADER_ROW, require_columns
 from .model import CouplingErrorModel
 from .zero import tare_offsets
 
@@ -108,9 +108,15 @@ def apply_file(
     settings = settings or model.settings
     if tare is not None and zero is not None:
         raise InputError("give either --tare or --zero, not both")
-    parquet_in = is_parquet(path)
-    header = parquet_header(path) if parquet_in else read_header(path, settings)
     refuse_overwriting_input(out, [path])
+    with LogFile(path, settings) as log:
+        return _apply(model, log, out, settings, tare, zero, force, chunk_rows, progress,
+                      workers, round_trip)
+
+
+def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, force, chunk_rows,
+           progress, workers, round_trip) -> ApplySummary:
+    path, header = log.path, log.header
     names = [settings.columns[c] for c in VOLTAGE_COLUMNS]
     require_columns(header, dict(zip(VOLTAGE_COLUMNS, names, strict=True)), path)
     clash = [c for c in (*FORCE_COLUMNS, STATUS_COLUMN) if c in header]
@@ -120,27 +126,22 @@ def apply_file(
             f"'{clash[0]}', which the output would overwrite"
         )
     scale = np.array([settings.scale[c] for c in VOLTAGE_COLUMNS])
-
-    def jobs() -> Iterator[Callable[[], Block]]:
-        """Blocks to parse, in file order; CSV blocks are parsed by the workers."""
-        if parquet_in:
-            for b in parquet_blocks(path, names, settings, chunk_rows=chunk_rows):
-                yield lambda b=b: b
-            return
-        parse = CsvParser(path, header, names, settings, csv_eol(path), is_parquet(out))
-        for body in csv_bodies(path, chunk_rows=chunk_rows):
-            yield partial(parse, body)
-
+    jobs: Iterator[Callable[[], Block]] = log.blocks(names, chunk_rows=chunk_rows,
+                                                     want_table=is_parquet(out))
     summary = ApplySummary()
     if tare is not None:
-        head, n = [], 0
-        for job in jobs():
-            head.append(job().u[:tare - n] * scale)
+        # the tare rows are read once: their blocks are kept and decoupled first
+        head, kept, n = [], [], 0
+        for job in jobs:
+            block = job()
+            kept.append(lambda block=block: block)
+            head.append(block.u[:tare - n] * scale)
             n += len(head[-1])
             if n >= tare:
                 break
         summary.offsets = tare_offsets(np.concatenate(head) if head else np.empty((0, 3)), tare,
                                        source=path)
+        jobs = itertools.chain(kept, jobs)
     elif zero is not None:
         summary.offsets = np.asarray(zero, dtype=float)
     lo, hi = model.calibrated_range.T
@@ -156,7 +157,7 @@ def apply_file(
             sink = ParquetSink(fh, (STATUS_COLUMN,))
         else:
             decimals = None if round_trip else force_decimals(model.k)
-            sink = CsvSink(fh, header, None if parquet_in else _header_line(path), decimals,
+            sink = CsvSink(fh, header, None if log.parquet else log.header_line, decimals,
                            sep=settings.sep, decimal=settings.decimal, extra=(STATUS_COLUMN,))
 
         def work(job):
@@ -190,7 +191,7 @@ def apply_file(
 
         with ThreadPoolExecutor(workers) as pool:
             pending: deque = deque()
-            for job in _prefetch(jobs(), workers + 1):
+            for job in _prefetch(jobs, workers + 1):
                 pending.append(pool.submit(work, job))
                 while len(pending) > workers or (pending and pending[0].done()):
                     _collect(pending.popleft().result(), sink, summary, progress)
@@ -258,8 +259,3 @@ def _collect(result, sink, summary: ApplySummary, progress) -> None:
     summary.first_missing += [int(r) for r in first[:10 - len(summary.first_missing)]]
     if progress is not None:
         progress(done, total)
-
-
-def _header_line(path: Path) -> bytes:
-    with open(path, "rb") as fh:
-        return fh.readline().removeprefix(b"\xef\xbb\xbf").rstrip(b"\r\n")

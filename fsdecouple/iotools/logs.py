@@ -15,8 +15,12 @@ fault.
 from __future__ import annotations
 
 import csv
+import os
+import stat
+import sys
 from collections.abc import Iterator
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +31,7 @@ import pyarrow.parquet as pq
 
 from ..config import Settings
 from ..errors import InputError, where
-from .text import HEADER_ROW, MISSING_CELLS, to_numbers
+from .text import HEADER_ROW, MAX_HEADER_CHARS, MISSING_CELLS, read_header, to_numbers
 
 BLOCK_BYTES = 4 << 20  # ~100 K rows of a 4-column log; a block in flight costs ~15x this
 MAX_LINE_BYTES = 16 << 20  # a log line is tens of bytes
@@ -57,7 +61,7 @@ class Block:
     lines: pa.Array | None = None
     table: pa.Table | None = None
     done: int = 0  # progress: bytes (CSV) or rows (Parquet) consumed
-    total: int = 1
+    total: int | None = 1  # None: unknown (a pipe)
     joined: bool = False  # lines carry the line feed before them (see _lines)
     truncated: bool = False  # the last line of a log cut off mid-write
 
@@ -83,49 +87,122 @@ class CsvBody:
     first_row: int
     rows: int  # lines, blank ones included: every line is a row
     done: int
-    total: int
+    total: int | None  # bytes of the log; None for a pipe
     truncated: bool = False  # the log's last line, which has no line end
 
 
-def csv_bodies(path: Path, *, chunk_rows: int, block_bytes: int = BLOCK_BYTES,
-               max_line: int = MAX_LINE_BYTES) -> Iterator[CsvBody]:
+def csv_bodies(fh, path: Path, *, done: int, total: int | None, chunk_rows: int,
+               block_bytes: int = BLOCK_BYTES, max_line: int = MAX_LINE_BYTES) -> Iterator[CsvBody]:
     """Cut the data lines of a CSV log into blocks of whole lines (at most ``chunk_rows``).
 
-    A last line without a line end comes alone, as a ``truncated`` body.  A line
-    longer than ``max_line`` bytes is an error: memory stays bounded whatever the file.
+    ``fh`` is the open binary stream, just past the header (``done`` bytes in);
+    it is read forward once.  A last line without a line end comes alone, as a
+    ``truncated`` body.  A line longer than ``max_line`` bytes is an error:
+    memory stays bounded whatever the file.
     """
-    total = max(1, path.stat().st_size)
-    with open(path, "rb") as fh:
-        done = len(fh.readline())
-        row = HEADER_ROW + 1  # spreadsheet row of the next data line
-        carry = b""
-        while True:
-            data = fh.read(block_bytes)
-            buf = carry + data
-            if not data:
-                if buf:  # the writer was cut off mid-line (or left NUL padding)
-                    yield CsvBody(buf, row, 1, total, total, truncated=True)
-                return
-            end = buf.rfind(b"\n") + 1
-            if end == 0:  # a line longer than the block: read on
-                if len(buf) > max_line:
-                    raise InputError(
-                        f"{where(path, row)}: no line end in {max_line:,} bytes; not a CSV log?"
-                    )
-                carry = buf
-                continue
-            body, carry = buf[:end], buf[end:]
-            while body:
-                feeds = body.count(b"\n")
-                if feeds > chunk_rows:
-                    nl = np.flatnonzero(np.frombuffer(body, np.uint8) == 10)
-                    cut = int(nl[chunk_rows - 1]) + 1
-                    piece, body, feeds = body[:cut], body[cut:], chunk_rows
-                else:
-                    piece, body = body, b""
-                done += len(piece)
-                yield CsvBody(piece, row, feeds, min(done, total), total)
-                row += feeds
+    row = HEADER_ROW + 1  # spreadsheet row of the next data line
+    carry = b""
+    while True:
+        data = fh.read(block_bytes)
+        buf = carry + data
+        if not data:
+            if buf:  # the writer was cut off mid-line (or left NUL padding)
+                done += len(buf)
+                yield CsvBody(buf, row, 1, done, total, truncated=True)
+            return
+        end = buf.rfind(b"\n") + 1
+        if end == 0:  # a line longer than the block: read on
+            if len(buf) > max_line:
+                raise InputError(
+                    f"{where(path, row)}: no line end in {max_line:,} bytes; not a CSV log?"
+                )
+            carry = buf
+            continue
+        body, carry = buf[:end], buf[end:]
+        while body:
+            feeds = body.count(b"\n")
+            if feeds > chunk_rows:
+                nl = np.flatnonzero(np.frombuffer(body, np.uint8) == 10)
+                cut = int(nl[chunk_rows - 1]) + 1
+                piece, body, feeds = body[:cut], body[cut:], chunk_rows
+            else:
+                piece, body = body, b""
+            done += len(piece)
+            yield CsvBody(piece, row, feeds, done if total is None else min(done, total), total)
+            row += feeds
+
+
+class LogFile:
+    """A voltage log opened once: its format, header row and line ends, then its blocks.
+
+    A CSV log is read in one forward pass from the stream opened here, so a pipe,
+    a FIFO or ``-`` (standard input) is read correctly.  A Parquet log needs a
+    seekable file (its footer comes first).
+
+    Use as a context manager; :meth:`blocks` yields the data rows in order.
+    """
+
+    def __init__(self, path: str | Path, settings: Settings):
+        self.path = Path(path)
+        self.settings = settings
+        self.parquet = is_parquet(self.path)
+        self.stdin = str(path) == "-"
+        self._fh = None
+        self.total: int | None = None
+        if self.parquet:
+            self.header = parquet_header(self.path)
+            self.header_line, self.eol = b"", b"\n"
+            return
+        try:
+            self._fh = sys.stdin.buffer if self.stdin else open(self.path, "rb")  # noqa: SIM115
+        except FileNotFoundError:
+            raise InputError(f"{self.path}: file not found") from None
+        except IsADirectoryError:
+            raise InputError(f"{self.path}: is a directory, expected a CSV file") from None
+        except OSError as err:
+            raise InputError(f"{self.path}: cannot read ({err.strerror})") from None
+        try:
+            line = self._fh.readline(MAX_HEADER_CHARS)
+            more = self._fh.peek(1)[:1] if hasattr(self._fh, "peek") else b""
+            if not self.stdin and stat.S_ISREG(os.fstat(self._fh.fileno()).st_mode):
+                self.total = max(1, os.fstat(self._fh.fileno()).st_size)
+        except OSError as err:
+            self.close()
+            raise InputError(f"{self.path}: cannot read ({err.strerror})") from None
+        try:
+            self.header = read_header(self.path, settings, line + more)
+        except BaseException:
+            self.close()
+            raise
+        self._done = len(line)
+        self.header_line = line.removeprefix(b"\xef\xbb\xbf").rstrip(b"\r\n")
+        self.eol = b"\r\n" if line.endswith(b"\r\n") else b"\n"
+
+    def __enter__(self) -> LogFile:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self._fh is not None and not self.stdin:
+            self._fh.close()
+        self._fh = None
+
+    def blocks(self, names: list[str], *, chunk_rows: int, want_table: bool):
+        """Jobs, in file order, each returning one :class:`Block` when called.
+
+        CSV blocks are cut here and parsed when the job runs (on a worker thread);
+        Parquet blocks are decoded here.
+        """
+        if self.parquet:
+            for b in parquet_blocks(self.path, names, self.settings, chunk_rows=chunk_rows):
+                yield lambda b=b: b
+            return
+        parse = CsvParser(self.path, self.header, names, self.settings, self.eol, want_table)
+        for body in csv_bodies(self._fh, self.path, done=self._done, total=self.total,
+                               chunk_rows=chunk_rows):
+            yield partial(parse, body)
 
 
 class CsvParser:
@@ -244,11 +321,6 @@ def _lines(body: bytes, buffer: pa.Buffer, rows: int) -> pa.Array:
     offsets[0] = 0
     offsets[1:] = np.flatnonzero(np.frombuffer(body, np.uint8) == 10)
     return pa.Array.from_buffers(pa.binary(), rows, [None, pa.py_buffer(offsets), buffer])
-
-
-def csv_eol(path: Path) -> bytes:
-    with open(path, "rb") as fh:
-        return b"\r\n" if fh.readline().endswith(b"\r\n") else b"\n"
 
 
 def parquet_blocks(path: Path, names: list[str], settings: Settings, *,
