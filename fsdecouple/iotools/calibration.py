@@ -13,7 +13,7 @@ import numpy as np
 from ..axes import FORCE_COLUMNS, VOLTAGE_COLUMNS
 from ..config import Settings
 from ..errors import InputError, where
-from .files import natural_key
+from .files import natural_key, reading
 from .text import HEADER_ROW, read_csv_text, read_header, require_columns, to_numbers
 
 if TYPE_CHECKING:
@@ -60,17 +60,6 @@ class CalibrationTable:
     hidden: list[Path]
 
 
-def _read_bytes(f: Path) -> bytes:
-    try:
-        return f.read_bytes()
-    except FileNotFoundError:
-        raise InputError(f"{f}: file not found") from None
-    except IsADirectoryError:
-        raise InputError(f"{f}: is a directory, expected a CSV file") from None
-    except OSError as err:
-        raise InputError(f"{f}: cannot read ({err.strerror})") from None
-
-
 def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationTable:
     """Read a calibration set into one long table in file order.
 
@@ -85,7 +74,8 @@ def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationT
     cols = settings.columns
     numeric = {c: cols[c] for c in (*FORCE_COLUMNS, *VOLTAGE_COLUMNS)}
     for rep_index, f in enumerate(files, start=1):
-        data = _read_bytes(f)
+        with reading(f):
+            data = f.read_bytes()
         digests.append((str(f), hashlib.sha256(data).hexdigest()))
         header = read_header(f, settings, data)
         if {"ux_raw", "uy_raw", "uz_raw"} <= set(header):

@@ -13,6 +13,21 @@ from pathlib import Path
 from ..errors import InputError
 
 
+@contextlib.contextmanager
+def reading(path: str | Path, what: str = "a CSV file") -> Iterator[None]:
+    """Turn the OS errors of opening and reading ``path`` into one-line InputErrors."""
+    try:
+        yield
+    except FileNotFoundError:
+        raise InputError(f"{path}: file not found") from None
+    except IsADirectoryError:
+        raise InputError(f"{path}: is a directory, expected {what}") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a UTF-8 text file") from None
+    except OSError as err:
+        raise InputError(f"{path}: cannot read ({err.strerror})") from None
+
+
 def natural_key(name: str) -> list:
     """Sort ``rep2`` before ``rep10``."""
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", name)]

@@ -31,6 +31,7 @@ import pyarrow.parquet as pq
 
 from ..config import Settings
 from ..errors import InputError, where
+from .files import reading
 from .text import HEADER_ROW, MAX_HEADER_CHARS, MISSING_CELLS, read_header, to_numbers
 
 BLOCK_BYTES = 4 << 20  # ~100 K rows of a 4-column log; a block in flight costs ~15x this
@@ -153,23 +154,14 @@ class LogFile:
             self.header = parquet_header(self.path)
             self.header_line, self.eol = b"", b"\n"
             return
-        try:
+        with reading(self.path):
             self._fh = sys.stdin.buffer if self.stdin else open(self.path, "rb")  # noqa: SIM115
-        except FileNotFoundError:
-            raise InputError(f"{self.path}: file not found") from None
-        except IsADirectoryError:
-            raise InputError(f"{self.path}: is a directory, expected a CSV file") from None
-        except OSError as err:
-            raise InputError(f"{self.path}: cannot read ({err.strerror})") from None
         try:
-            line = self._fh.readline(MAX_HEADER_CHARS)
-            more = self._fh.peek(1)[:1] if hasattr(self._fh, "peek") else b""
-            if not self.stdin and stat.S_ISREG(os.fstat(self._fh.fileno()).st_mode):
-                self.total = max(1, os.fstat(self._fh.fileno()).st_size)
-        except OSError as err:
-            self.close()
-            raise InputError(f"{self.path}: cannot read ({err.strerror})") from None
-        try:
+            with reading(self.path):
+                line = self._fh.readline(MAX_HEADER_CHARS)
+                more = self._fh.peek(1)[:1] if hasattr(self._fh, "peek") else b""
+                if not self.stdin and stat.S_ISREG(os.fstat(self._fh.fileno()).st_mode):
+                    self.total = max(1, os.fstat(self._fh.fileno()).st_size)
             self.header = read_header(self.path, settings, line + more)
         except BaseException:
             self.close()

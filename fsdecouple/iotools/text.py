@@ -19,6 +19,7 @@ import numpy as np
 
 from ..config import Settings
 from ..errors import InputError, where
+from .files import reading
 
 if TYPE_CHECKING:  # pandas loads on first use: apply and show never need it
     import pandas as pd
@@ -34,7 +35,7 @@ def read_header(path: Path, settings: Settings, data: bytes | None = None) -> li
     ``data``: the file's bytes when the caller has read them already (a file is
     read once per command).
     """
-    try:
+    with reading(path):
         if data is None:
             with open(path, encoding="utf-8-sig", newline="") as fh:
                 first = fh.readline(MAX_HEADER_CHARS)  # any line end: \n, \r\n or \r
@@ -45,14 +46,6 @@ def read_header(path: Path, settings: Settings, data: bytes | None = None) -> li
             first = fh.readline(MAX_HEADER_CHARS)
             more = bool(fh.read(1))
             size = len(data)
-    except FileNotFoundError:
-        raise InputError(f"{path}: file not found") from None
-    except IsADirectoryError:
-        raise InputError(f"{path}: is a directory, expected a CSV file") from None
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a UTF-8 text file") from None
-    except OSError as err:
-        raise InputError(f"{path}: cannot read ({err.strerror})") from None
     if first.endswith("\r") and not first.endswith("\r\n"):
         raise InputError(
             f"{where(path, HEADER_ROW)}: lines end with a carriage return only (old Mac line "
