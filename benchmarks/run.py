@@ -29,8 +29,8 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "docs"))
 
 from fsdecouple import load_calibration, load_config  # noqa: E402
-from fsdecouple.fit import chi_training_data, fit  # noqa: E402
 from fsdecouple.axes import CHI_NAMES  # noqa: E402
+from fsdecouple.fit import chi_training_data, fit  # noqa: E402
 from fsdecouple.modelfile import model_to_dict, save_model  # noqa: E402
 
 PYARROW_CSV_COPY = """

@@ -103,6 +103,8 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=()) ->
             f"{_source(files)}: {len(reps)} "
             f"repetition{'s' if len(reps) != 1 else ''}, the config requires at least "
             f"{settings.min_repetitions} (min_repetitions)"
+            + (f"; a single CSV without a '{settings.columns['repetition']}' column is one "
+               "repetition" if len(files) == 1 and len(reps) == 1 else "")
         )
     for rep in reps:
         have = set(table.loc[table["repetition"] == rep, "axis"])
@@ -133,8 +135,9 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=()) ->
         fs = settings.full_scale[a]
         if peak > 1.05 * fs or peak < 0.2 * fs:
             warnings.append(
-                f"the {axis} loads reach {peak:g} N, the full scale is {fs:g} N: check the "
-                "units (scale: in the config) and full_scale"
+                f"the {axis} loads reach {peak:g} {settings.load_unit}, the full scale is {fs:g} "
+                f"{settings.load_unit}: check the units (units: and scale: in the config) and "
+                "full_scale"
             )
     seen: dict[str, str] = {}
     for name, digest in files:
@@ -218,6 +221,7 @@ def ingest_summary(calib, settings) -> dict[str, Any]:
         }
     return {
         "sensor": settings.sensor,
+        "units": {"load": settings.load_unit, "output": settings.output_unit},
         "files": [{"path": p, "sha256": h} for p, h in calib.files],
         "repetitions": calib.repetitions,
         "axes": axes,

@@ -25,6 +25,7 @@ from rich.progress import (
     Progress,
     TimeRemainingColumn,
 )
+from rich.text import Text
 
 from . import __version__
 from .config import load_config
@@ -36,12 +37,17 @@ from .modelfile import load_model, save_model
 # Each command imports what only it needs (pandas, libsvm, scipy, matplotlib),
 # so that `apply` and `show` start in a fraction of a second.
 
+WIDE = 200  # columns of output that is not a terminal
+
 app = typer.Typer(
     add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
     help="Static decoupling of 3-axis force sensors: coupling error model + six eps-SVRs.",
 )
-console = Console()
-err_console = Console(stderr=True)
+# No markup and no highlighting: every name and cell from a user's file is printed
+# literally.  Redirected output (a CI log) is not cut at 80 columns.
+console = Console(markup=False, highlight=False, width=None if sys.stdout.isatty() else WIDE)
+err_console = Console(stderr=True, markup=False, highlight=False,
+                      width=None if sys.stderr.isatty() else WIDE)
 
 ConfigOpt = Annotated[
     Path | None, typer.Option("--config", "-c", help="YAML config (default: the paper's sensor).")
@@ -56,7 +62,7 @@ def user_errors():
     try:
         yield
     except FsdecoupleError as err:
-        err_console.print(f"[red]error:[/red] {err}", highlight=False, soft_wrap=True)
+        err_console.print(Text("error: ", "red") + Text(str(err)), soft_wrap=True)
         raise typer.Exit(2) from None
 
 
@@ -66,7 +72,7 @@ def interactive() -> bool:
 
 def warn(lines) -> None:
     for line in lines:
-        err_console.print(f"[yellow]warning:[/yellow] {line}", highlight=False, soft_wrap=True)
+        err_console.print(Text("warning: ", "yellow") + Text(line), soft_wrap=True)
 
 
 def print_json(doc) -> None:
@@ -183,8 +189,8 @@ def fit(
         worst = max(model.report.gamma_after.values())
         if worst > max_gamma:
             err_console.print(
-                f"[red]gate failed:[/red] gamma after decoupling {100 * worst:.3f} % F.S. "
-                f"exceeds --max-gamma {100 * max_gamma:.3f} %"
+                Text("gate failed: ", "red") + Text(f"gamma after decoupling {100 * worst:.3f} % F.S. "
+                                                    f"exceeds --max-gamma {100 * max_gamma:.3f} %")
             )
             raise typer.Exit(1)
 
@@ -411,7 +417,7 @@ def main() -> None:
     try:
         code = app(standalone_mode=False)
     except typer.Abort:
-        err_console.print("[red]error:[/red] aborted", highlight=False)
+        err_console.print(Text("error: ", "red") + Text("aborted"))
         code = 1
     except Exception as err:
         # Click's usage errors (a missing argument, `--tare abc`, an unknown
@@ -422,7 +428,7 @@ def main() -> None:
         command = ctx.command_path if ctx is not None else "fsdecouple"
         message = " ".join(err.format_message().split())
         if message:  # none when the help was printed for a bare `fsdecouple`
-            err_console.print(f"[red]error:[/red] {command}: {message} (see '{command} --help')",
+            err_console.print(Text("error: ", "red") + Text(f"{command}: {message} (see '{command} --help')"),
                               highlight=False, soft_wrap=True)
         code = err.exit_code
     sys.exit(code if isinstance(code, int) else 0)

@@ -18,6 +18,7 @@ import yaml
 
 from .axes import AXES, CANONICAL_COLUMNS, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .errors import ConfigError
+from .units import LOAD_UNITS, OUTPUT_UNITS, Units
 
 SCALINGS = ("none", "full_scale")
 
@@ -63,6 +64,15 @@ class Settings:
     scaling: str = "none"
     rotation: tuple[tuple[float, float, float], ...] | None = None
     min_r2: float = 0.99
+    units: Units = Units()
+
+    @property
+    def load_unit(self) -> str:
+        return self.units.load
+
+    @property
+    def output_unit(self) -> str:
+        return self.units.output
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -70,12 +80,14 @@ class Settings:
         d["rotation"] = None if self.rotation is None else [list(r) for r in self.rotation]
         d["csv"] = {"sep": d.pop("sep"), "decimal": d.pop("decimal")}
         d["checks"] = {"min_r2": d.pop("min_r2")}
+        if self.units == Units():
+            del d["units"]  # the paper's N and V: files from before units keep their bytes
         return d
 
 
 _TOP_KEYS = {
     "sensor", "full_scale", "min_repetitions", "columns", "scale", "csv", "svr",
-    "scaling", "rotation", "checks",
+    "scaling", "rotation", "checks", "units",
 }
 _SVR_KEYS = {"C", "epsilon", "gamma", "delta2", "tolerance"}
 
@@ -147,6 +159,22 @@ def _rotation(raw: Any, where: str) -> tuple[tuple[float, float, float], ...] | 
     if det < 0:
         raise ConfigError(f"{where}: determinant is -1, a reflection, not a rotation")
     return rows
+
+
+def _units(raw: Any, where: str) -> Units:
+    raw = _mapping(raw, where)
+    allowed = {"load": tuple(LOAD_UNITS), "output": OUTPUT_UNITS}
+    for key in raw:
+        if key not in allowed:
+            raise _unknown(str(key), set(allowed), where)
+    kw = {}
+    for key, units in allowed.items():
+        if key in raw:
+            if raw[key] not in units:
+                raise ConfigError(f"{where}: {key}: unknown unit {raw[key]!r}; expected one of "
+                                  f"{', '.join(units)}")
+            kw[key] = raw[key]
+    return Units(**kw)
 
 
 class SafeUniqueLoader(yaml.SafeLoader):
@@ -252,6 +280,11 @@ def settings_from_dict(raw: Any, source: str = "config") -> Settings:
         kw["scaling"] = raw["scaling"]
     if "rotation" in raw:
         kw["rotation"] = _rotation(raw["rotation"], f"{source}: rotation")
+    if "units" in raw:
+        kw["units"] = _units(raw["units"], f"{source}: units")
+        if "scaling" not in raw and kw["units"].output != "V":
+            # Table 2's kernel width assumes outputs of order 1 V
+            kw["scaling"] = "full_scale"
     if "checks" in raw:
         checks = _mapping(raw["checks"], f"{source}: checks")
         for key, value in checks.items():

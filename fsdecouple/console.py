@@ -17,29 +17,39 @@ from rich.text import Text
 from .axes import AXES, VOLTAGE_COLUMNS
 from .cv_doc import gamma_index, test_name
 from .metrics import pct
+from .units import Units, output_display
 
 # --- ingest, fit, show, apply ------------------------------------------------------
 
+def _units(settings_or_doc) -> Units:
+    u = getattr(settings_or_doc, "units", None)
+    if isinstance(u, Units):
+        return u
+    return Units(**settings_or_doc.get("units", {})) if isinstance(settings_or_doc, dict) else Units()
+
+
 def ingest_tables(summary: dict[str, Any]) -> list:
+    units = _units(summary)
     t = Table(title=f"Calibration set: {summary['sensor']}, "
                     f"{len(summary['repetitions'])} repetitions")
     t.add_column("axis")
     t.add_column("points", justify="right")
     t.add_column("per repetition", justify="right")
-    t.add_column("load grid [N]", justify="right")
+    t.add_column(f"load grid [{units.load}]", justify="right")
     t.add_column("levels", justify="right")
-    t.add_column("F.S. [N]", justify="right")
+    t.add_column(f"F.S. [{units.load}]", justify="right")
     for axis, d in summary["axes"].items():
         per = sorted(set(d["points_per_repetition"].values()))
         t.add_row(axis, str(d["points"]), "/".join(map(str, per)),
                   f"{d['load_min']:g} .. {d['load_max']:g}", str(d["load_levels"]),
                   f"{d['full_scale']:g}")
-    o = Table(title="Zero offsets removed \\[mV] (mean of each sweep's zero-load rows)")
+    factor, shown = output_display(units.output)
+    o = Table(title=f"Zero offsets removed [{shown}] (mean of each sweep's zero-load rows)")
     for col in ("repetition", "axis", "zero rows", *VOLTAGE_COLUMNS):
         o.add_column(col, justify="right")
     for r in summary["offsets"]:
         o.add_row(str(r["repetition"]), r["axis"], str(r["n_zero"]),
-                  *(f"{1e3 * r[c]:+.3f}" for c in VOLTAGE_COLUMNS))
+                  *(f"{factor * r[c]:+.3f}" for c in VOLTAGE_COLUMNS))
     out = [t, o]
     skipped = summary["skipped"]
     out.append(Text(f"rows skipped: {len(skipped)}" + "".join(f"\n  {s}" for s in skipped)))
@@ -48,23 +58,26 @@ def ingest_tables(summary: dict[str, Any]) -> list:
 
 def fit_tables(model) -> list:
     rep = model.report
+    units = model.settings.units
+    volts = units == Units()  # the paper's figures keep their paper-like format
     t = Table(title=f"Non-coupling functions omega (eq. 2), sensor {model.settings.sensor}")
-    for col in ("axis", "k [V/N]", "1/k [N/V] (eq. 13)", "R^2", "points"):
+    for col in ("axis", f"k [{units.slope()}]", f"1/k [{units.inverse_slope()}] (eq. 13)", "R^2",
+                "points"):
         t.add_column(col, justify="right")
     for a, axis in enumerate(AXES):
         r2 = rep.r2[axis]
         r2_text = Text(f"{r2:.6f}", style="" if r2 >= model.settings.min_r2 else "bold red")
-        t.add_row(axis, f"{model.k[a]:.6g}", f"{1.0 / model.k[a]:.5f}", r2_text,
-                  str(rep.n_points[axis]))
+        inverse = f"{1.0 / model.k[a]:.5f}" if volts else f"{1.0 / model.k[a]:.6g}"
+        t.add_row(axis, f"{model.k[a]:.6g}", inverse, r2_text, str(rep.n_points[axis]))
     s = model.settings.svr
     c = Table(title=f"Corrected coupling functions chi (eq. 4): eps-SVR, gamma={s.gamma:g} "
                     f"C={s.C:g} eps={s.epsilon:g} tol={s.tolerance:g}")
-    for col in ("chi", "input", "support vectors", "input range [V]"):
+    for col in ("chi", "input", "support vectors", f"input range [{units.output}]"):
         c.add_column(col, justify="right")
+    span = "{:+.4f} .. {:+.4f}" if volts else "{:+.6g} .. {:+.6g}"
     for name, chi in model.chi.items():
-        lo, hi = chi.input_range
         c.add_row(f"chi_{name}", f"u{name[1]}", f"{chi.support_vectors.size} / {chi.n_points}",
-                  f"{lo:+.4f} .. {hi:+.4f}")
+                  span.format(*chi.input_range))
     g = Table(title="Interference error gamma (eq. 12) on the calibration data, % F.S.")
     for col in ("loaded axis", "before (omega^-1 only)", "after (eq. 11)"):
         g.add_column(col, justify="right")
@@ -221,7 +234,7 @@ def gross_tables(doc: dict[str, Any]) -> list[Table]:
             side.add_row(str(r) if i == 0 else "",
                          f"{test_name(i)} ({rep})",
                          *(_num(v) for v in c + m), _num(change))
-    o = Table(title="omega^-1 \\[N/V]: clean (eq. 13) vs with the gross error (eq. 14)")
+    o = Table(title="omega^-1 [N/V]: clean (eq. 13) vs with the gross error (eq. 14)")
     for col in ("round", "axis", "clean", "gross", "change"):
         o.add_column(col, justify="right")
     for rec in g["omega"]:
@@ -262,7 +275,7 @@ def timing_table(doc: dict[str, Any]) -> Table:
     tm = doc["timing"]
     v = {(r["method"], r["metric"]): r["value"] for r in tm["records"]}
     t = Table(title=f"Timing (Table 4): medians over rounds and {tm['repeats']} sequential pass(es)")
-    for col in ("method", "establishment \\[ms]", "decoupling one vector \\[µs]"):
+    for col in ("method", "establishment [ms]", "decoupling one vector [µs]"):
         t.add_column(col, justify="right")
     for m in doc["methods"]:
         t.add_row(m, f"{1e3 * v[(m, 'establish_seconds')]:.1f}",

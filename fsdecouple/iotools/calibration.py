@@ -77,7 +77,7 @@ def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationT
         with reading(f):
             data = f.read_bytes()
         digests.append((str(f), hashlib.sha256(data).hexdigest()))
-        header = read_header(f, settings, data)
+        header = read_header(f, settings, data, strict=False)
         if {"ux_raw", "uy_raw", "uz_raw"} <= set(header):
             # the tidy CSV of `ingest -o`: zero-corrected already, and every repetition
             raise InputError(
@@ -85,23 +85,33 @@ def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationT
                 "ux_raw), not a repetition; move it out of the calibration directory"
             )
         require_columns(header, numeric, f)
-        if single:
-            require_columns(header, {"repetition": cols["repetition"]}, f)
-        raw = read_csv_text(io.BytesIO(data), settings, path=f)
+        # a single CSV without a repetition column is one repetition
+        numbered = single and cols["repetition"] in header
+        mapped = {name: name for name in numeric.values()}
+        mapped.update({cols[c]: cols[c] for c in ("axis", "repetition")
+                       if cols[c] in header and (c != "repetition" or numbered)})
+        require_columns(header, mapped, f)
+        # Columns the config does not map are ignored: they may have no name, a
+        # duplicated one, or hold a side table.  Positional names keep pandas from
+        # renaming any of them (every field is still read, so a row with more
+        # fields than the header is still refused).
+        raw = read_csv_text(io.BytesIO(data), settings, path=f, header=0,
+                            names=[str(i) for i in range(len(header))])
+        raw = raw[[str(header.index(n)) for n in mapped]]
+        raw.columns = list(mapped)
         if raw.empty:
             raise InputError(f"{f}: header only, no data rows")
         rows = np.arange(len(raw)) + HEADER_ROW + 1
-        used = [cols[c] for c in numeric] + (
-            [cols["axis"]] if cols["axis"] in header else []
-        ) + ([cols["repetition"]] if single else [])
+        used = list(mapped)
         blank = np.logical_and.reduce([raw[c].str.strip().eq("").to_numpy() for c in used])
         for r in rows[blank]:
-            skipped.append(f"{f}, row {r}: blank row skipped")
+            skipped.append(f"{f}, row {r}: skipped, no value in any mapped column (a blank row, "
+                           "or a side table running past the data)")
         raw, rows = raw[~blank], rows[~blank]
         if raw.empty:
             raise InputError(f"{f}: header only, no data rows")
         out = pd.DataFrame({"file": str(f), "row": rows})
-        if single:
+        if numbered:
             reps = to_numbers(raw[cols["repetition"]], f, cols["repetition"], rows)
             bad = (reps != np.round(reps)) | (reps < 1)
             if bad.any():
@@ -112,7 +122,7 @@ def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationT
                 )
             out["repetition"] = reps.astype(int)
         else:
-            out["repetition"] = rep_index
+            out["repetition"] = rep_index  # a directory's file order, or the one CSV
         if cols["axis"] in header:
             axis = raw[cols["axis"]].str.strip().str.lower()
             bad = ~axis.isin(["x", "y", "z"])

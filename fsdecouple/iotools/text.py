@@ -29,11 +29,15 @@ HEADER_ROW = 1  # data row i (0-based) is spreadsheet row i + 2
 MAX_HEADER_CHARS = 1 << 20
 
 
-def read_header(path: Path, settings: Settings, data: bytes | None = None) -> list[str]:
-    """The header row as written, refusing empty files and duplicated names.
+def read_header(path: Path, settings: Settings, data: bytes | None = None, *,
+                strict: bool = True) -> list[str]:
+    """The header row as written (names stripped), refusing empty files.
 
     ``data``: the file's bytes when the caller has read them already (a file is
-    read once per command).
+    read once per command).  ``strict``: refuse duplicated and empty names too
+    (a log passes every column through); otherwise only the columns the config
+    maps must be unique (:func:`require_columns`), and the rest, a side table
+    or columns without a name, are ignored.
     """
     with reading(path):
         if data is None:
@@ -60,7 +64,7 @@ def read_header(path: Path, settings: Settings, data: bytes | None = None) -> li
         raise InputError(f"{path}: file is empty (no header row)")
     names = [n.strip() for n in next(csv.reader([first], delimiter=settings.sep))]
     seen: set[str] = set()
-    for i, n in enumerate(names):
+    for i, n in enumerate(names if strict else ()):
         if n in seen:
             raise InputError(f"{where(path, HEADER_ROW, n)}: duplicated column name")
         seen.add(n)
@@ -181,13 +185,19 @@ def to_numbers(
 
 
 def require_columns(header: list[str], wanted: dict[str, str], path: Path) -> None:
+    """Every column the config maps is in the header, once."""
     for canonical, name in wanted.items():
+        if header.count(name) > 1:
+            raise InputError(f"{where(path, HEADER_ROW, name)}: appears {header.count(name)} times "
+                             "in the header; the config maps it, so it must be unique")
         if name not in header:
             hint = f" (config maps '{canonical}' to it)" if name != canonical else ""
             lower = {h.lower(): h for h in header}
             close = [lower[m] for m in difflib.get_close_matches(name.lower(), list(lower), n=1)]
             mean = f" (did you mean '{close[0]}'? map it under columns: in the config)" if close else ""
+            unnamed = [i + 1 for i, h in enumerate(header) if not h]
+            blank = f"; column {unnamed[0]} has no name" if unnamed and not close else ""
             raise InputError(
                 f"{where(path, HEADER_ROW)}: missing column '{name}'{hint}{mean}; "
-                f"found {', '.join(header) or 'no columns'}"
+                f"found {', '.join(h or '(no name)' for h in header) or 'no columns'}{blank}"
             )
