@@ -44,8 +44,11 @@ STALL_FACTOR = 2.0
 FLOOR_FACTOR = 10.0
 # Kernel terms (points x support vectors, values and slopes alike) that building
 # the tables of one input axis may spend, the final dense check included: about
-# 1-2 s at the ~5-10 ns a term measured here.  The sample data's tables cost ~3e6.
-KERNEL_BUDGET = 2e8
+# 0.3-0.5 s at the ~5-10 ns a term measured here, and room for a dense check of
+# ~5000 intervals with 240 support vectors.  The sample data's tables cost ~3e6;
+# a table that needs more is a symptom of unscaled inputs (fit warns about the
+# kernel widths), and unscaled millivolt data once spent 78 s here.
+KERNEL_BUDGET = 5e7
 # The table covers the calibrated range widened by this fraction of its span on
 # each side (task data after a tare may stray a little beyond the calibration).
 MARGIN = 0.25
