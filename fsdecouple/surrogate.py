@@ -6,14 +6,17 @@ result of a few 10 mV.  A cubic Hermite interpolant on a uniform grid (values an
 exact slopes of the kernel sum at the knots) reproduces it to ~1e-11 V with a few
 hundred intervals and costs four table look-ups and a Horner step per input.
 
-The grid is refined (interval count doubled) until the error measured on a dense
-check grid is at most :data:`TOLERANCE`; that measured maximum is stored in the
-model file beside the table, so a reader knows what the fast path promises.
+The tables are built after the fit.  The grid is refined (interval count doubled,
+old knots reused) until the error measured on a dense check grid is at most
+:data:`TOLERANCE`, or doubling stops helping, or a budget of kernel evaluations
+is spent (see :func:`build_pair`).  The error measured on the dense check grid
+of the table kept is stored in the model file beside it, so a reader knows what
+the fast path promises, and a table that missed is left to the exact path.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -26,6 +29,26 @@ KIND = "hermite3-uniform"
 TOLERANCE = 1e-10
 CHECKS_PER_INTERVAL = 20  # dense check points per interval, plus knots and midpoints
 MIN_INTERVALS, MAX_INTERVALS = 256, 1 << 17
+# Refinement has stalled for a chi when doubling cut its error by less than this
+# factor while the error is already near the kernel sum's rounding floor.  A
+# Hermite cubic's error is O(h^4), so in its asymptotic regime each doubling cuts
+# it ~16x; under 2x, three of the four expected bits are lost to noise that finer
+# tables cannot remove (rounding in the knot values, slopes and the reference).
+STALL_FACTOR = 2.0
+# "Near the floor" means within FLOOR_FACTOR * eps * |output_scale| * sum|dual_coef|,
+# the scale of the rounding in a kernel sum whose terms cancel (the floors
+# measured on the sample data are 0.2-0.35 of eps * sum|dual_coef|).  Without this
+# condition a coarse grid that does not yet resolve the Gaussians (error flat for
+# a doubling or two, as on millivolt data with volt-sized kernels) would count as
+# stalled and stop a table that finer grids would make usable.
+FLOOR_FACTOR = 10.0
+# Kernel terms (points x support vectors, values and slopes alike) that building
+# the tables of one input axis may spend, the final dense check included: about
+# 0.3-0.5 s at the ~5-10 ns a term measured here, and room for a dense check of
+# ~5000 intervals with 240 support vectors.  The sample data's tables cost ~3e6;
+# a table that needs more is a symptom of unscaled inputs (fit warns about the
+# kernel widths), and unscaled millivolt data once spent 78 s here.
+KERNEL_BUDGET = 5e7
 # The table covers the calibrated range widened by this fraction of its span on
 # each side (task data after a tare may stray a little beyond the calibration).
 MARGIN = 0.25
@@ -129,44 +152,110 @@ def check_points(lo: float, hi: float, intervals: int, per_interval: int) -> np.
     return np.append(x, hi)
 
 
-def _build(exact, slope, lo: float, hi: float, n: int) -> tuple[np.ndarray, np.ndarray]:
-    knots = lo + (hi - lo) * np.arange(n + 1) / n
-    return exact(knots), slope(knots)
+def knots(lo: float, hi: float, n: int, start: int = 0, step: int = 1) -> np.ndarray:
+    """Knots ``lo + (hi - lo) * i / n`` of the n-interval grid, i = start, start + step, ... <= n.
+
+    Refinement reuses knots: the knots of n intervals are bit for bit the even
+    knots of 2n.  Rounded, (hi - lo) * (2i) is 2 fl((hi - lo) * i), because
+    scaling by 2 is exact (no overflow or underflow at these sizes) and i < 2^53
+    converts exactly; so fl(2 fl((hi - lo) i) / (2n)) = fl(fl((hi - lo) i) / n),
+    the same real quotient rounded once, and adding lo gives the same double.
+    Only the odd knots of 2n, the midpoints of n, are new.
+    """
+    return lo + (hi - lo) * np.arange(start, n + 1, step) / n
 
 
-def build_pair(chis, lo: float, hi: float, tolerance: float = TOLERANCE) -> list[ChiSurrogate]:
+def _slope_fn(c):
+    def slope(u):
+        x = np.asarray(u, dtype=float) / c.input_scale
+        return rbf_sum_slope(x, c.support_vectors, c.dual_coef, c.gamma) * (
+            c.output_scale / c.input_scale
+        )
+    return slope
+
+
+def _max_error(name: str, table: ChiSurrogate, x: np.ndarray, exact: np.ndarray) -> float:
+    inside = table.covers(x)  # hi, and any point whose index rounds to it, go the exact path
+    err = float(np.max(np.abs(table(x[inside]) - exact[inside])))
+    if not np.isfinite(err):
+        raise FloatingPointError(f"chi_{name}: surrogate error is {err}")
+    return err
+
+
+def measured_error(chi, table: ChiSurrogate) -> float:
+    """Largest |table - chi| on the table's full check grid [V]: what the model file records."""
+    x = check_points(table.lo, table.hi, table.intervals, table.checks_per_interval)
+    return _max_error(chi.name, table, x, chi(x))
+
+
+def _interleave(even: np.ndarray, odd: np.ndarray) -> np.ndarray:
+    out = np.empty(even.size + odd.size)
+    out[::2], out[1::2] = even, odd
+    return out
+
+
+def build_pair(chis, lo: float, hi: float, tolerance: float = TOLERANCE,
+               budget: float = KERNEL_BUDGET) -> list[ChiSurrogate]:
     """Surrogates of the chi sharing one input axis, on one common grid of [lo, hi].
 
     The interval count doubles from :data:`MIN_INTERVALS` until every chi meets
-    ``tolerance`` on the check grid.  A common grid lets the evaluator compute
-    one table index per input voltage for both chi.
+    ``tolerance`` on the full check grid, or refining stops helping (every chi
+    either meets it or has stalled at the kernel sum's rounding floor, see
+    :data:`STALL_FACTOR`), or the next level would pass ``budget`` kernel terms
+    or :data:`MAX_INTERVALS`; then the best level so far is kept.  Either way the
+    recorded ``max_error`` is measured on the full check grid of the table
+    returned, so a table that missed the tolerance says so (and
+    :func:`fsdecouple.decouple.usable` may refuse it).
+
+    Each level costs only the kernel sums at its new knots (values and slopes)
+    and at its midpoints, the largest-error points of a Hermite cubic, which
+    decide whether to refine and are also the next level's new knots.  The full
+    check grid (:data:`CHECKS_PER_INTERVAL` per interval) is evaluated only for a
+    table that is about to be returned.  A common grid lets the evaluator
+    compute one table index per input voltage for both chi.
     """
-    fns = []
-    for c in chis:
-        def exact(u, c=c):
-            return c(u)
+    slope_fns = [_slope_fn(c) for c in chis]
+    n_sv = sum(c.support_vectors.size for c in chis)
+    floors = [FLOOR_FACTOR * np.finfo(float).eps * abs(c.output_scale) * np.abs(c.dual_coef).sum()
+              for c in chis]
 
-        def slope(u, c=c):
-            x = np.asarray(u, dtype=float) / c.input_scale
-            return rbf_sum_slope(x, c.support_vectors, c.dual_coef, c.gamma) * (
-                c.output_scale / c.input_scale
-            )
+    def full_check_cost(n: int) -> int:
+        return (n * (2 * CHECKS_PER_INTERVAL + 1) + 1) * n_sv
 
-        fns.append((exact, slope))
     n = MIN_INTERVALS
+    x = knots(lo, hi, n)
+    values = [c(x) for c in chis]
+    slopes = [s(x) for s in slope_fns]
+    spent = 2 * x.size * n_sv
+    history: list[tuple[int, list[float]]] = []  # (intervals, midpoint error per chi)
     while True:
-        out = []
-        for exact, slope in fns:
-            values, slopes = _build(exact, slope, lo, hi, n)
-            s = ChiSurrogate(lo, hi, values, slopes, 0.0)
-            x = check_points(lo, hi, n, CHECKS_PER_INTERVAL)
-            x = x[s.covers(x)]  # hi, and any point whose index rounds to it, go the exact path
-            err = float(np.max(np.abs(s(x) - exact(x))))
-            if not np.isfinite(err):
-                raise FloatingPointError(f"chi_{chis[len(out)].name}: surrogate error is {err}")
-            out.append(ChiSurrogate(lo, hi, values, slopes, err))
-        if all(s.max_error <= tolerance for s in out) or n >= MAX_INTERVALS:
-            return out
+        mid = knots(lo, hi, 2 * n, 1, 2)  # midpoints of n = the new knots of 2n
+        mid_values = [c(mid) for c in chis]
+        spent += mid.size * n_sv
+        tables = [ChiSurrogate(lo, hi, v, s, 0.0) for v, s in zip(values, slopes, strict=True)]
+        errs = [_max_error(c.name, t, mid, e) for c, t, e in zip(chis, tables, mid_values, strict=True)]
+        if all(e <= tolerance for e in errs):
+            full = [measured_error(c, t) for c, t in zip(chis, tables, strict=True)]
+            spent += full_check_cost(n)
+            if all(e <= tolerance for e in full):
+                return [replace(t, max_error=e) for t, e in zip(tables, full, strict=True)]
+        stalled = [
+            e > prev / STALL_FACTOR and e <= floor
+            for e, prev, floor in zip(errs, history[-1][1], floors, strict=True)
+        ] if history else [False] * len(chis)
+        history.append((n, errs))
+        done = any(stalled) and all(s or e <= tolerance for s, e in zip(stalled, errs, strict=True))
+        # the next level: slopes at n new knots, 2n midpoints, and its full check
+        next_cost = n * n_sv + 2 * n * n_sv + full_check_cost(2 * n)
+        if done or 2 * n > MAX_INTERVALS or spent + next_cost > budget:
+            best, _ = min(history, key=lambda h: max(h[1]))
+            step = n // best
+            tables = [ChiSurrogate(lo, hi, v[::step], s[::step], 0.0)
+                      for v, s in zip(values, slopes, strict=True)]
+            return [replace(t, max_error=measured_error(c, t)) for c, t in zip(chis, tables, strict=True)]
+        spent += n * n_sv
+        values = [_interleave(v, e) for v, e in zip(values, mid_values, strict=True)]
+        slopes = [_interleave(s, f(mid)) for s, f in zip(slopes, slope_fns, strict=True)]
         n *= 2
 
 

@@ -16,7 +16,7 @@ from conftest import SAMPLE
 from fsdecouple import load_calibration
 from fsdecouple.apply import apply_file
 from fsdecouple.axes import CHI_NAMES
-from fsdecouple.decouple import MAX_SURROGATE_ERROR, PROMISE
+from fsdecouple.decouple import MAX_SURROGATE_ERROR, PROMISE, usable
 from fsdecouple.errors import ModelFileError
 from fsdecouple.fit import chi_training_data, fit
 from fsdecouple.iotools.sinks import force_decimals
@@ -212,7 +212,27 @@ def test_surrogate_with_a_poor_bound_is_not_used(model, recorded):
     doc["integrity"]["digest"] = content_digest(doc)
     m = model_from_dict(doc)
     assert m.fast_decoupler() is None
-    assert 2 * MAX_SURROGATE_ERROR < PROMISE
+
+
+def test_table_path_keeps_the_promise_everywhere_inside_the_tables(model):
+    """The promise re-derived: forces by the tables against the exact kernel sum on
+    dense random points over the whole of every table (margins included).  Output a
+    adds N - 1 chi, each recorded within max_error <= MAX_SURROGATE_ERROR = PROMISE / 4
+    on its check grid, so |df_a| * |k_a| <= (N - 1) * PROMISE / 4 = PROMISE / 2 at
+    check points; the other half is room for errors between them."""
+    n_axes = len(model.k)
+    grid = {}
+    for c in model.chi.values():
+        assert usable(c.surrogate), c.name
+        grid[c.input_axis] = c.surrogate  # the chi fed by one input share a grid
+    rng = np.random.default_rng(12)
+    u = np.column_stack([rng.uniform(grid[b].lo, grid[b].hi, 400_000) for b in range(n_axes)])
+    u = u[np.all([grid[b].covers(u[:, b]) for b in range(n_axes)], axis=0)]
+    err = np.abs(model.decouple(u) - model.decouple(u, exact=True)) * np.abs(model.k)
+    for a in range(n_axes):
+        recorded = sum(c.surrogate.max_error for c in model.chi.values() if c.output_axis == a)
+        assert recorded <= (n_axes - 1) * MAX_SURROGATE_ERROR <= PROMISE / 2
+        assert err[:, a].max() <= PROMISE, a
 
 
 # --- apply: formats and paths -------------------------------------------------------
