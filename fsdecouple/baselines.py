@@ -47,8 +47,12 @@ def input_scale(train: CalibrationSet, settings: Settings) -> np.ndarray | None:
     return np.abs(fit_omega(train.points).k) * np.asarray(settings.full_scale)
 
 
-def establish(method: str, train: CalibrationSet, settings: Settings, *, workers: int = 1):
-    """Fit one method on a training set; the result has ``decouple(u, rotate=False)``."""
+def establish(method: str, train: CalibrationSet, settings: Settings, *, workers: int = 1,
+              tables: bool = True):
+    """Fit one method on a training set; the result has ``decouple(u, rotate=False)``.
+
+    ``tables``: build the svr model's fast-path tables (not needed to score it).
+    """
     if method == "initial":
         return InitialMethod(fit_omega(train.points).k)
     if method == "linear":
@@ -61,26 +65,26 @@ def establish(method: str, train: CalibrationSet, settings: Settings, *, workers
         return fit_siso(fit_omega(train.points).k, data, spread=SPREAD,
                         input_scale=input_scale(train, settings))
     if method == "svr":
-        return fit(train, settings, workers=workers)
+        return fit(train, settings, workers=workers, tables=tables)
     raise ValueError(f"unknown method {method!r}")
 
 
-def train_all(jobs, settings, workers, progress) -> tuple[dict, float]:
+def train_all(jobs, settings, workers, progress, *, tables: bool = True) -> tuple[dict, float]:
     """Fit every (key, method, train) job on a thread pool; (models, wall seconds).
 
     libsvm and LAPACK release the GIL, so threads train in parallel; each model
     depends only on its own job, so the results equal sequential training.
     """
     with single_threaded_libraries():
-        return _train_all(jobs, settings, workers, progress)
+        return _train_all(jobs, settings, workers, progress, tables)
 
 
-def _train_all(jobs, settings, workers, progress) -> tuple[dict, float]:
+def _train_all(jobs, settings, workers, progress, tables) -> tuple[dict, float]:
     models = {}
     t0 = time.perf_counter()
     if workers <= 1:
         for i, (key, method, train) in enumerate(jobs, start=1):
-            models[key] = establish(method, train, settings, workers=1)
+            models[key] = establish(method, train, settings, workers=1, tables=tables)
             if progress:
                 progress(i, len(jobs))
     else:
@@ -88,7 +92,7 @@ def _train_all(jobs, settings, workers, progress) -> tuple[dict, float]:
         order = sorted(jobs, key=lambda j: j[1] != "svr")
         with ThreadPoolExecutor(workers) as pool:
             # one thread per model: a fit's own pool on top would only oversubscribe
-            futures = {pool.submit(establish, m, tr, settings, workers=1): key
+            futures = {pool.submit(establish, m, tr, settings, workers=1, tables=tables): key
                        for key, m, tr in order}
             for i, fut in enumerate(as_completed(futures), start=1):
                 models[futures[fut]] = fut.result()

@@ -67,6 +67,16 @@ class CalibrationSet:
             self.files, self.skipped, self.warnings,
         )
 
+    def select(self, mask) -> CalibrationSet:
+        """The points where ``mask`` is true (a held-out round's training or test points).
+
+        Zero correction stays as it was done on the whole set: a held-out zero row
+        still zeroed its sweep.
+        """
+        mask = np.asarray(mask, dtype=bool)
+        return CalibrationSet(self.points[mask].reset_index(drop=True), self.offsets,
+                              self.files, self.skipped, self.warnings)
+
     def sweep(self, axis: str) -> pd.DataFrame:
         """All points whose loaded axis is ``axis``, in file order."""
         return self.points[self.points["axis"] == axis]

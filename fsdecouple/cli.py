@@ -29,7 +29,7 @@ from rich.text import Text
 
 from . import __version__
 from .config import load_config
-from .console import apply_lines, apply_warnings, fit_tables, ingest_tables
+from .console import apply_lines, apply_warnings, fit_checks_table, fit_tables, ingest_tables
 from .errors import FsdecoupleError, InputError
 from .iotools.files import atomic_write, check_output, refuse_overwriting_input
 from .modelfile import load_model, save_model
@@ -160,30 +160,44 @@ def fit(
         float | None,
         typer.Option(help="Exit 1 if any gamma after decoupling exceeds this fraction."),
     ] = None,
+    method: Annotated[
+        str, typer.Option(help="svr (the paper's), linear (calibration matrix) or auto "
+                               "(the lower held-out worst gamma).")
+    ] = "svr",
+    no_verdict: Annotated[
+        bool, typer.Option("--no-verdict", help="Skip the held-out comparison with the "
+                                                "calibration matrix.")
+    ] = False,
     force: ForceOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
-    """Fit the coupling error model and write it as one JSON file."""
+    """Fit the coupling error model, judge it on held-out points, write one JSON model file."""
     from .calibration import load_calibration
-    from .fit import fit as fit_model
+    from .checks import assumption_checks
+    from .verdict import calibrate, verdict_line
 
     with user_errors():
         settings = load_config(
             config, C=C, epsilon=epsilon, gamma=gamma, delta2=delta2, tolerance=tolerance,
             scaling=scaling,
         )
+        _check_gate(max_gamma)
         check_output(output, force=force)
         cs = load_calibration(calib, settings)
         refuse_overwriting_input(output, [*_read(cs), *_given(config)])
-        model = fit_model(cs, settings)
+        model = calibrate(cs, settings, method=method, verdict=not no_verdict)
+        checks = assumption_checks(model)
         save_model(model, output, force=force)
     if json_out:
-        print_json({"model": str(output), **model.report.to_dict()})
+        print_json({"model": str(output), "method": model.method, **model.report.to_dict(),
+                    "checks": [c.to_dict() for c in checks]})
     else:
-        for t in fit_tables(model):
+        for t in [*fit_tables(model), fit_checks_table(checks)]:
             console.print(t)
-        console.print(f"model written to {output}")
-        console.print(f"calibration report: fsdecouple report {output} -o report.html", highlight=False)
+        if model.report.verdict is not None:
+            console.print(verdict_line(model.report.verdict))
+        console.print(f"model written to {output} (decouples by {model.method})")
+        console.print(f"calibration report: fsdecouple report {output} -o report.html")
     warn(model.warnings)
     if max_gamma is not None:
         worst = max(model.report.gamma_after.values())
@@ -253,6 +267,11 @@ def report(
     if png is not None:
         console.print(f"figures written to {png}/: " + ", ".join(f"{n}.png" for n in result.figures),
                       highlight=False)
+
+
+def _check_gate(max_gamma: float | None) -> None:
+    if max_gamma is not None and not (math.isfinite(max_gamma) and max_gamma > 0):
+        raise InputError(f"--max-gamma {max_gamma}: expected a fraction greater than 0, e.g. 0.016")
 
 
 def _read(calib) -> list[Path]:
@@ -357,13 +376,18 @@ def cv(
         int | None, typer.Option(help="Training threads (default: cores; 1: sequential).")
     ] = None,
     repeats: Annotated[int, typer.Option(help="Sequential timing passes (Table 4).")] = 1,
+    protocol: Annotated[
+        str | None, typer.Option(help="What a round holds out: repetitions|levels (default: "
+                                      "repetitions with 3 or more, else load levels).")
+    ] = None,
     force: ForceOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
     """Cross-validate the model against the baselines of Section 4 (Tables 1, 3, 4, 5)."""
     from .calibration import GrossError, load_calibration
     from .console import cv_renderables
-    from .cv import parse_folds, run_cv
+    from .cv import run_cv
+    from .heldout import parse_folds
 
     with user_errors():
         settings = load_config(config)
@@ -384,7 +408,7 @@ def cv(
                 cs, settings, folds=parse_folds(folds) if folds is not None else None,
                 task=(task, task_forces) if task is not None else None, task_tare=task_tare,
                 gross_error=GrossError.parse(gross_error) if gross_error else None,
-                max_gamma=max_gamma, workers=workers, repeats=repeats,
+                max_gamma=max_gamma, workers=workers, repeats=repeats, protocol=protocol,
                 progress=lambda done, total: bar.update(job, completed=done, total=total),
             )
         text = json.dumps(doc, indent=1, sort_keys=True, allow_nan=False)

@@ -28,117 +28,64 @@ from .checks import assumption_checks
 from .config import Settings
 from .cv_doc import FORMAT, FORMAT_VERSION
 from .errors import InputError
+from .heldout import (
+    HeldOutRound,
+    check_folds,
+    choose_protocol,
+    default_folds,
+    rounds_for,
+)
 from .iotools.calibration import read_task_log
 from .linear import fit_omega
 from .metrics import interference_error
 from .parallel import single_threaded_libraries
 from .rbf import B_FACTOR, MSE_GOAL, OUTPUT_LAYER, SPREAD, basic_solution
+from .verdict import gamma_records
 from .zero import tare_offsets
 
-ROUNDS = 3  # Section 4.1: "the cross validation is repeated three times"
-HELD_OUT = 2  # "test data I" and "test data II"
 CURVE_POINTS = 201
 TIMING_VECTORS = 100  # single-vector decoupling calls timed per repeat (Table 4)
-
-
-# --- folds ------------------------------------------------------------------------
-
-
-def parse_folds(text: str) -> list[list[int]]:
-    """``"1,2;3,4;5,6"`` -> ``[[1, 2], [3, 4], [5, 6]]``: the held-out repetitions per round."""
-    folds = []
-    for part in text.split(";"):
-        try:
-            fold = [int(v) for v in part.split(",")]
-        except ValueError:
-            raise InputError(
-                f"--folds {text!r}: expected repetition numbers, ',' within a round and "
-                "';' between rounds, e.g. '1,2;3,4;5,6'"
-            ) from None
-        folds.append(fold)
-    return folds
-
-
-def default_folds(repetitions: list[int]) -> list[list[int]]:
-    """Three rounds holding out consecutive pairs: 1,2; 3,4; 5,6 for six repetitions.
-
-    With fewer than six repetitions the pairs wrap around and shift so that the
-    three rounds hold out different pairs (3 repetitions: 1,2; 1,3; 2,3).
-    """
-    n = len(repetitions)
-    folds: list[list[int]] = []
-    for start in [*range(0, 2 * n, 2), *range(1, 2 * n, 2)]:
-        pair = sorted({repetitions[start % n], repetitions[(start + 1) % n]})
-        if pair not in folds:
-            folds.append(pair)
-        if len(folds) == ROUNDS:
-            break
-    return folds
-
-
-def check_folds(folds: list[list[int]], repetitions: list[int]) -> None:
-    if len(repetitions) < HELD_OUT + 1:
-        raise InputError(
-            f"cross-validation needs at least {HELD_OUT + 1} repetitions (two held out, at "
-            f"least one to train); the calibration set has {len(repetitions)}"
-        )
-    have = ", ".join(map(str, repetitions))
-    for r, fold in enumerate(folds, start=1):
-        if not fold:
-            raise InputError(f"--folds: round {r} holds out no repetition")
-        for rep in fold:
-            if rep not in repetitions:
-                raise InputError(
-                    f"--folds: round {r} holds out repetition {rep}, which the calibration "
-                    f"set does not have (it has {have})"
-                )
-        if len(set(fold)) != len(fold):
-            raise InputError(f"--folds: round {r} names a repetition twice")
-        if len(set(fold)) >= len(repetitions):
-            raise InputError(f"--folds: round {r} holds out every repetition; none is left to train")
 
 
 # --- scoring -----------------------------------------------------------------------
 
 
-def _held_out(calib: CalibrationSet, folds) -> dict[int, tuple]:
-    """(voltages, loaded axis, forces) of every held-out repetition, extracted once."""
-    out = {}
-    for rep in sorted({rep for fold in folds for rep in fold}):
-        test = calib.subset([rep])
-        out[rep] = (test.voltages, test.points["axis"].to_numpy(), test.forces)
-    return out
+def _held_out(rounds: list[HeldOutRound]) -> dict[tuple, tuple]:
+    """(round, test set) -> (outputs, loaded axis, loads) of every held-out set, extracted once."""
+    return {(rnd.index, label): (test.voltages, test.points["axis"].to_numpy(), test.forces)
+            for rnd in rounds for label, test in rnd.tests}
 
 
-def _decouple_held_out(tests, folds, models) -> dict[tuple, np.ndarray]:
-    """(round, test_set, method) -> decoupled forces of that held-out repetition [N]."""
-    return {(r, rep, m): models[(r, m)].decouple(tests[rep][0], rotate=False)
-            for r, fold in enumerate(folds, start=1) for rep in fold for m in METHODS}
+def _decouple_held_out(tests, models) -> dict[tuple, np.ndarray]:
+    """(round, test_set, method) -> decoupled forces of that held-out set."""
+    return {(r, label, m): models[(r, m)].decouple(tests[(r, label)][0], rotate=False)
+            for (r, label) in tests for m in METHODS}
 
 
 def _score(tests, forces, settings, points=None) -> list[dict]:
     """gamma (eq. 12) per (round, test_set, method, axis) on the clean held-out data."""
     records = []
     fs = settings.full_scale
-    for (r, rep, method), f in forces.items():
-        _, axis, loads = tests[rep]
+    for (r, label, method), f in forces.items():
+        _, axis, loads = tests[(r, label)]
         for a, name in enumerate(AXES):
-            records.append({"round": r, "test_set": rep, "method": method, "axis": name,
-                            "metric": "gamma",
-                            "value": interference_error(f[axis == name], a, fs[a])})
+            if (axis == name).any():
+                records.append({"round": r, "test_set": label, "method": method, "axis": name,
+                                "metric": "gamma",
+                                "value": interference_error(f[axis == name], a, fs[a])})
         if points is not None:
             for i in range(len(f)):
                 a = AXES.index(axis[i])
-                points.append({"round": r, "test_set": rep, "method": method,
+                points.append({"round": r, "test_set": label, "method": method,
                                "axis": axis[i], "load": float(loads[i, a]),
                                **{c: float(v) for c, v in zip(FORCE_COLUMNS, f[i], strict=True)}})
     return records
 
 
-def _task_records(u, f_true, folds, models, settings) -> list[dict]:
+def _task_records(u, f_true, rounds, models, settings) -> list[dict]:
     records = []
     fs = np.asarray(settings.full_scale)
-    for r in range(1, len(folds) + 1):
+    for r in (rnd.index for rnd in rounds):
         for method in METHODS:
             err = np.abs(models[(r, method)].decouple(u, rotate=False) - f_true) / fs
             for a, name in enumerate(AXES):
@@ -149,17 +96,19 @@ def _task_records(u, f_true, folds, models, settings) -> list[dict]:
     return records
 
 
-def _curves(calib, folds, models) -> dict[str, Any]:
+def _curves(rounds, models, protocol) -> dict[str, Any]:
     """chi by SVR and by SISO RBF over each chi's calibrated input range, round 1 (Fig. 7)."""
-    svr, siso = models[(1, "svr")], models[(1, "rbf-siso")]
-    train = [rep for rep in calib.repetitions if rep not in folds[0]]
+    first = rounds[0]
+    svr, siso = models[(first.index, "svr")], models[(first.index, "rbf-siso")]
+    train = first.train.repetitions
+    test = [label for label, _ in first.tests] if protocol == "repetitions" else []
     chi = {}
     for name in CHI_NAMES:
         lo, hi = svr.chi[name].input_range
         u = np.linspace(lo, hi, CURVE_POINTS)
         chi[name] = {"u": u.tolist(), "svr": svr.chi[name](u).tolist(),
                      "rbf-siso": siso.chi[name](u).tolist()}
-    return {"round": 1, "train": train, "test": list(folds[0]), "chi": chi}
+    return {"round": first.index, "train": train, "test": test, "chi": chi}
 
 
 def _decouple_seconds(model, vectors, repeats) -> float:
@@ -188,6 +137,7 @@ def run_cv(
     workers: int | None = None,
     repeats: int = 1,
     progress: Callable[[int, int], None] | None = None,
+    protocol: str | None = None,
 ) -> dict[str, Any]:
     """Run the validation protocol of Section 4 and return the ``cv.json`` document.
 
@@ -212,25 +162,32 @@ def run_cv(
         Sequential timing passes (Table 4); medians over passes and rounds.
     progress : callable(done, total), optional
         Called as training jobs finish.
+    protocol : {"repetitions", "levels"}, optional
+        What a round holds out (:mod:`fsdecouple.heldout`); default: repetitions
+        with three or more, else load levels.
     """
     with single_threaded_libraries():
         return _run_cv(calib, settings, folds=folds, task=task, task_tare=task_tare,
                        gross_error=gross_error, max_gamma=max_gamma, workers=workers,
-                       repeats=repeats, progress=progress)
+                       repeats=repeats, progress=progress, protocol=protocol)
 
 
 def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, workers, repeats,
-            progress) -> dict[str, Any]:
+            progress, protocol) -> dict[str, Any]:
     settings = settings or Settings()
     if not isinstance(calib, CalibrationSet):
         calib = load_calibration(calib, settings)
     calib_path = calib.source
     reps = calib.repetitions
-    if folds is None:
-        if len(reps) < HELD_OUT + 1:
-            check_folds([], reps)
-        folds = default_folds(reps)
-    check_folds(folds, reps)
+    protocol = choose_protocol(calib, protocol if protocol is not None or folds is None
+                               else "repetitions")
+    if protocol == "levels" and folds is not None:
+        raise InputError("--folds names held-out repetitions; the levels protocol holds out "
+                         "load levels: drop one of them")
+    if protocol == "repetitions":
+        folds = folds if folds is not None else default_folds(reps)
+        check_folds(folds, reps)
+    rounds = rounds_for(calib, protocol, folds)
     if repeats < 1:
         raise InputError(f"--repeats {repeats}: needs at least 1 timing pass")
     if max_gamma is not None and not (np.isfinite(max_gamma) and max_gamma > 0):
@@ -252,22 +209,26 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
         gross_calib = CalibrationSet(gross_error.apply(calib.points), calib.offsets, calib.files,
                                      calib.skipped, calib.warnings)
 
-    trains = {r: [rep for rep in reps if rep not in fold] for r, fold in enumerate(folds, 1)}
-    jobs = [((r, m), m, calib.subset(trains[r])) for r in trains for m in METHODS]
-    # with the moved point, only rounds that train on its repetition change
-    gross_rounds = [r for r in trains if gross_calib is not None and gross_error.repetition in trains[r]]
-    gross_jobs = [(("gross", r, m), m, gross_calib.subset(trains[r]))
-                  for r in gross_rounds for m in METHODS]
+    trains = {rnd.index: rnd.train for rnd in rounds}
+    jobs = [((r, m), m, train) for r, train in trains.items() for m in METHODS]
+    # with the moved point, only rounds that train on it change
+    gross_trains = {} if gross_calib is None else {
+        rnd.index: rnd.train for rnd in rounds_for(gross_calib, protocol, folds)}
+    gross_rounds = [r for r in trains if r in gross_trains
+                    and not np.array_equal(gross_trains[r].voltages, trains[r].voltages)]
+    gross_jobs = [(("gross", r, m), m, gross_trains[r]) for r in gross_rounds for m in METHODS]
     # first calls into libsvm and LAPACK, so that neither timing below pays for them
     _svr.fit_svr(np.array([0.0, 1.0]), np.array([0.0, 0.01]), settings.svr)
     basic_solution(np.eye(2), np.ones((2, 1)))
     all_models, wall = train_all(jobs + gross_jobs, settings, workers, progress)
     models = {k: v for k, v in all_models.items() if k[0] != "gross"}
 
-    tests = _held_out(calib, folds)
-    forces = _decouple_held_out(tests, folds, models)
+    tests = _held_out(rounds)
+    forces = _decouple_held_out(tests, models)
     points: list[dict] = []
     records = _score(tests, forces, settings, points)
+    end_records = [{k: v for k, v in r.items() if k != "points"}
+                   for r in gamma_records(rounds, models, settings, METHODS) if r["points"] == "end"]
 
     # Table 4: a sample of the models established again, sequentially and alone:
     # each method on round 1's training set, `repeats` times.  (That parallel
@@ -282,7 +243,7 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
     # the whole training run done sequentially, estimated from the sample
     count = {m: sum(1 for _, jm, _ in jobs + gross_jobs if jm == m) for m in METHODS}
     sequential = float(sum(np.median(establish_times[m]) * count[m] for m in METHODS))
-    first_test = calib.subset(folds[0]).voltages
+    first_test = rounds[0].tests[0][1].voltages if rounds[0].tests else rounds[0].train.voltages
     vectors = [first_test[i:i + 1] for i in range(min(TIMING_VECTORS, len(first_test)))]
     timing_records = []
     for m in METHODS:
@@ -305,8 +266,10 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
                         "files": [{"path": p, "sha256": h} for p, h in calib.files],
                         "repetitions": reps},
         "settings": settings.to_dict(),
-        "folds": [list(f) for f in folds],
-        "train": [trains[r] for r in trains],
+        "protocol": protocol,
+        "folds": [list(f) for f in folds] if protocol == "repetitions"
+        else [[label for label, _ in rnd.tests] for rnd in rounds],
+        "train": [trains[r].repetitions for r in trains],
         "methods": list(METHODS),
         "rbf": {"spread": SPREAD, "b": B_FACTOR / SPREAD, "mse_goal": MSE_GOAL,
                 "output_layer": OUTPUT_LAYER,
@@ -315,6 +278,7 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
                           "centres": len(net.centres), "train_mse": net.train_mse}
                          for r in trains for m, s, net in _networks(models, r)]},
         "records": records,
+        "end_records": end_records,
         "task": None,
         "gross_error": None,
         "timing": {
@@ -331,7 +295,7 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
         },
         "checks": [{**c.to_dict(), "round": r} for r in trains
                    for c in assumption_checks(models[(r, "svr")])],
-        "curves": _curves(calib, folds, models),
+        "curves": _curves(rounds, models, protocol),
         "points": points,
         "gate": None,
         "warnings": warnings,
@@ -339,13 +303,13 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
     if task_data is not None:
         doc["task"] = {"voltages": str(task[0]), "forces": str(task[1]),
                        "rows": int(len(task_data[0])), "tare": task_tare,
-                       "records": _task_records(*task_data, folds, models, settings)}
+                       "records": _task_records(*task_data, rounds, models, settings)}
     if gross_calib is not None:
         gmodels = _models_for(all_models, gross=True)
         omega = []
         for r in trains:
-            k_clean = fit_omega(calib.subset(trains[r]).points).k
-            k_gross = fit_omega(gross_calib.subset(trains[r]).points).k
+            k_clean = fit_omega(trains[r].points).k
+            k_gross = fit_omega(gross_trains[r].points).k
             for a, name in enumerate(AXES):
                 omega.append({"round": r, "axis": name, "k_clean": float(k_clean[a]),
                               "k_gross": float(k_gross[a]), "inverse_clean": float(1 / k_clean[a]),
@@ -356,7 +320,7 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
             "placement": "added to the prime voltage of the point in the zero-corrected data; "
                          "training data only, the held-out test data stay clean",
             "rounds_affected": gross_rounds,
-            "records": _score(tests, _decouple_held_out(tests, folds, gmodels), settings),
+            "records": _score(tests, _decouple_held_out(tests, gmodels), settings),
             "omega": omega,
         }
     if max_gamma is not None:

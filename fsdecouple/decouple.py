@@ -28,8 +28,9 @@ from typing import Protocol
 
 import numpy as np
 
-# The table path promises forces within PROMISE (a fraction of each output's
-# full scale, i.e. volts on the paper's unscaled sensor) of the exact kernel sum.
+# The table path promises forces within PROMISE of the exact kernel sum, as a
+# fraction of each output's full scale |k_a| F_FS,a (so 1e-9 V on the paper's sensor,
+# whose full-scale outputs are about 1 V, and the same fraction in mV or counts).
 # An output adds N - 1 chi, and a surrogate's recorded max_error is the largest
 # error found on its check grid, which at the kernel sum's own rounding noise can
 # be exceeded a little between check points.  So a surrogate is used only if its
@@ -84,9 +85,12 @@ def initial_forces(u: np.ndarray, k: np.ndarray) -> np.ndarray:
     return u.reshape(-1, len(k)) / k
 
 
-def usable(surrogate) -> bool:
-    """Whether the table path may use a chi surrogate: present, and recorded within the gate."""
-    return surrogate is not None and surrogate.max_error <= MAX_SURROGATE_ERROR
+def usable(surrogate, full_scale_output: float = 1.0) -> bool:
+    """Whether the table path may use a chi surrogate: present, and recorded within the gate.
+
+    ``full_scale_output``: |k_a| F_FS,a of the chi's output a, in the data's units.
+    """
+    return surrogate is not None and surrogate.max_error <= MAX_SURROGATE_ERROR * full_scale_output
 
 
 def _fed_order(n: int, b: int) -> list[int]:
@@ -171,13 +175,18 @@ class TableDecoupler:
         self._sum = [_sum_order(n, a) for a in range(n)]
 
     @classmethod
-    def from_chis(cls, k, chis: Iterable, exact, rotation=None) -> TableDecoupler | None:
-        """From chi objects with ``output_axis``, ``input_axis`` and ``surrogate``."""
+    def from_chis(cls, k, chis: Iterable, exact, rotation=None, full_scale_output=None
+                  ) -> TableDecoupler | None:
+        """From chi objects with ``output_axis``, ``input_axis`` and ``surrogate``.
+
+        ``full_scale_output`` (N,): |k_a| F_FS,a, to which the gate is relative.
+        """
         tables = {(c.output_axis, c.input_axis): c.surrogate for c in chis}
         n = len(k)
+        u_fs = np.ones(n) if full_scale_output is None else np.asarray(full_scale_output, float)
         for b in range(n):
             fed = [tables.get((a, b)) for a in range(n) if a != b]
-            if not all(usable(s) for s in fed):
+            if not all(usable(tables.get((a, b)), u_fs[a]) for a in range(n) if a != b):
                 return None
             if len({(s.lo, s.hi, s.intervals) for s in fed}) != 1:
                 return None  # the evaluator shares one index per input

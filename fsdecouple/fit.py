@@ -28,7 +28,7 @@ from .linear import fit_omega
 from .metrics import interference_errors
 from .model import Chi, CouplingErrorModel, FitReport
 from .parallel import single_threaded_libraries
-from .surrogate import build_pair, table_interval
+from .surrogate import TOLERANCE, build_pair, table_interval
 
 if TYPE_CHECKING:
     from .calibration import CalibrationSet
@@ -71,6 +71,7 @@ def fit(
     settings: Settings | None = None,
     *,
     workers: int | None = None,
+    tables: bool = True,
 ) -> CouplingErrorModel:
     """Establish the coupling error model (Section 2.3, steps 1-4).
 
@@ -83,6 +84,9 @@ def fit(
     workers : int, optional
         Threads training the six SVRs (libsvm releases the GIL); default: the
         number of cores.  The result does not depend on it.
+    tables : bool
+        Build the chi tables of the fast path.  A model fitted only to be scored
+        on held-out points (the verdict, cv) decouples exactly without them.
     """
     # fitting needs pandas (calibration) and libsvm; loading and applying a model do not
     from .calibration import CalibrationSet, load_calibration
@@ -92,11 +96,11 @@ def fit(
     if not isinstance(calib, CalibrationSet):
         calib = load_calibration(calib, settings)
     with single_threaded_libraries():
-        return _establish(calib, settings, workers, fit_svr)
+        return _establish(calib, settings, workers, fit_svr, tables)
 
 
 def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
-               fit_svr) -> CouplingErrorModel:
+               fit_svr, with_tables: bool) -> CouplingErrorModel:
     omega = fit_omega(calib.points)
     warnings = list(calib.warnings)
     for a, axis in enumerate(AXES):
@@ -140,27 +144,33 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
             (float(x.min()), float(x.max())), int(x.size),
         )
 
+    u_fs = np.abs(omega.k) * np.asarray(settings.full_scale)
+
     def tables(axis: str) -> list[Chi]:
-        # both chi fed by one input axis share one grid (one index per voltage)
+        # the chi fed by one input axis share one grid (one index per input value);
+        # the tolerance is a fraction of the full-scale output of the chi's output
         pair = [c for c in chis if c.name[1] == axis]
         lo, hi = table_interval(min(c.input_range[0] for c in pair),
                                 max(c.input_range[1] for c in pair))
-        return [replace(c, surrogate=s) for c, s in zip(pair, build_pair(pair, lo, hi), strict=True)]
+        tolerance = TOLERANCE * min(u_fs[c.output_axis] for c in pair)
+        return [replace(c, surrogate=s)
+                for c, s in zip(pair, build_pair(pair, lo, hi, tolerance), strict=True)]
 
     n_workers = workers or min(len(jobs), os.cpu_count() or 1)
     if n_workers > 1:
         with ThreadPoolExecutor(n_workers) as pool:
             chis = list(pool.map(one, jobs))
-            done = [c for pair in pool.map(tables, AXES) for c in pair]
+            done = [c for pair in pool.map(tables, AXES) for c in pair] if with_tables else chis
     else:
         chis = [one(j) for j in jobs]
-        done = [c for axis in AXES for c in tables(axis)]
+        done = [c for axis in AXES for c in tables(axis)] if with_tables else chis
     by_name = {c.name: c for c in done}
-    for c in done:
-        if not usable(c.surrogate):
+    for c in done if with_tables else ():
+        if not usable(c.surrogate, u_fs[c.output_axis]):
             warnings.append(
-                f"chi_{c.name}: its surrogate table reaches only {c.surrogate.max_error:.2g} V of "
-                f"the kernel sum (needs <= {MAX_SURROGATE_ERROR:g} V); this model decouples by the "
+                f"chi_{c.name}: its surrogate table reaches only "
+                f"{c.surrogate.max_error / u_fs[c.output_axis]:.2g} of the full-scale output of "
+                f"the kernel sum (needs <= {MAX_SURROGATE_ERROR:g}); this model decouples by the "
                 "exact kernel sum, about 100x slower"
             )
     model = CouplingErrorModel(settings, omega.k, {name: by_name[name] for name in CHI_NAMES})
@@ -172,7 +182,8 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         r2=dict(zip(AXES, map(float, omega.r2), strict=True)),
         n_points=dict(zip(AXES, map(int, omega.n), strict=True)),
         n_support_vectors={c.name: int(c.support_vectors.size) for c in chis},
-        surrogate_max_error={n: c.surrogate.max_error for n, c in model.chi.items()},
+        surrogate_max_error={n: c.surrogate.max_error for n, c in model.chi.items()}
+        if with_tables else None,
         gamma_before=before,
         gamma_after=after,
         repetitions=calib.repetitions,

@@ -113,11 +113,13 @@ class FitReport:
     surrogate_max_error: dict[str, float] | None = None
     repetitions: list[int] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    verdict: dict[str, Any] | None = None  # held-out comparison (fsdecouple.verdict)
 
     def to_dict(self) -> dict[str, Any]:
         d = {f.name: getattr(self, f.name) for f in fields(self)}
-        if d["surrogate_max_error"] is None:  # files from before the tables
-            del d["surrogate_max_error"]
+        for key in ("surrogate_max_error", "verdict"):
+            if d[key] is None:  # files from before these figures
+                del d[key]
         return d
 
     @classmethod
@@ -140,6 +142,13 @@ class CouplingErrorModel:
         The corrected coupling functions, keyed ``"xy" ... "zy"`` (eq. 11 order).
     report : FitReport
         Fit figures: R^2 per axis, support vectors, gamma before/after, warnings.
+    method : str
+        What :meth:`decouple` uses: ``svr``, eq. (11) with the chi (the paper's
+        method), or ``linear``, the least-squares calibration matrix ``f = C u``
+        (``fit --method linear|auto``; omega and chi are kept as the diagnostics of
+        the sensor's coupling).
+    matrix : ndarray, shape (N, N), optional
+        The calibration matrix C [load unit / output unit] of a ``linear`` model.
     provenance : dict
         Input files and digests, library versions.
     created : str
@@ -152,6 +161,8 @@ class CouplingErrorModel:
     report: FitReport | None = None
     provenance: dict[str, Any] = field(default_factory=dict)
     created: str = ""
+    method: str = "svr"
+    matrix: np.ndarray | None = None
     _tables: Any = field(default=None, init=False, repr=False, compare=False)
 
     @property
@@ -161,6 +172,11 @@ class CouplingErrorModel:
     @property
     def warnings(self) -> list[str]:
         return list(self.report.warnings) if self.report is not None else []
+
+    @property
+    def full_scale_output(self) -> np.ndarray:
+        """|k_a| F_FS,a per output, in the data's output unit: tolerances are fractions of it."""
+        return np.abs(self.k) * np.asarray(self.settings.full_scale, dtype=float)
 
     @property
     def rotation(self) -> np.ndarray | None:
@@ -208,7 +224,11 @@ class CouplingErrorModel:
         u_arr = np.asarray(u, dtype=float)
         flat = u_arr.reshape(-1, self.n_components)
         tables = None if exact else self.fast_decoupler()
-        if tables is not None:
+        if self.method == "linear":
+            f = flat @ self.matrix.T
+            if rotate and self.rotation is not None:
+                f = f @ self.rotation.T
+        elif tables is not None:
             f = tables.decouple(flat, rotate=rotate, workers=workers)
         else:
             f = self._exact(flat, rotate)
@@ -216,9 +236,12 @@ class CouplingErrorModel:
 
     def fast_decoupler(self) -> TableDecoupler | None:
         """The table path of :mod:`fsdecouple.decouple`, or None without usable surrogates."""
+        if self.method == "linear":
+            return None
         if self._tables is None:
             self._tables = TableDecoupler.from_chis(
-                self.k, self.chi.values(), self._exact, self.rotation) or False
+                self.k, self.chi.values(), self._exact, self.rotation,
+                self.full_scale_output) or False
         return self._tables or None
 
     def decoupler(self):

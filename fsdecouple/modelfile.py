@@ -22,7 +22,11 @@ from .iotools.files import atomic_write
 from .model import Chi, CouplingErrorModel, FitReport
 
 FORMAT = "fsdecouple.model"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+# Version 2 adds: ``method`` (svr | linear) and ``matrix`` for linear models,
+# ``settings.units``, and ``report.verdict``.  Version 1 files read as svr models
+# in newtons and volts.
+METHODS = ("svr", "linear")
 
 
 def model_to_dict(model: CouplingErrorModel) -> dict[str, Any]:
@@ -40,9 +44,12 @@ def model_to_dict(model: CouplingErrorModel) -> dict[str, Any]:
             for a, axis in enumerate(AXES)
         },
         "chi": {name: c.to_dict() for name, c in model.chi.items()},
+        "method": model.method,
         "provenance": model.provenance,
         "report": model.report.to_dict() if model.report else {},
     }
+    if model.matrix is not None:
+        doc["matrix"] = [[float(v) for v in row] for row in model.matrix]
     doc["integrity"] = {"algorithm": "sha256", "digest": content_digest(doc)}
     return doc
 
@@ -119,9 +126,29 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
         )
     report = doc.get("report")
     _check_report(report, source)
+    method, matrix = _method(doc, len(k), source)
     return CouplingErrorModel(
-        settings, k, chi, FitReport.from_dict(report), doc.get("provenance", {}), doc.get("created", "")
+        settings, k, chi, FitReport.from_dict(report), doc.get("provenance", {}),
+        doc.get("created", ""), method, matrix,
     )
+
+
+def _method(doc: dict[str, Any], n: int, source: str) -> tuple[str, np.ndarray | None]:
+    """The decoupling method and, for ``linear``, its N x N finite calibration matrix."""
+    method = doc.get("method", "svr")
+    if method not in METHODS:
+        raise ModelFileError(f"{source}: malformed model file (method {method!r}, expected "
+                             f"{' or '.join(METHODS)})")
+    if method == "svr":
+        return method, None
+    try:
+        matrix = np.array(doc["matrix"], dtype=float)
+    except (KeyError, TypeError, ValueError):
+        matrix = None
+    if matrix is None or matrix.shape != (n, n) or not np.isfinite(matrix).all():
+        raise ModelFileError(f"{source}: malformed model file (a linear model needs a finite "
+                             f"{n}x{n} matrix)")
+    return method, matrix
 
 
 def _check_report(report: Any, source: str) -> None:

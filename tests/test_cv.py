@@ -13,8 +13,9 @@ from conftest import ROOT, SAMPLE, invoke
 
 from fsdecouple.axes import VOLTAGE_COLUMNS
 from fsdecouple.calibration import GrossError
-from fsdecouple.cv import METHODS, check_folds, default_folds, parse_folds, run_cv
+from fsdecouple.cv import METHODS, run_cv
 from fsdecouple.errors import InputError
+from fsdecouple.heldout import check_folds, default_folds, parse_folds
 from fsdecouple.linear import fit_omega
 from fsdecouple.metrics import interference_error
 
@@ -215,15 +216,27 @@ def test_cv_command_bad_input_exits_2(args, message):
     assert message in r.stderr and "Traceback" not in r.stderr
 
 
-def test_cv_needs_three_repetitions(tmp_path):
+def test_fewer_than_three_repetitions_hold_out_load_levels(tmp_path):
     d = tmp_path / "two"
     d.mkdir()
     for rep in (1, 2):
         (d / f"rep{rep}.csv").write_bytes((SAMPLE / "calibration" / f"rep{rep}.csv").read_bytes())
     cfg = tmp_path / "two.yaml"
     cfg.write_text("min_repetitions: 2\n")
-    r = invoke(["cv", d, "-c", cfg], code=2)
-    assert "cross-validation needs at least 3 repetitions" in r.stderr
+    r = invoke(["cv", d, "-c", cfg, "--protocol", "repetitions"], code=2)
+    assert "needs at least 3" in r.stderr and "--protocol levels" in r.stderr
+    r = invoke(["cv", d, "-c", cfg, "--folds", "1,2"], code=2)  # folds are repetitions
+    assert "needs at least 3 repetitions" in r.stderr
+    doc = json.loads(invoke(["cv", d, "-c", cfg, "--json"]).stdout)
+    assert doc["protocol"] == "levels"
+    # the paper's Z sweep has 30 loaded points (0..-150 N in 5 N steps): 30 rounds.
+    # X runs -100..100 N in 10 N steps, 20 loaded points in file order; held out,
+    # -100 N (round 1) and +100 N (round 20) lie beyond every load left: end points
+    assert len(doc["folds"]) == 30
+    ends = {(r["round"], r["axis"]) for r in doc["end_records"] if r["method"] == "svr"}
+    assert (1, "x") in ends and (20, "x") in ends and (10, "x") not in ends
+    interior = {(r["round"], r["axis"]) for r in doc["records"] if r["method"] == "svr"}
+    assert (10, "x") in interior and not interior & {(1, "x"), (20, "x")}
     r = invoke(["cv", d], code=2)  # the default config already wants six
     assert "requires at least 6" in r.stderr
 

@@ -17,8 +17,8 @@ import os
 from pathlib import Path
 
 from fsdecouple import FsdecoupleError, load_calibration, load_config
-from fsdecouple.fit import fit
 from fsdecouple.modelfile import FORMAT_VERSION, save_model
+from fsdecouple.verdict import calibrate
 
 ROOT = Path(__file__).resolve().parents[2]
 CREATED = "2026-01-01T00:00:00+00:00"
@@ -30,7 +30,9 @@ def main() -> None:
     args = parser.parse_args()
     os.chdir(ROOT)
     settings = load_config()
-    model = fit(load_calibration(Path("sample_data/calibration"), settings), settings, workers=1)
+    # as `fsdecouple fit` makes it: the model and its held-out verdict (format 2)
+    model = calibrate(load_calibration(Path("sample_data/calibration"), settings), settings,
+                      workers=1)
     model.created = CREATED
     out = Path("tests/data/golden") / f"model-v{FORMAT_VERSION}.json"
     try:
