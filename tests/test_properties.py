@@ -129,20 +129,6 @@ def calibration_tables(draw):
                                        "ux", "uy", "uz"])
 
 
-@settings(max_examples=40, deadline=None)
-@given(calibration_tables())
-def test_fit_contract(table):
-    """fit: a finite model whose decoupling is never NaN, or an FsdecoupleError."""
-    try:
-        cs = from_table(table, LENIENT, files=(("f", ""),))
-        m = fit(cs, LENIENT, workers=1)
-    except FsdecoupleError:
-        event("refused")
-        return
-    event("fitted")
-    assert np.isfinite(m.k).all() and (m.k != 0).all()
-    assert all(np.isfinite(c.dual_coef).all() and np.isfinite(c.rho) for c in m.chi.values())
-    assert not np.isnan(m.decouple(cs.voltages)).any()
 
 
 @settings(max_examples=100, deadline=None)
@@ -162,7 +148,9 @@ def valid_calibration_tables(draw):
     """Calibration sets ingest must accept: every repetition sweeps x, y and z, each
     sweep has a zero-load row and at least one loaded point, one load per row."""
     rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
-    k = draw(st.lists(st.sampled_from([0.013, 0.008, -0.01, 1e-3, 5.0]), min_size=3, max_size=3))
+    # sensitivities of real bridges [V/N]; the 5 V/N unit mistake of calibration_tables
+    # makes fit build surrogate tables over ~1000 kernel widths (seconds per example)
+    k = draw(st.lists(st.sampled_from([0.013, 0.008, -0.01, 1e-3, 0.1]), min_size=3, max_size=3))
     coupling = draw(st.sampled_from([0.0, 0.01, 0.3]))
     noise = draw(st.sampled_from([0.0, 1e-4, 0.05]))
     # half the sets lead every sweep with its zero rows, which the order alone can tell
@@ -315,3 +303,37 @@ def test_calibration_ingest_contract():
     run()
     print(f"spoilt calibration inputs: {outcomes}")
     assert outcomes["read"] + outcomes["refused"] >= 30, outcomes
+
+
+def test_fit_contract():
+    """fit: a finite model whose decoupling is never NaN, or an FsdecoupleError.
+
+    Three of four examples are valid sets, which must fit; the others come from the
+    looser generator (zero slopes, sweeps without a zero row, 5 V/N unit mistakes)."""
+    outcomes = {"fitted": 0, "refused": 0}
+
+    @settings(max_examples=40, deadline=None)
+    @given(st.one_of(valid_calibration_tables().map(lambda t: (t, True)),
+                     valid_calibration_tables().map(lambda t: (t, True)),
+                     valid_calibration_tables().map(lambda t: (t, True)),
+                     calibration_tables().map(lambda t: (t, False))))
+    def run(example):
+        table, valid = example
+        try:
+            cs = from_table(table, LENIENT, files=(("f", ""),))
+            m = fit(cs, LENIENT, workers=1)
+        except FsdecoupleError as err:
+            assert not valid, err
+            outcomes["refused"] += 1
+            event("refused")
+            return
+        outcomes["fitted"] += 1
+        event("fitted")
+        assert np.isfinite(m.k).all() and (m.k != 0).all()
+        assert all(np.isfinite(c.dual_coef).all() and np.isfinite(c.rho) for c in m.chi.values())
+        assert not np.isnan(m.decouple(cs.voltages)).any()
+
+    run()
+    print(f"fit examples: {outcomes}")
+    total = outcomes["fitted"] + outcomes["refused"]
+    assert total >= 40 and outcomes["fitted"] / total > 0.5, outcomes
