@@ -55,6 +55,66 @@ def parse(text: str) -> Tree:
     return t
 
 
+class Tables(HTMLParser):
+    """Every <table id=...> as rows of cells (tag, text, class); nested spans' text joins
+    their cell's."""
+
+    def __init__(self):
+        super().__init__()
+        self.tables: dict[str, list[list[tuple[str, str, str]]]] = {}
+        self._table = self._row = self._cell = None
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        if tag == "table":
+            self._table = self.tables.setdefault(a["id"], [])
+        elif tag == "tr" and self._table is not None:
+            self._row = []
+            self._table.append(self._row)
+        elif tag in ("td", "th") and self._row is not None:
+            self._cell = [tag, [], a.get("class") or ""]
+
+    def handle_data(self, data):
+        if self._cell is not None:
+            self._cell[1].append(data)
+
+    def handle_endtag(self, tag):
+        if tag in ("td", "th") and self._cell is not None:
+            self._row.append((self._cell[0], " ".join("".join(self._cell[1]).split()), self._cell[2]))
+            self._cell = None
+        elif tag == "tr":
+            self._row = None
+        elif tag == "table":
+            self._table = None
+
+
+def tables_of(text: str) -> dict[str, list[list[tuple[str, str, str]]]]:
+    t = Tables()
+    t.feed(text)
+    t.close()
+    return t.tables
+
+
+def body_rows(rows):
+    """Rows with at least one <td>: the table body (header rows are all <th>)."""
+    return [r for r in rows if any(tag == "td" for tag, _, _ in r)]
+
+
+def number(text: str) -> float:
+    """The number a cell shows: '▲ 1.23 %' -> 0.0123, '0.0133' -> 0.0133."""
+    text = text.replace("▲", "").strip()
+    if text.endswith("%"):
+        return float(text[:-1]) / 100.0
+    return float(text)
+
+
+def shown(cell_text: str, value: float, decimals: int, percent: bool = True):
+    """Assert a cell shows ``value`` to its printed ``decimals`` (half a unit in the last place)."""
+    assert cell_text.endswith(" %") == percent, cell_text
+    half = 0.5 * 10.0 ** -decimals / (100.0 if percent else 1.0)
+    assert abs(number(cell_text) - value) <= half * (1 + 1e-9), (cell_text, value)
+
+
 def decode_png(src: str) -> np.ndarray:
     prefix = "data:image/png;base64,"
     assert src.startswith(prefix)
@@ -76,6 +136,132 @@ def full_report(tmp_path_factory, sample_model, cv_json):
                 "-o", html, "--png", out / "png"])
     assert "report written to" in r.stdout
     return html, out / "png"
+
+
+@pytest.fixture(scope="module")
+def shown_tables(full_report):
+    return tables_of(full_report[0].read_text(encoding="utf-8"))
+
+
+@pytest.fixture(scope="module")
+def model_doc(sample_model):
+    """The model file as plain JSON: its numbers, read without fsdecouple."""
+    return json.loads(sample_model.read_text(encoding="utf-8"))
+
+
+def test_omega_table_shows_the_model_files_k(shown_tables, model_doc):
+    rows = body_rows(shown_tables["table-omega"])
+    assert [r[0][1] for r in rows] == ["x", "y", "z"]
+    for row in rows:
+        omega = model_doc["omega"][row[0][1]]
+        k_text, inv_text, r2_text, n_text = (c[1] for c in row[1:])
+        # k to 6 significant digits, 1/k (eq. 13) to 4 decimals, R^2 to 6
+        assert float(k_text) == pytest.approx(omega["k"], rel=5e-6)
+        shown(inv_text, 1.0 / omega["k"], 4, percent=False)
+        shown(r2_text, omega["r2"], 6, percent=False)
+        assert int(n_text) == model_doc["report"]["n_points"][row[0][1]]
+    # the sample sensor is the paper's: 1/k within 0.1 % of eq. (13)
+    inverse = [number(r[2][1]) for r in rows]
+    np.testing.assert_allclose(inverse, [75.065, 77.788, 125.17], rtol=1e-3)
+
+
+def test_chi_table_shows_the_model_files_support_vectors_and_ranges(shown_tables, model_doc):
+    rows = body_rows(shown_tables["table-chi"])
+    assert [r[0][1] for r in rows] == ["χxy", "χxz", "χyx", "χyz", "χzx", "χzy"]
+    for row in rows:
+        chi = model_doc["chi"][row[0][1][1:]]
+        assert row[1][1] == f"u{chi['input_axis']}"
+        assert row[2][1] == f"{len(chi['support_vectors'])} / {chi['n_points']}"
+        lo, hi = (float(v) for v in row[3][1].split("…"))
+        np.testing.assert_allclose([lo, hi], chi["input_range"], rtol=0, atol=0.5e-4)
+
+
+def test_in_sample_gamma_table_equals_eq_12_recomputed(shown_tables, sample_model):
+    """gamma_a = (max|f_b| + max|f_c|) / f_a(FS) over the a sweeps of all repetitions,
+    by hand from the calibration points, initial (u / k) and decoupled (model.decouple)."""
+    from fsdecouple import load_calibration, load_config, load_model
+
+    model = load_model(sample_model)
+    points = load_calibration(SAMPLE / "calibration", load_config()).points
+    u = points[["ux", "uy", "uz"]].to_numpy()
+    forces = {"initial": u / model.k, "decoupled": model.decouple(u, rotate=False)}
+    full_scale = {"x": 100.0, "y": 100.0, "z": 150.0}  # Section 3
+    rows = body_rows(shown_tables["table-gamma-fit"])
+    assert [r[0][1] for r in rows] == ["x", "y", "z"]
+    for a, row in enumerate(rows):
+        axis = row[0][1]
+        sweep = (points["axis"] == axis).to_numpy()
+        for col, f in zip((1, 2), forces.values(), strict=True):
+            others = np.abs(np.delete(f[sweep], a, axis=1)).max(axis=0)
+            gamma = others.sum() / full_scale[axis]
+            shown(row[col][1], gamma, 2)
+        # decoupling is what the model is for: after < before on every axis here
+        assert number(row[2][1]) < number(row[1][1]) and row[2][2] != "worse"
+
+
+def test_table_1_and_3_analogues_show_the_cv_records(shown_tables, cv_json):
+    doc = json.loads(cv_json.read_text())
+    gamma = {(r["round"], r["test_set"], r["method"], r["axis"]): r["value"]
+             for r in doc["records"] if r["metric"] == "gamma"}
+    methods = doc["methods"]
+    held_out = [(rnd, rep) for rnd, fold in enumerate(doc["folds"], 1) for rep in fold]
+    rows = body_rows(shown_tables["table-gamma-methods"])
+    # one row per held-out repetition: Table 1 has 3 rounds x tests I and II
+    assert [(int(r[0][1]), r[1][1]) for r in rows] == [
+        (rnd, f"test {'I' if i == 0 else 'II'} (rep {rep})")
+        for rnd, fold in enumerate(doc["folds"], 1) for i, rep in enumerate(fold)]
+    for row, (rnd, rep) in zip(rows, held_out, strict=True):
+        cells = row[2:]
+        assert len(cells) == 3 * len(methods)
+        for j, (tag, text, cls) in enumerate(cells):
+            assert tag == "td"
+            axis, method = "xyz"[j // len(methods)], methods[j % len(methods)]
+            value = gamma[(rnd, rep, method, axis)]
+            shown(text, value, 2)
+            worse = method != "initial" and value > gamma[(rnd, rep, "initial", axis)]
+            assert (cls == "worse") == worse, (rnd, rep, method, axis)
+    # Table 3: the svr columns again, plus the worst held-out gamma per axis
+    rows = body_rows(shown_tables["table-gamma-svr"])
+    assert len(rows) == len(held_out) + 1 and rows[-1][0][1] == "worst"
+    for row, (rnd, rep) in zip(rows[:-1], held_out, strict=True):
+        for axis, (_, text, _) in zip("xyz", row[2:], strict=True):
+            shown(text, gamma[(rnd, rep, "svr", axis)], 2)
+    for axis, (_, text, _) in zip("xyz", rows[-1][2:], strict=True):
+        shown(text, max(gamma[(rnd, rep, "svr", axis)] for rnd, rep in held_out), 2)
+
+
+def test_gross_error_and_task_tables_show_the_cv_records(shown_tables, cv_json):
+    doc = json.loads(cv_json.read_text())
+    ge = doc["gross_error"]
+    clean = {(r["round"], r["test_set"], r["method"], r["axis"]): r["value"] for r in doc["records"]}
+    gross = {(r["round"], r["test_set"], r["method"], r["axis"]): r["value"] for r in ge["records"]}
+    rows = body_rows(shown_tables["table-gross-error"])
+    keys = sorted({(k[0], k[1]) for k in gross if k[2] == "svr"})
+    assert [(int(r[0][1]), int(r[1][1].split("rep ")[1].rstrip(")"))) for r in rows] == keys
+    for row, (rnd, rep) in zip(rows, keys, strict=True):
+        for j, axis in enumerate("xyz"):
+            shown(row[2 + 2 * j][1], clean[(rnd, rep, "svr", axis)], 2)
+            shown(row[3 + 2 * j][1], gross[(rnd, rep, "svr", axis)], 2)
+    rows = body_rows(shown_tables["table-omega-gross"])
+    assert len(rows) == len(ge["omega"])
+    for row, o in zip(rows, ge["omega"], strict=True):
+        assert (int(row[0][1]), row[1][1]) == (o["round"], o["axis"])
+        assert float(row[2][1]) == pytest.approx(o["k_clean"], rel=5e-6)
+        assert float(row[3][1]) == pytest.approx(o["k_gross"], rel=5e-6)
+        shown(row[4][1], o["inverse_clean"], 3, percent=False)
+        shown(row[5][1], o["inverse_gross"], 3, percent=False)
+        shown(row[6][1].replace("+", ""), o["inverse_gross"] / o["inverse_clean"] - 1, 2)
+    task = {(r["round"], r["method"], r["axis"], r["metric"]): r["value"]
+            for r in doc["task"]["records"]}
+    rows = body_rows(shown_tables["table-task"])
+    names = {"initial": "initial (ω⁻¹ only)", "linear": "linear matrix", "rbf-mimo": "MIMO RBF NN",
+             "rbf-siso": "SISO RBF NN", "svr": "ε-SVR"}
+    assert len(rows) == len({(k[0], k[1]) for k in task})
+    for row in rows:
+        rnd, method = int(row[0][1]), next(m for m, n in names.items() if n == row[1][1])
+        for j, (_, text, _) in enumerate(row[2:]):
+            axis, metric = "xyz"[j // 2], ("max_error", "rms_error")[j % 2]
+            shown(text, task[(rnd, method, axis, metric)], 3)
 
 
 def test_report_is_self_contained_html_with_every_figure_and_table(full_report):
@@ -125,6 +311,13 @@ def test_worse_cells_are_highlighted(tmp_path, sample_model, cv_json):
     text = (tmp_path / "r.html").read_text(encoding="utf-8")
     assert text.count('class="worse"') == before + 2  # Table 1 and Table 3 analogues
     assert "▲</span> 50.00 %" in text
+    # and they are the cells of that record: round 1, test I (rep 1), gamma_y, svr
+    tables = tables_of(text)
+    first = body_rows(tables["table-gamma-methods"])[0]
+    assert first[1][1] == "test I (rep 1)"
+    svr_y = first[2 + len(doc["methods"]) + doc["methods"].index("svr")]
+    assert svr_y == ("td", "▲ 50.00 %", "worse")
+    assert body_rows(tables["table-gamma-svr"])[0][3] == ("td", "▲ 50.00 %", "worse")
 
 
 def test_report_from_the_model_alone(tmp_path, sample_model):
