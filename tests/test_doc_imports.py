@@ -16,12 +16,8 @@ from conftest import ROOT
 IMPORT = re.compile(r"^\s*from (fsdecouple(?:\.[a-z_.]+)?) import ([A-Za-z_, ]+)", re.M)
 SOURCES = ["README.md", *sorted(str(p.relative_to(ROOT)) for p in (ROOT / "docs").glob("*.py")),
            *sorted(str(p.relative_to(ROOT)) for p in (ROOT / "benchmarks").glob("*.py"))]
-# known broken on main at ed71bb8 ("Restructure: one home per idea")
-BROKEN = {
-    ("README.md", "fsdecouple.html_report"): "the restructure renamed html_report to report",
-    ("docs/make_figures.py", "fsdecouple.html_report"): "the restructure renamed html_report to report",
-    ("benchmarks/run.py", "fsdecouple.model"): "the restructure moved CHI_NAMES to fsdecouple.axes",
-}
+# (source, module) -> reason, for an import known to be broken (a strict xfail)
+BROKEN: dict[tuple[str, str], str] = {}
 
 
 def cases():
