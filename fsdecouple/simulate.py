@@ -39,7 +39,10 @@ class SimulatedSensor:
     """Ground truth for a simulated sensor.
 
     ``phi_ab(f_b) = amplitude[a][b] * u_FS[a] * g_ab(f_b / F_FS[b]) / max|g_ab|`` is the
-    coupling function of eq. (3), a fraction ``amplitude`` of the full-scale output.
+    coupling function of eq. (3), a fraction ``amplitude`` of the full-scale output;
+    the max is taken over ``load_span[b]``, the calibrated loads as fractions of F_FS.
+    Units are the data's: N and V for the paper's sensor, gf and ADC counts for a
+    load cell (:func:`load_cell_sensor`).
     """
 
     inverse_slopes: tuple[float, float, float] = PAPER_INVERSE_SLOPES
@@ -54,6 +57,8 @@ class SimulatedSensor:
         "yz": (0.9, 0.2, -0.4), "zx": (0.3, -0.4, 0.6), "zy": (-0.6, -0.5, 0.3),
     })
     noise: float = 0.0005  # [V], standard deviation per channel
+    # Section 3: X and Y are loaded both ways, Z only in compression
+    load_span: tuple[tuple[float, float], ...] = ((-1.0, 1.0), (-1.0, 1.0), (-1.0, 0.0))
 
     @property
     def k(self) -> np.ndarray:
@@ -67,7 +72,8 @@ class SimulatedSensor:
         """Coupling error element e_ab [V] caused by load f_b [N] (eq. 3)."""
         a, b = AXES.index(name[0]), AXES.index(name[1])
         fs = self.full_scale[b]
-        grid = np.linspace(-1.0, 1.0, 2001) if b < 2 else np.linspace(-1.0, 0.0, 1001)
+        lo, hi = self.load_span[b]
+        grid = np.linspace(lo, hi, 1 + round(1000 * (hi - lo)))
         peak = np.abs(_shape(grid, self.shapes[name])).max()
         g = _shape(np.asarray(f, dtype=float) / fs, self.shapes[name]) / peak
         return self.amplitude[a][b] * self.full_scale_output[a] * g
