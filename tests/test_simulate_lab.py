@@ -11,9 +11,11 @@ import csv
 
 import numpy as np
 import pytest
-from conftest import SAMPLE, invoke
+import yaml
+from conftest import ROOT, SAMPLE, invoke
 
 from fsdecouple.axes import AXES
+from fsdecouple.config import settings_from_dict
 from fsdecouple.simulate import (
     LOAD_CELL_FULL_SCALE,
     LOAD_CELL_SLOPES,
@@ -234,3 +236,17 @@ def test_lab_outputs_are_all_or_nothing(tmp_path):
     invoke(["simulate", tmp_path, "--layout", "lab", "--force"])
     assert (tmp_path / "validation.csv").read_bytes() == (LAB / "validation.csv").read_bytes()
 
+
+def test_config_describes_the_sample_file():
+    raw = yaml.safe_load((ROOT / "configs" / "loadcell.yaml").read_text())
+    assert set(raw) == {"sensor", "columns", "units", "full_scale", "min_repetitions", "scaling"}
+    assert raw["units"] == {"load": "gf", "output": "count"}
+    with open(LAB / "calibration.csv", newline="") as fh:
+        header = next(csv.reader(fh))
+    assert [raw["columns"][c] for c in ("fx", "fy", "fz", "ux", "uy", "uz")] == header[:6]
+    _, loads, *_ = read_lab(LAB / "calibration.csv")
+    assert [raw["full_scale"][a] for a in AXES] == loads.max(axis=0).tolist()
+    # everything but `units` (not yet known to this parser) is a valid config today
+    settings = settings_from_dict({k: v for k, v in raw.items() if k != "units"})
+    assert settings.min_repetitions == 1 and settings.scaling == "full_scale"
+    assert settings.full_scale == LOAD_CELL_FULL_SCALE
