@@ -97,19 +97,31 @@ def _main(
 @app.command()
 def simulate(
     out_dir: Annotated[Path, typer.Argument(help="Directory to write the data set into.")],
-    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    seed: Annotated[int, typer.Option(help="Random seed (>= 0).")] = 0,
     gross_error: Annotated[
         str | None, typer.Option(help="Move one point: AXIS:REP:POINT:OFFSET[V], e.g. x:1:5:0.2")
     ] = None,
+    layout: Annotated[
+        str,
+        typer.Option(help="paper: the paper's sensor, grid and files; lab: a load cell [gf, "
+                          "ADC counts] in a lab spreadsheet, calibration.csv + validation.csv."),
+    ] = "paper",
+    repetitions: Annotated[
+        int | None, typer.Option(help="Repetitions (default: 6 for paper, 1 for lab).")
+    ] = None,
+    levels: Annotated[
+        int | None, typer.Option(help="Loads per sweep after its zero row (lab only; default 4).")
+    ] = None,
     force: ForceOpt = False,
 ) -> None:
-    """Write a simulated six-repetition calibration set and a combined-load task log."""
+    """Write a simulated calibration set: the paper's (with a combined-load task log) or a lab's."""
     from .calibration import GrossError
     from .simulate import simulate as simulate_sensor
 
     with user_errors():
         ge = GrossError.parse(gross_error) if gross_error else None
-        files = simulate_sensor(out_dir, seed=seed, gross_error=ge, force=force)
+        files = simulate_sensor(out_dir, seed=seed, gross_error=ge, force=force, layout=layout,
+                                repetitions=repetitions, levels=levels)
     console.print(f"wrote {len(files)} files under {out_dir}")
 
 

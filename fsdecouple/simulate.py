@@ -3,11 +3,14 @@
 The sensor follows the paper's coupling error model exactly (eq. 1-3): linear
 prime voltages with the sensitivities of eq. (13), smooth nonlinear coupling
 error elements of 1-3 % of full-scale output per axis pair, by superposition;
-plus Gaussian noise and a zero offset per sweep.
+plus Gaussian noise and a zero offset per sweep.  The same model, in gram-force and
+ADC counts, is the load cell of ``sample_data/loadcell`` (:func:`load_cell_sensor`),
+written as a lab's spreadsheet by :mod:`fsdecouple.simulate_lab`.
 """
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -18,6 +21,7 @@ from .axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .calibration import GrossError
 from .errors import InputError
 from .iotools.files import atomic_write, check_output
+from .simulate_lab import write_lab_csv
 
 # Section 3 and eq. (13)
 PAPER_INVERSE_SLOPES = (75.065, 77.788, 125.17)  # [N/V]
@@ -39,7 +43,10 @@ class SimulatedSensor:
     """Ground truth for a simulated sensor.
 
     ``phi_ab(f_b) = amplitude[a][b] * u_FS[a] * g_ab(f_b / F_FS[b]) / max|g_ab|`` is the
-    coupling function of eq. (3), a fraction ``amplitude`` of the full-scale output.
+    coupling function of eq. (3), a fraction ``amplitude`` of the full-scale output;
+    the max is taken over ``load_span[b]``, the calibrated loads as fractions of F_FS.
+    Units are the data's: N and V for the paper's sensor, gf and ADC counts for a
+    load cell (:func:`load_cell_sensor`).
     """
 
     inverse_slopes: tuple[float, float, float] = PAPER_INVERSE_SLOPES
@@ -54,6 +61,8 @@ class SimulatedSensor:
         "yz": (0.9, 0.2, -0.4), "zx": (0.3, -0.4, 0.6), "zy": (-0.6, -0.5, 0.3),
     })
     noise: float = 0.0005  # [V], standard deviation per channel
+    # Section 3: X and Y are loaded both ways, Z only in compression
+    load_span: tuple[tuple[float, float], ...] = ((-1.0, 1.0), (-1.0, 1.0), (-1.0, 0.0))
 
     @property
     def k(self) -> np.ndarray:
@@ -67,7 +76,8 @@ class SimulatedSensor:
         """Coupling error element e_ab [V] caused by load f_b [N] (eq. 3)."""
         a, b = AXES.index(name[0]), AXES.index(name[1])
         fs = self.full_scale[b]
-        grid = np.linspace(-1.0, 1.0, 2001) if b < 2 else np.linspace(-1.0, 0.0, 1001)
+        lo, hi = self.load_span[b]
+        grid = np.linspace(lo, hi, 1 + round(1000 * (hi - lo)))
         peak = np.abs(_shape(grid, self.shapes[name])).max()
         g = _shape(np.asarray(f, dtype=float) / fs, self.shapes[name]) / peak
         return self.amplitude[a][b] * self.full_scale_output[a] * g
@@ -100,6 +110,52 @@ def simulate_calibration(
             u = sensor.voltages(f) + offset + rng.normal(0.0, sensor.noise, size=f.shape)
             for i in range(loads.size):
                 rows.append((rep, axis, *f[i], *u[i]))
+    return pd.DataFrame(rows, columns=["repetition", "axis", *FORCE_COLUMNS, *VOLTAGE_COLUMNS])
+
+
+# A small 3-axis load cell read by a 24-bit ADC: loads [gf], outputs [counts].
+# These are the sensor's unknowns: they are written into no data file.
+LOAD_CELL_SLOPES = (812.5, -1347.5, 415.0)  # [counts/gf], ch1 wired reversed
+LOAD_CELL_FULL_SCALE = (1000.0, 1000.0, 1000.0)  # [gf]
+LOAD_CELL_OFFSETS = (1.0e5, 1.0e6)  # [counts], range of |zero offset| per sweep
+VALIDATION_REACH = 1.2  # validation loads go to 120 % of full scale
+LAYOUTS = ("paper", "lab")
+
+
+def load_cell_sensor() -> SimulatedSensor:
+    """The load cell of ``sample_data/loadcell``: coupling 0.7-2.8 % F.S. per pair,
+    by the paper's model, loaded by weights (positive loads only), 25 counts noise."""
+    return SimulatedSensor(
+        inverse_slopes=tuple(1.0 / k for k in LOAD_CELL_SLOPES),
+        full_scale=LOAD_CELL_FULL_SCALE,
+        amplitude=((0.0, 0.012, 0.025), (0.018, 0.0, 0.007), (0.028, 0.009, 0.0)),
+        noise=25.0,
+        load_span=((0.0, 1.0),) * len(AXES),
+    )
+
+
+def simulate_lab_calibration(
+    sensor: SimulatedSensor, rng: np.random.Generator, *, levels: int = 4,
+    repetitions: int = 1, reach: float = 1.0,
+) -> pd.DataFrame:
+    """Single-axis sweeps by weights: per sweep a zero row, then ``levels`` loads
+    evenly up to ``reach`` x full scale, with its own zero offset.
+
+    Returns the long table (``repetition, axis, fx .. uz``) with raw outputs,
+    rounded to whole counts.
+    """
+    rows = []
+    for rep in range(1, repetitions + 1):
+        for a, axis in enumerate(AXES):
+            # weights are whole milligrams: round so the file's loads are the true ones
+            loads = np.round(reach * sensor.full_scale[a] * np.arange(levels + 1) / levels, 3)
+            f = np.zeros((loads.size, 3))
+            f[:, a] = loads
+            sign = rng.choice((-1.0, 1.0), size=3)
+            offset = sign * rng.uniform(*LOAD_CELL_OFFSETS, size=3)
+            u = sensor.voltages(f) + offset + rng.normal(0.0, sensor.noise, size=f.shape)
+            for i in range(loads.size):
+                rows.append((rep, axis, *f[i], *np.rint(u[i])))
     return pd.DataFrame(rows, columns=["repetition", "axis", *FORCE_COLUMNS, *VOLTAGE_COLUMNS])
 
 
@@ -136,6 +192,11 @@ def _write_csv(df: pd.DataFrame, path: Path, formats: dict[str, str], force: boo
         out.to_csv(fh, index=False, lineterminator="\n")
 
 
+def _whole(value: int, name: str, minimum: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < minimum:
+        raise InputError(f"--{name} {value!r}: expected a whole number >= {minimum}")
+
+
 def simulate(
     out_dir: str | Path,
     *,
@@ -143,23 +204,45 @@ def simulate(
     gross_error: GrossError | None = None,
     sensor: SimulatedSensor | None = None,
     force: bool = False,
+    layout: str = "paper",
+    repetitions: int | None = None,
+    levels: int | None = None,
 ) -> list[Path]:
-    """Write a calibration set and a task log for a simulated sensor.
+    """Write a simulated calibration data set; all files or, on an error, none.
 
-    Layout: ``OUT_DIR/calibration/rep1.csv .. rep6.csv``, ``OUT_DIR/task_voltages.csv``
-    and ``OUT_DIR/task_forces.csv`` (true forces).  Voltages are written to 0.1 uV.
+    ``layout="paper"``: ``OUT_DIR/calibration/rep1.csv .. repN.csv`` on the paper's
+    grid (six repetitions unless given), ``OUT_DIR/task_voltages.csv`` and
+    ``OUT_DIR/task_forces.csv`` (true forces).  Voltages are written to 0.1 uV.
+
+    ``layout="lab"``: a load cell (:func:`load_cell_sensor` unless given) in a lab's
+    spreadsheet (:mod:`fsdecouple.simulate_lab`): ``OUT_DIR/calibration.csv`` with
+    ``levels`` loads per sweep up to full scale (one repetition unless given) and
+    ``OUT_DIR/validation.csv``, the same sensor with its own noise and offsets and
+    loads up to 120 % of full scale.  ``gross_error`` moves a calibration point.
     """
-    sensor = sensor or SimulatedSensor()
+    if layout not in LAYOUTS:
+        raise InputError(f"--layout {layout!r}: expected one of {', '.join(LAYOUTS)}")
+    _whole(seed, "seed", 0)
+    if repetitions is not None:
+        _whole(repetitions, "repetitions", 1)
+    if levels is not None:
+        if layout != "lab":
+            raise InputError("--levels: only with --layout lab (the paper layout uses the paper's grid)")
+        _whole(levels, "levels", 1)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: is a file, expected a directory to write into")
-    n_reps = 6
+    if layout == "lab":
+        return _simulate_lab(out, seed=seed, gross_error=gross_error, sensor=sensor,
+                             force=force, repetitions=repetitions or 1, levels=levels or 4)
+    sensor = sensor or SimulatedSensor()
+    n_reps = repetitions or 6
     for path in (*(out / "calibration" / f"rep{r}.csv" for r in range(1, n_reps + 1)),
                  out / "task_voltages.csv", out / "task_forces.csv"):
         if path.parent.is_dir():  # all or nothing: refuse before the first file is written
             check_output(path, force=force)
     (out / "calibration").mkdir(parents=True, exist_ok=True)
-    table = simulate_calibration(sensor, seed=seed)
+    table = simulate_calibration(sensor, repetitions=n_reps, seed=seed)
     if gross_error is not None:
         table = gross_error.apply(table)
     volt_fmt = {c: "%.7f" for c in VOLTAGE_COLUMNS}
@@ -174,3 +257,26 @@ def simulate(
     _write_csv(forces, out / "task_forces.csv", {"t": "%.3f", **force_fmt}, force)
     written += [out / "task_voltages.csv", out / "task_forces.csv"]
     return written
+
+
+def _simulate_lab(
+    out: Path, *, seed: int, gross_error: GrossError | None, sensor: SimulatedSensor | None,
+    force: bool, repetitions: int, levels: int,
+) -> list[Path]:
+    sensor = sensor or load_cell_sensor()
+    targets = [out / "calibration.csv", out / "validation.csv"]
+    if out.is_dir():  # all or nothing: refuse before the first file is written
+        for path in targets:
+            check_output(path, force=force)
+    # independent streams: the validation set is not the calibration's noise again
+    calib_rng, valid_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
+    calib = simulate_lab_calibration(sensor, calib_rng, levels=levels, repetitions=repetitions)
+    if gross_error is not None:
+        calib = gross_error.apply(calib)
+    valid = simulate_lab_calibration(
+        sensor, valid_rng, levels=levels, repetitions=repetitions, reach=VALIDATION_REACH
+    )
+    out.mkdir(parents=True, exist_ok=True)
+    for table, path in zip((calib, valid), targets, strict=True):
+        write_lab_csv(table, path, force=force)
+    return targets
