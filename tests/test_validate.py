@@ -9,6 +9,7 @@ re-derived here another way: the zero correction by hand, the range split by
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -101,6 +102,9 @@ def test_layout(doc, model_file, set_file):
     # one record per (method, axis, metric, range), both ranges present here
     assert len(doc["records"]) == 2 * 3 * 3 * 2
     json.dumps(doc, allow_nan=False)
+    readme = (SAMPLE.parent / "README.md").read_text(encoding="utf-8")
+    layout = re.search(r"<!-- validation-json-layout -->\n```json\n(.*?)```", readme, re.S).group(1)
+    assert set(re.findall(r'^  "(\w+)":', layout, re.M)) == TOP_KEYS
 
 
 def test_gamma_rederived_and_initial_is_worse(doc, truth, model_file):
