@@ -31,6 +31,7 @@ _PUBLIC = {
     "run_cv": "cv",
     "load_cv_results": "cv_doc",
     "build_report": "report",
+    "validate": "validate",
 }
 __all__ = sorted([*_PUBLIC, "fit"])  # noqa: F822
 

@@ -443,6 +443,27 @@ def cv(
         raise typer.Exit(1)
 
 
+@app.command()
+def validate(
+    model_file: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file (JSON).")],
+    set_path: Annotated[Path, typer.Argument(metavar="SET", help="Independent set, calibration format.")],
+    config: ConfigOpt = None,
+    output: Annotated[Path | None, typer.Option("--output", "-o", help="Write validation.json.")] = None,
+    max_gamma: Annotated[float | None, typer.Option(help="Exit 1 if calibrated gamma exceeds this.")] = None,
+    force: ForceOpt = False, json_out: JsonOpt = False,
+) -> None:
+    """Score a model on an independent single-axis set: gamma and force errors, per axis."""
+    from .console import validation_renderables
+    from .validate import validate as validate_set
+
+    with user_errors():
+        doc = validate_set(model_file, set_path, load_config(config) if config else None,
+                           max_gamma=max_gamma, output=output, force=force, inputs=_given(config))
+    for to_stderr, r in validation_renderables(doc, output, as_json=json_out):
+        (err_console if to_stderr else console).print(r, soft_wrap=True)
+    raise typer.Exit(0 if doc["gate"] is None or doc["gate"]["passed"] else 1)
+
+
 def _terminate(signum, frame) -> None:
     # SIGTERM (kill, CI timeouts) unwinds like Ctrl-C, so temporary files are removed
     raise SystemExit(128 + signum)

@@ -343,3 +343,51 @@ def cv_renderables(doc: dict[str, Any]) -> list:
                         f"-> {'passed' if g['passed'] else 'FAILED'}",
                         style="" if g["passed"] else "bold red"))
     return out
+
+
+# --- validate -----------------------------------------------------------------------
+
+def validation_renderables(doc: dict[str, Any], output=None, *, as_json: bool = False) -> list:
+    """Everything ``fsdecouple validate`` prints, as (to_stderr, renderable) pairs.
+
+    Text from files (paths, unit names, warnings) is always a :class:`Text`, so
+    rich never reads it as markup.
+    """
+    from .validate import METHODS, RANGES, dumps
+
+    out: list = []
+    if as_json:
+        out.append((False, Text(dumps(doc))))
+    unit = doc["units"]["load"]
+    by = {(r["range"], r["axis"], r["method"], r["metric"]): r for r in doc["records"]}
+    for rng in RANGES if not as_json else ():
+        axes = [a for a in AXES if any((rng, a, m, "gamma") in by for m in METHODS)]
+        if not axes:
+            continue
+        t = Table(title=Text(f"{rng} points of {doc['set']['path']}, model {doc['model']}: "
+                             f"% F.S. and {unit}"))
+        for col in ("axis", "method", "γ % F.S.", "max % F.S.", "RMS % F.S.",
+                    f"max [{unit}]", f"RMS [{unit}]"):
+            t.add_column(Text(col), justify="right")
+        for a in axes:
+            for m in METHODS:
+                rec = [by[(rng, a, m, metric)] for metric in ("gamma", "max_error", "rms_error")]
+                t.add_row(a, m, *(_num(r["value"]) for r in rec),
+                          *(f"{r['value_load_unit']:.4g}" for r in rec[1:]))
+        out.append((False, t))
+    if not as_json:
+        out.append((False, Text(
+            "gamma: eq. (12) on each loaded axis's points; max, RMS: |f_c - F_c| / F_c(FS) over "
+            f"those points and every component c; in {unit}: the same fraction of the largest "
+            "full scale. calibrated: every output within the calibrated range +/- 1 % of its span.")))
+    g = doc["gate"]
+    if g is not None:
+        worst = "no calibrated point" if g["worst"] is None else f"{_num(g['worst'])} % F.S."
+        line = Text(f"gate: worst model gamma on calibrated points {worst}, --max-gamma "
+                    f"{_num(g['max_gamma'])} % -> {'passed' if g['passed'] else 'FAILED'}",
+                    style="" if g["passed"] else "bold red")
+        out.append((as_json or not g["passed"], line))
+    if output is not None and not as_json:
+        out.append((False, Text(f"validation document written to {output}")))
+    out += [(True, Text("warning: ", style="yellow") + Text(w)) for w in doc["warnings"]]
+    return out
