@@ -391,6 +391,37 @@ def cv(
         raise typer.Exit(1)
 
 
+@app.command()
+def export(
+    model_file: Annotated[Path, typer.Argument(help="Model file (JSON).")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="C header to write, e.g. decoupler.h.")],
+    precision: Annotated[
+        str, typer.Option(help="double: fsd_decouple; float: fsd_decouple_f with float tables.")
+    ] = "double",
+    prefix: Annotated[str, typer.Option(help="Prefix of every C name (macros: uppercased).")] = "fsd_",
+    max_error: Annotated[
+        float | None,
+        typer.Option(help="Coarsest tables keeping this force error (fraction of full-scale load)."),
+    ] = None,
+    force: ForceOpt = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Export the model as one dependency-free C99 header (eq. 11 for embedded use)."""
+    from .export import export_header
+
+    with user_errors():
+        model = load_model(model_file)
+        check_output(output, force=force)
+        refuse_overwriting_input(output, [model_file])
+        result = export_header(model, output, precision=precision, prefix=prefix,
+                               max_error=max_error, force=force)
+    if json_out:
+        print_json(result.to_dict())
+        return
+    for line in result.summary_lines():
+        console.print(line, highlight=False, soft_wrap=True)
+
+
 def _terminate(signum, frame) -> None:
     # SIGTERM (kill, CI timeouts) unwinds like Ctrl-C, so temporary files are removed
     raise SystemExit(128 + signum)

@@ -128,6 +128,24 @@ class ExportResult:
     table_max_error: float  # fraction of full-scale load
     float_max_error: float | None
 
+    def to_dict(self) -> dict[str, Any]:
+        return {"path": str(self.path), "precision": self.precision, "prefix": self.prefix,
+                "n_components": self.n_components, "intervals": self.intervals,
+                "table_bytes": self.table_bytes, "kernel_bytes": self.kernel_bytes,
+                "table_max_error": self.table_max_error, "float_max_error": self.float_max_error}
+
+    def summary_lines(self) -> list[str]:
+        counts = [v for v in self.intervals.values() if v is not None]
+        tables = (f"{len(counts)} tables of {min(counts)}-{max(counts)} intervals"
+                  if counts else "no tables (kernel sums only)")
+        lines = [f"wrote {self.path}: {self.n_components} components, {self.precision}, {tables}",
+                 f"table bytes {self.table_bytes}, support-vector bytes {self.kernel_bytes}",
+                 f"table error <= {self.table_max_error:.3g} of full-scale load"]
+        if self.float_max_error is not None:
+            lines.append(f"float error <= {self.float_max_error:.3g} of full-scale load "
+                         "(FLOAT_MAX_ERROR in the header)")
+        return lines
+
 
 def export_header(
     model, out: str | Path, *, precision: str = "double", prefix: str = "fsd_",
@@ -207,7 +225,9 @@ def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",
             if s is not None and s.max_error <= PROMISE / (2 * max(n - 1, 1)):
                 cp.lo, cp.hi, cp.table, cp.table_error = s.lo, s.hi, s.coefficients(), s.max_error
     else:
-        share = max_error / 2 if precision == "float" else max_error  # float: half for rounding
+        # float: the measured bound is FLOAT_SAFETY x (table + rounding error), so the
+        # tables get a quarter, leaving the rest of E for float rounding
+        share = max_error / (2 * FLOAT_SAFETY) if precision == "float" else max_error
         _coarsest_tables(plan, model, share, max_error)
     plan.table_max_error = float(np.max(_table_bound(plan)))
     if max_error is not None and plan.table_max_error > max_error:
