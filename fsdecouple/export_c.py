@@ -116,8 +116,8 @@ def _preamble(plan: ExportPlan) -> str:
  * Do not compile with -ffast-math: the status bits rely on IEEE NaN and infinity.
  *
  * uint32_t {fn}
- *   u: {plan.n} zero-corrected prime voltages [{plan.output_unit}] (tare/zero already removed,
- *      as model.decouple takes them); f: {n} forces [{plan.load_unit}].  Returns a status
+ *   u: {plan.n} zero-corrected prime voltages [{P}OUTPUT_UNIT] (tare/zero already removed,
+ *      as model.decouple takes them); f: {n} forces [{P}LOAD_UNIT].  Returns a status
  *   bitmask, 0 when every chi came from its table and every input lies in the
  *   calibrated range:
  *   bit b (b < {n}): input channel b is outside its calibrated range widened by
@@ -166,7 +166,7 @@ extern "C" {{
 #define {P}STATUS_NOT_FINITE ((uint32_t)1 << {BIT_NOT_FINITE})
 #define {P}STATUS_SATURATED ((uint32_t)1 << {BIT_SATURATED})
 
-/* full-scale load per component [{plan.load_unit}]; calibrated prime-voltage range per channel */
+/* full-scale load per component [{P}LOAD_UNIT]; calibrated prime-voltage range per channel */
 extern const double {p}full_scale[{n}];
 extern const double {p}calibrated_range[{n}][2];
 
