@@ -166,9 +166,20 @@ extern "C" {{
 #define {P}STATUS_NOT_FINITE ((uint32_t)1 << {BIT_NOT_FINITE})
 #define {P}STATUS_SATURATED ((uint32_t)1 << {BIT_SATURATED})
 
-/* full-scale load per component [{P}LOAD_UNIT]; calibrated prime-voltage range per channel */
+/* The model, for the record (the functions use inline constants): full-scale load
+ * per component [{P}LOAD_UNIT]; omega slopes k_aa (eq. 2) [{P}OUTPUT_UNIT per {P}LOAD_UNIT];
+ * calibrated prime-voltage range per channel [{P}OUTPUT_UNIT]; per chi_ab its output a
+ * and input b, its table interval (lo == hi: no table, kernel sum only) and
+ * interval count; the rotation to the reference frame (identity if none). */
+#define {P}N_CHI {len(plan.chis)}
+#define {P}HAS_ROTATION {0 if plan.rotation is None else 1}
 extern const double {p}full_scale[{n}];
+extern const double {p}omega_k[{n}];
 extern const double {p}calibrated_range[{n}][2];
+extern const int {p}chi_axes[{len(plan.chis)}][2];
+extern const double {p}table_range[{len(plan.chis)}][2];
+extern const int {p}table_intervals[{len(plan.chis)}];
+extern const double {p}rotation[{n}][{n}];
 
 uint32_t {fn};
 int {p}selftest(void);
@@ -183,10 +194,23 @@ def _ctypes_note(ctype: str) -> str:
 
 def _implementation_start(plan: ExportPlan) -> str:
     p, n = plan.prefix, plan.n
-    fs = ", ".join(num(v) for v in plan.full_scale)
-    rng = ", ".join(f"{{{num(lo)}, {num(hi)}}}" for lo, hi in plan.calibrated_range)
-    return (f"const double {p}full_scale[{n}] = {{{fs}}};\n"
-            f"const double {p}calibrated_range[{n}][2] = {{{rng}}};\n")
+    m = len(plan.chis)
+
+    def row(values) -> str:
+        return "{" + ", ".join(num(v) for v in values) + "}"
+
+    tables = [(c.lo, c.hi) if c.table is not None else (0.0, 0.0) for c in plan.chis]
+    rotation = np.eye(n) if plan.rotation is None else plan.rotation
+    return "".join([
+        f"const double {p}full_scale[{n}] = {row(plan.full_scale)};\n",
+        f"const double {p}omega_k[{n}] = {row(plan.k)};\n",
+        f"const double {p}calibrated_range[{n}][2] = {{{', '.join(map(row, plan.calibrated_range))}}};\n",
+        f"const int {p}chi_axes[{m}][2] = {{{', '.join(f'{{{c.out}, {c.inp}}}' for c in plan.chis)}}};\n",
+        f"const double {p}table_range[{m}][2] = {{{', '.join(map(row, tables))}}};\n",
+        f"const int {p}table_intervals[{m}] = "
+        f"{{{', '.join(str(0 if c.table is None else c.table.shape[1]) for c in plan.chis)}}};\n",
+        f"const double {p}rotation[{n}][{n}] = {{{', '.join(map(row, rotation))}}};\n",
+    ])
 
 
 def _kernel(plan: ExportPlan, j: int, chi: ChiPlan) -> str:

@@ -236,6 +236,13 @@ def test_kernel_sums_only_without_surrogates(tmp_path):
     f_c, status = run(u)
     assert_close(f_c, decouple(model, u), model.settings.full_scale)
     assert (status & OUTSIDE_TABLE == 0).all()  # no tables: never "outside" one
+    # --max-error builds tables from the kernel sums even where the model has none
+    run, text = build(model, tmp_path, name="coarse.h", max_error=1e-5)
+    assert "#define FSD_TABLE_BYTES 0" not in text
+    f_c, status = run(u)
+    ok = np.isfinite(u).all(axis=1) & (np.abs(u) < 1e6).all(axis=1)
+    err = np.abs(f_c[ok] - decouple(model, u[ok])) / np.asarray(model.settings.full_scale)
+    assert err.max() <= 1e-5 and (status[ok] & OUTSIDE_TABLE == 0).any()
 
 
 @needs_cc
