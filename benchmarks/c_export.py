@@ -30,8 +30,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from fsdecouple import fit  # noqa: E402
 from fsdecouple.export import export_header  # noqa: E402
-from fsdecouple.model import fit  # noqa: E402
 
 HARNESS = r"""
 #define _POSIX_C_SOURCE 199309L  /* clock_gettime under -std=c99 */

@@ -26,6 +26,7 @@ import numpy as np
 
 from .apply import RANGE_MARGIN
 from .errors import ConfigError, FsdecoupleError
+from .export_tables import CHECKS_PER_INTERVAL, coarsest_tables, table_bound
 from .io import atomic_write
 
 PRECISIONS = ("double", "float")
@@ -34,9 +35,6 @@ PRECISIONS = ("double", "float")
 # tables; each may use half its share, the other half covers error between check
 # points and rounding.  For 3 axes this is 2.5e-10 V, the fast path's own gate.
 PROMISE = 1e-9
-CHECKS_PER_INTERVAL = 20  # check points per interval (knots, midpoints included) for max_error
-MAX_INTERVALS = 1 << 14  # Hermite error falls as h^4: past this, double rounding dominates
-TABLE_MARGIN = 0.25  # a resampled table without a model table covers the range +- 25 % of its span
 # The float bound is the largest error seen on the check points times this factor:
 # the emulation rounds like the C, op for op, but a compiler may fuse a multiply-add
 # (one rounding less, changing a result by <= 1/2 ulp per Horner step) or, on x87,
@@ -143,7 +141,7 @@ class ExportResult:
                  f"table error <= {self.table_max_error:.3g} of full-scale load"]
         if self.float_max_error is not None:
             lines.append(f"float error <= {self.float_max_error:.3g} of full-scale load "
-                         "(FLOAT_MAX_ERROR in the header)")
+                         f"({self.prefix.upper()}FLOAT_MAX_ERROR in the header)")
         return lines
 
 
@@ -199,8 +197,10 @@ def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",
     if n > MAX_CHANNELS:
         raise ConfigError(f"the model has {n} channels; the status word holds at most {MAX_CHANNELS}")
     settings = model.settings
-    doc = model.to_dict()
-    units = getattr(settings, "units", None) or {}
+    doc = _model_document(model)
+    units = getattr(settings, "units", None) or {}  # none today: loads in N, outputs in V
+    if not isinstance(units, dict):
+        units = {key: getattr(units, key) for key in ("loads", "outputs") if hasattr(units, key)}
     rotation = None if settings.rotation is None else np.asarray(settings.rotation, dtype=float)
     fs = np.asarray(settings.full_scale, dtype=float)
     cal = np.asarray(model.calibrated_range, dtype=float)
@@ -228,11 +228,12 @@ def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",
         # float: the measured bound is FLOAT_SAFETY x (table + rounding error), so the
         # tables get a quarter, leaving the rest of E for float rounding
         share = max_error / (2 * FLOAT_SAFETY) if precision == "float" else max_error
-        _coarsest_tables(plan, model, share, max_error)
-    plan.table_max_error = float(np.max(_table_bound(plan)))
+        coarsest_tables(plan, model, share, max_error)
+    plan.table_max_error = float(np.max(table_bound(plan)))
     if max_error is not None and plan.table_max_error > max_error:
         raise FsdecoupleError(f"--max-error {max_error:g}: the tables reach only "
                               f"{plan.table_max_error:.3g} of full scale")
+    # for a float u: u < lo  <=>  u < (smallest float >= lo), u > hi  <=>  u > (largest float <= hi)
     plan.range_limits_f = np.column_stack([_f32_up(plan.range_limits[:, 0]),
                                            _f32_down(plan.range_limits[:, 1])])
     # u <= lo  <=>  u <= (largest float <= lo); u >= hi  <=>  u >= (smallest float >= hi)
@@ -241,10 +242,16 @@ def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",
     if precision == "float":
         plan.float_max_error = float_bound(plan)
         if max_error is not None and plan.float_max_error > max_error:
-            raise FsdecoupleError(f"--max-error {max_error:g}: float arithmetic alone reaches "
-                                  f"{plan.float_max_error:.3g} of full scale; use --precision double")
+            raise FsdecoupleError(f"--max-error {max_error:g}: the float function reaches "
+                                  f"{plan.float_max_error:.3g} of full scale with float rounding; "
+                                  "use --precision double")
     _selftest(plan)
     return plan
+
+
+def _model_document(model) -> dict[str, Any]:
+    """The model file's document (digest and format_version are read from it)."""
+    return model.to_dict()
 
 
 def _limits(model, limits, n: int) -> list:
@@ -270,98 +277,6 @@ def _limits(model, limits, n: int) -> list:
             raise ConfigError(f"limits: {key}: expected finite lo < hi, found [{lo!r}, {hi!r}]")
         out[b] = (lo, hi)
     return out
-
-
-# --- tables -------------------------------------------------------------------------
-
-
-def hermite(values: np.ndarray, slopes: np.ndarray, h: float) -> np.ndarray:
-    """Power-basis coefficients c0..c3 per interval of the cubic Hermite interpolant.
-
-    On interval i with s in [0, 1): ((c3 s + c2) s + c1) s + c0, the form the
-    model's ChiSurrogate.coefficients() gives (tested to agree).
-    """
-    y0, y1, d0, d1 = values[:-1], values[1:], h * slopes[:-1], h * slopes[1:]
-    return np.stack([y0, d0, 3.0 * (y1 - y0) - 2.0 * d0 - d1, 2.0 * (y0 - y1) + d0 + d1])
-
-
-def chi_slope(cp: ChiPlan, u: np.ndarray) -> np.ndarray:
-    """d chi / du [V/V] of the kernel sum (eq. 10) at ``u``, exactly."""
-    d = np.asarray(u, float)[:, None] / cp.in_scale - cp.sv[None, :]
-    w = cp.coef * np.exp(-cp.gamma * d * d) * (-2.0 * cp.gamma * d)
-    return w.sum(axis=1) * (cp.out_scale / cp.in_scale)
-
-
-def table_eval(coef: np.ndarray, lo: float, inv_step: float, u: np.ndarray) -> np.ndarray:
-    """Table value at ``u`` (inside it), by the C's index rule and Horner order."""
-    t = (u - lo) * inv_step
-    i = t.astype(np.intp)
-    s = t - i
-    return ((coef[3, i] * s + coef[2, i]) * s + coef[1, i]) * s + coef[0, i]
-
-
-def _table_error(cp: ChiPlan, coef: np.ndarray) -> float:
-    """max |table - kernel sum| [V] on knots, midpoints and 20 points per interval."""
-    n = coef.shape[1]
-    s = np.arange(2 * CHECKS_PER_INTERVAL + 1) / (2 * CHECKS_PER_INTERVAL)
-    u = cp.lo + (cp.hi - cp.lo) * ((np.arange(n)[:, None] + s[None, :]) / n).ravel()
-    inv = n / (cp.hi - cp.lo)
-    t = (u - cp.lo) * inv
-    u = u[(t >= 0) & (t < n)]  # as the C: a point whose index rounds to n goes the exact way
-    return float(np.max(np.abs(table_eval(coef, cp.lo, inv, u) - cp.exact(u))))
-
-
-def resample(cp: ChiPlan, n: int) -> tuple[np.ndarray, float]:
-    """Table of ``n`` intervals from the kernel sum and its slope, and its measured error."""
-    knots = cp.lo + (cp.hi - cp.lo) * np.arange(n + 1) / n
-    coef = hermite(cp.exact(knots), chi_slope(cp, knots), (cp.hi - cp.lo) / n)
-    return coef, _table_error(cp, coef)
-
-
-def _coarsest_tables(plan: ExportPlan, model, fraction: float, requested: float) -> None:
-    """Per chi, the fewest intervals whose error keeps the force bound <= ``fraction``."""
-    n, fs, k = plan.n, plan.full_scale, np.abs(plan.k)
-    # sensor-frame share: a rotated component i sums |R_ij| times the errors of components j
-    if plan.rotation is not None:
-        fraction *= float(np.min(fs / (np.abs(plan.rotation) @ fs)))
-    for cp, c in zip(plan.chis, model.chi.values(), strict=True):
-        if c.surrogate is not None:
-            cp.lo, cp.hi = float(c.surrogate.lo), float(c.surrogate.hi)
-        else:
-            a, b = c.input_range
-            span = max(b - a, 1e-3)
-            cp.lo, cp.hi = a - TABLE_MARGIN * span, b + TABLE_MARGIN * span
-        target = fraction * fs[cp.out] * k[cp.out] / max(n - 1, 1)  # [V], eq. (11): / k_aa
-        m, last = 1, np.inf
-        while True:
-            coef, err = resample(cp, m)
-            if err <= target:
-                break
-            if m >= MAX_INTERVALS or (m >= 64 and err > last / 4):  # h^4 would give /16
-                raise FsdecoupleError(
-                    f"--max-error {requested:g} is below what a table can reach: chi_{cp.out}{cp.inp} "
-                    f"stops at {err / (fs[cp.out] * k[cp.out]):.3g} of full scale ({m} intervals)")
-            m, last = 2 * m, err
-        lo_m = m // 2  # bisect between the last failing and the first passing count
-        while m - lo_m > 1:
-            mid = (lo_m + m) // 2
-            c_mid, e_mid = resample(cp, mid)
-            if e_mid <= target:
-                m, coef, err = mid, c_mid, e_mid
-            else:
-                lo_m = mid
-        cp.table, cp.table_error = coef, err
-
-
-def _table_bound(plan: ExportPlan) -> np.ndarray:
-    """Force error bound per component from the tables' measured errors, / full scale."""
-    d = np.zeros(plan.n)
-    for c in plan.chis:
-        if c.table is not None:
-            d[c.out] += c.table_error / abs(plan.k[c.out])  # eq. (11)
-    if plan.rotation is not None:
-        d = np.abs(plan.rotation) @ d
-    return d / plan.full_scale
 
 
 # --- the reference and the float emulation ----------------------------------------------

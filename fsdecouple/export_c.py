@@ -91,6 +91,11 @@ def _preamble(plan: ExportPlan) -> str:
              "/* max |df| / full-scale load, float vs exact model, calibrated range */\n"
              if plan.precision == "float" else "")
     mask = (1 << n) - 1
+    precision_note = (
+        " * Float: tables and eq. (11) in float; a kernel sum (outside a table) in double,\n"
+        " * as its dual coefficients cancel too much for float.  Forces beyond float's\n"
+        " * range overflow (bit 18) where the double model would still be finite.\n"
+        if plan.precision == "float" else "")
     limits = "\n".join(
         f" *   channel {b}: saturated at u[{b}] <= {num(lo)} or u[{b}] >= {num(hi)}"
         for b, (lo, hi) in enumerate(plan.limits) if lo is not None
@@ -114,7 +119,7 @@ def _preamble(plan: ExportPlan) -> str:
  *     #include "this header"
  * and include it without the define elsewhere.  C99, <math.h>, link with -lm.
  * Do not compile with -ffast-math: the status bits rely on IEEE NaN and infinity.
- *
+{precision_note} *
  * uint32_t {fn}
  *   u: {plan.n} zero-corrected prime voltages [{P}OUTPUT_UNIT] (tare/zero already removed,
  *      as model.decouple takes them); f: {n} forces [{P}LOAD_UNIT].  Returns a status
