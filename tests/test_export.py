@@ -9,6 +9,7 @@ writes forces and status words back.  The references are ``model.decouple``
 from __future__ import annotations
 
 import dataclasses
+import json
 import re
 import shutil
 import subprocess
@@ -228,6 +229,57 @@ def test_float_header_within_its_bound(which, request, tmp_path):
 
 
 @needs_cc
+def test_float_bound_holds_with_fused_multiply_add(sample_model, tmp_path):
+    """The 2x safety factor of FSD_FLOAT_MAX_ERROR covers a compiler contracting the
+    Horner steps into FMAs (the emulation rounds each product separately)."""
+    header = tmp_path / "f.h"
+    result = export_header(sample_model, header, precision="float")
+    src = tmp_path / "fma.c"
+    src.write_text(HARNESS.format(P="FSD_", p="fsd_", header="f.h", real="float", fn="fsd_decouple_f"))
+    flags = ["-O3", "-march=native", "-ffp-contract=fast"]
+    built = subprocess.run([CC, "-std=c99", *flags, str(src), "-o", str(tmp_path / "fma"), "-lm"],
+                           capture_output=True)
+    if built.returncode != 0:
+        pytest.skip(f"{CC} does not take {' '.join(flags)}")
+    lo, hi = np.asarray(sample_model.calibrated_range).T
+    u32 = (lo + (hi - lo) * np.random.default_rng(6).random((100_000, 3))).astype(np.float32)
+    (tmp_path / "in.bin").write_bytes(u32.tobytes())
+    subprocess.run([str(tmp_path / "fma"), str(tmp_path / "in.bin"), str(tmp_path / "out.bin")],
+                   check=True)
+    rec = np.dtype([("f", "<f4", 3), ("s", "<u4")])
+    f = np.fromfile(tmp_path / "out.bin", dtype=rec)["f"].astype(float)
+    err = np.abs(f - sample_model.decouple(u32.astype(float))) / np.asarray(sample_model.settings.full_scale)
+    assert err.max() <= result.float_max_error
+
+
+@needs_cc
+@pytest.mark.parametrize("precision", ["double", "float"])
+def test_selftest_catches_a_damaged_header(sample_model, precision, tmp_path):
+    """A slope a little off, or one support vector moved: fsd_selftest() reports it.
+
+    1e-6 relative in double (tolerance ~1e-9 of full scale), 1e-4 in float (tolerance
+    FSD_FLOAT_MAX_ERROR, ~3e-7 of full scale, below 1e-4 of the vectors' forces).
+    """
+    header = tmp_path / "d.h"
+    export_header(sample_model, header, precision=precision)
+    text = header.read_text()
+    slope = re.search(r"\) \* ([0-9.e+-]+f?);", text).group(1)  # 1 / k_00 in eq. (11)
+    value = float(slope.rstrip("f"))
+    rel = 1e-6 if precision == "double" else 1e-4
+    damaged = {"slope": text.replace(slope, repr(value * (1 + rel)) + "f" * slope.endswith("f"), 1)}
+    if precision == "double":  # the vector beyond the tables is a kernel sum
+        sv = re.search(r"fsd_sv0\[\d+\] = \{\n    ([0-9.e+-]+),", text).group(1)
+        damaged["support vector"] = text.replace(sv, repr(float(sv) + 1e-3), 1)
+    src = tmp_path / "st.c"
+    src.write_text('#define FSD_IMPLEMENTATION\n#include "d.h"\nint main(void) { return fsd_selftest(); }\n')
+    for what, body in {"intact": text, **damaged}.items():
+        header.write_text(body)
+        subprocess.run([CC, *FLAGS, "-O2", str(src), "-o", str(tmp_path / "st"), "-lm"], check=True)
+        bad = subprocess.run([str(tmp_path / "st")]).returncode
+        assert (bad == 0) == (what == "intact"), what
+
+
+@needs_cc
 def test_kernel_sums_only_without_surrogates(tmp_path):
     model = load_model(GOLDEN / "model-v1-without-surrogates.json")
     run, text = build(model, tmp_path)
@@ -358,6 +410,10 @@ def test_cli_export_writes_a_header(tmp_path):
     assert "float error <=" in r.stdout and "FSD_FLOAT_MAX_ERROR" in out.read_text()
     digest = load_model(GOLDEN / "model-v1.json").to_dict()["integrity"]["digest"]
     assert f'#define FSD_MODEL_DIGEST "{digest}"' in out.read_text()
+    r = invoke(["export", GOLDEN / "model-v1.json", "-o", out, "--force", "--json", "--max-error", "1e-5"])
+    doc = json.loads(r.stdout)
+    assert doc["precision"] == "double" and 0 < doc["table_max_error"] <= 1e-5
+    assert f"#define FSD_TABLE_BYTES {doc['table_bytes']}" in out.read_text()
 
 
 @pytest.mark.parametrize("args, message", [
