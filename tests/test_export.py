@@ -297,6 +297,59 @@ def test_kernel_sums_only_without_surrogates(tmp_path):
     assert err.max() <= 1e-5 and (status[ok] & OUTSIDE_TABLE == 0).any()
 
 
+class _Chi:
+    """A chi of the sample model re-wired to other axes (for an N-axis test model)."""
+
+    def __init__(self, base, out: int, inp: int):
+        self._base, self.output_axis, self.input_axis = base, out, inp
+
+    def __getattr__(self, name):
+        return getattr(self._base, name)
+
+    def __call__(self, u):
+        return self._base(u)
+
+
+class _NAxisModel:
+    """An N-axis model from the sample's chi: channel b >= 3 reuses channel b % 3's
+    voltages and chi.  Its decouple() is eq. (11) written out here with kernel sums."""
+
+    def __init__(self, model, n: int):
+        src = lambda b: next(c for c in model.chi.values() if c.input_axis == b % 3)  # noqa: E731
+        self.chi = {f"c{a}{b}": _Chi(src(b), a, b) for a in range(n) for b in range(n) if a != b}
+        self.k = np.array([model.k[b % 3] * (1 + 0.1 * (b // 3)) for b in range(n)])
+        fs = tuple(model.settings.full_scale[b % 3] for b in range(n))
+        self.settings = _Settings(model.settings, full_scale=fs, rotation=None)
+        self.calibrated_range = np.asarray(model.calibrated_range)[[b % 3 for b in range(n)]]
+        self._doc = model.to_dict()
+
+    def to_dict(self):
+        return self._doc
+
+    def decouple(self, u, *, rotate=True, exact=False, workers=None):
+        u = np.asarray(u, dtype=float)
+        f = u.copy()
+        for c in self.chi.values():
+            f[:, c.output_axis] -= c(u[:, c.input_axis])
+        return f / self.k
+
+
+@needs_cc
+@pytest.mark.parametrize("n", [2, 4])
+def test_any_number_of_axes(sample_model, n, tmp_path):
+    model = _NAxisModel(sample_model, n)
+    run, text = build(model, tmp_path)
+    assert f"#define FSD_N_COMPONENTS {n}" in text and f"#define FSD_N_CHI {n * (n - 1)}" in text
+    lo, hi = model.calibrated_range.T
+    u = lo - 0.1 * (hi - lo) + 1.2 * (hi - lo) * np.random.default_rng(7).random((20_000, n))
+    f_c, status = run(u)
+    assert_close(f_c, model.decouple(u), model.settings.full_scale)
+    margin = 0.01 * (hi - lo)  # apply's RANGE_MARGIN
+    outside = (u < lo - margin) | (u > hi + margin)
+    bits = (status[:, None] >> np.arange(n)) & 1
+    assert np.array_equal(bits == 1, outside) and outside.any(axis=0).all()
+
+
 @needs_cc
 def test_max_error_picks_coarse_tables_within_it(sample_model, tmp_path):
     full, _ = build(sample_model, tmp_path, name="full.h")
