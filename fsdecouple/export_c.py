@@ -64,19 +64,14 @@ def _array(name: str, values, fmt, per_line: int = 4, ctype: str = "double") -> 
 
 
 def render(plan: ExportPlan) -> str:
-    P = plan.prefix.upper()
+    """The header: declarations, then (under PREFIX_IMPLEMENTATION) the code."""
+    P, ctype = plan.prefix.upper(), plan.precision  # the C type is the precision's name
     parts = [_preamble(plan), _implementation_start(plan)]
     for j, chi in enumerate(plan.chis):
         parts.append(_kernel(plan, j, chi))
-        if plan.precision == "double" and chi.table is not None:
-            parts.append(_table(plan, j, chi, "double"))
-        if plan.precision == "float" and chi.table is not None:
-            parts.append(_table(plan, j, chi, "float"))
-    if plan.precision == "double":
-        parts.append(_decouple(plan, "double"))
-    else:
-        parts.append(_decouple(plan, "float"))
-    parts.append(_selftest(plan))
+        if chi.table is not None:
+            parts.append(_table(plan, j, chi, ctype))
+    parts += [_decouple(plan, ctype), _selftest(plan)]
     parts.append(f"#endif /* {P}IMPLEMENTATION */\n\n#ifdef __cplusplus\n}}\n#endif\n"
                  f"#endif /* {P}DECOUPLER_H */\n")
     return "\n".join(parts)
@@ -190,11 +185,8 @@ uint32_t {fn};
 int {p}selftest(void);
 
 #ifdef {P}IMPLEMENTATION
-{_ctypes_note(ctype)}"""
-
-
-def _ctypes_note(ctype: str) -> str:
-    return f"/* --- implementation ({ctype} tables) --- */\n"
+/* --- implementation ({ctype} tables) --- */
+"""
 
 
 def _implementation_start(plan: ExportPlan) -> str:
