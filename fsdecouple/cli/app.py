@@ -1,0 +1,149 @@
+"""The ``fsdecouple`` Typer app: consoles, shared options, errors and the entry point.
+
+Each command (in the modules beside this one) parses its arguments, calls one
+library function, renders the result and picks the exit code: 0 done, 1 a gate
+failed (``--max-gamma``), 2 bad input (one line on stderr, no traceback, no
+output file).  Nothing outside this package imports typer.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import signal
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    Progress,
+)
+from rich.text import Text
+
+from .. import __version__
+from ..errors import FsdecoupleError, InputError
+
+# Each command imports what only it needs (pandas, libsvm, scipy, matplotlib),
+# so that `apply` and `show` start in a fraction of a second.
+
+WIDE = 200  # columns of output that is not a terminal
+
+app = typer.Typer(
+    add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+    # plain help: the rich formatter labels every flag "<bool>", as if it took a value
+    rich_markup_mode=None,
+    help="Static decoupling of 3-axis force sensors: coupling error model + six eps-SVRs.",
+)
+# No markup and no highlighting: every name and cell from a user's file is printed
+# literally.  Redirected output (a CI log) is not cut at 80 columns.
+console = Console(markup=False, highlight=False, width=None if sys.stdout.isatty() else WIDE)
+err_console = Console(stderr=True, markup=False, highlight=False,
+                      width=None if sys.stderr.isatty() else WIDE)
+
+ConfigOpt = Annotated[
+    Path | None, typer.Option("--config", "-c", help="YAML config (default: the paper's sensor).")
+]
+ForceOpt = Annotated[bool, typer.Option("--force", help="Overwrite existing output files.")]
+JsonOpt = Annotated[bool, typer.Option("--json", help="Print a JSON document on stdout.")]
+
+
+@contextlib.contextmanager
+def user_errors():
+    """Turn library errors into one red line on stderr and exit code 2."""
+    try:
+        yield
+    except FsdecoupleError as err:
+        err_console.print(Text("error: ", "red") + Text(str(err)), soft_wrap=True)
+        raise typer.Exit(2) from None
+
+
+def interactive() -> bool:
+    return err_console.is_terminal and not os.environ.get("CI")
+
+
+def warn(lines) -> None:
+    for line in lines:
+        err_console.print(Text("warning: ", "yellow") + Text(line), soft_wrap=True)
+
+
+def print_json(doc) -> None:
+    sys.stdout.write(json.dumps(doc, indent=2, sort_keys=True, allow_nan=False) + "\n")
+
+
+def version_callback(value: bool) -> None:
+    if value:
+        console.print(f"fsdecouple {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(
+    version: Annotated[
+        bool, typer.Option("--version", callback=version_callback, is_eager=True)
+    ] = False,
+) -> None:
+    pass
+
+
+def _check_gate(max_gamma: float | None) -> None:
+    if max_gamma is not None and not (math.isfinite(max_gamma) and max_gamma > 0):
+        raise InputError(f"--max-gamma {max_gamma}: expected a fraction greater than 0, e.g. 0.016")
+
+
+def _read(calib) -> list[Path]:
+    """The files a calibration set was read from."""
+    return [Path(f) for f, _ in calib.files]
+
+
+def _given(*paths):
+    return [p for p in paths if p is not None]
+
+
+def _parse_zero(text: str) -> tuple[float, float, float]:
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
+        raise InputError(f"--zero {text!r}: expected three voltages ux,uy,uz, e.g. 0.01,-0.02,0")
+    return values  # type: ignore[return-value]
+
+
+def _bar(*columns) -> Progress:
+    """A progress bar on stderr, drawn on a terminal only (never with CI set), erased when done."""
+    return Progress(
+        "[progress.description]{task.description}", BarColumn(), *columns, console=err_console,
+        disable=not interactive(), transient=True,
+    )
+
+
+def _terminate(signum, frame) -> None:
+    # SIGTERM (kill, CI timeouts) unwinds like Ctrl-C, so temporary files are removed
+    raise SystemExit(128 + signum)
+
+
+def main() -> None:
+    signal.signal(signal.SIGTERM, _terminate)
+    try:
+        code = app(standalone_mode=False)
+    except typer.Abort:
+        err_console.print(Text("error: ", "red") + Text("aborted"))
+        code = 1
+    except Exception as err:
+        # Click's usage errors (a missing argument, `--tare abc`, an unknown
+        # command) get one line like every other bad input, not a framed box
+        if not (hasattr(err, "format_message") and hasattr(err, "exit_code")):
+            raise
+        ctx = getattr(err, "ctx", None)
+        command = ctx.command_path if ctx is not None else "fsdecouple"
+        message = " ".join(err.format_message().split())
+        if message:  # none when the help was printed for a bare `fsdecouple`
+            err_console.print(Text("error: ", "red") + Text(f"{command}: {message} (see '{command} --help')"),
+                              highlight=False, soft_wrap=True)
+        code = err.exit_code
+    sys.exit(code if isinstance(code, int) else 0)

@@ -1,0 +1,7 @@
+"""Every command, registered on the app by importing its module (in the order of --help)."""
+# isort: skip_file
+
+from . import data  # noqa: F401  simulate, ingest
+from . import model  # noqa: F401  fit, show, export
+from . import evaluate  # noqa: F401  cv, validate, report
+from . import run  # noqa: F401  apply

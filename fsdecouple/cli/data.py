@@ -1,0 +1,87 @@
+"""Commands that make and read calibration data: simulate, ingest."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..config import load_config
+from ..console import ingest_tables
+from ..iotools.files import atomic_write, check_output, refuse_overwriting_input
+from .app import (
+    ConfigOpt,
+    ForceOpt,
+    JsonOpt,
+    _given,
+    _read,
+    app,
+    console,
+    print_json,
+    user_errors,
+    warn,
+)
+
+
+@app.command()
+def simulate(
+    out_dir: Annotated[Path, typer.Argument(help="Directory to write the data set into.")],
+    seed: Annotated[int, typer.Option(help="Random seed (>= 0).")] = 0,
+    gross_error: Annotated[
+        str | None, typer.Option(help="Move one point: AXIS:REP:POINT:OFFSET[V], e.g. x:1:5:0.2")
+    ] = None,
+    layout: Annotated[
+        str,
+        typer.Option(help="paper: the paper's sensor, grid and files; lab: a load cell [gf, "
+                          "ADC counts] in a lab spreadsheet, calibration.csv + validation.csv."),
+    ] = "paper",
+    repetitions: Annotated[
+        int | None, typer.Option(help="Repetitions (default: 6 for paper, 1 for lab).")
+    ] = None,
+    levels: Annotated[
+        int | None, typer.Option(help="Loads per sweep after its zero row (lab only; default 4).")
+    ] = None,
+    force: ForceOpt = False,
+) -> None:
+    """Write a simulated calibration set: the paper's (with a combined-load task log) or a lab's."""
+    from ..calibration import GrossError
+    from ..simulate import simulate as simulate_sensor
+
+    with user_errors():
+        ge = GrossError.parse(gross_error) if gross_error else None
+        files = simulate_sensor(out_dir, seed=seed, gross_error=ge, force=force, layout=layout,
+                                repetitions=repetitions, levels=levels)
+    console.print(f"wrote {len(files)} files under {out_dir}")
+
+
+@app.command()
+def ingest(
+    calib: Annotated[Path, typer.Argument(help="Calibration directory or CSV.")],
+    config: ConfigOpt = None,
+    output: Annotated[
+        Path | None, typer.Option("--output", "-o", help="Write the zero-corrected tidy CSV.")
+    ] = None,
+    force: ForceOpt = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Validate and zero-correct a calibration set, and summarise it."""
+    from ..calibration import ingest_summary, load_calibration
+
+    with user_errors():
+        settings = load_config(config)
+        if output is not None:
+            check_output(output, force=force)
+        cs = load_calibration(calib, settings)
+        if output is not None:
+            refuse_overwriting_input(output, [*_read(cs), *_given(config)])
+        summary = ingest_summary(cs, settings)
+        if output is not None:
+            with atomic_write(output, force=force) as fh:
+                cs.points.to_csv(fh, index=False, lineterminator="\n")
+    if json_out:
+        print_json(summary)
+    else:
+        for r in ingest_tables(summary):
+            console.print(r)
+    warn(summary["warnings"])

@@ -1,0 +1,187 @@
+"""Commands that judge a model: cv, validate, report."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.progress import MofNCompleteColumn
+
+from ..config import load_config
+from ..errors import InputError
+from ..iotools.files import atomic_write, check_output, refuse_overwriting_input
+from ..modelfile import load_model
+from .app import (
+    ConfigOpt,
+    ForceOpt,
+    JsonOpt,
+    _bar,
+    _given,
+    _read,
+    app,
+    console,
+    err_console,
+    user_errors,
+    warn,
+)
+
+
+@app.command()
+def cv(
+    calib: Annotated[Path, typer.Argument(help="Calibration directory or CSV.")],
+    config: ConfigOpt = None,
+    folds: Annotated[
+        str | None,
+        typer.Option(help='Held-out repetitions per round, e.g. "1,2;3,4;5,6" (the default).'),
+    ] = None,
+    output: Annotated[
+        Path | None, typer.Option("--output", "-o", help="Write the cv.json document.")
+    ] = None,
+    task: Annotated[
+        Path | None, typer.Option(help="Combined-load voltage log (CSV) to validate on.")
+    ] = None,
+    task_forces: Annotated[
+        Path | None, typer.Option(help="True forces of --task, row for row (CSV: fx, fy, fz).")
+    ] = None,
+    task_tare: Annotated[
+        int | None, typer.Option(help="Zero the task voltages by the mean of their first N rows.")
+    ] = None,
+    gross_error: Annotated[
+        str | None,
+        typer.Option(help="Move one training point: AXIS:REP:POINT:OFFSET[V], e.g. x:1:5:0.2"),
+    ] = None,
+    max_gamma: Annotated[
+        float | None,
+        typer.Option(help="Exit 1 if any svr gamma on held-out data exceeds this fraction."),
+    ] = None,
+    workers: Annotated[
+        int | None, typer.Option(help="Training threads (default: cores; 1: sequential).")
+    ] = None,
+    repeats: Annotated[int, typer.Option(help="Sequential timing passes (Table 4).")] = 1,
+    protocol: Annotated[
+        str | None, typer.Option(help="What a round holds out: repetitions|levels (default: "
+                                      "repetitions with 3 or more, else load levels).")
+    ] = None,
+    force: ForceOpt = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Cross-validate the model against the baselines of Section 4 (Tables 1, 3, 4, 5)."""
+    from ..calibration import GrossError, load_calibration
+    from ..console import cv_renderables
+    from ..cv import run_cv
+    from ..heldout import parse_folds
+
+    with user_errors():
+        settings = load_config(config)
+        if (task is None) != (task_forces is None):
+            raise InputError("--task and --task-forces go together: the log and its true forces")
+        if task_tare is not None and task is None:
+            raise InputError("--task-tare needs --task")
+        if workers is not None and workers < 1:
+            raise InputError(f"--workers {workers}: needs at least 1")
+        if output is not None:
+            check_output(output, force=force)
+        cs = load_calibration(calib, settings)
+        if output is not None:
+            refuse_overwriting_input(output, [*_read(cs), *_given(config, task, task_forces)])
+        with _bar(MofNCompleteColumn()) as bar:
+            job = bar.add_task("training", total=None)
+            doc = run_cv(
+                cs, settings, folds=parse_folds(folds) if folds is not None else None,
+                task=(task, task_forces) if task is not None else None, task_tare=task_tare,
+                gross_error=GrossError.parse(gross_error) if gross_error else None,
+                max_gamma=max_gamma, workers=workers, repeats=repeats, protocol=protocol,
+                progress=lambda done, total: bar.update(job, completed=done, total=total),
+            )
+        text = json.dumps(doc, indent=1, sort_keys=True, allow_nan=False)
+        if output is not None:
+            with atomic_write(output, force=force) as fh:
+                fh.write(text + "\n")
+    if json_out:
+        sys.stdout.write(text + "\n")
+    else:
+        for r in cv_renderables(doc):
+            console.print(r)
+        if output is not None:
+            console.print(f"cv document written to {output}", highlight=False)
+            console.print(
+                f"calibration report: fsdecouple report MODEL --cv {output} --calib {calib} "
+                "-o report.html", highlight=False,
+            )
+    warn(doc["warnings"])
+    if doc["gate"] is not None and not doc["gate"]["passed"]:
+        raise typer.Exit(1)
+
+
+@app.command()
+def validate(
+    model_file: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file (JSON).")],
+    set_path: Annotated[Path, typer.Argument(metavar="SET", help="Independent set, calibration format.")],
+    config: ConfigOpt = None,
+    output: Annotated[Path | None, typer.Option("--output", "-o", help="Write validation.json.")] = None,
+    max_gamma: Annotated[float | None, typer.Option(help="Exit 1 if calibrated gamma exceeds this.")] = None,
+    force: ForceOpt = False, json_out: JsonOpt = False,
+) -> None:
+    """Score a model on an independent single-axis set: gamma and force errors, per axis."""
+    from ..console import validation_renderables
+    from ..validate import validate as validate_set
+
+    with user_errors():
+        doc = validate_set(model_file, set_path, load_config(config) if config else None,
+                           max_gamma=max_gamma, output=output, force=force, inputs=_given(config))
+    for to_stderr, r in validation_renderables(doc, output, as_json=json_out):
+        (err_console if to_stderr else console).print(r, soft_wrap=True)
+    raise typer.Exit(0 if doc["gate"] is None or doc["gate"]["passed"] else 1)
+
+
+@app.command()
+def report(
+    model_file: Annotated[Path, typer.Argument(help="Model file (JSON).")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="HTML report to write.")],
+    cv: Annotated[
+        Path | None, typer.Option("--cv", help="cv.json of `fsdecouple cv`: Tables 1, 3, 5, residuals.")
+    ] = None,
+    calib: Annotated[
+        Path | None, typer.Option("--calib", help="Calibration directory or CSV, to plot its points.")
+    ] = None,
+    png: Annotated[
+        Path | None, typer.Option("--png", help="Also write each figure as a PNG into this directory.")
+    ] = None,
+    force: ForceOpt = False,
+) -> None:
+    """Write a self-contained HTML calibration report (figures, gamma tables, checks)."""
+    from ..calibration import load_calibration
+    from ..cv_doc import load_cv_results
+    from ..report import build_report
+
+    with user_errors():
+        model = load_model(model_file)
+        cv_doc = load_cv_results(cv) if cv is not None else None
+        cs = load_calibration(calib, model.settings) if calib is not None else None
+        targets = [output]
+        if png is not None:
+            if png.exists() and not png.is_dir():
+                raise InputError(f"--png {png}: exists and is not a directory")
+            png.mkdir(parents=True, exist_ok=True)
+        inputs = [model_file, *_given(cv), *(_read(cs) if cs is not None else [])]
+        check_output(output, force=force)
+        refuse_overwriting_input(output, inputs)
+        result = build_report(model, cv_doc, cs)
+        if png is not None:
+            targets += [png / f"{name}.png" for name in result.figures]
+        for t in targets:
+            check_output(t, force=force)
+            refuse_overwriting_input(t, inputs)
+        with atomic_write(output, force=True) as fh:
+            fh.write(result.html)
+        for name, data in result.figures.items():
+            if png is not None:
+                with atomic_write(png / f"{name}.png", "wb", force=True) as fh:
+                    fh.write(data)
+    console.print(f"report written to {output} ({len(result.figures)} figures)", highlight=False)
+    if png is not None:
+        console.print(f"figures written to {png}/: " + ", ".join(f"{n}.png" for n in result.figures),
+                      highlight=False)

@@ -1,0 +1,134 @@
+"""Commands that make and read model files: fit, show, export."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.text import Text
+
+from ..config import load_config
+from ..console import fit_checks_table, fit_tables
+from ..iotools.files import check_output, refuse_overwriting_input
+from ..modelfile import load_model, save_model
+from .app import (
+    ConfigOpt,
+    ForceOpt,
+    JsonOpt,
+    _check_gate,
+    _given,
+    _read,
+    app,
+    console,
+    err_console,
+    print_json,
+    user_errors,
+    warn,
+)
+
+
+@app.command()
+def fit(
+    calib: Annotated[Path, typer.Argument(help="Calibration directory or CSV.")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Model file to write (JSON).")],
+    config: ConfigOpt = None,
+    C: Annotated[float | None, typer.Option("--C", help="SVR regularisation C.")] = None,
+    epsilon: Annotated[float | None, typer.Option(
+        help="SVR epsilon (in full-scale units with scaling: full_scale, else output units).")] = None,
+    gamma: Annotated[float | None, typer.Option(help="RBF gamma = 1/(2 delta^2).")] = None,
+    delta2: Annotated[float | None, typer.Option(help="RBF delta^2.")] = None,
+    tolerance: Annotated[float | None, typer.Option(help="libsvm stopping tolerance.")] = None,
+    scaling: Annotated[str | None, typer.Option(help="Kernel input scaling: none|full_scale.")] = None,
+    max_gamma: Annotated[
+        float | None,
+        typer.Option(help="Exit 1 if any gamma after decoupling exceeds this fraction."),
+    ] = None,
+    method: Annotated[
+        str, typer.Option(help="svr (the paper's), linear (calibration matrix) or auto "
+                               "(the lower held-out worst gamma).")
+    ] = "svr",
+    no_verdict: Annotated[
+        bool, typer.Option("--no-verdict", help="Skip the held-out comparison with the "
+                                                "calibration matrix.")
+    ] = False,
+    force: ForceOpt = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Fit the coupling error model, judge it on held-out points, write one JSON model file."""
+    from ..calibration import load_calibration
+    from ..checks import assumption_checks
+    from ..verdict import calibrate, verdict_line
+
+    with user_errors():
+        settings = load_config(
+            config, C=C, epsilon=epsilon, gamma=gamma, delta2=delta2, tolerance=tolerance,
+            scaling=scaling,
+        )
+        _check_gate(max_gamma)
+        check_output(output, force=force)
+        cs = load_calibration(calib, settings)
+        refuse_overwriting_input(output, [*_read(cs), *_given(config)])
+        model = calibrate(cs, settings, method=method, verdict=not no_verdict)
+        checks = assumption_checks(model)
+        save_model(model, output, force=force)
+    if json_out:
+        print_json({"model": str(output), "method": model.method, **model.report.to_dict(),
+                    "checks": [c.to_dict() for c in checks]})
+    else:
+        for t in [*fit_tables(model), fit_checks_table(checks)]:
+            console.print(t)
+        if model.report.verdict is not None:
+            console.print(verdict_line(model.report.verdict))
+        console.print(f"model written to {output} (decouples by {model.method})")
+        console.print(f"calibration report: fsdecouple report {output} -o report.html")
+    warn(model.warnings)
+    if max_gamma is not None:
+        worst = max(model.report.gamma_after.values())
+        if worst > max_gamma:
+            err_console.print(
+                Text("gate failed: ", "red") + Text(f"gamma after decoupling {100 * worst:.3f} % F.S. "
+                                                    f"exceeds --max-gamma {100 * max_gamma:.3f} %")
+            )
+            raise typer.Exit(1)
+
+
+@app.command()
+def show(model_file: Annotated[Path, typer.Argument(help="Model file (JSON).")]) -> None:
+    """Print a model file's slopes, SVRs and fit report."""
+    with user_errors():
+        model = load_model(model_file)
+    for t in fit_tables(model):
+        console.print(t)
+    warn(model.warnings)
+
+
+@app.command()
+def export(
+    model_file: Annotated[Path, typer.Argument(help="Model file (JSON).")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="C header to write, e.g. decoupler.h.")],
+    precision: Annotated[
+        str, typer.Option(help="double: fsd_decouple; float: fsd_decouple_f with float tables.")
+    ] = "double",
+    prefix: Annotated[str, typer.Option(help="Prefix of every C name (macros: uppercased).")] = "fsd_",
+    max_error: Annotated[
+        float | None,
+        typer.Option(help="Coarsest tables keeping this force error (fraction of full-scale load)."),
+    ] = None,
+    force: ForceOpt = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Export the model as one dependency-free C99 header (eq. 11 for embedded use)."""
+    from ..export import export_header
+
+    with user_errors():
+        model = load_model(model_file)
+        check_output(output, force=force)
+        refuse_overwriting_input(output, [model_file])
+        result = export_header(model, output, precision=precision, prefix=prefix,
+                               max_error=max_error, force=force)
+    if json_out:
+        print_json(result.to_dict())
+        return
+    for line in result.summary_lines():
+        console.print(line, highlight=False, soft_wrap=True)
