@@ -32,6 +32,9 @@ class CalibrationSet:
         Each input file and its SHA-256.
     skipped : tuple of str
         Rows left out, with the reason.
+    excluded : tuple of str
+        Points dropped by ``--exclude`` (also in ``skipped``; recorded in the model's
+        provenance).
     warnings : tuple of str
         Things a technician should look at; the data are still usable.
     """
@@ -41,6 +44,7 @@ class CalibrationSet:
     files: tuple[tuple[str, str], ...] = ()
     skipped: tuple[str, ...] = ()
     warnings: tuple[str, ...] = field(default=())
+    excluded: tuple[str, ...] = ()
 
     @property
     def source(self) -> str:
@@ -61,10 +65,9 @@ class CalibrationSet:
                 f"(it has {', '.join(map(str, self.repetitions))})"
             )
         keep = self.points["repetition"].isin(reps)
-        return CalibrationSet(
-            self.points[keep].reset_index(drop=True),
-            self.offsets[self.offsets["repetition"].isin(reps)].reset_index(drop=True),
-            self.files, self.skipped, self.warnings,
+        return replace(
+            self, points=self.points[keep].reset_index(drop=True),
+            offsets=self.offsets[self.offsets["repetition"].isin(reps)].reset_index(drop=True),
         )
 
     def select(self, mask) -> CalibrationSet:
@@ -73,9 +76,7 @@ class CalibrationSet:
         Zero correction stays as it was done on the whole set: a held-out zero row
         still zeroed its sweep.
         """
-        mask = np.asarray(mask, dtype=bool)
-        return CalibrationSet(self.points[mask].reset_index(drop=True), self.offsets,
-                              self.files, self.skipped, self.warnings)
+        return replace(self, points=self.points[np.asarray(mask, dtype=bool)].reset_index(drop=True))
 
     def sweep(self, axis: str) -> pd.DataFrame:
         """All points whose loaded axis is ``axis``, in file order."""
@@ -158,12 +159,39 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=()) ->
     return CalibrationSet(points, offsets, tuple(files), tuple(skipped), tuple(warnings))
 
 
-def load_calibration(path: str | Path, settings: Settings) -> CalibrationSet:
-    """Read, validate and zero-correct a calibration set (a directory or one CSV)."""
+def load_calibration(path: str | Path, settings: Settings, exclude=()) -> CalibrationSet:
+    """Read, validate and zero-correct a calibration set (a directory or one CSV).
+
+    ``exclude``: ``FILE:ROW`` points to drop before zero correction (``fit --exclude``);
+    FILE is a file of the set by path or by name, ROW its spreadsheet row.
+    """
     read = read_calibration_table(path, settings)
-    cs = from_table(read.table, settings, read.files, read.skipped)
+    table, dropped = _exclude(read.table, exclude)
+    cs = from_table(table, settings, read.files, [*read.skipped, *dropped])
     hidden = tuple(f"{f}: hidden file, not read as a repetition" for f in read.hidden)
+    cs = replace(cs, excluded=tuple(dropped))
     return replace(cs, warnings=hidden + cs.warnings) if hidden else cs
+
+
+def _exclude(table: pd.DataFrame, specs) -> tuple[pd.DataFrame, list[str]]:
+    """Drop the ``FILE:ROW`` points named; each must be a point of the set."""
+    drop = np.zeros(len(table), dtype=bool)
+    dropped = []
+    files = table["file"].to_numpy()
+    names = np.array([Path(f).name for f in files])
+    for spec in specs:
+        name, sep, row = str(spec).rpartition(":")
+        if not sep or not name or not row.strip().isdigit():
+            raise InputError(f"--exclude {spec!r}: expected FILE:ROW, e.g. rep3.csv:17")
+        row = int(row)
+        in_file = (files == name) | (names == Path(name).name) if "/" not in name else files == name
+        hit = np.flatnonzero(in_file & (table["row"].to_numpy() == row))
+        if hit.size == 0:
+            known = "a file of the set" if not in_file.any() else f"a calibration point of {name}"
+            raise InputError(f"--exclude {spec!r}: row {row} of {name} is not {known}")
+        drop[hit] = True
+        dropped.append(f"{files[hit[0]]}, row {row}: excluded (--exclude)")
+    return table[~drop].reset_index(drop=True), dropped
 
 
 @dataclass(frozen=True)

@@ -193,5 +193,7 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         "files": [{"path": p, "sha256": h} for p, h in calib.files],
         "libraries": _library_versions(),
     }
+    if calib.excluded:
+        model.provenance["excluded"] = list(calib.excluded)
     model.created = datetime.now(UTC).replace(microsecond=0).isoformat()
     return model

@@ -114,10 +114,11 @@ class FitReport:
     repetitions: list[int] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     verdict: dict[str, Any] | None = None  # held-out comparison (fsdecouple.verdict)
+    outliers: list[dict[str, Any]] | None = None  # possible gross errors (fsdecouple.outliers)
 
     def to_dict(self) -> dict[str, Any]:
         d = {f.name: getattr(self, f.name) for f in fields(self)}
-        for key in ("surrogate_max_error", "verdict"):
+        for key in ("surrogate_max_error", "verdict", "outliers"):
             if d[key] is None:  # files from before these figures
                 del d[key]
         return d

@@ -15,6 +15,7 @@ the levels protocol the end points (extrapolation) are reported apart.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 from .axes import AXES
@@ -24,6 +25,7 @@ from .config import Settings
 from .errors import InputError
 from .heldout import HeldOutRound, choose_protocol, rounds_for
 from .metrics import interference_error, pct
+from .outliers import gross_errors
 
 VERDICT_METHODS = ("initial", "linear", "svr")
 FIT_METHODS = ("svr", "linear", "auto")
@@ -131,6 +133,9 @@ def calibrate(calib: CalibrationSet, settings: Settings, *, method: str = "svr",
     if method == "auto" and not verdict:
         raise InputError("--method auto chooses by the held-out verdict; drop --no-verdict")
     model = fit(calib, settings, workers=workers)
+    outliers = gross_errors(calib.points, model.k, settings.full_scale)
+    model.report.outliers = [dataclasses.asdict(o) for o in outliers]
+    model.report.warnings += [o.message(settings.load_unit) for o in outliers]
     found = None
     if verdict:
         try:

@@ -48,6 +48,10 @@ def fit(
         str, typer.Option(help="svr (the paper's), linear (calibration matrix) or auto "
                                "(the lower held-out worst gamma).")
     ] = "svr",
+    exclude: Annotated[
+        list[str] | None, typer.Option(help="Drop the calibration point FILE:ROW (repeatable), "
+                                            "e.g. a gross error fit flagged.")
+    ] = None,
     no_verdict: Annotated[
         bool, typer.Option("--no-verdict", help="Skip the held-out comparison with the "
                                                 "calibration matrix.")
@@ -67,7 +71,7 @@ def fit(
         )
         _check_gate(max_gamma)
         check_output(output, force=force)
-        cs = load_calibration(calib, settings)
+        cs = load_calibration(calib, settings, exclude=exclude or ())
         refuse_overwriting_input(output, [*_read(cs), *_given(config)])
         model = calibrate(cs, settings, method=method, verdict=not no_verdict)
         checks = assumption_checks(model)
