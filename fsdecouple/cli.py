@@ -108,6 +108,34 @@ def simulate(
 
 
 @app.command()
+def init(
+    data_file: Annotated[Path, typer.Argument(help="A calibration CSV to guess the config from.")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Config file to write (YAML).")],
+    force: ForceOpt = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Start a config: guess columns, units, full scale and scaling from a calibration file."""
+    from rich.text import Text
+
+    from .guess import guess_table, init_config
+
+    try:
+        guess = init_config(data_file, output, force=force)
+    except FsdecoupleError as err:
+        # not user_errors(): the message quotes the file's header, which must not
+        # be read as rich markup ("[bold]x", "[/]")
+        err_console.print(Text.assemble(("error:", "red"), f" {err}"), soft_wrap=True)
+        raise typer.Exit(2) from None
+    if json_out:
+        print_json(guess.to_dict())
+        return
+    console.print(guess_table(guess))
+    for note in guess.notes:
+        err_console.print(Text.assemble(("note:", "yellow"), f" {note}"), soft_wrap=True)
+    console.print(Text(f"config written to {output}; check every guessed value before fitting"))
+
+
+@app.command()
 def ingest(
     calib: Annotated[Path, typer.Argument(help="Calibration directory or CSV.")],
     config: ConfigOpt = None,
