@@ -115,24 +115,18 @@ def init(
     json_out: JsonOpt = False,
 ) -> None:
     """Start a config: guess columns, units, full scale and scaling from a calibration file."""
-    from rich.text import Text
+    from .guess import guess_renderables, init_config
 
-    from .guess import guess_table, init_config
-
-    try:
+    try:  # not user_errors(): the message quotes the header, and "[/]" is not rich markup
         guess = init_config(data_file, output, force=force)
     except FsdecoupleError as err:
-        # not user_errors(): the message quotes the file's header, which must not
-        # be read as rich markup ("[bold]x", "[/]")
-        err_console.print(Text.assemble(("error:", "red"), f" {err}"), soft_wrap=True)
+        err_console.print(f"error: {err}", style="red", markup=False, highlight=False,
+                          soft_wrap=True)
         raise typer.Exit(2) from None
     if json_out:
-        print_json(guess.to_dict())
-        return
-    console.print(guess_table(guess))
-    for note in guess.notes:
-        err_console.print(Text.assemble(("note:", "yellow"), f" {note}"), soft_wrap=True)
-    console.print(Text(f"config written to {output}; check every guessed value before fitting"))
+        return print_json(guess.to_dict())
+    for r in guess_renderables(guess):
+        console.print(r, soft_wrap=True)
 
 
 @app.command()

@@ -1,25 +1,22 @@
-"""Starting a config from a calibration file: guess columns, units, full scale.
+"""Starting a config from a calibration file (``fsdecouple init``).
 
-``fsdecouple init`` reads one calibration CSV (header and values, with the
-:mod:`csv` module, at most :data:`MAX_ROWS` rows) and guesses what the config
-would say about it.  Every guess carries its reason, which goes into the YAML
-as a comment and into the printed table, because a guess nobody can check is
-worse than none.
-
-The reading here is lenient on purpose (empty and duplicated header names,
-side tables to the right, text in number columns): it only has to find the
-data, not to validate it; ``fsdecouple ingest`` does that with the config.
+One CSV's header and values (at most :data:`MAX_ROWS` rows) give guesses of the
+columns, units, full scale and scaling, each with its reason: a guess nobody can
+check is worse than none.  Reading is lenient on purpose (unnamed and repeated
+header names, side tables, text in number columns); ``ingest`` validates.
 """
 
 from __future__ import annotations
 
+import collections
 import csv
+import itertools
 import json
 import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import yaml
 
@@ -33,15 +30,13 @@ REQUIRED = (*FORCE_COLUMNS, *VOLTAGE_COLUMNS)
 OPTIONAL = ("axis", "repetition")
 KEYS = (*OPTIONAL[::-1], *REQUIRED)  # the order the config lists them
 
-LOAD_UNITS = ("N", "kN", "gf", "kgf", "lbf")
-OUTPUT_UNITS = ("V", "mV", "uV", "count", "mV/V")
-
 # unit words as they appear in headers ([gf], (kgf), _N, lbf), lower case
 _LOAD_HINTS = {"n": "N", "kn": "kN", "gf": "gf", "g": "gf", "kgf": "kgf", "kg": "kgf",
                "lbf": "lbf", "lb": "lbf", "lbs": "lbf"}
 _OUTPUT_HINTS = {"v": "V", "mv": "mV", "uv": "uV", "µv": "uV", "μv": "uV", "count": "count",
                  "counts": "count", "cnt": "count", "lsb": "count", "mv/v": "mV/V",
                  "mvv": "mV/V", "mv/v excitation": "mV/V"}
+_HINTS = {**_LOAD_HINTS, **_OUTPUT_HINTS}
 _UNIT_NAMES = {"N": "newton", "kN": "kilonewton", "gf": "gram-force", "kgf": "kilogram-force",
                "lbf": "pound-force", "V": "volt", "mV": "millivolt", "uV": "microvolt",
                "count": "ADC counts", "mV/V": "millivolt per volt of excitation"}
@@ -101,22 +96,25 @@ class Guess:
     def to_dict(self) -> dict[str, Any]:
         """The ``--json`` document."""
         return {
-            "config": None if self.config is None else str(self.config),
-            "data": str(self.path),
-            "columns": dict(self.columns),
-            "units": dict(self.units),
-            "full_scale": dict(self.full_scale),
-            "min_repetitions": self.min_repetitions,
-            "scaling": self.scaling,
-            "csv": {"sep": self.sep, "decimal": self.decimal},
-            "rows": self.rows,
-            "reasons": dict(self.reasons),
+            "config": None if self.config is None else str(self.config), "data": str(self.path),
+            "columns": dict(self.columns), "units": dict(self.units),
+            "full_scale": dict(self.full_scale), "min_repetitions": self.min_repetitions,
+            "scaling": self.scaling, "csv": {"sep": self.sep, "decimal": self.decimal},
+            "rows": self.rows, "reasons": dict(self.reasons), "notes": list(self.notes),
             "ignored": [i.name for i in self.ignored],
-            "ignored_columns": [
-                {"column": i.column, "name": i.name, "reason": i.reason} for i in self.ignored
-            ],
-            "notes": list(self.notes),
+            "ignored_columns": [vars(i) for i in self.ignored],
         }
+
+    def settings(self) -> list[tuple[str, str, str]]:
+        """(key, YAML flow value, reason) of each guessed setting, in config order."""
+        fs = ", ".join(f"{a}: {_num(self.full_scale[a])}" for a in AXES)
+        values = {
+            "units": f"{{load: {self.units['load']}, output: {self.units['output']}}}",
+            "full_scale": f"{{{fs}}}", "min_repetitions": str(self.min_repetitions),
+            "csv": f"{{sep: {json.dumps(self.sep)}, decimal: {json.dumps(self.decimal)}}}",
+            "scaling": self.scaling,
+        }
+        return [(k, v, self.reasons[k]) for k, v in values.items()]
 
     def to_yaml(self) -> str:
         """The commented config: every guessed value with a comment saying why."""
@@ -141,23 +139,9 @@ class Guess:
             out.append("# Ignored columns (not read):")
             out += [f"#   column {i.column} {_comment(_shown(i.name))}: {_comment(i.reason)}"
                     for i in self.ignored]
-        out += [
-            "",
-            f"# guessed: {_comment(self.reasons['units'])}",
-            f"units: {{load: {self.units['load']}, output: {self.units['output']}}}",
-            "",
-            f"# guessed: {_comment(self.reasons['full_scale'])}",
-            "full_scale: {" + ", ".join(f"{a}: {_num(self.full_scale[a])}" for a in AXES) + "}",
-            "",
-            f"# guessed: {_comment(self.reasons['min_repetitions'])}",
-            f"min_repetitions: {self.min_repetitions}",
-            "",
-            f"# {_comment(self.reasons['csv'])}",
-            f"csv: {{sep: {json.dumps(self.sep)}, decimal: {json.dumps(self.decimal)}}}",
-            "",
-            f"# guessed: {_comment(self.reasons['scaling'])}",
-            f"scaling: {self.scaling}",
-        ]
+        for key, value, why in self.settings():
+            out += ["", f"# {'' if key == 'csv' else 'guessed: '}{_comment(why)}",
+                    f"{key}: {value}"]
         if self.notes:
             out += ["", "# Notes:"] + [f"#   {_comment(n)}" for n in self.notes]
         return "\n".join(out) + "\n"
@@ -185,38 +169,24 @@ def _num(v: float) -> str:
 def nice_ceil(value: float) -> float:
     """The smallest 1, 2, 2.5 or 5 x 10^k that is >= ``value`` (> 0)."""
     k = math.floor(math.log10(value))
-    for exp in (k - 1, k, k + 1):
-        for m in (1.0, 2.0, 2.5, 5.0):
-            nice = m * 10.0**exp
-            if nice >= value * (1 - 1e-12):
-                # 2.5 x 10^-1 is 0.25, not 0.25000000000000006
-                return float(f"{nice:.12g}")
-    raise AssertionError("unreachable")
+    # .12g: 2.5 x 10^-1 is 0.25, not 0.25000000000000006
+    return next(float(f"{m * 10.0**e:.12g}") for e in (k - 1, k, k + 1)
+                for m in (1.0, 2.0, 2.5, 5.0) if m * 10.0**e >= value * (1 - 1e-12))
 
 
-# --- the header --------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class _Name:
-    compact: str  # lower case, units and separators removed
-    hint: str | None  # unit word found ("gf", "mv/v"), lower case
-
-
-def _parse_name(header: str) -> _Name:
+def _parse_name(header: str) -> tuple[str, str | None]:
+    """(name in lower case without units and separators, unit word found or None)."""
     text = header.strip().lower()
     hints = re.findall(r"[\[(]([^\])]*)[\])]", text)
     text = re.sub(r"[\[(][^\])]*[\])]", " ", text)
     tokens = [t for t in re.split(r"[\s_\-]+", text.strip()) if t]
-    if len(tokens) > 1 and (tokens[-1] in _LOAD_HINTS or tokens[-1] in _OUTPUT_HINTS):
+    if len(tokens) > 1 and tokens[-1] in _HINTS:
         hints.append(tokens.pop())
-    hint = next((h.strip() for h in hints if h.strip() in _LOAD_HINTS or h.strip() in
-                 _OUTPUT_HINTS), None)
-    return _Name(re.sub(r"[^0-9a-zµμ]", "", "".join(tokens)), hint)
+    hint = next((h.strip() for h in hints if h.strip() in _HINTS), None)
+    return re.sub(r"[^0-9a-zµμ]", "", "".join(tokens)), hint
 
 
-@dataclass(frozen=True)
-class _Candidate:
+class _Candidate(NamedTuple):
     key: str
     column: int  # 0-based
     rank: int  # 0 the config's own name, 1 a named pattern, 2 a numbered channel
@@ -227,23 +197,23 @@ def _candidates(names: list[str], usable: list[int]) -> list[_Candidate]:
     found: list[_Candidate] = []
     families: dict[str, list[tuple[int, int]]] = {}
     for i in usable:
-        n = _parse_name(names[i])
-        unit = f", unit {n.hint} ({_UNIT_NAMES[_unit_of(n.hint)]})" if n.hint else ""
-        if n.compact in (*REQUIRED, *OPTIONAL):
-            found.append(_Candidate(n.compact, i, 0, f"header names {n.compact}{unit}"))
-        elif m := _FORCE.fullmatch(n.compact):
+        name, hint = _parse_name(names[i])
+        unit = f", unit {hint} ({_UNIT_NAMES[_HINTS[hint]]})" if hint else ""
+        if name in (*REQUIRED, *OPTIONAL):
+            found.append(_Candidate(name, i, 0, f"header names {name}{unit}"))
+        elif m := _FORCE.fullmatch(name):
             key = "f" + (m.group(1) or m.group(2))
             found.append(_Candidate(key, i, 1, f"header names the load along "
                                                f"{key[1]} ({key}){unit}"))
-        elif m := _OUTPUT.fullmatch(n.compact):
+        elif m := _OUTPUT.fullmatch(name):
             key = "u" + (m.group(1) or m.group(2))
             found.append(_Candidate(key, i, 1, f"header names the output along "
                                                f"{key[1]} ({key}){unit}"))
-        elif n.compact in _AXIS:
+        elif name in _AXIS:
             found.append(_Candidate("axis", i, 1, "header names the loaded axis"))
-        elif n.compact in _REPETITION:
+        elif name in _REPETITION:
             found.append(_Candidate("repetition", i, 1, "header names the repetition"))
-        elif m := _CHANNEL.fullmatch(n.compact):
+        elif m := _CHANNEL.fullmatch(name):
             families.setdefault(m.group(1), []).append((int(m.group(2)), i))
     for members in families.values():
         members.sort()
@@ -262,10 +232,6 @@ def _candidates(names: list[str], usable: list[int]) -> list[_Candidate]:
             found.append(_Candidate(key, i, 2, f"numbered channel {k} of {span}, taken in "
                                                f"order as {', '.join(VOLTAGE_COLUMNS)}"))
     return found
-
-
-def _unit_of(hint: str) -> str:
-    return _LOAD_HINTS.get(hint) or _OUTPUT_HINTS[hint]
 
 
 def _sniff_sep(first_line: str) -> str:
@@ -292,13 +258,9 @@ def guess_config(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
         fh.seek(0)  # utf-8-sig drops the byte-order mark again
         reader = csv.reader(fh, delimiter=sep)
         names = [n.strip() for n in next(reader)]
-        raw_rows = []
-        truncated = False
-        for row in reader:
-            if len(raw_rows) >= max_rows:
-                truncated = True
-                break
-            raw_rows.append(row)
+        raw_rows = list(itertools.islice(reader, max_rows + 1))
+    truncated = len(raw_rows) > max_rows
+    del raw_rows[max_rows:]
 
     notes: list[str] = []
     ignored: dict[int, str] = {}
@@ -307,27 +269,17 @@ def guess_config(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
     # every load and output is there.
     usable = list(range(len(names)))
     gap = next((i for i, n in enumerate(names) if not n), None)
-    if gap is not None:
-        left = {c.key for c in _candidates(names, list(range(gap)))}
-        if set(REQUIRED) <= left:
-            usable = list(range(gap))
-            for i in range(gap + 1, len(names)):
-                if names[i]:
-                    ignored[i] = f"right of the unnamed column {gap + 1}: a side table"
-        else:
-            notes.append(f"column {gap + 1} has no name but the columns left of it do not "
-                         "hold every load and output, so all columns were searched")
-    for i, name in enumerate(names):
-        if not name:
-            ignored[i] = "no header name"
-    seen: dict[str, list[int]] = {}
-    for i in usable:
-        seen.setdefault(names[i], []).append(i)
-    for name, cols in seen.items():
-        if name and len(cols) > 1:
-            for i in cols:
-                ignored[i] = ("header name repeated in columns "
-                              f"{', '.join(str(c + 1) for c in cols)}")
+    if gap is not None and set(REQUIRED) <= {c.key for c in _candidates(names, usable[:gap])}:
+        usable = usable[:gap]
+        ignored.update({i: f"right of the unnamed column {gap + 1}: a side table"
+                        for i in range(gap + 1, len(names)) if names[i]})
+    elif gap is not None:
+        notes.append(f"column {gap + 1} has no name but the columns left of it do not "
+                     "hold every load and output, so all columns were searched")
+    ignored.update({i: "no header name" for i, name in enumerate(names) if not name})
+    count = collections.Counter(names[i] for i in usable)
+    ignored.update({i: f"header name repeated ({count[names[i]]} columns)"
+                    for i in usable if names[i] and count[names[i]] > 1})
     usable = [i for i in usable if i not in ignored]
 
     by_key: dict[str, list[_Candidate]] = {}
@@ -346,9 +298,8 @@ def guess_config(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
                     f"{key[1]}); header: {_comment(header_seen)}; name it {key} or map it "
                     "under columns: in a config"
                 )
-            reasons[key] = (f"no {key} column: "
-                            + ("sweeps are inferred from consecutive rows" if key == "axis"
-                               else "one repetition in this file"))
+            reasons[key] = f"no {key} column: " + (
+                "sweeps are inferred from consecutive rows" if key == "axis" else "one repetition")
             continue
         best = cands[0]
         columns[key] = best.column
@@ -357,41 +308,30 @@ def guess_config(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
             others = ", ".join(_shown(names[c.column]) for c in cands[1:])
             notes.append(f"{key}: more than one candidate; took {_shown(names[best.column])}, "
                          f"not {others}")
-    for key, cands in by_key.items():
-        for c in cands:
-            if columns.get(key) != c.column and c.column not in ignored:
-                ignored[c.column] = f"another candidate for {key}"
-    for i in usable:
-        if i not in columns.values() and i not in ignored:
-            ignored[i] = "not a known quantity"
+    for c in (c for cands in by_key.values() for c in cands):
+        if columns[c.key] != c.column:
+            ignored[c.column] = f"another candidate for {c.key}"
+    for i in set(usable) - set(columns.values()) - set(ignored):
+        ignored[i] = "not a known quantity"
 
     # values: rows where every mapped cell is empty (a side table running past the
     # data, a blank line) are not data
     decimal = _sniff_decimal(sep, raw_rows, list(columns.values()))
-    values: dict[str, list[float]] = {k: [] for k in columns}
-    skipped: dict[str, int] = {k: 0 for k in columns}
-    integers = True
-    reps: set[str] = set()
-    rows = 0
+    values: dict[str, list[float]] = {k: [] for k in REQUIRED}
+    skipped = dict.fromkeys(REQUIRED, 0)
+    integers, reps, rows = True, set(), 0
     for row in raw_rows:
         cells = {k: (row[i].strip() if i < len(row) else "") for k, i in columns.items()}
-        if not any(cells.values()):
-            continue
-        rows += 1
-        for key, text in cells.items():
-            if key == "axis":
-                continue
-            if key == "repetition":
-                if text:
-                    reps.add(text)
-                continue
-            number = text.replace(decimal, ".") if decimal != "." else text
+        rows += any(cells.values())
+        reps.add(cells.get("repetition", ""))
+        for key in REQUIRED if any(cells.values()) else ():
+            number = cells[key].replace(decimal, ".")
             if not _NUMBER.fullmatch(number):
                 skipped[key] += 1
                 continue
             values[key].append(float(number))
-            if key in VOLTAGE_COLUMNS and not _INTEGER.fullmatch(number):
-                integers = False
+            integers &= key in FORCE_COLUMNS or bool(_INTEGER.fullmatch(number))
+    reps.discard("")
     if truncated:
         notes.append(f"read the first {max_rows:,} data rows only")
     for key in REQUIRED:
@@ -404,33 +344,24 @@ def guess_config(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
             notes.append(f"{key}: {skipped[key]} cells of {_shown(names[columns[key]])} are "
                          "not numbers and were skipped")
 
-    hints = {k: _parse_name(names[i]).hint for k, i in columns.items() if k in REQUIRED}
+    hints = {k: _parse_name(names[i])[1] for k, i in columns.items()}
+    shown = {k: _shown(names[i]) for k, i in columns.items()}
     peak_load = max(abs(v) for k in FORCE_COLUMNS for v in values[k])
     peak_out = max(abs(v) for k in VOLTAGE_COLUMNS for v in values[k])
-    load, load_why = _load_unit(hints, peak_load, notes, names, columns)
-    output, output_why = _output_unit(hints, peak_out, integers, notes, names, columns)
+    load, load_why = _unit("load", hints, peak_load, integers, notes, shown)
+    output, output_why = _unit("output", hints, peak_out, integers, notes, shown)
     reasons["units"] = f"load {load}: {load_why}; output {output}: {output_why}"
 
-    full_scale: dict[str, float] = {}
-    peaks = []
-    for a, key in zip(AXES, FORCE_COLUMNS, strict=True):
-        peak = max(abs(v) for v in values[key])
-        peaks.append(f"{a} {peak:g}")
-        if peak == 0:
-            full_scale[a] = 1.0
-            notes.append(f"full_scale {a}: no load along {a} in the data; 1 is a placeholder")
-        else:
-            full_scale[a] = nice_ceil(peak)
-    reasons["full_scale"] = (f"largest |load| per axis ({', '.join(peaks)} {load}) rounded up "
-                             "to a nice value (1, 2, 2.5 or 5 x 10^k)")
-
-    if "repetition" in columns:
-        min_repetitions = max(1, len(reps))
-        reasons["min_repetitions"] = (f"{len(reps)} distinct values in "
-                                      f"{_shown(names[columns['repetition']])}")
-    else:
-        min_repetitions = 1
-        reasons["min_repetitions"] = "no repetition column: one repetition in this file"
+    peaks = {a: max(abs(v) for v in values[k]) for a, k in zip(AXES, FORCE_COLUMNS, strict=True)}
+    full_scale = {a: nice_ceil(p) if p else 1.0 for a, p in peaks.items()}
+    notes += [f"full_scale {a}: no load along {a} in the data; 1 is a placeholder"
+              for a, p in peaks.items() if not p]
+    seen = ", ".join(f"{a} {p:g}" for a, p in peaks.items())
+    reasons["full_scale"] = f"largest |load| per axis ({seen} {load}) rounded up to 1, 2, 2.5 or 5 x 10^k"
+    min_repetitions = max(1, len(reps))
+    reasons["min_repetitions"] = (f"{len(reps)} distinct values in {shown['repetition']}"
+                                  if "repetition" in columns else
+                                  "no repetition column: one repetition in this file")
 
     in_volts = output in ("V", "mV/V") and 0.1 <= peak_out <= 10
     scaling = "none" if in_volts else "full_scale"
@@ -440,9 +371,8 @@ def guess_config(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
         f"outputs peak at {peak_out:g} {output}, not volts of order 1 as Table 2's gamma "
         "assumes: divide by each axis's full-scale output"
     )
-    detected = "detected" if sep != "," else "the default"
-    reasons["csv"] = (f"{detected}: {json.dumps(sep)}-separated"
-                      + (", decimal comma" if decimal == "," else ""))
+    reasons["csv"] = (f"{'the default' if sep == ',' else 'detected'}: {json.dumps(sep)}-"
+                      f"separated{', decimal comma' if decimal == ',' else ''}")
 
     return Guess(
         path=path, columns={k: names[i] for k, i in columns.items()},
@@ -454,55 +384,34 @@ def guess_config(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
 
 
 def _sniff_decimal(sep: str, rows: list[list[str]], cols: list[int]) -> str:
-    if sep == ",":
-        return "."  # a decimal comma cannot live in a comma-separated file
-    comma = point = 0
-    for row in rows[:1000]:
-        for i in cols:
-            cell = row[i].strip() if i < len(row) else ""
-            comma += bool(re.fullmatch(r"[+-]?\d*,\d+(?:[eE][+-]?\d+)?", cell))
-            point += bool(re.fullmatch(r"[+-]?\d*\.\d+(?:[eE][+-]?\d+)?", cell))
-    # a ';' file is European unless its numbers say otherwise
-    return "." if point > comma else ","
+    """'.' in a comma file; else ',' (European) unless its numbers say otherwise."""
+    cells = [row[i].strip() for row in rows[:1000] for i in cols if i < len(row)]
+    point = sum(bool(re.fullmatch(r"[+-]?\d*\.\d+([eE][+-]?\d+)?", c)) for c in cells)
+    comma = sum(bool(re.fullmatch(r"[+-]?\d*,\d+([eE][+-]?\d+)?", c)) for c in cells)
+    return "." if sep == "," or point > comma else ","
 
 
-def _hinted(hints: dict[str, str | None], keys, table: dict[str, str], notes, names, columns,
-            what: str) -> tuple[str | None, str]:
+def _unit(kind: str, hints: dict[str, str | None], peak: float, integers: bool,
+          notes: list[str], shown: dict[str, str]) -> tuple[str, str]:
+    """The ``load`` or ``output`` unit: from header hints, else from the magnitudes."""
+    keys, table = ((FORCE_COLUMNS, _LOAD_HINTS) if kind == "load"
+                   else (VOLTAGE_COLUMNS, _OUTPUT_HINTS))
     found = {k: table[h] for k in keys if (h := hints.get(k)) in table}
-    units = sorted(set(found.values()))
-    if not units:
-        return None, ""
-    if len(units) > 1:
-        notes.append(f"{what} headers disagree on the unit ({', '.join(units)}); took "
-                     f"{found[next(iter(found))]}")
-    unit = found[next(iter(found))]
-    cols = ", ".join(_shown(names[columns[k]]) for k in found)
-    return unit, f"header hint in {cols} ({_UNIT_NAMES[unit]})"
-
-
-def _load_unit(hints, peak, notes, names, columns) -> tuple[str, str]:
-    unit, why = _hinted(hints, FORCE_COLUMNS, _LOAD_HINTS, notes, names, columns, "load")
-    if unit is not None:
-        return unit, why
-    if peak > GF_ABOVE:
-        notes.append("load unit gf is a guess from the magnitudes (no unit in the headers)")
-        return "gf", f"a guess: largest |load| {peak:g} > {GF_ABOVE:g}, no unit in the headers"
-    notes.append("load unit N is a guess from the magnitudes (no unit in the headers)")
-    return "N", f"a guess: largest |load| {peak:g} <= {GF_ABOVE:g}, no unit in the headers"
-
-
-def _output_unit(hints, peak, integers, notes, names, columns) -> tuple[str, str]:
-    unit, why = _hinted(hints, VOLTAGE_COLUMNS, _OUTPUT_HINTS, notes, names, columns, "output")
-    if unit is not None:
-        return unit, why
-    if integers and peak > COUNT_ABOVE:
+    if found:
+        unit = next(iter(found.values()))
+        if len(set(found.values())) > 1:
+            notes.append(f"{kind} headers disagree on the unit "
+                         f"({', '.join(sorted(set(found.values())))}); took {unit}")
+        return unit, f"header hint in {', '.join(shown[k] for k in found)} ({_UNIT_NAMES[unit]})"
+    if kind == "output" and integers and peak > COUNT_ABOVE:
         return "count", f"every output an integer, largest |output| {peak:g} > {COUNT_ABOVE:g}"
-    notes.append("output unit is a guess from the magnitudes (no unit in the headers)")
-    if peak <= 20:
-        return "V", f"a guess: largest |output| {peak:g} <= 20"
-    if peak <= 20_000:
-        return "mV", f"a guess: largest |output| {peak:g} in 20..20000"
-    return "uV", f"a guess: largest |output| {peak:g} > 20000, not all integers"
+    if kind == "load":
+        unit, why = ("gf", f"> {GF_ABOVE:g}") if peak > GF_ABOVE else ("N", f"<= {GF_ABOVE:g}")
+    else:
+        unit, why = next((u, f"<= {top:g}") for u, top in
+                         (("V", 20), ("mV", 20_000), ("uV", math.inf)) if peak <= top)
+    notes.append(f"{kind} unit {unit} is a guess from the magnitudes (no unit in the headers)")
+    return unit, f"a guess: largest |{kind}| {peak:g} {why}, no unit in the headers"
 
 
 def init_config(path: str | Path, output: str | Path, *, force: bool = False) -> Guess:
@@ -521,24 +430,19 @@ def init_config(path: str | Path, output: str | Path, *, force: bool = False) ->
     return guess
 
 
-def guess_table(guess: Guess):
-    """The rich table of the guesses (file text shown literally, never as markup)."""
+def guess_renderables(guess: Guess) -> list:
+    """What ``init`` prints: a table (key, column, reason), the notes, where the config
+    went.  File text (header names, paths) is shown literally, never as rich markup."""
     from rich.table import Table
     from rich.text import Text
 
-    t = Table(title=Text(f"Guessed from {guess.path}"))
-    for name in ("key", "column", "reason"):
-        t.add_column(name)
+    t = Table("key", "column", "reason", title=Text(f"Guessed from {guess.path}"))
     for key in KEYS:
-        col = guess.columns.get(key)
-        t.add_row(key, Text(col if col is not None else "-"), Text(guess.reasons[key]))
-    t.add_row("units", Text(f"load: {guess.units['load']}, output: {guess.units['output']}"),
-              Text(guess.reasons["units"]))
-    t.add_row("full_scale", Text(", ".join(f"{a}: {_num(v)}" for a, v in guess.full_scale.items())),
-              Text(guess.reasons["full_scale"]))
-    t.add_row("min_repetitions", str(guess.min_repetitions), Text(guess.reasons["min_repetitions"]))
-    t.add_row("csv", Text(f"sep {guess.sep!r}, decimal {guess.decimal!r}"), Text(guess.reasons["csv"]))
-    t.add_row("scaling", guess.scaling, Text(guess.reasons["scaling"]))
+        t.add_row(key, Text(guess.columns.get(key, "-")), Text(guess.reasons[key]))
+    for key, value, why in guess.settings():
+        t.add_row(key, Text(value), Text(why))
     for i in guess.ignored:
         t.add_row("(ignored)", Text(f"{i.column}: {_shown(i.name)}"), Text(i.reason))
-    return t
+    notes = [Text.assemble(("note:", "yellow"), f" {n}") for n in guess.notes]
+    done = f"config written to {guess.config}; check every guessed value before fitting"
+    return [t, *notes, Text(done)]
