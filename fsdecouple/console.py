@@ -16,6 +16,9 @@ from rich.text import Text
 
 from .axes import AXES, VOLTAGE_COLUMNS
 from .cv_doc import gamma_index, test_name
+from .guess import KEYS as GUESS_KEYS
+from .guess import Guess
+from .guess import shown as shown_name
 from .metrics import pct
 from .units import Units, output_display
 
@@ -391,3 +394,20 @@ def validation_renderables(doc: dict[str, Any], output=None, *, as_json: bool = 
         out.append((False, Text(f"validation document written to {output}")))
     out += [(True, Text("warning: ", style="yellow") + Text(w)) for w in doc["warnings"]]
     return out
+
+
+# --- init -----------------------------------------------------------------------------
+
+def guess_renderables(guess: Guess) -> list:
+    """What ``init`` prints: a table (key, column, reason), the notes, where the config
+    went.  File text (header names, paths) is shown literally, never as rich markup."""
+    t = Table("key", "column", "reason", title=Text(f"Guessed from {guess.path}"))
+    for key in GUESS_KEYS:
+        t.add_row(key, Text(guess.columns.get(key, "-")), Text(guess.reasons[key]))
+    for key, value, why in guess.settings():
+        t.add_row(key, Text(value), Text(why))
+    for i in guess.ignored:
+        t.add_row("(ignored)", Text(f"{i.column}: {shown_name(i.name)}"), Text(i.reason))
+    notes = [Text.assemble(("note:", "yellow"), f" {n}") for n in guess.notes]
+    done = f"config written to {guess.config}; check every guessed value before fitting"
+    return [t, *notes, Text(done)]

@@ -85,3 +85,22 @@ def ingest(
         for r in ingest_tables(summary):
             console.print(r)
     warn(summary["warnings"])
+
+
+@app.command()
+def init(
+    data_file: Annotated[Path, typer.Argument(help="A calibration CSV to guess the config from.")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Config file to write (YAML).")],
+    force: ForceOpt = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Start a config: guess columns, units, full scale and scaling from a calibration file."""
+    from ..console import guess_renderables
+    from ..guess import init_config
+
+    with user_errors():
+        guess = init_config(data_file, output, force=force)
+    if json_out:
+        return print_json(guess.to_dict())
+    for r in guess_renderables(guess):
+        console.print(r, soft_wrap=True)

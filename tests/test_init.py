@@ -1,0 +1,199 @@
+"""`fsdecouple init`: a config guessed from a calibration file, with its reasons."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+import yaml
+from conftest import SAMPLE, invoke
+
+from fsdecouple.config import settings_from_dict
+from fsdecouple.errors import InputError
+from fsdecouple.guess import guess_config, nice_ceil
+
+LAB_HEADER = "Fx [gf],Fy [gf],Fz [gf],ch0,ch1,ch2,,,orientation,load on x"
+LOADS = (300, 600, 900, 1200)  # gf; 1200 rounds up to 2000
+SENS = (1500, 1400, 1300)  # counts per gf, so outputs reach ~1e6 + 1.8e6
+
+
+def lab_rows() -> list[str]:
+    """One zero row and four loads per axis in ADC counts, and a side table
+    (orientation, load on x) that runs three rows past the data."""
+    rows = []
+    for a in range(3):
+        for load in (0, *LOADS):
+            f = [0, 0, 0]
+            f[a] = load
+            u = [1_000_000 + SENS[j] * f[j] + 7 * j for j in range(3)]
+            rows.append(",".join(map(str, (*f, *u))))
+    side = [f"{o},{v}" for o, v in
+            [("up", 1), ("down", -1), ("left", 2), ("right", 3)] * 5]
+    n = len(rows)
+    return [f"{rows[i] if i < n else ',,,,,'},,,{side[i]}" for i in range(len(side))]
+
+
+def validate(text: str) -> dict:
+    """The YAML parses, has a units key of the expected shape, and the rest is a
+    config the current parser accepts (it does not know `units` yet)."""
+    doc = yaml.safe_load(text)
+    assert set(doc["units"]) == {"load", "output"}
+    rest = {k: v for k, v in doc.items() if k != "units"}
+    settings_from_dict(rest)
+    return doc
+
+
+def test_lab_file_counts_in_gram_force(tmp_path):
+    data = tmp_path / "lab.csv"
+    data.write_text("\n".join([LAB_HEADER, *lab_rows()]) + "\n")
+    out = tmp_path / "sensor.yaml"
+    res = invoke(["init", data, "-o", out, "--json"])
+    doc = json.loads(res.stdout)
+    assert doc["columns"] == {"fx": "Fx [gf]", "fy": "Fy [gf]", "fz": "Fz [gf]",
+                              "ux": "ch0", "uy": "ch1", "uz": "ch2"}
+    assert doc["units"] == {"load": "gf", "output": "count"}
+    # largest |load| 1200 gf on each axis; the next of 1, 2, 2.5, 5 x 10^k is 2000
+    assert doc["full_scale"] == {"x": 2000, "y": 2000, "z": 2000}
+    assert doc["min_repetitions"] == 1
+    assert doc["scaling"] == "full_scale"
+    assert doc["csv"] == {"sep": ",", "decimal": "."}
+    assert {"orientation", "load on x"} <= set(doc["ignored"])
+    assert doc["ignored"].count("") == 2  # the two unnamed gap columns
+    # the side table's rows past the data are not data rows
+    assert doc["rows"] == 15
+
+    text = out.read_text()
+    cfg = validate(text)
+    assert cfg["columns"]["ux"] == "ch0" and cfg["full_scale"]["z"] == 2000
+    assert "# guessed: 'Fx [gf]': header names fx, unit gf (gram-force)" in text
+    assert "'orientation': right of the unnamed column 7: a side table" in text
+    assert "Table 2's gamma" in text
+
+
+def test_paper_layout_is_the_identity(tmp_path):
+    out = tmp_path / "sensor.yaml"
+    invoke(["init", SAMPLE / "calibration" / "rep1.csv", "-o", out])
+    g = guess_config(SAMPLE / "calibration" / "rep1.csv")
+    assert g.columns == {k: k for k in ("axis", "fx", "fy", "fz", "ux", "uy", "uz")}
+    assert g.units == {"load": "N", "output": "V"}
+    assert g.scaling == "none"
+    # the sample's peaks are 100, 100 and 150 N (README, Sample data)
+    assert g.full_scale == {"x": 100, "y": 100, "z": 200}
+    cfg = validate(out.read_text())
+    assert cfg["columns"] == g.columns and cfg["scaling"] == "none"
+
+
+def test_repetition_column_gives_min_repetitions(tmp_path):
+    src = (SAMPLE / "calibration" / "rep1.csv").read_text().splitlines()
+    lines = [f"Run,{src[0]}"] + [f"{r},{line}" for r in (1, 2, 3) for line in src[1:]]
+    data = tmp_path / "all.csv"
+    data.write_text("\n".join(lines) + "\n")
+    g = guess_config(data)
+    assert g.columns["repetition"] == "Run"
+    assert g.min_repetitions == 3
+
+
+def test_semicolon_decimal_comma(tmp_path):
+    data = tmp_path / "eu.csv"
+    data.write_text("Fx (N);Fy (N);Fz (N);u_x;u_y;u_z\n"
+                    "0;0;0;0,001;-0,002;0,003\n"
+                    "10,5;0;0;0,5;0,01;-0,02\n"
+                    "0;20;0;0,02;0,9;0,01\n"
+                    "0;0;-30;0,01;0,03;-1,2\n")
+    out = tmp_path / "eu.yaml"
+    doc = json.loads(invoke(["init", data, "-o", out, "--json"]).stdout)
+    assert doc["csv"] == {"sep": ";", "decimal": ","}
+    assert doc["columns"]["fx"] == "Fx (N)" and doc["columns"]["uz"] == "u_z"
+    assert doc["units"]["load"] == "N"
+    # 10,5 read as 10.5 (not 105): rounded up to 20
+    assert doc["full_scale"] == {"x": 20, "y": 20, "z": 50}
+    cfg = validate(out.read_text())
+    assert cfg["csv"] == {"sep": ";", "decimal": ","}
+    assert settings_from_dict({k: v for k, v in cfg.items() if k != "units"}).sep == ";"
+
+
+def test_missing_quantity_is_one_line_and_writes_nothing(tmp_path):
+    data = tmp_path / "lab.csv"
+    data.write_text("Fx [gf],Fy [gf],Fz [gf],ch0,ch1\n0,0,0,1,2\n100,0,0,5,6\n")
+    out = tmp_path / "sensor.yaml"
+    res = invoke(["init", data, "-o", out], code=2)
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1, res.stderr
+    assert str(data) in lines[0] and "uz" in lines[0] and "ch0" in lines[0]
+    assert not out.exists()
+    assert list(tmp_path.iterdir()) == [data]  # no temporary file left either
+    with pytest.raises(InputError, match=r"no column found for uz .*header: 'Fx \[gf\]'"):
+        guess_config(data)
+
+
+def test_two_candidates_are_reported(tmp_path):
+    data = tmp_path / "two.csv"
+    data.write_text("fx,force_x,fy,fz,ux,uy,uz\n0,0,0,0,0,0,0\n1,1,1,1,0.5,0.5,0.5\n")
+    g = guess_config(data)
+    assert g.columns["fx"] == "fx"  # the config's own name wins
+    assert any("fx: more than one candidate" in n and "force_x" in n for n in g.notes)
+    assert "force_x" in [i.name for i in g.ignored]
+
+
+def test_duplicated_header_is_ignored(tmp_path):
+    data = tmp_path / "dup.csv"
+    data.write_text("fx,fy,fz,ux,uy,uz,note,note\n0,0,0,0,0,0,a,b\n1,1,1,1,1,1,c,d\n")
+    g = guess_config(data)
+    assert [i.reason for i in g.ignored] == ["header name repeated (2 columns)"] * 2
+
+
+def test_existing_output_needs_force(tmp_path):
+    out = tmp_path / "sensor.yaml"
+    out.write_text("keep me\n")
+    data = SAMPLE / "calibration" / "rep1.csv"
+    res = invoke(["init", data, "-o", out], code=2)
+    assert "already exists; pass --force" in res.stderr
+    assert out.read_text() == "keep me\n"
+    invoke(["init", data, "-o", out, "--force"])
+    validate(out.read_text())
+
+
+def test_output_may_not_be_the_data(tmp_path):
+    data = tmp_path / "rep1.csv"
+    shutil.copy(SAMPLE / "calibration" / "rep1.csv", data)
+    res = invoke(["init", data, "-o", data, "--force"], code=2)
+    assert "is also an input file" in res.stderr
+
+
+def test_header_text_is_printed_literally(tmp_path):
+    data = tmp_path / "odd.csv"
+    data.write_text("fx,fy,fz,ux,uy,uz,[bold]x,[/]\n0,0,0,0,0,0,1,2\n5,0,0,1,0,0,3,4\n")
+    out = tmp_path / "odd.yaml"
+    res = invoke(["init", data, "-o", out], terminal_width=200)
+    assert "[bold]x" in res.stdout and "[/]" in res.stdout
+    text = out.read_text()
+    validate(text)
+    assert "'[bold]x'" in text
+
+    # and in the one-line error that quotes the header
+    bad = tmp_path / "bad.csv"
+    bad.write_text("fx,fy,fz,ux,uy,[/]\n0,0,0,0,0,0\n")
+    res = invoke(["init", bad, "-o", tmp_path / "bad.yaml"], code=2)
+    assert "'[/]'" in res.stderr and len(res.stderr.strip().splitlines()) == 1
+
+
+def test_column_names_read_back_exactly(tmp_path):
+    """Header names YAML would misread unquoted (a number, 'yes', a '#') survive."""
+    data = tmp_path / "names.csv"
+    data.write_text("Fx [N],Fy [N],Fz [N],ux # raw,V2,V3\n0,0,0,0,0,0\n1,1,1,1,1,1\n")
+    # 'ux # raw' names no output; V1..V3 are incomplete, so ux is missing
+    with pytest.raises(InputError, match="no column found for ux"):
+        guess_config(data)
+    data.write_text("Fx [N],Fy [N],Fz [N],V1,V2,V3,yes,#c\n0,0,0,0,0,0,1,2\n1,1,1,1,1,1,3,4\n")
+    g = guess_config(data)
+    assert [g.columns[k] for k in ("ux", "uy", "uz")] == ["V1", "V2", "V3"]
+    cfg = validate(g.to_yaml())
+    assert cfg["columns"] == g.columns
+
+
+@pytest.mark.parametrize(("value", "nice"), [
+    (1200, 2000), (100, 100), (150, 200), (0.3, 0.5), (2.2, 2.5), (5000.1, 10000), (0.25, 0.25),
+])
+def test_nice_ceil(value, nice):
+    assert nice_ceil(value) == nice
