@@ -20,6 +20,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -29,9 +30,10 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "docs"))
 
 from fsdecouple import load_calibration, load_config  # noqa: E402
-from fsdecouple.axes import CHI_NAMES  # noqa: E402
+from fsdecouple.axes import CHI_NAMES, VOLTAGE_COLUMNS  # noqa: E402
 from fsdecouple.fit import chi_training_data, fit  # noqa: E402
 from fsdecouple.modelfile import model_to_dict, save_model  # noqa: E402
+from fsdecouple.units import Units  # noqa: E402
 
 PYARROW_CSV_COPY = """
 import sys, pyarrow.csv as c
@@ -203,6 +205,28 @@ def main() -> int:
         seq_wall / cv_wall, "<= 2 s", cv_wall <= 2.0)
     row("4c. cv training, parallel vs sequential", statistics.median(speedups), "x speed-up", 1.0,
         "sequential training in the same run (cv.json)", statistics.median(speedups), "info", True)
+
+    # --- 4d. fit with its held-out verdict (issue "Real lab data") -----------------------
+    print("fsdecouple fit on the sample data, with and without the verdict")
+    with tempfile.TemporaryDirectory(prefix="fsdecouple-bench-fit-") as tmp:
+        fit_args = [py, "-m", "fsdecouple", "fit", ROOT / "sample_data" / "calibration", "-o",
+                    Path(tmp) / "m.json", "--force"]
+        with_verdict = median_child(fit_args, repeats)[0]
+        without = median_child([*fit_args, "--no-verdict"], repeats)[0]
+    row("4d. fsdecouple fit with the verdict, sample data", with_verdict, "s wall", without,
+        "fit --no-verdict [s]", with_verdict / without, "<= 3 s", with_verdict <= 3.0)
+
+    # --- 4e. the same calibration in counts and in volts ---------------------------------
+    print("fit: the sample calibration in ADC counts vs in volts (scaling: full_scale)")
+    volts = replace(settings, scaling="full_scale")
+    counts = replace(volts, units=Units("N", "count"),
+                     scale={**settings.scale, **{c: float(2 ** 20) for c in VOLTAGE_COLUMNS}})
+    calib_v = load_calibration(ROOT / "sample_data" / "calibration", volts)
+    calib_c = load_calibration(ROOT / "sample_data" / "calibration", counts)
+    t_v = median_time(lambda: fit(calib_v, volts), repeats)
+    t_c = median_time(lambda: fit(calib_c, counts), repeats)
+    row("4e. fit in counts vs in volts", t_c, "s", t_v, "the same data in V [s]", t_c / t_v,
+        "<= 1.2", t_c / t_v <= 1.2)
 
     # --- 1. in-memory decoupling of (N, 3) -------------------------------------------
     print("in-memory decoupling, N = 1e6")
