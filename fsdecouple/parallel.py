@@ -14,13 +14,33 @@ duration only (threadpoolctl, as scikit-learn does) instead of setting
 from __future__ import annotations
 
 import contextlib
+import threading
 from collections.abc import Iterator
+
+_lock = threading.Lock()
+_depth = 0
+_limits = None
 
 
 @contextlib.contextmanager
 def single_threaded_libraries() -> Iterator[None]:
-    """BLAS and OpenMP pools at one thread inside the block, as they were after it."""
-    from threadpoolctl import threadpool_limits
+    """BLAS and OpenMP pools at one thread inside the block, as they were after it.
 
-    with threadpool_limits(limits=1):
+    Re-entrant and thread-safe: the limits are process-wide, so they are set when
+    the first block opens and restored when the last one (in any thread) closes.
+    """
+    global _depth, _limits
+    with _lock:
+        if _depth == 0:
+            from threadpoolctl import threadpool_limits
+
+            _limits = threadpool_limits(limits=1)
+        _depth += 1
+    try:
         yield
+    finally:
+        with _lock:
+            _depth -= 1
+            if _depth == 0:
+                _limits.restore_original_limits()
+                _limits = None

@@ -13,6 +13,7 @@ from libsvm import svmutil
 
 from .config import SVRSettings
 from .errors import FsdecoupleError
+from .parallel import single_threaded_libraries
 
 
 @dataclass(frozen=True)
@@ -46,7 +47,8 @@ def train(x: np.ndarray, y: np.ndarray, params: SVRSettings):
     y = np.ascontiguousarray(y, dtype=float).ravel()
     if x.shape[0] != y.size or y.size < 2:
         raise FsdecoupleError(f"an SVR needs at least 2 points, got {y.size}")
-    return svmutil.svm_train(y, x, params.libsvm_options())
+    with single_threaded_libraries():
+        return svmutil.svm_train(y, x, params.libsvm_options())
 
 
 def extract(model, gamma: float) -> SVRFit:
@@ -66,5 +68,6 @@ def fit_svr(x: np.ndarray, y: np.ndarray, params: SVRSettings) -> SVRFit:
 def predict(model, x: np.ndarray) -> np.ndarray:
     """libsvm's own prediction, for checking the numpy evaluator."""
     x = np.ascontiguousarray(x, dtype=float).reshape(-1, 1)
-    values, _, _ = svmutil.svm_predict(np.zeros(x.shape[0]), x, model, "-q")
+    with single_threaded_libraries():
+        values, _, _ = svmutil.svm_predict(np.zeros(x.shape[0]), x, model, "-q")
     return np.asarray(values, dtype=float)
