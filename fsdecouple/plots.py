@@ -16,8 +16,8 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from .axes import AXES, CHI_NAMES, FORCE_COLUMNS, VOLTAGE_COLUMNS
+from .units import output_display
 
-MV = 1e3  # V -> mV: the coupling error elements are a few mV
 OMEGA, CHI = r"\omega", r"\chi"  # mathtext symbols
 
 # Figure 7 of the paper: training points blue, test I red, test II magenta.  Here
@@ -83,6 +83,8 @@ def omega_figure(model, points: pd.DataFrame | None = None) -> Figure:
     axs = fig.subplots(rows, 3, squeeze=False, sharex="col",
                        gridspec_kw={"height_ratios": [2.2, 1]} if rows == 2 else None)
     lo_hi = model.calibrated_range
+    units = model.settings.units
+    small, small_unit = output_display(units.output)
     for a, axis in enumerate(AXES):
         k = model.k[a]
         ax = axs[0, a]
@@ -96,22 +98,23 @@ def omega_figure(model, points: pd.DataFrame | None = None) -> Figure:
                 fa = g[FORCE_COLUMNS[a]].to_numpy()
                 ua = g[VOLTAGE_COLUMNS[a]].to_numpy()
                 ax.plot(fa, ua, label=_role_label(role, points), **style)
-                axs[1, a].plot(fa, (ua - k * fa) * MV, **style)
+                axs[1, a].plot(fa, (ua - k * fa) * small, **style)
             axs[1, a].axhline(0.0, **SVR_STYLE)
-            axs[1, a].set_ylabel(f"${{u_{axis} - k_{{{axis}{axis}}} f_{axis}}}$ [mV]")
-            axs[1, a].set_xlabel(f"prime force {_sub('f', axis)} [N]")
+            axs[1, a].set_ylabel(f"${{u_{axis} - k_{{{axis}{axis}}} f_{axis}}}$ [{small_unit}]")
+            axs[1, a].set_xlabel(f"prime force {_sub('f', axis)} [{units.load}]")
             axs[1, a].grid(True, color="0.88")
         else:
-            ax.set_xlabel(f"prime force {_sub('f', axis)} [N]")
+            ax.set_xlabel(f"prime force {_sub('f', axis)} [{units.load}]")
         ax.plot(f_line, k * f_line, label="fitted line u = k·f", **SVR_STYLE)
         r2 = (model.report.r2.get(axis) if model.report else None)
-        text = f"{_sub('k', axis + axis)} = {k:.6g} V/N\n1/{_sub('k', axis + axis)} = {1 / k:.3f} N/V"
+        text = (f"{_sub('k', axis + axis)} = {k:.6g} {units.slope()}\n"
+                f"1/{_sub('k', axis + axis)} = {1 / k:.4g} {units.inverse_slope()}")
         if r2 is not None:
             text += f"\nR² = {r2:.6f}"
         ax.text(0.04, 0.96, text, transform=ax.transAxes, va="top", ha="left", fontsize=9,
                 bbox=dict(boxstyle="round", fc="white", ec="0.6"))
         ax.set_title(f"({PANEL[a]}) {_sub(OMEGA, axis)}: {axis} sweeps, eq. (2)")
-        ax.set_ylabel(f"prime voltage {_sub('u', axis)} [V]")
+        ax.set_ylabel(f"prime output {_sub('u', axis)} [{units.output}]")
         ax.grid(True, color="0.88")
     handles, labels = _legend_by_label(axs[0, 0])
     fig.legend(handles, labels, loc="outside lower center", ncol=len(labels), frameon=False)
@@ -125,7 +128,7 @@ def omega_figure(model, points: pd.DataFrame | None = None) -> Figure:
 
 
 def chi_figure(model, points: pd.DataFrame | None = None, curves: dict | None = None) -> Figure:
-    """Figure 7: the six corrected coupling functions chi (eq. 4), in mV.
+    """Figure 7: the six corrected coupling functions chi (eq. 4), in the output unit (mV for V).
 
     Parameters
     ----------
@@ -139,6 +142,8 @@ def chi_figure(model, points: pd.DataFrame | None = None, curves: dict | None = 
     """
     fig = Figure(figsize=(11, 7.2), layout="constrained")
     axs = fig.subplots(2, 3).ravel()
+    units = model.settings.units
+    MV, small_unit = output_display(units.output)  # noqa: N806 (mV for volts, else as is)
     for i, name in enumerate(CHI_NAMES):
         ax = axs[i]
         a, b = AXES.index(name[0]), AXES.index(name[1])
@@ -163,8 +168,8 @@ def chi_figure(model, points: pd.DataFrame | None = None, curves: dict | None = 
             ax.plot(u, model.chi[name](u) * MV, label="ε-SVR", **SVR_STYLE)
         ax.set_title(f"({PANEL[i]}) {_sub(CHI, name)}({_sub('u', name[1])}): "
                      f"load on {name[1]}, error on {_sub('u', name[0])}")
-        ax.set_xlabel(f"prime voltage {_sub('u', name[1])} [V]")
-        ax.set_ylabel(f"coupling error {_sub('e', name)} [mV]")
+        ax.set_xlabel(f"prime output {_sub('u', name[1])} [{units.output}]")
+        ax.set_ylabel(f"coupling error {_sub('e', name)} [{small_unit}]")
         ax.grid(True, color="0.88")
     handles, labels = _legend_by_label(axs[0])
     fig.legend(handles, labels, loc="outside lower center", ncol=len(labels), frameon=False)
@@ -186,7 +191,7 @@ def _clip_to_frame(ax, frame: tuple[float, float]) -> None:
                 bbox=dict(boxstyle="round", fc="white", ec="0.6"))
 
 
-def residual_figure(residuals: pd.DataFrame, title: str) -> Figure:
+def residual_figure(residuals: pd.DataFrame, title: str, load_unit: str = "N") -> Figure:
     """Decoupled force error against applied load, per loaded axis and component.
 
     Parameters
@@ -213,8 +218,8 @@ def residual_figure(residuals: pd.DataFrame, title: str) -> Figure:
             ax.axhline(0.0, color="0.3", lw=0.8)
             kind = "on-axis" if comp == axis else "off-axis"
             ax.set_title(f"{axis} loaded: error in {_sub('f', comp)} ({kind})", fontsize=10)
-            ax.set_xlabel(f"applied load {_sub('F', axis)} [N]")
-            ax.set_ylabel(f"{_sub('f', comp)} − {_sub('F', comp)} [N]")
+            ax.set_xlabel(f"applied load {_sub('F', axis)} [{load_unit}]")
+            ax.set_ylabel(f"{_sub('f', comp)} − {_sub('F', comp)} [{load_unit}]")
             ax.yaxis.set_tick_params(labelleft=True)
             ax.grid(True, color="0.88")
     handles, labs = _legend_by_label(axs[0, 0])

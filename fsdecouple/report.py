@@ -101,8 +101,13 @@ def _calib_residuals(model, calib) -> pd.DataFrame:
 # --- sections --------------------------------------------------------------------------
 
 def _header(model, cv) -> str:
+    units = model.settings.units
     rows = [tr(th("sensor"), cell(model.settings.sensor)),
             tr(th("model fitted"), cell(model.created or "–")),
+            tr(th("decouples by"), cell("the coupling error model, eq. (11)" if model.method == "svr"
+                                        else "the least-squares calibration matrix (fit --method "
+                                             f"{(model.report.verdict or {}).get('asked', 'linear')})")),
+            tr(th("units"), cell(f"loads in {units.load}, outputs in {units.output}")),
             tr(th("repetitions in the model"), cell(_reps(model.report.repetitions if model.report else []))),
             tr(th("report written by"), cell(f"fsdecouple {__version__}"))]
     if cv:
@@ -191,8 +196,10 @@ def _gamma_tables(cv) -> str:
     keys = sorted({(r, t) for r, t, _, _ in g})
     methods = [m for m in cv.get("methods", []) if any(k[2] == m for k in g)]
 
+    levels = cv.get("protocol") == "levels"
+
     def held(r, t):
-        return f"{_test_name(cv, r, t)} (rep {t})"
+        return f"level {t} (interior points)" if levels else f"{_test_name(cv, r, t)} (rep {t})"
 
     def val(r, t, m, a, base="initial"):
         v, b = g.get((r, t, m, a)), g.get((r, t, base, a))
@@ -204,7 +211,8 @@ def _gamma_tables(cv) -> str:
     rows = [tr(cell(str(r)), cell(held(r, t)), *(val(r, t, m, a) for a in AXES for m in methods))
             for r, t in keys]
     out = table("table-gamma-methods", "Table 1 analogue: interference error γ (eq. 12) of the "
-                "held-out repetitions, every method, % F.S.", head, rows)
+                f"held-out {'load levels' if levels else 'repetitions'} ({cv.get('protocol', 'repetitions')} "
+                "protocol), every method, % F.S.", head, rows)
     absent = [METHOD_NAMES[m] for m in METHOD_NAMES if m not in methods]
     if absent:
         out += note("Not in cv.json (not run): " + ", ".join(absent) + ".")
@@ -391,7 +399,7 @@ def build_report(model, cv: dict | None = None, calib=None) -> Report:
                "and force component (columns), one series per repetition. These points trained the "
                "model: pass --cv cv.json for held-out residuals.")
     if residuals is not None:
-        figs["residuals"] = to_png(residual_figure(residuals, title))
+        figs["residuals"] = to_png(residual_figure(residuals, title, model.settings.load_unit))
         body.append(figure_html("fig-residuals", figs["residuals"], "Residual plot", cap))
     else:
         body.append(note("No residual plot: pass --cv cv.json or --calib CALIB."))
