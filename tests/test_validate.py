@@ -43,10 +43,8 @@ def validation_table(seed: int = 11, repetitions: int = 1) -> pd.DataFrame:
 
 
 @pytest.fixture(scope="module")
-def model_file(tmp_path_factory):
-    path = tmp_path_factory.mktemp("validate") / "model.json"
-    invoke(["fit", SAMPLE / "calibration", "-o", path])
-    return path
+def model_file(sample_model):
+    return sample_model  # conftest's model fitted on the sample data
 
 
 @pytest.fixture(scope="module")
