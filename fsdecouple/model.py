@@ -98,6 +98,9 @@ class Chi:
         return chi
 
 
+RANGE_MARGIN = 0.01  # of the calibrated span: see CouplingErrorModel.extrapolation_limits
+
+
 @dataclass
 class FitReport:
     """What the fit measured, as ``fit`` prints it and the model file stores it.
@@ -192,6 +195,17 @@ class CouplingErrorModel:
             ranges = [c.input_range for c in self.chi.values() if c.input_axis == b]
             r[b] = (min(lo for lo, _ in ranges), max(hi for _, hi in ranges))
         return r
+
+    def extrapolation_limits(self) -> np.ndarray:
+        """The calibrated range widened by RANGE_MARGIN of its span, shape (N, 2).
+
+        An output beyond it is extrapolation (``apply``'s status ``extrapolated``,
+        ``validate``'s range, the C header's bits): noise around an end of the
+        range (a component at rest at its 0 end) is not.
+        """
+        r = self.calibrated_range
+        margin = RANGE_MARGIN * (r[:, 1] - r[:, 0])
+        return np.column_stack([r[:, 0] - margin, r[:, 1] + margin])
 
     def coupling_errors(self, u: np.ndarray) -> np.ndarray:
         """Measured coupling errors e_a = sum_b chi_ab(u_b) [V] (eq. 1 with eq. 4 at u_(t))."""

@@ -14,7 +14,7 @@ each sweep zero-corrected by its own zero-load rows), decoupled by eq. (11)
 
 Each figure is given apart for the points whose prime outputs all lie in the
 model's calibrated range (widened as ``apply`` widens it, by
-:data:`fsdecouple.apply.RANGE_MARGIN` of the span) and for the others, which the
+:data:`fsdecouple.model.RANGE_MARGIN` of the span) and for the others, which the
 model extrapolates.  Zero-load rows are points at 0 load, as in :mod:`metrics`.
 """
 
@@ -42,8 +42,6 @@ FORMAT_VERSION = 1
 METHODS = ("model", "initial")
 METRICS = ("gamma", "max_error", "rms_error")
 RANGES = ("calibrated", "extrapolated")
-# a validation set need not repeat the calibration's grid, so this warning of
-# the reader (about gamma across repetitions of a calibration) does not apply
 # calibration warnings that do not apply to a validation set, which may use other
 # loads than the calibration and go beyond its full scale on purpose
 _NOT_FOR_VALIDATION = ("uses a different load grid than repetition", "loads reach")
@@ -51,11 +49,8 @@ _NOT_FOR_VALIDATION = ("uses a different load grid than repetition", "loads reac
 
 def in_calibrated_range(model: CouplingErrorModel, u: np.ndarray) -> np.ndarray:
     """Rows whose outputs all lie in the calibrated range, widened as ``apply`` widens it."""
-    from .apply import RANGE_MARGIN
-
-    lo, hi = model.calibrated_range.T
-    margin = RANGE_MARGIN * (hi - lo)
-    return ((u >= lo - margin) & (u <= hi + margin)).all(axis=1)
+    lo, hi = model.extrapolation_limits().T
+    return ((u >= lo) & (u <= hi)).all(axis=1)
 
 
 def force_errors(forces: np.ndarray, loads: np.ndarray, full_scale) -> dict[str, float]:
