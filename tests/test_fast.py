@@ -257,7 +257,7 @@ def test_apply_csv_and_parquet_give_the_same_forces(model, sim_dir, tmp_path):
             apply_file(model, src, out, tare=200)
             outs[(src.suffix, suffix)] = _forces(out)
     ref = outs[(".csv", ".parquet")][["fx", "fy", "fz"]].to_numpy()  # the doubles
-    step = 10.0 ** -force_decimals(model.k)
+    step = 10.0 ** -force_decimals(model.settings.full_scale)
     assert step / 2 * np.abs(model.k).max() <= 1e-10  # CSV rounding: a tenth of the 1e-9 V
     for key, df in outs.items():
         assert list(df.columns) == ["t", "ux", "uy", "uz", "fx", "fy", "fz", "status"], key
