@@ -307,7 +307,8 @@ def test_apply_crlf_blank_lines_and_missing(model, tmp_path):
     assert (tmp_path / "c.csv").read_text().splitlines()[-1] == "3,0.3,0.1,-0.3,,,,truncated"
     u = np.array([[0.1, 0.0, -0.1], [0.2, 0.1, -0.2], [0.3, 0.1, -0.3]])
     got = pd.read_csv(a)[["fx", "fy", "fz"]].dropna().to_numpy()
-    np.testing.assert_array_equal(got, np.round(model.decouple(u), force_decimals(model.k)))
+    decimals = force_decimals(model.settings.full_scale)
+    np.testing.assert_array_equal(got, np.round(model.decouple(u), decimals))
 
 
 def test_a_control_loop_loads_numpy_only(model, tmp_path):
