@@ -1,10 +1,13 @@
 """Decouple a logged voltage file into forces, in blocks (files larger than memory).
 
 Every input row is kept, in order, and every input column is passed through as
-text, unchanged; ``fx, fy, fz`` [N] and ``status`` are appended.  ``status`` says
-what the forces of the row are worth (:data:`STATUSES`); rows that cannot be
-decoupled keep empty forces and are counted.  CSV output uses the log's dialect
-(``sep``, ``decimal``).
+text, unchanged; ``fx, fy, fz`` and ``status`` are appended.  Forces are in the
+calibration's load unit, or in the one asked for (``unit``); voltages are in
+the data's output unit (:mod:`fsdecouple.units`).  ``status`` says what the
+forces of the row are worth (:data:`STATUSES`); rows that cannot be decoupled
+keep empty forces and are counted.  CSV output uses the log's dialect (``sep``,
+``decimal``); Parquet output records the units in its schema metadata
+(:data:`FORCE_UNIT_KEY`, :data:`OUTPUT_UNIT_KEY`).
 """
 
 from __future__ import annotations
@@ -31,37 +34,49 @@ from .iotools.logs import Block, LogFile, is_parquet
 from .iotools.sinks import CsvSink, ParquetSink, force_decimals
 from .iotools.text import HEADER_ROW, require_columns
 from .model import CouplingErrorModel
+from .units import LOAD_UNITS, load_factor
 from .zero import tare_offsets
 
 CHUNK_ROWS = 1 << 20  # rows per block at most; blocks are cut at ~4 MB anyway
 MAX_WORKERS = 4
 RANGE_MARGIN = 0.01  # fraction of the calibrated voltage span
 STATUS_COLUMN = "status"
-# What a row's forces are worth.  Only "ok" and "extrapolated" rows have forces.
+FORCE_UNIT_KEY, OUTPUT_UNIT_KEY = "fsdecouple.force_unit", "fsdecouple.output_unit"
+# What a row's forces are worth.  Only "ok", "extrapolated" and "saturated" rows
+# have forces.  A row takes the first that applies of: truncated, missing,
+# not_finite (no forces), saturated, extrapolated, ok.
 STATUSES = {
     "ok": "decoupled by eq. (11), voltages inside the calibrated range",
     "extrapolated": "decoupled, but a voltage lies outside the calibrated range",
+    "saturated": "decoupled, but a raw output is at or beyond its limit (limits:): it may "
+                 "have clipped",
     "missing": "a voltage is empty or missing (blank or short row): no forces",
     "truncated": "last line of a log that does not end with a newline (the writer "
                  "was cut off, a number may be cut short): no forces",
     "not_finite": "the voltages are so large that eq. (11) overflows: no forces",
 }
 STATUS_NAMES = pa.array(list(STATUSES), pa.string())
-OK_, EXTRAPOLATED_, MISSING_, TRUNCATED_, NOT_FINITE_ = range(len(STATUSES))
+OK_, EXTRAPOLATED_, SATURATED_, MISSING_, TRUNCATED_, NOT_FINITE_ = range(len(STATUSES))
 
 
 @dataclass
 class ApplySummary:
-    """What ``apply`` did: rows written, per-status counts, the zero removed [V]."""
+    """What ``apply`` did: rows written, per-status counts, the zero removed.
+
+    ``offsets`` are in ``output_unit``, the forces written in ``force_unit``.
+    """
 
     rows: int = 0
     missing_rows: int = 0
     first_missing: list[int] = field(default_factory=list)
     out_of_range_rows: int = 0
+    saturated_rows: int = 0
     truncated_rows: int = 0
     not_finite_rows: int = 0
     status_counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(STATUSES, 0))
     offsets: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    force_unit: str = "N"
+    output_unit: str = "V"
 
 
 def apply_file(
@@ -72,6 +87,7 @@ def apply_file(
     settings: Settings | None = None,
     tare: int | None = None,
     zero: tuple[float, float, float] | None = None,
+    unit: str | None = None,
     force: bool = False,
     chunk_rows: int = CHUNK_ROWS,
     progress: Callable[[int, int], None] | None = None,
@@ -83,11 +99,15 @@ def apply_file(
     Parameters
     ----------
     settings : Settings, optional
-        Column names, scales and CSV dialect of the log; default: the model's.
+        Column names, scales, CSV dialect and ``limits`` of the log; default:
+        the model's.  Without ``limits`` of its own, the model's apply.
     tare : int, optional
         Subtract the mean voltages of the first ``tare`` rows (task-data zero).
     zero : (float, float, float), optional
-        Subtract these voltages [V] instead.
+        Subtract these voltages [output unit of the model] instead.
+    unit : str, optional
+        Load unit of the forces written (:data:`~fsdecouple.units.LOAD_UNITS`);
+        default: the calibration's, ``model.settings.load_unit``.
     progress : callable, optional
         Called as ``progress(done, total)`` in bytes (CSV) or rows (Parquet).
     workers : int, optional
@@ -96,9 +116,13 @@ def apply_file(
     round_trip : bool
         CSV output: write each force as the shortest text that reads back as
         the same double.  By default forces are rounded to the decimals that
-        keep them within 1e-10 V-equivalent (:func:`~fsdecouple.stream.force_decimals`,
-        8 decimals for the paper's sensor), a tenth of the fast path's 1e-9 V.
-        Parquet output always stores the doubles.
+        keep them within 1e-10 of full-scale load
+        (:func:`~fsdecouple.iotools.sinks.force_decimals`, 8 decimals for the
+        paper's sensor in N), a tenth of the fast path's 1e-9.  Parquet output
+        always stores the doubles.
+
+    Rows with a raw output (after ``scale:``, before the tare or zero) at or
+    beyond its ``limits`` get the status ``saturated``; their forces are written.
 
     The input and output formats follow the file suffixes: ``.parquet`` (or
     ``.pq``) is Parquet, anything else CSV.  CSV lines pass through byte for
@@ -108,14 +132,26 @@ def apply_file(
     settings = settings or model.settings
     if tare is not None and zero is not None:
         raise InputError("give either --tare or --zero, not both")
+    unit = model.settings.load_unit if unit is None else unit
+    if unit not in LOAD_UNITS:
+        raise InputError(f"--unit {unit!r}: unknown load unit; expected one of "
+                         f"{', '.join(LOAD_UNITS)}")
     refuse_overwriting_input(out, [path])
     with LogFile(path, settings) as log:
-        return _apply(model, log, out, settings, tare, zero, force, chunk_rows, progress,
+        return _apply(model, log, out, settings, tare, zero, unit, force, chunk_rows, progress,
                       workers, round_trip)
 
 
-def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, force, chunk_rows,
-           progress, workers, round_trip) -> ApplySummary:
+def _limit_bounds(settings: Settings, model: CouplingErrorModel) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) per output; +-inf where no limit is given (never saturated)."""
+    limits = settings.limits or model.settings.limits
+    lo = np.array([limits.get(c, (-np.inf, np.inf))[0] for c in VOLTAGE_COLUMNS])
+    hi = np.array([limits.get(c, (-np.inf, np.inf))[1] for c in VOLTAGE_COLUMNS])
+    return lo, hi
+
+
+def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit, force,
+           chunk_rows, progress, workers, round_trip) -> ApplySummary:
     path, header = log.path, log.header
     names = [settings.columns[c] for c in VOLTAGE_COLUMNS]
     require_columns(header, dict(zip(VOLTAGE_COLUMNS, names, strict=True)), path)
@@ -128,7 +164,9 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, force
     scale = np.array([settings.scale[c] for c in VOLTAGE_COLUMNS])
     jobs: Iterator[Callable[[], Block]] = log.blocks(names, chunk_rows=chunk_rows,
                                                      want_table=is_parquet(out))
-    summary = ApplySummary()
+    summary = ApplySummary(force_unit=unit, output_unit=model.settings.output_unit)
+    to_unit = load_factor(model.settings.load_unit, unit)
+    sat_lo, sat_hi = _limit_bounds(settings, model)
     if tare is not None:
         # the tare rows are read once: their blocks are kept and decoupled first
         head, kept, n = [], [], 0
@@ -154,9 +192,11 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, force
 
     with atomic_write(out, "wb", force=force) as fh:
         if is_parquet(out):
-            sink = ParquetSink(fh, (STATUS_COLUMN,))
+            sink = ParquetSink(fh, (STATUS_COLUMN,), {FORCE_UNIT_KEY: unit,
+                                                      OUTPUT_UNIT_KEY: summary.output_unit})
         else:
-            decimals = None if round_trip else force_decimals(model.k)
+            full_scale = np.asarray(model.settings.full_scale) * to_unit
+            decimals = None if round_trip else force_decimals(full_scale)
             sink = CsvSink(fh, header, None if log.parquet else log.header_line, decimals,
                            sep=settings.sep, decimal=settings.decimal, extra=(STATUS_COLUMN,))
 
@@ -164,7 +204,8 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, force
             # parse, eq. (11) and format one block; numpy and pyarrow release the
             # GIL, so blocks overlap on the cores while the main thread writes
             block = job()
-            u = block.u * scale - summary.offsets
+            raw = block.u * scale
+            u = raw - summary.offsets
             code = np.zeros(len(block), dtype=np.int8)  # index into STATUSES
             empty = np.isnan(u).any(axis=1)
             code[empty] = MISSING_
@@ -181,7 +222,12 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, force
                     code[huge] = NOT_FINITE_
                     empty |= huge
                 outside = ((u < lo) | (u > hi)).any(axis=1) & ~empty
+                # the limits are the ADC's or amplifier's, so they bound the raw values
+                saturated = ((raw <= sat_lo) | (raw >= sat_hi)).any(axis=1) & ~empty
             code[outside] = EXTRAPOLATED_
+            code[saturated] = SATURATED_
+            if to_unit != 1.0:
+                f = f * to_unit
             counts = np.bincount(code, minlength=len(STATUSES))
             first = np.flatnonzero(code == MISSING_)[:10] + block.first_row if counts[MISSING_] \
                 else ()
@@ -256,6 +302,7 @@ def _collect(result, sink, summary: ApplySummary, progress) -> None:
     summary.truncated_rows += int(counts[TRUNCATED_])
     summary.not_finite_rows += int(counts[NOT_FINITE_])
     summary.out_of_range_rows += int(counts[EXTRAPOLATED_])
+    summary.saturated_rows += int(counts[SATURATED_])
     summary.first_missing += [int(r) for r in first[:10 - len(summary.first_missing)]]
     if progress is not None:
         progress(done, total)

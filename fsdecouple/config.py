@@ -60,6 +60,8 @@ class Settings:
     )
     sep: str = ","
     decimal: str = "."
+    # raw output range of each channel (ADC or amplifier), before zero correction
+    limits: dict[str, tuple[float, float]] = field(default_factory=dict)
     svr: SVRSettings = SVRSettings()
     scaling: str = "none"
     rotation: tuple[tuple[float, float, float], ...] | None = None
@@ -76,6 +78,8 @@ class Settings:
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
+        if not self.limits:
+            del d["limits"]  # files from before limits keep their bytes
         d["full_scale"] = dict(zip(AXES, self.full_scale, strict=True))
         d["rotation"] = None if self.rotation is None else [list(r) for r in self.rotation]
         d["csv"] = {"sep": d.pop("sep"), "decimal": d.pop("decimal")}
@@ -86,6 +90,7 @@ class Settings:
 
 
 _TOP_KEYS = {
+    "limits",
     "sensor", "full_scale", "min_repetitions", "columns", "scale", "csv", "svr",
     "scaling", "rotation", "checks", "units",
 }
@@ -175,6 +180,22 @@ def _units(raw: Any, where: str) -> Units:
                                   f"{', '.join(units)}")
             kw[key] = raw[key]
     return Units(**kw)
+
+
+def _limits(raw: Any, where: str) -> dict[str, tuple[float, float]]:
+    """``{ux: [lo, hi], ...}``: the raw range of each output, in the data's units."""
+    raw = _mapping(raw, where)
+    out = {}
+    for key, pair in raw.items():
+        if key not in VOLTAGE_COLUMNS:
+            raise _unknown(str(key), set(VOLTAGE_COLUMNS), where)
+        if not (isinstance(pair, list | tuple) and len(pair) == 2):
+            raise ConfigError(f"{where}: {key}: expected [lo, hi], found {pair!r}")
+        lo, hi = (_number(v, f"{where}: {key}") for v in pair)
+        if not lo < hi:
+            raise ConfigError(f"{where}: {key}: expected lo < hi, found [{pair[0]!r}, {pair[1]!r}]")
+        out[key] = (lo, hi)
+    return out
 
 
 class SafeUniqueLoader(yaml.SafeLoader):
@@ -280,6 +301,8 @@ def settings_from_dict(raw: Any, source: str = "config") -> Settings:
         kw["scaling"] = raw["scaling"]
     if "rotation" in raw:
         kw["rotation"] = _rotation(raw["rotation"], f"{source}: rotation")
+    if "limits" in raw:
+        kw["limits"] = _limits(raw["limits"], f"{source}: limits")
     if "units" in raw:
         kw["units"] = _units(raw["units"], f"{source}: units")
         if "scaling" not in raw and kw["units"].output != "V":

@@ -93,9 +93,10 @@ def fit_tables(model) -> list:
 
 def apply_lines(summary, out) -> list[str]:
     counts = ", ".join(f"{n} {name}" for name, n in summary.status_counts.items() if n)
-    lines = [f"decoupled {summary.rows} rows into {out} (status: {counts})"]
+    lines = [f"decoupled {summary.rows} rows into {out} (forces in {summary.force_unit}; "
+             f"status: {counts})"]
     if np.any(summary.offsets):
-        lines.append("zero removed [V]: " + ", ".join(
+        lines.append(f"zero removed [{summary.output_unit}]: " + ", ".join(
             f"{c}={v:+.6f}" for c, v in zip(VOLTAGE_COLUMNS, summary.offsets, strict=True)))
     return lines
 
@@ -113,6 +114,10 @@ def apply_warnings(summary) -> list[str]:
     if summary.not_finite_rows:
         w.append(f"{summary.not_finite_rows} rows have voltages so large that eq. (11) "
                  "overflows; kept with empty forces and status 'not_finite'")
+    if summary.saturated_rows:
+        w.append(f"{summary.saturated_rows} rows have an output at or beyond its limit "
+                 "(limits:), so the channel may have clipped; their forces are written "
+                 "but flagged (status 'saturated')")
     if summary.out_of_range_rows:
         w.append(f"{summary.out_of_range_rows} rows have a voltage more than 1 % of the span "
                  "outside the calibrated range; their forces are extrapolated (status "

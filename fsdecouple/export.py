@@ -260,7 +260,7 @@ def _model_document(model) -> dict[str, Any]:
 def _limits(model, limits, n: int) -> list:
     """(lo, hi) per channel, (None, None) where no limit is given."""
     if limits is None:
-        limits = getattr(model.settings, "limits", None)
+        limits = model.settings.limits  # {'ux': (lo, hi), ...} from the config's limits:
     out: list = [(None, None)] * n
     if not limits:
         return out

@@ -257,7 +257,7 @@ def test_apply_csv_and_parquet_give_the_same_forces(model, sim_dir, tmp_path):
             apply_file(model, src, out, tare=200)
             outs[(src.suffix, suffix)] = _forces(out)
     ref = outs[(".csv", ".parquet")][["fx", "fy", "fz"]].to_numpy()  # the doubles
-    step = 10.0 ** -force_decimals(model.k)
+    step = 10.0 ** -force_decimals(model.settings.full_scale)
     assert step / 2 * np.abs(model.k).max() <= 1e-10  # CSV rounding: a tenth of the 1e-9 V
     for key, df in outs.items():
         assert list(df.columns) == ["t", "ux", "uy", "uz", "fx", "fy", "fz", "status"], key
@@ -307,7 +307,8 @@ def test_apply_crlf_blank_lines_and_missing(model, tmp_path):
     assert (tmp_path / "c.csv").read_text().splitlines()[-1] == "3,0.3,0.1,-0.3,,,,truncated"
     u = np.array([[0.1, 0.0, -0.1], [0.2, 0.1, -0.2], [0.3, 0.1, -0.3]])
     got = pd.read_csv(a)[["fx", "fy", "fz"]].dropna().to_numpy()
-    np.testing.assert_array_equal(got, np.round(model.decouple(u), force_decimals(model.k)))
+    decimals = force_decimals(model.settings.full_scale)
+    np.testing.assert_array_equal(got, np.round(model.decouple(u), decimals))
 
 
 def test_a_control_loop_loads_numpy_only(model, tmp_path):

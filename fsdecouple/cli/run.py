@@ -38,13 +38,20 @@ def apply(
     tare: Annotated[
         int | None, typer.Option(help="Subtract the mean voltages of the first N rows.")
     ] = None,
-    zero: Annotated[str | None, typer.Option(help="Subtract offsets ux,uy,uz [V].")] = None,
+    zero: Annotated[
+        str | None, typer.Option(help="Subtract offsets ux,uy,uz (the model's output unit).")
+    ] = None,
+    unit: Annotated[
+        str | None,
+        typer.Option(help="Write forces in this load unit (N, kN, gf, kgf, lbf); "
+                          "default: the calibration's."),
+    ] = None,
     round_trip: Annotated[
         bool, typer.Option("--round-trip", help="CSV: write forces as round-trip exact text.")
     ] = False,
     force: ForceOpt = False,
 ) -> None:
-    """Decouple logged voltages into forces fx, fy, fz [N] by eq. (11)."""
+    """Decouple logged voltages into forces fx, fy, fz by eq. (11)."""
     from ..apply import apply_file
     from ..iotools.logs import is_parquet
 
@@ -60,9 +67,9 @@ def apply(
             task = bar.add_task("decoupling", total=None)
             summary = apply_file(
                 model, voltages, output, settings=settings, tare=tare, zero=offsets,
-                force=force, round_trip=round_trip,
+                unit=unit, force=force, round_trip=round_trip,
                 progress=lambda done, total: bar.update(task, completed=done, total=total),
             )
     for line in apply_lines(summary, output):
-        console.print(line, highlight=False)
+        console.print(line, highlight=False, markup=False)  # '[mV]' is no markup
     warn(apply_warnings(summary))
