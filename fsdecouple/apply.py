@@ -39,7 +39,6 @@ from .zero import tare_offsets
 
 CHUNK_ROWS = 1 << 20  # rows per block at most; blocks are cut at ~4 MB anyway
 MAX_WORKERS = 4
-RANGE_MARGIN = 0.01  # fraction of the calibrated voltage span
 STATUS_COLUMN = "status"
 FORCE_UNIT_KEY, OUTPUT_UNIT_KEY = "fsdecouple.force_unit", "fsdecouple.output_unit"
 # What a row's forces are worth.  Only "ok", "extrapolated" and "saturated" rows
@@ -182,11 +181,7 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
         jobs = itertools.chain(kept, jobs)
     elif zero is not None:
         summary.offsets = np.asarray(zero, dtype=float)
-    lo, hi = model.calibrated_range.T
-    # Noise around an end of the range (e.g. Z's 0 N end at rest) is not
-    # extrapolation worth a warning: allow 1 % of the calibrated span.
-    margin = RANGE_MARGIN * (hi - lo)
-    lo, hi = lo - margin, hi + margin
+    lo, hi = model.extrapolation_limits().T
     # blocks in flight bound the memory (~60 MB each), so not every core of a big box
     workers = workers or min(MAX_WORKERS, os.cpu_count() or 1)
 

@@ -24,11 +24,11 @@ from typing import Any
 
 import numpy as np
 
-from .apply import RANGE_MARGIN
 from .decouple import PROMISE
 from .errors import ConfigError, FsdecoupleError
 from .export_tables import CHECKS_PER_INTERVAL, coarsest_tables, table_bound
 from .iotools.files import atomic_write
+from .model import RANGE_MARGIN
 from .modelfile import model_to_dict
 
 PRECISIONS = ("double", "float")
@@ -206,12 +206,10 @@ def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",
     rotation = None if settings.rotation is None else np.asarray(settings.rotation, dtype=float)
     fs = np.asarray(settings.full_scale, dtype=float)
     cal = np.asarray(model.calibrated_range, dtype=float)
-    lo, hi = cal.T
-    margin = RANGE_MARGIN * (hi - lo)  # exactly as apply computes "extrapolated"
     plan = ExportPlan(
         prefix=prefix, precision=precision, n=n, k=k, chis=[], rotation=rotation,
         full_scale=fs, calibrated_range=cal,
-        range_limits=np.column_stack([lo - margin, hi + margin]),
+        range_limits=np.asarray(model.extrapolation_limits()),  # exactly apply's "extrapolated"
         limits=_limits(model, limits, n), refine=int(getattr(settings, "refine", 0) or 0),
         digest=str(doc["integrity"]["digest"]), format_version=int(doc["format_version"]),
         sensor=str(settings.sensor), load_unit=settings.load_unit,

@@ -24,6 +24,7 @@ from fsdecouple.apply import apply_file
 from fsdecouple.errors import ConfigError, FsdecoupleError
 from fsdecouple.export import emulate_float, export_header, plan_export
 from fsdecouple.export_tables import hermite, resample
+from fsdecouple.model import CouplingErrorModel
 from fsdecouple.modelfile import model_to_dict
 from fsdecouple.units import Units
 
@@ -325,6 +326,8 @@ class _NAxisModel:
         self.calibrated_range = np.asarray(model.calibrated_range)[[b % 3 for b in range(n)]]
         self._doc = model_to_dict(model)
         self.method = "svr"
+
+    extrapolation_limits = CouplingErrorModel.extrapolation_limits  # from calibrated_range
 
     def decouple(self, u, *, rotate=True, exact=False, workers=None):
         u = np.asarray(u, dtype=float)
