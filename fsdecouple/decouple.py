@@ -17,23 +17,15 @@ with omega_a^-1(v) = v / k_aa (eq. 13 form).  N is the number of components
   Python, generated for N from the template below and tested bit for bit
   against the array path.
 
-Second-order refinement (``refine = K``).  Eq. (11) evaluates chi_ab at the
-measured output u_b, not at the prime output u_bb; eq. (5)-(6) bound the error
-this makes and the paper neglects it.  K fixed-point steps on the prime outputs
-remove it:
+Second-order refinement (``refine = K``; README, "Second-order refinement"):
+eq. (11) evaluated at estimates p of the prime outputs instead of u (eq. 5-6),
 
     p^0 = u,   p_b^(j+1) = u_b - sum_{c != b} chi_bc(p_c^j)   (j = 0 .. K - 1)
-    f_a = [u_a - sum_{b != a} chi_ab(p_b^K)] / k_aa          eq. (11) at p^K
+    f_a = [u_a - sum_{b != a} chi_ab(p_b^K)] / k_aa,  so k_a f_a = p_a^(K+1).
 
-K = 0 is eq. (11) itself, bit for bit, on every path.  The true prime outputs
-are the fixed point (eq. 1), and the map is a contraction when
-(N - 1) max|chi'| < 1: each step shrinks the distance to it by that factor, so
-under Section 2.1's |chi'| <= 0.05 (factor 0.1 for N = 3) each step gains about
-a decimal digit, starting from the coupling error itself (< 5 % F.S.).  Note
-k_a f_a = p_a^(K+1): the forces are one more step.  A row is *converged* when
-that last step moved every output by at most ``REFINE_TOLERANCE`` of its
-full-scale output (and is finite); other rows get NaN forces, never silent
-ones, and a ``converged`` mask says which (see :func:`settled`).
+A contraction when (N - 1) max|chi'| < 1.  K = 0 is eq. (11), bit for bit, on
+every path.  A row whose last step k f - p^K is not finite or above
+REFINE_TOLERANCE F.S. gets NaN forces and converged = False, never silent forces.
 """
 
 from __future__ import annotations
@@ -60,16 +52,10 @@ MAX_SURROGATE_ERROR = PROMISE / 4
 SMALL_ROWS = 32
 BLOCK_ROWS = 1 << 15  # 32 K rows: measured fastest here; smaller blocks pay more Python per row
 # A refined row has settled when its last step, k_a f_a - p_a^K, is at most this
-# fraction of each full-scale output |k_a| F_FS,a.  Under Section 2.1's
-# assumptions that step is at most (N - 1) * 0.05 * 5 % = 0.5 % F.S. already at
-# K = 1 (N = 3) and shrinks tenfold a step; a row above 1 % is outside the regime
-# where the iteration is known to contract (a slope near 1/(N - 1) or beyond,
-# far outside the calibrated range), i.e. diverging or oscillating, not just slow.
+# fraction of each full-scale output.  Under Section 2.1's assumptions it is at most
+# (N - 1) 0.05 * 5 % = 0.5 % F.S. at K = 1 (N = 3), tenfold less a step on; above 1 %
+# the row is outside the regime known to contract: diverging, not just slow.
 REFINE_TOLERANCE = 0.01
-# The recommended K (recommend_refine): the largest eq. (6) estimate E2 [fraction
-# of F.S.] is brought below REFINE_TARGET, about the noise floor of a calibration
-# (0.5 mV on ~1.3 V full-scale outputs for the simulated sensor = 0.04 %).
-REFINE_TARGET = 5e-4
 
 
 class ChiFunction(Protocol):
@@ -108,14 +94,13 @@ def decouple_exact(u: np.ndarray, k: np.ndarray, chis: Iterable[ChiFunction],
     for _ in range(refine):
         p = u - coupling_errors(p, chis)
     kf = u - coupling_errors(p, chis)  # = p^(K+1)
-    ok = settled(kf - p, full_scale_output) if refine else None
     f = kf / k
-    if ok is not None:
-        f[~ok] = np.nan
+    ok = settled(kf - p, full_scale_output) if refine else np.ones(len(f), dtype=bool)
+    f[~ok] = np.nan
     if rotation is not None:
         f = f @ np.asarray(rotation).T
     if converged is not None:
-        converged[:] = True if ok is None else ok
+        converged[:] = ok
     return f
 
 
@@ -123,24 +108,6 @@ def settled(step: np.ndarray, full_scale_output) -> np.ndarray:
     """Rows (n,) whose last refinement step (n, N) is finite and within REFINE_TOLERANCE F.S."""
     with np.errstate(invalid="ignore"):
         return np.all(np.abs(step) <= REFINE_TOLERANCE * np.asarray(full_scale_output), axis=1)
-
-
-def recommend_refine(second_order: float, n: int = 3) -> int:
-    """The K to recommend for a model whose largest eq. (6) estimate is ``second_order``.
-
-    0 when it is already below REFINE_TARGET.  Otherwise each step multiplies the
-    remaining second-order error by about (N - 1) max|chi'|; the estimate E2 =
-    max|chi'| * coupling fraction hides that factor, so the rule takes the slope
-    at its Section 2.1 limit (0.05), which over-estimates it, and K is the
-    smallest with E2 ((N - 1) 0.05)^K <= REFINE_TARGET.  Measured on simulated
-    sensors (coupling 2x to 8x the sample's, benchmarks/refine.py --sweep): this
-    K brings the combined-load error down to the fit's own noise floor, and one
-    more step changes it by less than the noise.
-    """
-    if not np.isfinite(second_order) or second_order <= REFINE_TARGET:
-        return 0
-    q = (n - 1) * 0.05
-    return max(1, int(np.ceil(np.log(REFINE_TARGET / second_order) / np.log(q))))
 
 
 def initial_forces(u: np.ndarray, k: np.ndarray) -> np.ndarray:
@@ -220,7 +187,6 @@ class TableDecoupler:
         self._small: dict[int, Callable] = {}
         self.k = np.asarray(k, dtype=float)
         self.inv_k = 1.0 / self.k
-        # the settled test of a refined row, per output (REFINE_TOLERANCE F.S.)
         self.step_tol = REFINE_TOLERANCE * (np.ones(n) if full_scale_output is None
                                             else np.asarray(full_scale_output, dtype=float))
         self.rotation = None if rotation is None else np.asarray(rotation, dtype=float)
@@ -286,8 +252,7 @@ class TableDecoupler:
         """g_ab(x_b) of every table into ``w["g"]`` (N, n, N - 1), for x (N, n).
 
         Returns None when every x lies inside its table, else the (N, n) mask of
-        the values that do (a NaN is outside); the others are evaluated at the
-        table's start, to be replaced by the caller.
+        those that do (not NaN); the others are evaluated at the table's start.
         """
         t, s, i = w["t"], w["s"], w["i"]
         np.subtract(x, self._lo, out=t)
@@ -372,8 +337,6 @@ class TableDecoupler:
         u = np.ascontiguousarray(u, dtype=float).reshape(-1, self.n)
         if covered is not None:
             covered[:] = True
-        if converged is not None:
-            converged[:] = True
         if u.shape[0] <= SMALL_ROWS and covered is None and converged is None and (
                 not rotate or self.rotation is None):
             if refine not in self._small:
@@ -438,70 +401,50 @@ def one_vector_source(n: int, rotate: bool) -> str:
     """Python source of the one-vector evaluator of :meth:`TableDecoupler.one` for N = n.
 
     The statements follow :meth:`TableDecoupler._block` step by step: the table
-    index ``t = (u_b - lo_b) * inv_step_b``, a Horner step per chi, then
+    index ``t = (x_b - lo_b) * inv_step_b``, a Horner step per chi, then
     ``f_a = u_a / k_a + sum g_ab`` in :func:`_sum_order`.  ``make`` returns
-    ``decouple_one`` (eq. 11) for ``refine == 0`` and ``decouple_refined`` (the
-    same steps at p, after ``refine`` fixed-point steps p_a = k_a f_a) otherwise,
-    so the plain evaluator pays nothing for the refinement.
+    ``decouple_one`` (x = u) for ``refine == 0``, else ``decouple_refined`` (x = p
+    after ``refine`` steps p_a = k_a f_a, then the settled test).
     """
-    u = [f"u{b}" for b in range(n)]
-    f = [f"f{a}" for a in range(n)]
+    u, p, f = ([f"{c}{b}" for b in range(n)] for c in "upf")
+    inside = " and ".join(f"0.0 <= t{b} < n{b}" for b in range(n))
     lines = ["def make(rows, lo, inv, cnt, ik, rot, exact, kk, tol, refine, nan):"]
     for b in range(n):
-        lines.append(f"    r{b}, l{b}, i{b}, n{b}, k{b} = rows[{b}], lo[{b}], inv[{b}], cnt[{b}], ik[{b}]")
-        lines.append(f"    K{b}, s{b} = kk[{b}], tol[{b}]")
+        lines += [f"    r{b}, l{b}, i{b}, n{b}, k{b} = rows[{b}], lo[{b}], inv[{b}], cnt[{b}], ik[{b}]",
+                  f"    K{b}, s{b} = kk[{b}], tol[{b}]"]
     if rotate:
         lines.append(f"    ({', '.join(f'R{a}' for a in range(n))},) = rot")
-    inside = " and ".join(f"0.0 <= t{b} < n{b}" for b in range(n))
 
     def index(x: list[str], pad: str) -> list[str]:
         return [f"{pad}t{b} = ({x[b]} - l{b}) * i{b}" for b in range(n)]
 
-    def terms(pad: str) -> list[str]:  # g_ab at the index t_b: one Horner step per chi
+    def forces(pad: str, into: list[str], k: str = "") -> list[str]:  # g_ab at t_b, then sums
         out = []
         for b in range(n):
             coef = [f"c{m}_{j}" for m in range(n - 1) for j in range(4)]
             out += [f"{pad}i = int(t{b})", f"{pad}s = t{b} - i", f"{pad}{', '.join(coef)} = r{b}[i]"]
-            for m in range(n - 1):
-                out.append(f"{pad}g{b}_{m} = ((c{m}_3 * s + c{m}_2) * s + c{m}_1) * s + c{m}_0")
-        return out
+            out += [f"{pad}g{b}_{m} = ((c{m}_3 * s + c{m}_2) * s + c{m}_1) * s + c{m}_0"
+                    for m in range(n - 1)]
+        sums = [f"{u[a]} * k{a}" + "".join(f" + g{b}_{m}" for b, m in _sum_order(n, a))
+                for a in range(n)]
+        return out + [f"{pad}{into[a]} = ({sums[a]}) * K{a}" if k else f"{pad}{into[a]} = {sums[a]}"
+                      for a in range(n)]
 
-    def forces(a: int) -> str:
-        return f"{u[a]} * k{a}" + "".join(f" + g{b}_{m}" for b, m in _sum_order(n, a))
-
-    def result(pad: str) -> str:
-        if rotate:
-            rows = [" + ".join(f"R{a}[{b}] * {f[b]}" for b in range(n)) for a in range(n)]
-            return f"{pad}return ({', '.join(rows)},)"
-        return f"{pad}return ({', '.join(f)},)"
-
-    exact = f"            {', '.join(f)}, = exact({', '.join(u)})"
+    rows = [" + ".join(f"R{a}[{b}] * {f[b]}" for b in range(n)) for a in range(n)]
+    tail = ["        else:  # outside a table (at u or at a step), or NaN: the exact path",
+            f"            {', '.join(f)}, = exact({', '.join(u)})",
+            f"        return ({', '.join(rows if rotate else f)},)"]
     # eq. (11) at u
-    lines.append(f"    def decouple_one({', '.join(u)}):")
-    lines += index(u, "        ")
-    lines.append(f"        if {inside}:")
-    lines += terms("            ")
-    lines += [f"            f{a} = {forces(a)}" for a in range(n)]
-    lines += ["        else:  # outside a table, or NaN: the exact kernel sum", exact,
-              result("        ")]
+    lines += [f"    def decouple_one({', '.join(u)}):", *index(u, "        "),
+              f"        if {inside}:", *forces("            ", f), *tail]
     # eq. (11) at p, after `refine` steps p_a <- k_a f_a (as TableDecoupler._block)
-    p = [f"p{b}" for b in range(n)]
-    lines.append(f"    def decouple_refined({', '.join(u)}):")
-    lines.append(f"        {', '.join(p)} = {', '.join(u)}")
-    lines.append("        for _ in range(refine):")
-    lines += index(p, "            ")
-    lines += [f"            if not ({inside}):", "                break  # t fails again below"]
-    lines += terms("            ")
-    lines += [f"            p{a} = ({forces(a)}) * K{a}" for a in range(n)]
-    lines.append("        else:")
-    lines += index(p, "            ")
-    lines.append(f"        if {inside}:")
-    lines += terms("            ")
-    lines += [f"            f{a} = {forces(a)}" for a in range(n)]
     settled = " and ".join(f"abs(f{a} * K{a} - p{a}) <= s{a}" for a in range(n))
-    lines += [f"            if not ({settled}):",
-              f"                {' = '.join(f)} = nan  # did not settle: no silent forces"]
-    lines += ["        else:  # outside a table at some step, or NaN: the exact path", exact,
-              result("        ")]
-    lines.append("    return decouple_refined if refine else decouple_one")
+    lines += [f"    def decouple_refined({', '.join(u)}):", f"        {', '.join(p)} = {', '.join(u)}",
+              "        for _ in range(refine):", *index(p, "            "),
+              f"            if not ({inside}):", "                break  # t fails again below",
+              *forces("            ", p, "K"), "        else:", *index(p, "            "),
+              f"        if {inside}:", *forces("            ", f),
+              f"            if not ({settled}):",
+              f"                {' = '.join(f)} = nan  # did not settle: no silent forces", *tail,
+              "    return decouple_refined if refine else decouple_one"]
     return "\n".join(lines) + "\n"

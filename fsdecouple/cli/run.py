@@ -39,6 +39,10 @@ def apply(
         int | None, typer.Option(help="Subtract the mean voltages of the first N rows.")
     ] = None,
     zero: Annotated[str | None, typer.Option(help="Subtract offsets ux,uy,uz [V].")] = None,
+    refine: Annotated[
+        int | None, typer.Option(help="Second-order refinement steps K for this run "
+                                      "(default: the model's).")
+    ] = None,
     round_trip: Annotated[
         bool, typer.Option("--round-trip", help="CSV: write forces as round-trip exact text.")
     ] = False,
@@ -50,6 +54,8 @@ def apply(
 
     with user_errors():
         model = load_model(model_file)
+        if refine is not None:
+            model = model.refined(refine)
         settings = load_config(config) if config is not None else None
         offsets = _parse_zero(zero) if zero is not None else None
         check_output(output, force=force)
@@ -66,3 +72,7 @@ def apply(
     for line in apply_lines(summary, output):
         console.print(line, highlight=False)
     warn(apply_warnings(summary))
+    if summary.status_counts.get("not_converged"):
+        warn([f"{summary.status_counts['not_converged']} rows did not settle in the "
+              f"second-order refinement (K = {model.settings.refine}); kept with empty forces "
+              "and status 'not_converged'"])
