@@ -53,9 +53,12 @@ STATUSES = {
     "truncated": "last line of a log that does not end with a newline (the writer "
                  "was cut off, a number may be cut short): no forces",
     "not_finite": "the voltages are so large that eq. (11) overflows: no forces",
+    "not_converged": "the model's second-order refinement (refine: K) did not settle "
+                     "for this row (decouple.REFINE_TOLERANCE): no forces",
 }
 STATUS_NAMES = pa.array(list(STATUSES), pa.string())
-OK_, EXTRAPOLATED_, SATURATED_, MISSING_, TRUNCATED_, NOT_FINITE_ = range(len(STATUSES))
+OK_, EXTRAPOLATED_, SATURATED_, MISSING_, TRUNCATED_, NOT_FINITE_, NOT_CONVERGED_ = range(
+    len(STATUSES))
 
 
 @dataclass
@@ -209,9 +212,14 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
                 # the last number be cut short, so the row gets no forces
                 empty[:] = True
                 code[:] = TRUNCATED_
+            converged = np.empty(len(block), dtype=bool)
             with np.errstate(over="ignore", invalid="ignore"):
                 f = model.decouple(np.where(empty[:, None], 0.0, u) if empty.any() else u,
-                                   workers=1)
+                                   workers=1, converged=converged)
+                unsettled = ~converged & ~empty
+                if unsettled.any():
+                    code[unsettled] = NOT_CONVERGED_
+                    empty |= unsettled
                 huge = ~np.isfinite(f).all(axis=1) & ~empty
                 if huge.any():
                     code[huge] = NOT_FINITE_

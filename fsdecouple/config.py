@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import numbers
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -21,6 +22,9 @@ from .errors import ConfigError
 from .units import LOAD_UNITS, OUTPUT_UNITS, Units
 
 SCALINGS = ("none", "full_scale")
+# Second-order refinement steps (decouple.py): each gains about a decimal digit
+# under Section 2.1's slopes, so beyond this many a K is a typo, not a setting.
+MAX_REFINE = 100
 
 
 @dataclass(frozen=True)
@@ -66,6 +70,7 @@ class Settings:
     scaling: str = "none"
     rotation: tuple[tuple[float, float, float], ...] | None = None
     min_r2: float = 0.99
+    refine: int = 0  # fixed-point steps on the prime outputs before eq. (11) (decouple.py)
     units: Units = Units()
 
     @property
@@ -84,6 +89,8 @@ class Settings:
         d["rotation"] = None if self.rotation is None else [list(r) for r in self.rotation]
         d["csv"] = {"sep": d.pop("sep"), "decimal": d.pop("decimal")}
         d["checks"] = {"min_r2": d.pop("min_r2")}
+        if self.refine == 0:
+            del d["refine"]  # eq. (11) as written: files from before refine keep their bytes
         if self.units == Units():
             del d["units"]  # the paper's N and V: files from before units keep their bytes
         return d
@@ -91,6 +98,7 @@ class Settings:
 
 _TOP_KEYS = {
     "limits",
+    "refine",
     "sensor", "full_scale", "min_repetitions", "columns", "scale", "csv", "svr",
     "scaling", "rotation", "checks", "units",
 }
@@ -114,6 +122,15 @@ def _number(value: Any, where: str, *, positive: bool = False) -> float:
     if positive and v <= 0:
         raise ConfigError(f"{where}: must be greater than 0, found {value!r}")
     return v
+
+
+def check_refine(value: Any, where: str = "refine") -> int:
+    """The number K of refinement steps: a whole number from 0 to MAX_REFINE."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) \
+            or not 0 <= value <= MAX_REFINE:
+        raise ConfigError(f"{where}: expected a whole number of refinement steps from 0 to "
+                          f"{MAX_REFINE}, found {value!r}")
+    return int(value)
 
 
 def _mapping(value: Any, where: str) -> dict:
@@ -303,6 +320,8 @@ def settings_from_dict(raw: Any, source: str = "config") -> Settings:
         kw["rotation"] = _rotation(raw["rotation"], f"{source}: rotation")
     if "limits" in raw:
         kw["limits"] = _limits(raw["limits"], f"{source}: limits")
+    if "refine" in raw:
+        kw["refine"] = check_refine(raw["refine"], f"{source}: refine")
     if "units" in raw:
         kw["units"] = _units(raw["units"], f"{source}: units")
         if "scaling" not in raw and kw["units"].output != "V":
@@ -354,4 +373,6 @@ def apply_overrides(settings: Settings, **overrides: Any) -> Settings:
         raise ConfigError(
             f"--scaling: expected one of {', '.join(SCALINGS)}, found {given['scaling']!r}"
         )
+    if "refine" in given:
+        given["refine"] = check_refine(given["refine"], "--refine")
     return replace(settings, **given)

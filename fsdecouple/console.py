@@ -122,6 +122,10 @@ def apply_warnings(summary) -> list[str]:
         w.append(f"{summary.out_of_range_rows} rows have a voltage more than 1 % of the span "
                  "outside the calibrated range; their forces are extrapolated (status "
                  "'extrapolated')")
+    if summary.status_counts.get("not_converged"):
+        w.append(f"{summary.status_counts['not_converged']} rows did not settle in the "
+                 "second-order refinement (refine: K); kept with empty forces and status "
+                 "'not_converged'")
     return w
 
 

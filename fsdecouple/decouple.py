@@ -16,6 +16,16 @@ with omega_a^-1(v) = v / k_aa (eq. 13 form).  N is the number of components
 * :meth:`TableDecoupler.one` is the same table arithmetic for one vector in plain
   Python, generated for N from the template below and tested bit for bit
   against the array path.
+
+Second-order refinement (``refine = K``; README, "Second-order refinement"):
+eq. (11) evaluated at estimates p of the prime outputs instead of u (eq. 5-6),
+
+    p^0 = u,   p_b^(j+1) = u_b - sum_{c != b} chi_bc(p_c^j)   (j = 0 .. K - 1)
+    f_a = [u_a - sum_{b != a} chi_ab(p_b^K)] / k_aa,  so k_a f_a = p_a^(K+1).
+
+A contraction when (N - 1) max|chi'| < 1.  K = 0 is eq. (11), bit for bit, on
+every path.  A row whose last step k f - p^K is not finite or above
+REFINE_TOLERANCE F.S. gets NaN forces and converged = False, never silent forces.
 """
 
 from __future__ import annotations
@@ -41,6 +51,11 @@ MAX_SURROGATE_ERROR = PROMISE / 4
 # (~1 us a row, bit-identical) rather than the block path (~50 us of numpy calls).
 SMALL_ROWS = 32
 BLOCK_ROWS = 1 << 15  # 32 K rows: measured fastest here; smaller blocks pay more Python per row
+# A refined row has settled when its last step, k_a f_a - p_a^K, is at most this
+# fraction of each full-scale output.  Under Section 2.1's assumptions it is at most
+# (N - 1) 0.05 * 5 % = 0.5 % F.S. at K = 1 (N = 3), tenfold less a step on; above 1 %
+# the row is outside the regime known to contract: diverging, not just slow.
+REFINE_TOLERANCE = 0.01
 
 
 class ChiFunction(Protocol):
@@ -64,16 +79,35 @@ def coupling_errors(u: np.ndarray, chis: Iterable[ChiFunction]) -> np.ndarray:
 
 
 def decouple_exact(u: np.ndarray, k: np.ndarray, chis: Iterable[ChiFunction],
-                   rotation: np.ndarray | None = None) -> np.ndarray:
+                   rotation: np.ndarray | None = None, *, refine: int = 0,
+                   full_scale_output=1.0, converged: np.ndarray | None = None) -> np.ndarray:
     """Eq. (11) with every chi evaluated as given; ``u`` (n, N) zero-corrected outputs.
 
     ``rotation`` (N, N), if given, takes the forces from the sensor frame to the
-    reference frame (end of Section 2.3).
+    reference frame (end of Section 2.3).  ``refine``: K fixed-point steps on the
+    prime outputs first (module docstring); rows that do not settle within
+    ``REFINE_TOLERANCE`` of ``full_scale_output`` (N,) get NaN forces and False in
+    ``converged`` (n,), if given.  K = 0 is eq. (11) as written, every row converged.
     """
-    f = (u - coupling_errors(u, chis)) / k
+    chis = list(chis)
+    p = u
+    for _ in range(refine):
+        p = u - coupling_errors(p, chis)
+    kf = u - coupling_errors(p, chis)  # = p^(K+1)
+    f = kf / k
+    ok = settled(kf - p, full_scale_output) if refine else np.ones(len(f), dtype=bool)
+    f[~ok] = np.nan
     if rotation is not None:
         f = f @ np.asarray(rotation).T
+    if converged is not None:
+        converged[:] = ok
     return f
+
+
+def settled(step: np.ndarray, full_scale_output) -> np.ndarray:
+    """Rows (n,) whose last refinement step (n, N) is finite and within REFINE_TOLERANCE F.S."""
+    with np.errstate(invalid="ignore"):
+        return np.all(np.abs(step) <= REFINE_TOLERANCE * np.asarray(full_scale_output), axis=1)
 
 
 def initial_forces(u: np.ndarray, k: np.ndarray) -> np.ndarray:
@@ -133,22 +167,28 @@ class TableDecoupler:
     surrogates : mapping of (a, b) to ChiSurrogate
         The table of every chi_ab; the N - 1 tables of one input b share a grid.
     exact : callable
-        ``exact(u, rotate) -> f`` for rows the tables do not cover.
+        ``exact(u, rotate, refine, converged) -> f`` for rows the tables do not
+        cover (:func:`decouple_exact` with the same K).
     rotation : ndarray, shape (N, N), optional
         Sensor frame to reference frame.
+    full_scale_output : ndarray, shape (N,), optional
+        |k_a| F_FS,a, to which the refinement's settled test is relative.
 
     Build with :meth:`from_chis`, which returns None when a table is missing or
     unusable (then every row takes the exact path).
     """
 
     def __init__(self, k: np.ndarray, surrogates: dict[tuple[int, int], object],
-                 exact: Callable[[np.ndarray, bool], np.ndarray], rotation=None):
+                 exact: Callable[..., np.ndarray], rotation=None, full_scale_output=None):
         n = len(k)
         self.n = n
         self._exact = exact
         self._local = threading.local()
-        self._small: Callable | None = None
-        self.inv_k = 1.0 / np.asarray(k, dtype=float)
+        self._small: dict[int, Callable] = {}
+        self.k = np.asarray(k, dtype=float)
+        self.inv_k = 1.0 / self.k
+        self.step_tol = REFINE_TOLERANCE * (np.ones(n) if full_scale_output is None
+                                            else np.asarray(full_scale_output, dtype=float))
         self.rotation = None if rotation is None else np.asarray(rotation, dtype=float)
         lo, inv, count = [], [], []
         tabs: list[list[np.ndarray]] = [[] for _ in range(4)]
@@ -172,6 +212,7 @@ class TableDecoupler:
             v.reshape(n, 1) for v in (self.lo, self.inv_step, self.intervals, self.inv_k)
         )
         self._offsets = self.offsets.reshape(n, 1)
+        self._k, self._step_tol = self.k.reshape(n, 1), self.step_tol.reshape(n, 1)
         self._sum = [_sum_order(n, a) for a in range(n)]
 
     @classmethod
@@ -190,7 +231,7 @@ class TableDecoupler:
                 return None
             if len({(s.lo, s.hi, s.intervals) for s in fed}) != 1:
                 return None  # the evaluator shares one index per input
-        return cls(k, tables, exact, rotation)
+        return cls(k, tables, exact, rotation, full_scale_output)
 
     # --- arrays -------------------------------------------------------------------
 
@@ -201,22 +242,24 @@ class TableDecoupler:
         ws = getattr(self._local, "ws", None)
         n, m = self.n, self.n - 1
         if ws is None or ws["t"].shape[1] < rows:
-            ws = {k: np.empty((n, rows)) for k in ("ut", "t", "s")}
+            ws = {k: np.empty((n, rows)) for k in ("ut", "t", "s", "p")}
             ws.update({k: np.empty((n, rows, m)) for k in ("g", "c", "s2")})
             ws["i"] = np.empty((n, rows), dtype=np.intp)
             self._local.ws = ws
         return {k: v[:, :rows] for k, v in ws.items()}
 
-    def _block(self, u: np.ndarray, out: np.ndarray, rotate: bool, covered) -> None:
-        w = self._scratch(u.shape[0])
-        # Work on (N, n) rows: numpy broadcasts an (N,) vector over (n, N) with an
-        # inner loop of length N, which is many times slower than one long row.
-        ut, t, s, i = w["ut"], w["t"], w["s"], w["i"]
-        np.copyto(ut, u.T)
-        np.subtract(ut, self._lo, out=t)
+    def _terms(self, x: np.ndarray, w: dict[str, np.ndarray]) -> np.ndarray | None:
+        """g_ab(x_b) of every table into ``w["g"]`` (N, n, N - 1), for x (N, n).
+
+        Returns None when every x lies inside its table, else the (N, n) mask of
+        those that do (not NaN); the others are evaluated at the table's start.
+        """
+        t, s, i = w["t"], w["s"], w["i"]
+        np.subtract(x, self._lo, out=t)
         t *= self._inv_step
-        inside = bool(t.min() >= 0.0 and np.all(t.max(axis=1) < self.intervals))
-        if not inside:  # also a NaN: min/max propagate it and the test fails
+        ok = None
+        if not (t.min() >= 0.0 and np.all(t.max(axis=1) < self.intervals)):
+            # also a NaN: min/max propagate it and the test fails
             ok = (t >= 0) & (t < self._intervals)
             np.copyto(t, 0.0, where=~ok)
         np.copyto(i, t, casting="unsafe")  # truncation = floor, as t >= 0
@@ -231,43 +274,86 @@ class TableDecoupler:
             g *= s2
             np.take(self.tab[j], i, axis=0, out=c, mode="clip")
             g += c
-        ut *= self._inv_k
+        return ok
+
+    def _add_terms(self, f: np.ndarray, g: np.ndarray) -> None:
+        """f_a += g_ab in :func:`_sum_order`: f = u / k on entry, the forces of eq. (11) on exit."""
         for a, terms in enumerate(self._sum):
             for b, m in terms:
-                ut[a] += g[b, :, m]
+                f[a] += g[b, :, m]
+
+    def _block(self, u: np.ndarray, out: np.ndarray, rotate: bool, covered, refine: int = 0,
+               converged=None) -> None:
+        w = self._scratch(u.shape[0])
+        # Work on (N, n) rows: numpy broadcasts an (N,) vector over (n, N) with an
+        # inner loop of length N, which is many times slower than one long row.
+        ut, p = w["ut"], w["p"]
+        np.copyto(ut, u.T)
+        ok = self._terms(ut, w)
+        for _ in range(refine):
+            # p^(j+1) = k (u / k + sum g(p^j)) = u - sum chi(p^j): the same sum as
+            # the forces, multiplied back by k (the tables hold g = -chi / k)
+            np.multiply(ut, self._inv_k, out=p)
+            self._add_terms(p, w["g"])
+            p *= self._k
+            more = self._terms(p, w)
+            if more is not None:
+                ok = more if ok is None else ok & more
+        ut *= self._inv_k
+        self._add_terms(ut, w["g"])
+        bad_step = None
+        if refine:
+            step = np.multiply(ut, self._k, out=w["t"])  # k f = p^(K+1)
+            step -= p
+            with np.errstate(invalid="ignore"):
+                bad_step = ~np.all(np.abs(step) <= self._step_tol, axis=0)
+            ut[:, bad_step] = np.nan
         if rotate and self.rotation is not None:
             ut = self.rotation @ ut
         for a in range(self.n):  # column by column: 3x faster than out[:] = ut.T
             out[:, a] = ut[a]
-        if not inside:
+        if converged is not None:
+            converged[:] = True if bad_step is None else ~bad_step
+        if ok is not None:
             bad = ~ok.all(axis=0)
-            out[bad] = self._exact(u[bad], rotate)
+            sub = None if converged is None else np.ones(int(bad.sum()), dtype=bool)
+            out[bad] = self._exact(u[bad], rotate, refine, sub)
             if covered is not None:
                 covered[bad] = False
+            if converged is not None:
+                converged[bad] = sub
 
     def decouple(self, u: np.ndarray, *, rotate: bool = True, workers: int | None = None,
-                 block_rows: int = BLOCK_ROWS, covered: np.ndarray | None = None) -> np.ndarray:
+                 block_rows: int = BLOCK_ROWS, covered: np.ndarray | None = None,
+                 refine: int = 0, converged: np.ndarray | None = None) -> np.ndarray:
         """Forces by eq. (11) for zero-corrected outputs ``u``, shape (n, N).
 
         ``covered``, a boolean array of n rows, is set False where a row left the
-        tables (outside their intervals, or NaN) and took the exact path.
+        tables (outside their intervals, or NaN, at u or at any refinement step)
+        and took the exact path.  ``refine``: K fixed-point steps (module
+        docstring); ``converged`` (n,), if given, is set False where a row did not
+        settle (its forces are NaN).
         """
         u = np.ascontiguousarray(u, dtype=float).reshape(-1, self.n)
         if covered is not None:
             covered[:] = True
-        if u.shape[0] <= SMALL_ROWS and covered is None and (not rotate or self.rotation is None):
-            if self._small is None:
-                self._small = self.one(rotate=False)
-            one = self._small
+        if u.shape[0] <= SMALL_ROWS and covered is None and converged is None and (
+                not rotate or self.rotation is None):
+            if refine not in self._small:
+                self._small[refine] = self.one(rotate=False, refine=refine)
+            one = self._small[refine]
             return np.array([one(*v) for v in u.tolist()], dtype=float).reshape(-1, self.n)
         out = np.empty_like(u)
         starts = range(0, u.shape[0], block_rows)
         workers = default_workers() if workers is None else workers
 
+        def part(mask, a):
+            return None if mask is None else mask[a:a + block_rows]
+
         def run_blocks(chunk) -> None:
             for a in chunk:
                 self._block(u[a:a + block_rows], out[a:a + block_rows], rotate,
-                            None if covered is None else covered[a:a + block_rows])
+                            part(covered, a), refine, part(converged, a))
 
         if workers <= 1 or len(starts) <= 1:
             run_blocks(starts)
@@ -286,12 +372,13 @@ class TableDecoupler:
 
     # --- one vector -----------------------------------------------------------------
 
-    def one(self, rotate: bool = True) -> Callable[..., tuple[float, ...]]:
+    def one(self, rotate: bool = True, refine: int = 0) -> Callable[..., tuple[float, ...]]:
         """A plain-Python function ``(u_1, ..., u_N) -> (f_1, ..., f_N)``, no numpy per call.
 
         Generated for N from :func:`one_vector_source`: the array path's
         arithmetic in the same order (bit-identical without a rotation; the
-        rotation is summed in Python, not by BLAS).
+        rotation is summed in Python, not by BLAS).  ``refine``: K fixed-point
+        steps, as :meth:`decouple`; a row that does not settle gives NaN forces.
         """
         rot = None if self.rotation is None or not rotate else \
             [tuple(map(float, r)) for r in self.rotation]
@@ -300,7 +387,9 @@ class TableDecoupler:
             "rows": self.rows, "lo": [float(v) for v in self.lo],
             "inv": [float(v) for v in self.inv_step], "cnt": [float(v) for v in self.intervals],
             "ik": [float(v) for v in self.inv_k], "rot": rot,
-            "exact": lambda *u: exact(np.array([u], dtype=float), False)[0].tolist(),
+            "exact": lambda *u: exact(np.array([u], dtype=float), False, refine)[0].tolist(),
+            "kk": [float(v) for v in self.k], "tol": [float(v) for v in self.step_tol],
+            "refine": int(refine), "nan": float("nan"),
         }
         namespace: dict = {}
         exec(compile(one_vector_source(self.n, rot is not None), "<fsdecouple.decouple.one>",
@@ -312,35 +401,50 @@ def one_vector_source(n: int, rotate: bool) -> str:
     """Python source of the one-vector evaluator of :meth:`TableDecoupler.one` for N = n.
 
     The statements follow :meth:`TableDecoupler._block` step by step: the table
-    index ``t = (u_b - lo_b) * inv_step_b``, a Horner step per chi, then
-    ``f_a = u_a / k_a + sum g_ab`` in :func:`_sum_order`.
+    index ``t = (x_b - lo_b) * inv_step_b``, a Horner step per chi, then
+    ``f_a = u_a / k_a + sum g_ab`` in :func:`_sum_order`.  ``make`` returns
+    ``decouple_one`` (x = u) for ``refine == 0``, else ``decouple_refined`` (x = p
+    after ``refine`` steps p_a = k_a f_a, then the settled test).
     """
-    u = [f"u{b}" for b in range(n)]
-    lines = ["def make(rows, lo, inv, cnt, ik, rot, exact):"]
+    u, p, f = ([f"{c}{b}" for b in range(n)] for c in "upf")
+    inside = " and ".join(f"0.0 <= t{b} < n{b}" for b in range(n))
+    lines = ["def make(rows, lo, inv, cnt, ik, rot, exact, kk, tol, refine, nan):"]
     for b in range(n):
-        lines.append(f"    r{b}, l{b}, i{b}, n{b}, k{b} = rows[{b}], lo[{b}], inv[{b}], cnt[{b}], ik[{b}]")
+        lines += [f"    r{b}, l{b}, i{b}, n{b}, k{b} = rows[{b}], lo[{b}], inv[{b}], cnt[{b}], ik[{b}]",
+                  f"    K{b}, s{b} = kk[{b}], tol[{b}]"]
     if rotate:
         lines.append(f"    ({', '.join(f'R{a}' for a in range(n))},) = rot")
-    lines.append(f"    def decouple_one({', '.join(u)}):")
-    for b in range(n):
-        lines.append(f"        t{b} = ({u[b]} - l{b}) * i{b}")
-    lines.append("        if " + " and ".join(f"0.0 <= t{b} < n{b}" for b in range(n)) + ":")
-    for b in range(n):
-        coef = [f"c{m}_{j}" for m in range(n - 1) for j in range(4)]
-        lines += [f"            i = int(t{b})", f"            s = t{b} - i",
-                  f"            {', '.join(coef)} = r{b}[i]"]
-        for m in range(n - 1):
-            lines.append(f"            g{b}_{m} = ((c{m}_3 * s + c{m}_2) * s + c{m}_1) * s + c{m}_0")
-    for a in range(n):
-        terms = "".join(f" + g{b}_{m}" for b, m in _sum_order(n, a))
-        lines.append(f"            f{a} = {u[a]} * k{a}{terms}")
-    lines += ["        else:  # outside a table, or NaN: the exact kernel sum",
-              f"            {', '.join(f'f{a}' for a in range(n))}, = exact({', '.join(u)})"]
-    f = [f"f{a}" for a in range(n)]
-    if rotate:
-        rows = [" + ".join(f"R{a}[{b}] * {f[b]}" for b in range(n)) for a in range(n)]
-        lines.append(f"        return ({', '.join(rows)},)")
-    else:
-        lines.append(f"        return ({', '.join(f)},)")
-    lines.append("    return decouple_one")
+
+    def index(x: list[str], pad: str) -> list[str]:
+        return [f"{pad}t{b} = ({x[b]} - l{b}) * i{b}" for b in range(n)]
+
+    def forces(pad: str, into: list[str], k: str = "") -> list[str]:  # g_ab at t_b, then sums
+        out = []
+        for b in range(n):
+            coef = [f"c{m}_{j}" for m in range(n - 1) for j in range(4)]
+            out += [f"{pad}i = int(t{b})", f"{pad}s = t{b} - i", f"{pad}{', '.join(coef)} = r{b}[i]"]
+            out += [f"{pad}g{b}_{m} = ((c{m}_3 * s + c{m}_2) * s + c{m}_1) * s + c{m}_0"
+                    for m in range(n - 1)]
+        sums = [f"{u[a]} * k{a}" + "".join(f" + g{b}_{m}" for b, m in _sum_order(n, a))
+                for a in range(n)]
+        return out + [f"{pad}{into[a]} = ({sums[a]}) * K{a}" if k else f"{pad}{into[a]} = {sums[a]}"
+                      for a in range(n)]
+
+    rows = [" + ".join(f"R{a}[{b}] * {f[b]}" for b in range(n)) for a in range(n)]
+    tail = ["        else:  # outside a table (at u or at a step), or NaN: the exact path",
+            f"            {', '.join(f)}, = exact({', '.join(u)})",
+            f"        return ({', '.join(rows if rotate else f)},)"]
+    # eq. (11) at u
+    lines += [f"    def decouple_one({', '.join(u)}):", *index(u, "        "),
+              f"        if {inside}:", *forces("            ", f), *tail]
+    # eq. (11) at p, after `refine` steps p_a <- k_a f_a (as TableDecoupler._block)
+    settled = " and ".join(f"abs(f{a} * K{a} - p{a}) <= s{a}" for a in range(n))
+    lines += [f"    def decouple_refined({', '.join(u)}):", f"        {', '.join(p)} = {', '.join(u)}",
+              "        for _ in range(refine):", *index(p, "            "),
+              f"            if not ({inside}):", "                break  # t fails again below",
+              *forces("            ", p, "K"), "        else:", *index(p, "            "),
+              f"        if {inside}:", *forces("            ", f),
+              f"            if not ({settled}):",
+              f"                {' = '.join(f)} = nan  # did not settle: no silent forces", *tail,
+              "    return decouple_refined if refine else decouple_one"]
     return "\n".join(lines) + "\n"

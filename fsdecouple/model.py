@@ -8,17 +8,62 @@ it needs numpy only.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from collections.abc import Iterable
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
 
 from .axes import AXES
-from .config import Settings
+from .config import Settings, check_refine
 from .decouple import TableDecoupler, decouple_exact, initial_forces
 from .decouple import coupling_errors as _coupling_errors
 from .kernel import rbf_sum
 from .surrogate import ChiSurrogate
+
+# The recommended K (recommend_refine): the largest eq. (6) estimate E2 [fraction
+# of F.S.] is brought below REFINE_TARGET, about the noise floor of a calibration
+# (0.5 mV on ~1.3 V full-scale outputs for the simulated sensor = 0.04 %).
+REFINE_TARGET = 5e-4
+
+
+def recommend_refine(second_order: float, slope: float, n: int = 3) -> int | None:
+    """The K to recommend for a model, from its eq. (6) estimate and its slopes.
+
+    ``second_order``: the largest eq. (6) estimate E2 = max|chi_ab'| * coupling
+    fraction of input b [fraction of F.S.]; ``slope``: the largest max|chi'|.
+    0 when E2 is already at most REFINE_TARGET; None when (N - 1) max|chi'| >= 1,
+    where the iteration is not known to contract.  Otherwise the smallest K >= 1
+    with E2 * max|chi'|^K <= REFINE_TARGET.  The factor per step is taken as
+    max|chi'|, not the contraction bound (N - 1) max|chi'|: on simulated sensors
+    (benchmarks/refine.py --sweep, coupling 1x to 8x the sample's, max|chi'|
+    0.05 to 0.44) the combined-load error fell at about that rate: the K needed
+    to bring it within the 0.04 % F.S. noise of the fit's own error floor was
+    1, 1, 2, 3, 4, 4, and this rule gives 1, 2, 2, 3, 5, 7 (never too few; a
+    step costs about one table evaluation), where the bound's factor asks 1 to 41.
+    """
+    if not np.isfinite(second_order) or second_order <= REFINE_TARGET:
+        return 0
+    if not (np.isfinite(slope) and (n - 1) * slope < 1.0):
+        return None
+    if slope <= 0.0:
+        return 1
+    return max(1, int(np.ceil(np.log(REFINE_TARGET / second_order) / np.log(slope))))
+
+
+def refine_advice(checks: Iterable, n: int) -> dict:
+    """The eq. (6) figure ``fit`` prints, from the Section 2.1 checks (checks.py).
+
+    ``second_order``: the largest eq. (6) estimate [fraction of F.S.] and its
+    ``chi``; ``slope``: the largest max|chi'|; ``recommended``: K by
+    :func:`recommend_refine` (0: eq. (11) is within the noise; None: no K is
+    known to converge).
+    """
+    checks = list(checks)
+    worst = max((c for c in checks if c.name == "second_order"), key=lambda c: c.value)
+    slope = max(c.value for c in checks if c.name == "slope")
+    return {"second_order": worst.value, "chi": worst.subject, "slope": slope,
+            "target": REFINE_TARGET, "recommended": recommend_refine(worst.value, slope, n)}
 
 
 @dataclass(frozen=True)
@@ -212,17 +257,33 @@ class CouplingErrorModel:
         return _coupling_errors(np.asarray(u, dtype=float).reshape(-1, self.n_components),
                                 self.chi.values())
 
-    def _exact(self, u: np.ndarray, rotate: bool) -> np.ndarray:
-        return decouple_exact(u, self.k, self.chi.values(), self.rotation if rotate else None)
+    def _exact(self, u: np.ndarray, rotate: bool, refine: int = 0,
+               converged: np.ndarray | None = None) -> np.ndarray:
+        return decouple_exact(u, self.k, self.chi.values(), self.rotation if rotate else None,
+                              refine=refine, full_scale_output=self.full_scale_output,
+                              converged=converged)
+
+    def _refine(self, refine: int | None) -> int:
+        return self.settings.refine if refine is None else check_refine(refine, "refine")
+
+    def refined(self, refine: int) -> CouplingErrorModel:
+        """This model with ``settings.refine = refine`` (``apply --refine K``); tables shared."""
+        settings = replace(self.settings, refine=check_refine(refine, "--refine"))
+        model = replace(self, settings=settings)
+        model._tables = self._tables
+        return model
 
     def decouple(
         self, u: np.ndarray, *, rotate: bool = True, exact: bool = False, workers: int | None = None,
+        refine: int | None = None, converged: np.ndarray | None = None,
     ) -> np.ndarray:
         """Forces [N] from zero-corrected outputs [V] by eq. (11).
 
         f_a = omega_a^-1[u_a - sum_{b != a} chi_ab(u_b)]; then, if the config gives
         one and ``rotate``, the rotation from the sensor frame to the reference
-        frame (end of Section 2.3).
+        frame (end of Section 2.3).  With ``refine`` K > 0 the chi are evaluated
+        at estimates of the prime outputs instead of u (second-order refinement,
+        :mod:`fsdecouple.decouple`).
 
         Parameters
         ----------
@@ -235,18 +296,29 @@ class CouplingErrorModel:
             them; models without usable surrogates are always exact.
         workers : int, optional
             Threads for the table path; default: the number of cores.
+        refine : int, optional
+            K fixed-point steps on the prime outputs; default ``settings.refine``
+            (0: eq. (11) as the paper writes it).
+        converged : ndarray of bool, shape (n,), optional
+            Set False for rows whose refinement did not settle (last step above
+            ``REFINE_TOLERANCE`` of full-scale output, or not finite): their
+            forces are NaN.  All True for K = 0 and for linear models.
         """
         u_arr = np.asarray(u, dtype=float)
         flat = u_arr.reshape(-1, self.n_components)
+        refine = self._refine(refine)
         tables = None if exact else self.fast_decoupler()
         if self.method == "linear":
             f = flat @ self.matrix.T
             if rotate and self.rotation is not None:
                 f = f @ self.rotation.T
+            if converged is not None:
+                converged[:] = True
         elif tables is not None:
-            f = tables.decouple(flat, rotate=rotate, workers=workers)
+            f = tables.decouple(flat, rotate=rotate, workers=workers, refine=refine,
+                                converged=converged)
         else:
-            f = self._exact(flat, rotate)
+            f = self._exact(flat, rotate, refine, converged)
         return f.reshape(u_arr.shape)
 
     def fast_decoupler(self) -> TableDecoupler | None:
@@ -259,22 +331,24 @@ class CouplingErrorModel:
                 self.full_scale_output) or False
         return self._tables or None
 
-    def decoupler(self):
+    def decoupler(self, refine: int | None = None):
         """A plain-Python function ``(ux, uy, uz) -> (fx, fy, fz)`` for control loops.
 
         About a microsecond per call: no numpy, no allocation beyond the result
         tuple.  Same tables and arithmetic as :meth:`decouple` (equal to it within
         1e-12 N); exact kernel sum for inputs outside the tables and for NaN.
+        ``refine`` as for :meth:`decouple`; a vector that does not settle gives NaN.
 
         >>> f = model.decoupler()
         >>> fx, fy, fz = f(0.5, 0.01, -0.2)
         """
+        refine = self._refine(refine)
         tables = self.fast_decoupler()
         if tables is not None:
-            return tables.one()
+            return tables.one(refine=refine)
 
         def exact_one(*u: float) -> tuple[float, ...]:
-            return tuple(self.decouple(list(u), exact=True).tolist())
+            return tuple(self.decouple(list(u), exact=True, refine=refine).tolist())
 
         return exact_one
 

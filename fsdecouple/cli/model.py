@@ -52,6 +52,10 @@ def fit(
         list[str] | None, typer.Option(help="Drop the calibration point FILE:ROW (repeatable), "
                                             "e.g. a gross error fit flagged.")
     ] = None,
+    refine: Annotated[
+        int | None, typer.Option(help="Second-order refinement steps K stored in the model "
+                                      "(0: eq. (11) as the paper writes it).")
+    ] = None,
     no_verdict: Annotated[
         bool, typer.Option("--no-verdict", help="Skip the held-out comparison with the "
                                                 "calibration matrix.")
@@ -62,12 +66,13 @@ def fit(
     """Fit the coupling error model, judge it on held-out points, write one JSON model file."""
     from ..calibration import load_calibration
     from ..checks import assumption_checks
+    from ..model import refine_advice
     from ..verdict import calibrate, verdict_line
 
     with user_errors():
         settings = load_config(
             config, C=C, epsilon=epsilon, gamma=gamma, delta2=delta2, tolerance=tolerance,
-            scaling=scaling,
+            scaling=scaling, refine=refine,
         )
         _check_gate(max_gamma)
         check_output(output, force=force)
@@ -75,13 +80,16 @@ def fit(
         refuse_overwriting_input(output, [*_read(cs), *_given(config)])
         model = calibrate(cs, settings, method=method, verdict=not no_verdict)
         checks = assumption_checks(model)
+        advice = refine_advice(checks, model.n_components)
         save_model(model, output, force=force)
     if json_out:
         print_json({"model": str(output), "method": model.method, **model.report.to_dict(),
-                    "checks": [c.to_dict() for c in checks]})
+                    "checks": [c.to_dict() for c in checks], "refine": settings.refine,
+                    "refine_advice": advice})
     else:
         for t in [*fit_tables(model), fit_checks_table(checks)]:
             console.print(t)
+        console.print(_refine_line(advice, settings.refine))
         if model.report.verdict is not None:
             console.print(verdict_line(model.report.verdict))
         console.print(f"model written to {output} (decouples by {model.method})")
@@ -95,6 +103,20 @@ def fit(
                                                     f"exceeds --max-gamma {100 * max_gamma:.3f} %")
             )
             raise typer.Exit(1)
+
+
+def _refine_line(advice: dict, refine: int) -> str:
+    k = advice["recommended"]
+    line = (f"second-order coupling error (eq. 6): at most {100 * advice['second_order']:.3f} % "
+            f"F.S. (chi_{advice['chi']}); model refine: K = {refine}")
+    if k == 0:
+        return f"{line} (within {100 * advice['target']:.2f} % F.S., eq. (11) as written is enough)"
+    if k is None:
+        return (f"{line}; max |dchi/du| = {advice['slope']:.3f}: refinement is not known to "
+                "converge, check the sensor's coupling")
+    if refine >= k:
+        return line
+    return f"{line}; recommended: --refine {k} (brings it within {100 * advice['target']:.2f} % F.S.)"
 
 
 @app.command()

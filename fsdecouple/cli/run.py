@@ -46,6 +46,10 @@ def apply(
         typer.Option(help="Write forces in this load unit (N, kN, gf, kgf, lbf); "
                           "default: the calibration's."),
     ] = None,
+    refine: Annotated[
+        int | None, typer.Option(help="Second-order refinement steps K for this run "
+                                      "(default: the model's).")
+    ] = None,
     round_trip: Annotated[
         bool, typer.Option("--round-trip", help="CSV: write forces as round-trip exact text.")
     ] = False,
@@ -57,6 +61,8 @@ def apply(
 
     with user_errors():
         model = load_model(model_file)
+        if refine is not None:
+            model = model.refined(refine)
         settings = load_config(config) if config is not None else None
         offsets = _parse_zero(zero) if zero is not None else None
         check_output(output, force=force)
