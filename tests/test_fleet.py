@@ -1,0 +1,131 @@
+"""Fleets: drift between calibrations (compare), decouple_frame, fit-many."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+
+import pytest
+from conftest import SAMPLE, invoke
+
+from fsdecouple import load_calibration, load_config, load_model, save_model
+from fsdecouple.drift import compare, largest
+from fsdecouple.errors import InputError
+from fsdecouple.simulate import SimulatedSensor, simulate
+from fsdecouple.units import Units
+from fsdecouple.verdict import calibrate
+
+THREE_REPS = "min_repetitions: 3\n"
+
+
+def _fit(calib_dir, config, out):
+    settings = load_config(config)
+    model = calibrate(load_calibration(calib_dir, settings), settings)
+    save_model(model, out)
+    return out
+
+
+@pytest.fixture(scope="module")
+def drift_models(tmp_path_factory):
+    """Two calibrations of the sample sensor (repetitions 1-3 and 4-6), and two
+    simulated calibrations of one sensor whose gain rose by 1 % in between."""
+    tmp = tmp_path_factory.mktemp("drift")
+    config = tmp / "three.yaml"
+    config.write_text(THREE_REPS)
+    for name, reps in (("first", (1, 2, 3)), ("second", (4, 5, 6))):
+        (tmp / name).mkdir()
+        for r in reps:
+            shutil.copy(SAMPLE / "calibration" / f"rep{r}.csv", tmp / name)
+    sensor = SimulatedSensor()
+    gained = dataclasses.replace(sensor, inverse_slopes=tuple(v / 1.01 for v in sensor.inverse_slopes))
+    simulate(tmp / "before", seed=3, sensor=sensor, repetitions=3)
+    simulate(tmp / "after", seed=4, sensor=gained, repetitions=3)
+    return {
+        "first": _fit(tmp / "first", config, tmp / "first.json"),
+        "second": _fit(tmp / "second", config, tmp / "second.json"),
+        "before": _fit(tmp / "before" / "calibration", config, tmp / "before.json"),
+        "after": _fit(tmp / "after" / "calibration", config, tmp / "after.json"),
+    }
+
+
+# Two calibrations of one sensor differ by their noise only: 0.5 mV per channel
+# (simulate.SimulatedSensor.noise), 0.04 % of x's full-scale output of 1.33 V.  An
+# SVR with C = 1000 and epsilon = 0.1 mV follows that noise, so two fits' chi differ
+# by a few noise sigmas (0.06-0.11 % measured), and a force by up to two chi
+# differences plus the slope's (0.14-0.22 % measured, at the corners of the grid).
+# 0.3 % bounds that with a margin, and is far below a 1 % gain change.
+NOISE_DRIFT_PCT = 0.3
+
+
+def test_two_calibrations_of_one_sensor_show_no_drift(drift_models):
+    doc = compare(drift_models["first"], drift_models["second"], max_drift=0.5)
+    assert largest(doc) < NOISE_DRIFT_PCT, json.dumps(doc["components"], indent=1)
+    assert doc["passed"] is True and doc["exceeded"] == []
+    invoke(["compare", drift_models["first"], drift_models["second"], "--max-drift", 0.5])
+
+
+def test_a_one_percent_gain_change_is_found(drift_models):
+    doc = compare(drift_models["before"], drift_models["after"], max_drift=0.5)
+    for a, c in doc["components"].items():
+        # the simulated truth: k rose by exactly 1 %; the fits add their noise.  Z is
+        # loaded one way (0 to -150 N), so the 0.5 mV noise of each sweep's zero row
+        # tilts its slope through the origin by 0.5 mV * sum(f) / sum(f^2) / k_z,
+        # 0.06 % per sweep: 0.15 % bounds the difference of two fits.
+        assert c["slope_change_pct"] == pytest.approx(1.0, abs=0.15), a
+        # forces scale by 1/1.01 at the same outputs: ~0.99 % at full scale, plus noise
+        assert 0.9 < c["force_max_pct"] < 1.0 + NOISE_DRIFT_PCT, a
+        # chi is a fraction of the full-scale output, which rose with k: barely changes
+        assert max(c["chi_max_pct"].values()) < NOISE_DRIFT_PCT, a
+    assert doc["passed"] is False
+    result = invoke(["compare", drift_models["before"], drift_models["after"], "--max-drift", 0.5], 1)
+    assert "x: slope change +1.0" in result.stderr
+    out = invoke(["compare", drift_models["before"], drift_models["after"], "--max-drift", 0.5,
+                  "--json"], 1).stdout
+    doc = json.loads(out)
+    assert doc["format"] == "fsdecouple.drift" and doc["passed"] is False
+    assert set(doc["components"]["x"]) == {"slope_change_pct", "chi_max_pct", "force_max_pct"}
+
+
+def test_a_shifted_chi_is_measured_exactly(drift_models):
+    """chi_xy shifted by a constant d: |chi_new - chi_old| = d everywhere, and by
+    eq. (11) f_x moves by d / |k_x| at every output; both in % of full scale."""
+    old = load_model(drift_models["first"])
+    chi = old.chi["xy"]
+    d = 1e-3  # [V]
+    shifted = dataclasses.replace(chi, rho=chi.rho - d / chi.output_scale, surrogate=None)
+    new = dataclasses.replace(old, chi={**old.chi, "xy": shifted})
+    doc = compare(old, new)
+    x = doc["components"]["x"]
+    fso = abs(old.k[0]) * old.settings.full_scale[0]
+    assert x["chi_max_pct"]["xy"] == pytest.approx(100 * d / fso, rel=1e-9)
+    assert x["chi_max_pct"]["xz"] == 0.0 and x["slope_change_pct"] == 0.0
+    assert x["force_max_pct"] == pytest.approx(100 * d / abs(old.k[0]) / old.settings.full_scale[0],
+                                               rel=1e-9)
+    assert doc["components"]["y"]["force_max_pct"] == 0.0
+    assert doc["passed"] is None and doc["max_drift"] is None
+
+
+def test_compare_refuses_other_units_and_components(drift_models, tmp_path):
+    old = load_model(drift_models["first"])
+    other = dataclasses.replace(old, settings=dataclasses.replace(
+        old.settings, units=Units(load="gf", output="count")))
+    save_model(other, tmp_path / "gf.json")
+    with pytest.raises(InputError, match="in gf and count.*same units"):
+        compare(old, other)
+    r = invoke(["compare", drift_models["first"], tmp_path / "gf.json"], 2)
+    assert "same units" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    fewer = dataclasses.replace(old, chi={k: v for k, v in old.chi.items() if k != "zy"})
+    with pytest.raises(InputError, match="components"):
+        compare(old, fewer)
+
+
+@pytest.mark.parametrize("bad", ["0", "-1", "nan", "inf"])
+def test_max_drift_must_be_a_positive_percentage(drift_models, bad):
+    r = invoke(["compare", drift_models["first"], drift_models["second"], "--max-drift", bad], 2)
+    assert "--max-drift" in r.stderr
+
+
+def test_compare_of_a_missing_model_is_one_line(drift_models, tmp_path):
+    r = invoke(["compare", drift_models["first"], tmp_path / "nope.json"], 2)
+    assert "model file not found" in r.stderr
