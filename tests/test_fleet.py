@@ -6,6 +6,7 @@ import dataclasses
 import json
 import shutil
 
+import numpy as np
 import pytest
 from conftest import SAMPLE, invoke
 
@@ -129,3 +130,72 @@ def test_max_drift_must_be_a_positive_percentage(drift_models, bad):
 def test_compare_of_a_missing_model_is_one_line(drift_models, tmp_path):
     r = invoke(["compare", drift_models["first"], tmp_path / "nope.json"], 2)
     assert "model file not found" in r.stderr
+
+
+# --- decouple_frame -----------------------------------------------------------------
+
+def _floats(text: str) -> float:
+    return float(text) if text else np.nan
+
+
+def _statuses_log(path):
+    """The sample task log, with rows apply marks missing, extrapolated and not_finite."""
+    lines = (SAMPLE / "task_voltages.csv").read_text().splitlines()
+    head, rows = lines[0], lines[1:]
+    edits = {250: "0.3,,0.001,0.002", 251: "0.301,nan,0.001,0.002", 252: "0.302,0.01,NA,0.0",
+             253: "0.303,2.5,0.0,0.0",  # 2.5 V: beyond x's calibrated +-1.33 V
+             254: "0.304,1e307,0.0,0.0"}  # f = u / k overflows a double
+    for i, line in edits.items():
+        rows[i] = line
+    path.write_text("\n".join([head, *rows]) + "\n")
+    return path
+
+
+def test_decouple_frame_equals_apply_round_trip(sample_model, tmp_path):
+    import pandas as pd
+
+    import fsdecouple
+
+    log = _statuses_log(tmp_path / "log.csv")
+    out = tmp_path / "forces.csv"
+    invoke(["apply", sample_model, log, "-o", out, "--tare", 200, "--round-trip"])
+    model = fsdecouple.load_model(sample_model)
+    frame = pd.read_csv(log)
+    got = fsdecouple.decouple_frame(model, frame, tare=200)
+    # apply's text read back by Python's own float(): the shortest round-trip text
+    ref = pd.read_csv(out, dtype=str, keep_default_na=False)
+    assert list(got.columns) == list(ref.columns)
+    for c in ("fx", "fy", "fz"):
+        np.testing.assert_array_equal(got[c].to_numpy(), ref[c].map(_floats).to_numpy(), c)
+    assert (got["status"] == ref["status"]).all()
+    assert got["status"].value_counts().to_dict() == {"ok": 2995, "missing": 3, "extrapolated": 1,
+                                                      "not_finite": 1}
+    pd.testing.assert_frame_equal(got[frame.columns], frame)  # the input passes through
+    # decoupled in partitions with the zero of the whole log: the same forces
+    zero = fsdecouple.frame.frame_tare(model, frame, 200)
+    parts = pd.concat([fsdecouple.decouple_frame(model, p, zero=zero)
+                       for p in (frame.iloc[i:i + 430] for i in range(0, len(frame), 430))])
+    pd.testing.assert_frame_equal(parts, got)
+
+
+def test_decouple_frame_bad_input(sample_model):
+    import pandas as pd
+
+    import fsdecouple
+
+    model = fsdecouple.load_model(sample_model)
+    good = pd.DataFrame({"ux": [0.1, 0.2], "uy": [0.0, 0.0], "uz": [0.0, 0.0]})
+    with pytest.raises(InputError, match="no column 'uz'"):
+        fsdecouple.decouple_frame(model, good.drop(columns="uz"))
+    with pytest.raises(InputError, match="row 1, column 'uy': 'abc', expected a number"):
+        fsdecouple.decouple_frame(model, good.assign(uy=["0.1", "abc"]))
+    with pytest.raises(InputError, match="row 0, column 'ux': .*inf"):
+        fsdecouple.decouple_frame(model, good.assign(ux=[np.inf, 0.0]))
+    with pytest.raises(InputError, match="already has a column named 'status'"):
+        fsdecouple.decouple_frame(model, good.assign(status="x"))
+    with pytest.raises(InputError, match="either tare or zero"):
+        fsdecouple.decouple_frame(model, good, tare=1, zero=(0, 0, 0))
+    with pytest.raises(InputError, match="the log has only 2 rows"):
+        fsdecouple.decouple_frame(model, good, tare=5)
+    with pytest.raises(InputError, match="expected 3 finite outputs"):
+        fsdecouple.decouple_frame(model, good, zero=(0, 0))
