@@ -199,3 +199,110 @@ def test_decouple_frame_bad_input(sample_model):
         fsdecouple.decouple_frame(model, good, tare=5)
     with pytest.raises(InputError, match="expected 3 finite outputs"):
         fsdecouple.decouple_frame(model, good, zero=(0, 0))
+
+
+# --- fit-many -----------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory, drift_models):
+    """Four sensors: two on the sample data (one with a calibration/ folder), one the
+    simulated sensor whose gain rose by 1 %, and one without its sensor.yaml."""
+    root = tmp_path_factory.mktemp("fleet")
+    sensors = root / "sensors"
+    for name, sub in (("alpha", ""), ("beta", "calibration")):
+        d = sensors / name / sub
+        d.mkdir(parents=True)
+        for r in (1, 2, 3):
+            shutil.copy(SAMPLE / "calibration" / f"rep{r}.csv", d)
+        (sensors / name / "sensor.yaml").write_text(THREE_REPS)
+    shutil.copytree(drift_models["after"].parent / "after" / "calibration", sensors / "gamma")
+    (sensors / "gamma" / "sensor.yaml").write_text(THREE_REPS)
+    shutil.copytree(sensors / "alpha", sensors / "broken")
+    (sensors / "broken" / "sensor.yaml").unlink()
+    return root
+
+
+def test_fit_many_fits_each_sensor_as_fit_does(fleet, tmp_path):
+    from fsdecouple.fleet import fit_many
+    from fsdecouple.modelfile import model_to_dict
+
+    result = fit_many(fleet / "sensors", tmp_path / "models", workers=2)
+    assert [s.sensor for s in result.sensors] == ["alpha", "beta", "broken", "gamma"]
+    assert [s.sensor for s in result.failed] == ["broken"]
+    assert "no sensor.yaml" in result.failed[0].error
+    assert sorted(p.name for p in (tmp_path / "models").iterdir()) == ["alpha.json", "beta.json",
+                                                                        "gamma.json"]
+    # each model is the one `fit` writes for the same data and config (digests leave
+    # out the creation time): parallel worker processes change nothing
+    config = fleet / "sensors" / "alpha" / "sensor.yaml"
+    for name, calib in (("alpha", fleet / "sensors" / "alpha"),
+                        ("beta", fleet / "sensors" / "beta" / "calibration")):
+        invoke(["fit", calib, "-c", config, "-o", tmp_path / f"{name}-fit.json"])
+        ours = model_to_dict(load_model(tmp_path / "models" / f"{name}.json"))
+        assert ours["integrity"] == model_to_dict(load_model(tmp_path / f"{name}-fit.json"))["integrity"]
+    alpha = result.sensors[0]
+    verdict = load_model(tmp_path / "models" / "alpha.json").report.verdict
+    assert alpha.worst_gamma == verdict["heldout"]["svr"]["worst_gamma"] and alpha.method == "svr"
+    assert alpha.k["x"] == pytest.approx(1 / 75.065, rel=1e-3)  # the sample sensor's slope
+
+
+def test_fit_many_cli_gates_and_errors(fleet, tmp_path):
+    out = tmp_path / "models"
+    r = invoke(["fit-many", fleet / "sensors", "-o", out, "--json", "--workers", 2], 2)
+    doc = json.loads(r.stdout)
+    assert doc["format"] == "fsdecouple.fleet" and doc["failed"] == ["broken"]
+    assert [s["sensor"] for s in doc["sensors"]] == ["alpha", "beta", "broken", "gamma"]
+    assert "error: broken:" in r.stderr and "no sensor.yaml" in r.stderr
+    (fleet / "good").mkdir(exist_ok=True)
+    good = fleet / "good"
+    for name in ("alpha", "gamma"):
+        if not (good / name).exists():
+            shutil.copytree(fleet / "sensors" / name, good / name)
+    worst = max(s["worst_gamma"] for s in doc["sensors"] if s["error"] is None)
+    invoke(["fit-many", good, "-o", tmp_path / "ok", "--max-gamma", worst * 1.01])
+    r = invoke(["fit-many", good, "-o", tmp_path / "strict", "--max-gamma", worst * 0.99], 1)
+    assert "gate failed" in r.stderr and "exceeds --max-gamma" in r.stderr
+    # existing models are not overwritten without --force: each sensor's own error
+    r = invoke(["fit-many", good, "-o", tmp_path / "ok"], 2)
+    assert "already exists; pass --force" in r.stderr
+    invoke(["fit-many", good, "-o", tmp_path / "ok", "--force"])
+
+
+def test_fit_many_baseline_reports_drift(fleet, drift_models, tmp_path):
+    good = tmp_path / "sensors"
+    for name in ("alpha", "gamma"):
+        shutil.copytree(fleet / "sensors" / name, good / name)
+    base = tmp_path / "base"
+    base.mkdir()
+    shutil.copy(drift_models["first"], base / "alpha.json")  # the same sensor, fitted on reps 1-3
+    shutil.copy(drift_models["before"], base / "gamma.json")  # gamma's sensor before its gain rose
+    r = invoke(["fit-many", good, "-o", tmp_path / "new", "--baseline", base, "--max-drift", 0.5,
+                "--json"], 1)
+    doc = json.loads(r.stdout)
+    alpha, gamma = doc["sensors"]
+    # alpha: the same data as its baseline, and the fit is deterministic: no drift at all
+    assert largest(alpha["drift"]) == 0.0 and alpha["gate"] == []
+    assert gamma["drift"]["components"]["x"]["slope_change_pct"] == pytest.approx(1.0, abs=0.15)
+    assert doc["gate_failed"] == ["gamma"] and "drift exceeds --max-drift" in r.stderr
+    # the baseline may be the output directory: old models are read before they are replaced
+    invoke(["fit-many", good, "-o", base, "--baseline", base, "--force"])
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--max-drift", "0.5"], "give --baseline"),
+    (["--max-gamma", "0"], "--max-gamma"),
+    (["--baseline", "nowhere"], "not a directory of earlier models"),
+    (["--workers", "0"], "--workers 0"),
+    (["--method", "best"], "--method 'best'"),
+])
+def test_fit_many_bad_options(fleet, tmp_path, args, message):
+    r = invoke(["fit-many", fleet / "sensors", "-o", tmp_path / "m", *args], 2)
+    assert message in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "m").exists()
+
+
+def test_fit_many_refuses_a_models_dir_inside_a_sensor(fleet, tmp_path):
+    r = invoke(["fit-many", fleet / "sensors", "-o", fleet / "sensors" / "alpha" / "models"], 2)
+    assert "inside the sensor directory" in r.stderr
+    r = invoke(["fit-many", tmp_path / "none", "-o", tmp_path / "m"], 2)
+    assert "not a directory" in r.stderr
