@@ -28,6 +28,7 @@ _PUBLIC = {
     "load_model": "modelfile",
     "save_model": "modelfile",
     "apply_file": "apply",
+    "decouple_frame": "frame",
     "run_cv": "cv",
     "load_cv_results": "cv_doc",
     "build_report": "report",

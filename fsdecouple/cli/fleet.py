@@ -1,0 +1,83 @@
+"""Commands for many sensors and calibrations over time: compare, fit-many."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.text import Text
+
+from .app import ForceOpt, JsonOpt, _bar, app, console, err_console, print_json, user_errors
+
+MaxDriftOpt = Annotated[
+    float | None, typer.Option("--max-drift", help="Exit 1 if any change exceeds P [%], e.g. 0.5.")
+]
+
+
+@app.command()
+def compare(
+    old_model: Annotated[Path, typer.Argument(help="The earlier model file (JSON).")],
+    new_model: Annotated[Path, typer.Argument(help="The new model file of the same sensor.")],
+    max_drift: MaxDriftOpt = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Drift between two calibrations of one sensor: slopes, chi and forces, in % F.S."""
+    from ..console_fleet import drift_line, drift_table
+    from ..drift import compare as compare_models
+
+    with user_errors():
+        doc = compare_models(old_model, new_model, max_drift=max_drift)
+    if json_out:
+        print_json(doc)
+    else:
+        console.print(drift_table(doc))
+    line = drift_line(doc)
+    if doc["passed"] is False:
+        err_console.print(Text("gate failed: ", "red") + Text(line), soft_wrap=True)
+        raise typer.Exit(1)
+    if line and not json_out:
+        console.print(line)
+
+
+@app.command("fit-many")
+def fit_many(
+    sensors_dir: Annotated[Path, typer.Argument(
+        help="One subdirectory per sensor: sensor.yaml and its calibration CSVs "
+             "(or a calibration/ folder).")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Directory for <sensor>.json models.")],
+    max_gamma: Annotated[float | None, typer.Option(
+        help="Exit 1 if a sensor's held-out worst gamma exceeds this fraction, e.g. 0.016.")] = None,
+    baseline: Annotated[Path | None, typer.Option(
+        help="Directory of earlier <sensor>.json models: report each sensor's drift.")] = None,
+    max_drift: MaxDriftOpt = None,
+    method: Annotated[str, typer.Option(help="svr, linear or auto, as fit --method.")] = "svr",
+    workers: Annotated[int | None, typer.Option(help="Sensors fitted at once (processes); "
+                                                     "default: the cores.")] = None,
+    force: ForceOpt = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Fit every sensor of a directory in parallel; one model file each, one summary."""
+    from rich.progress import MofNCompleteColumn
+
+    from ..console_fleet import fleet_errors, fleet_gate_lines, fleet_table
+    from ..fleet import fit_many as fit_all
+
+    with user_errors(), _bar(MofNCompleteColumn()) as bar:
+        task = bar.add_task("fitting", total=None)
+        result = fit_all(sensors_dir, output, method=method, max_gamma=max_gamma, baseline=baseline,
+                         max_drift=max_drift, force=force, workers=workers,
+                         progress=lambda done, total: bar.update(task, completed=done, total=total))
+    doc = result.to_dict()
+    if json_out:
+        print_json(doc)
+    else:
+        console.print(fleet_table(doc))
+    for line in fleet_errors(doc):
+        err_console.print(Text("error: ", "red") + Text(line), soft_wrap=True)
+    for line in fleet_gate_lines(doc):
+        err_console.print(Text("gate failed: ", "red") + Text(line), soft_wrap=True)
+    if doc["failed"]:
+        raise typer.Exit(2)
+    if doc["gate_failed"]:
+        raise typer.Exit(1)

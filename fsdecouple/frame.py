@@ -1,0 +1,129 @@
+"""eq. (11) over a pandas DataFrame: the pure function any engine can call.
+
+:func:`decouple_frame` takes the output columns of a log as a DataFrame and
+returns the same rows with ``fx, fy, fz`` (in the model's load unit) and
+``status`` appended, by the rules :mod:`fsdecouple.apply` writes a log with:
+the same status vocabulary (:data:`~fsdecouple.apply.STATUSES`), the same 1 %
+range margin (:data:`~fsdecouple.apply.RANGE_MARGIN`), the same arithmetic and
+the same table path of eq. (11) (one thread per call).  So a log decoupled in
+partitions by Dask (``map_partitions``), by Spark (``mapInPandas``) or in a
+notebook gets the forces ``apply --round-trip`` writes, to the last bit.
+
+A DataFrame has no text, so ``truncated`` (a cut-off last line) never occurs;
+the parsing is the caller's (``pandas.read_csv`` of pandas 3 reads the same
+doubles as ``apply``'s parser; the tests check it on the sample log).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .apply import RANGE_MARGIN, STATUS_COLUMN, STATUSES
+from .axes import FORCE_COLUMNS, VOLTAGE_COLUMNS
+from .errors import InputError
+from .model import CouplingErrorModel
+from .zero import tare_offsets
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+_NAMES = np.array(list(STATUSES), dtype=object)
+_OK, _EXTRAPOLATED, _MISSING, _NOT_FINITE = (list(STATUSES).index(s) for s in
+                                             ("ok", "extrapolated", "missing", "not_finite"))
+
+
+def frame_outputs(model: CouplingErrorModel, frame: pd.DataFrame) -> np.ndarray:
+    """The outputs u_x, u_y, u_z of ``frame`` after the config's ``scale``, shape (n, N).
+
+    Columns by the model's config names (``model.settings.columns['ux']`` ...);
+    missing values (NaN, None, pandas NA) stay NaN; text that is not a number and
+    an infinite value are errors naming the row, as in ``apply``.
+    """
+    import pandas as pd
+
+    settings = model.settings
+    names = [settings.columns[c] for c in VOLTAGE_COLUMNS]
+    absent = [n for n in names if n not in frame.columns]
+    if absent:
+        raise InputError(f"the frame has no column '{absent[0]}' (columns: "
+                         f"{', '.join(map(str, frame.columns))})")
+    clash = [c for c in (*FORCE_COLUMNS, STATUS_COLUMN) if c in frame.columns]
+    if clash:
+        raise InputError(f"the frame already has a column named '{clash[0]}', which the output "
+                         "would overwrite")
+    cols = []
+    for name in names:
+        col = frame[name]
+        values = pd.to_numeric(col, errors="coerce").to_numpy(dtype=float, na_value=np.nan)
+        bad = (np.isnan(values) & col.notna().to_numpy()) | np.isinf(values)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise InputError(f"frame row {frame.index[i]!r}, column '{name}': "
+                             f"{col.iloc[i]!r}, expected a number")
+        cols.append(values)
+    scale = np.array([settings.scale[c] for c in VOLTAGE_COLUMNS])
+    # C order, as apply's parsed blocks: the tare's mean then sums in the same order
+    return np.ascontiguousarray(np.column_stack(cols)) * scale
+
+
+def frame_tare(model: CouplingErrorModel, frame: pd.DataFrame, n: int) -> np.ndarray:
+    """The zero of a log [output unit]: the mean outputs of its first ``n`` rows.
+
+    For engines that cut a log into partitions: compute the zero once, from the
+    log's head, and pass it to every partition as ``decouple_frame(..., zero=...)``.
+    """
+    return tare_offsets(frame_outputs(model, frame.iloc[:n]), n)
+
+
+def decouple_frame(model: CouplingErrorModel, frame: pd.DataFrame, *, tare: int | None = None,
+                   zero=None) -> pd.DataFrame:
+    """Forces by eq. (11) for every row of ``frame``; the rows and columns unchanged.
+
+    Parameters
+    ----------
+    model : CouplingErrorModel
+        A loaded model (:func:`fsdecouple.load_model`).
+    frame : pandas.DataFrame
+        Outputs by the model's config column names and units (``scale`` is applied).
+    tare : int, optional
+        Subtract the mean outputs of the first ``tare`` rows *of this frame*.
+    zero : array_like, shape (N,), optional
+        Subtract these outputs instead [output unit].
+
+    Returns
+    -------
+    pandas.DataFrame
+        A copy of ``frame`` with ``fx, fy, fz`` [load unit] (NaN where a row has no
+        forces) and ``status`` (``ok``, ``extrapolated``, ``missing``, ``not_finite``).
+    """
+    if tare is not None and zero is not None:
+        raise InputError("give either tare or zero, not both")
+    u = frame_outputs(model, frame)
+    if tare is not None:
+        u = u - tare_offsets(u, tare)
+    elif zero is not None:
+        offsets = np.asarray(zero, dtype=float)
+        if offsets.shape != (model.n_components,) or not np.isfinite(offsets).all():
+            raise InputError(f"zero {zero!r}: expected {model.n_components} finite outputs")
+        u = u - offsets
+    lo, hi = model.calibrated_range.T
+    margin = RANGE_MARGIN * (hi - lo)
+    lo, hi = lo - margin, hi + margin
+    code = np.full(len(u), _OK, dtype=np.int8)
+    empty = np.isnan(u).any(axis=1)
+    code[empty] = _MISSING
+    with np.errstate(over="ignore", invalid="ignore"):
+        f = model.decouple(np.where(empty[:, None], 0.0, u) if empty.any() else u, workers=1)
+        huge = ~np.isfinite(f).all(axis=1) & ~empty
+        code[huge] = _NOT_FINITE
+        empty |= huge
+        outside = ((u < lo) | (u > hi)).any(axis=1) & ~empty
+    code[outside] = _EXTRAPOLATED
+    f[empty] = np.nan
+    out = frame.copy()
+    for a, name in enumerate(FORCE_COLUMNS):
+        out[name] = f[:, a]
+    out[STATUS_COLUMN] = _NAMES[code]
+    return out
