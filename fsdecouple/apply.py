@@ -144,6 +144,56 @@ def apply_file(
                       workers, round_trip)
 
 
+@dataclass(frozen=True)
+class RowRules:
+    """What decides a row's status besides its values: extrapolation and saturation bounds."""
+
+    lo: np.ndarray  # model.extrapolation_limits(), zero-corrected outputs
+    hi: np.ndarray
+    sat_lo: np.ndarray  # limits: raw outputs (after scale:, before the zero)
+    sat_hi: np.ndarray
+
+    @classmethod
+    def for_model(cls, model: CouplingErrorModel, settings: Settings | None = None) -> RowRules:
+        return cls(*model.extrapolation_limits().T,
+                   *_limit_bounds(settings or model.settings, model))
+
+
+def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarray,
+                  rules: RowRules, *, truncated: bool = False):
+    """Eq. (11) and a status per row: ``(forces, status code, no-forces mask)``.
+
+    ``raw``: outputs as read (after ``scale:``); ``offsets``: the zero subtracted.
+    The one place that decides a row's status (:data:`STATUSES`), for ``apply``'s
+    blocks and for :func:`fsdecouple.frame.decouple_frame` alike.
+    """
+    u = raw - offsets
+    code = np.zeros(len(u), dtype=np.int8)  # index into STATUSES
+    empty = np.isnan(u).any(axis=1)
+    code[empty] = MISSING_
+    if truncated:
+        # a writer that crashed mid-line: the fields may look complete but the last
+        # number be cut short, so the row gets no forces
+        empty[:] = True
+        code[:] = TRUNCATED_
+    converged = np.empty(len(u), dtype=bool)
+    with np.errstate(over="ignore", invalid="ignore"):
+        f = model.decouple(np.where(empty[:, None], 0.0, u) if empty.any() else u,
+                           workers=1, converged=converged)
+        unsettled = ~converged & ~empty
+        code[unsettled] = NOT_CONVERGED_
+        empty |= unsettled
+        huge = ~np.isfinite(f).all(axis=1) & ~empty
+        code[huge] = NOT_FINITE_
+        empty |= huge
+        outside = ((u < rules.lo) | (u > rules.hi)).any(axis=1) & ~empty
+        # the limits are the ADC's or amplifier's, so they bound the raw values
+        saturated = ((raw <= rules.sat_lo) | (raw >= rules.sat_hi)).any(axis=1) & ~empty
+    code[outside] = EXTRAPOLATED_
+    code[saturated] = SATURATED_
+    return f, code, empty
+
+
 def _limit_bounds(settings: Settings, model: CouplingErrorModel) -> tuple[np.ndarray, np.ndarray]:
     """(lo, hi) per output; +-inf where no limit is given (never saturated)."""
     limits = settings.limits or model.settings.limits
@@ -184,7 +234,7 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
         jobs = itertools.chain(kept, jobs)
     elif zero is not None:
         summary.offsets = np.asarray(zero, dtype=float)
-    lo, hi = model.extrapolation_limits().T
+    rows = RowRules(*model.extrapolation_limits().T, sat_lo, sat_hi)
     # blocks in flight bound the memory (~60 MB each), so not every core of a big box
     workers = workers or min(MAX_WORKERS, os.cpu_count() or 1)
 
@@ -202,33 +252,8 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
             # parse, eq. (11) and format one block; numpy and pyarrow release the
             # GIL, so blocks overlap on the cores while the main thread writes
             block = job()
-            raw = block.u * scale
-            u = raw - summary.offsets
-            code = np.zeros(len(block), dtype=np.int8)  # index into STATUSES
-            empty = np.isnan(u).any(axis=1)
-            code[empty] = MISSING_
-            if block.truncated:
-                # a writer that crashed mid-line: the fields may look complete but
-                # the last number be cut short, so the row gets no forces
-                empty[:] = True
-                code[:] = TRUNCATED_
-            converged = np.empty(len(block), dtype=bool)
-            with np.errstate(over="ignore", invalid="ignore"):
-                f = model.decouple(np.where(empty[:, None], 0.0, u) if empty.any() else u,
-                                   workers=1, converged=converged)
-                unsettled = ~converged & ~empty
-                if unsettled.any():
-                    code[unsettled] = NOT_CONVERGED_
-                    empty |= unsettled
-                huge = ~np.isfinite(f).all(axis=1) & ~empty
-                if huge.any():
-                    code[huge] = NOT_FINITE_
-                    empty |= huge
-                outside = ((u < lo) | (u > hi)).any(axis=1) & ~empty
-                # the limits are the ADC's or amplifier's, so they bound the raw values
-                saturated = ((raw <= sat_lo) | (raw >= sat_hi)).any(axis=1) & ~empty
-            code[outside] = EXTRAPOLATED_
-            code[saturated] = SATURATED_
+            f, code, empty = decouple_rows(model, block.u * scale, summary.offsets, rows,
+                                           truncated=block.truncated)
             if to_unit != 1.0:
                 f = f * to_unit
             counts = np.bincount(code, minlength=len(STATUSES))

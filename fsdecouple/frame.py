@@ -3,9 +3,9 @@
 :func:`decouple_frame` takes the output columns of a log as a DataFrame and
 returns the same rows with ``fx, fy, fz`` (in the model's load unit) and
 ``status`` appended, by the rules :mod:`fsdecouple.apply` writes a log with:
-the same status vocabulary (:data:`~fsdecouple.apply.STATUSES`), the same 1 %
-range margin (:data:`~fsdecouple.apply.RANGE_MARGIN`), the same arithmetic and
-the same table path of eq. (11) (one thread per call).  So a log decoupled in
+the very function that sets the status of ``apply``'s rows
+(:func:`fsdecouple.apply.decouple_rows`: the same statuses, range margin,
+limits and table path of eq. (11), one thread per call).  So a log decoupled in
 partitions by Dask (``map_partitions``), by Spark (``mapInPandas``) or in a
 notebook gets the forces ``apply --round-trip`` writes, to the last bit.
 
@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .apply import RANGE_MARGIN, STATUS_COLUMN, STATUSES
+from .apply import STATUS_COLUMN, STATUSES, RowRules, decouple_rows
 from .axes import FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .errors import InputError
 from .model import CouplingErrorModel
@@ -30,8 +30,6 @@ if TYPE_CHECKING:
     import pandas as pd
 
 _NAMES = np.array(list(STATUSES), dtype=object)
-_OK, _EXTRAPOLATED, _MISSING, _NOT_FINITE = (list(STATUSES).index(s) for s in
-                                             ("ok", "extrapolated", "missing", "not_finite"))
 
 
 def frame_outputs(model: CouplingErrorModel, frame: pd.DataFrame) -> np.ndarray:
@@ -96,31 +94,19 @@ def decouple_frame(model: CouplingErrorModel, frame: pd.DataFrame, *, tare: int 
     -------
     pandas.DataFrame
         A copy of ``frame`` with ``fx, fy, fz`` [load unit] (NaN where a row has no
-        forces) and ``status`` (``ok``, ``extrapolated``, ``missing``, ``not_finite``).
+        forces) and ``status`` (:data:`fsdecouple.apply.STATUSES`).
     """
     if tare is not None and zero is not None:
         raise InputError("give either tare or zero, not both")
-    u = frame_outputs(model, frame)
+    raw = frame_outputs(model, frame)
+    offsets = np.zeros(model.n_components)
     if tare is not None:
-        u = u - tare_offsets(u, tare)
+        offsets = tare_offsets(raw, tare)
     elif zero is not None:
         offsets = np.asarray(zero, dtype=float)
         if offsets.shape != (model.n_components,) or not np.isfinite(offsets).all():
             raise InputError(f"zero {zero!r}: expected {model.n_components} finite outputs")
-        u = u - offsets
-    lo, hi = model.calibrated_range.T
-    margin = RANGE_MARGIN * (hi - lo)
-    lo, hi = lo - margin, hi + margin
-    code = np.full(len(u), _OK, dtype=np.int8)
-    empty = np.isnan(u).any(axis=1)
-    code[empty] = _MISSING
-    with np.errstate(over="ignore", invalid="ignore"):
-        f = model.decouple(np.where(empty[:, None], 0.0, u) if empty.any() else u, workers=1)
-        huge = ~np.isfinite(f).all(axis=1) & ~empty
-        code[huge] = _NOT_FINITE
-        empty |= huge
-        outside = ((u < lo) | (u > hi)).any(axis=1) & ~empty
-    code[outside] = _EXTRAPOLATED
+    f, code, empty = decouple_rows(model, raw, offsets, RowRules.for_model(model))
     f[empty] = np.nan
     out = frame.copy()
     for a, name in enumerate(FORCE_COLUMNS):
