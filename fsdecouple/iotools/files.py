@@ -7,12 +7,13 @@ import ctypes
 import errno
 import os
 import re
+import stat
 import sys
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-from ..errors import InputError
+from ..errors import InputError, printable
 
 
 @contextlib.contextmanager
@@ -28,6 +29,37 @@ def reading(path: str | Path, what: str = "a CSV file") -> Iterator[None]:
         raise InputError(f"{path}: not a UTF-8 text file") from None
     except OSError as err:
         raise InputError(f"{path}: cannot read ({err.strerror})") from None
+
+
+MB = 1 << 20
+# Size limits per input kind, checked before reading (README, "Errors and exit codes").
+CONFIG_LIMIT = 1 * MB
+MODEL_LIMIT = 64 * MB
+CV_LIMIT = 64 * MB
+
+
+def _size(n: int) -> str:
+    return f"{n / MB:.0f} MB" if n >= MB else f"{n} bytes"
+
+
+def read_bounded(path: str | Path, limit: int, what: str, error: type = InputError) -> bytes:
+    """The bytes of ``path``, refused with one line if there are more than ``limit``.
+
+    A regular file is measured (``fstat``) before anything is read, so a 1 GB
+    sparse file costs nothing; anything else (``/dev/zero``, a pipe) is read to at
+    most ``limit + 1`` bytes.  OS errors (not found, a directory) are the caller's.
+    """
+    with open(path, "rb") as fh:
+        st = os.fstat(fh.fileno())
+        if stat.S_ISDIR(st.st_mode):
+            raise IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR), str(path))
+        if stat.S_ISREG(st.st_mode) and st.st_size > limit:
+            raise error(f"{printable(path)}: {_size(st.st_size)}, larger than the {_size(limit)} "
+                        f"limit for {what}; not read")
+        data = fh.read(limit + 1)
+    if len(data) > limit:
+        raise error(f"{printable(path)}: more than the {_size(limit)} limit for {what}; not read")
+    return data
 
 
 def natural_key(name: str) -> list:
