@@ -18,7 +18,8 @@ from typing import Any
 import yaml
 
 from .axes import AXES, CANONICAL_COLUMNS, FORCE_COLUMNS, VOLTAGE_COLUMNS
-from .errors import ConfigError
+from .errors import ConfigError, excerpt, printable
+from .iotools.files import CONFIG_LIMIT, read_bounded
 from .units import LOAD_UNITS, OUTPUT_UNITS, Units
 
 SCALINGS = ("none", "full_scale")
@@ -234,6 +235,70 @@ class SafeUniqueLoader(yaml.SafeLoader):
             seen.add(key)
         return super().construct_mapping(node, deep)
 
+    def construct_yaml_int(self, node):
+        # int() refuses more than 4300 digits with a ValueError, not a YAML error,
+        # and a float() of a longer int overflows: both are one line, not a traceback
+        try:
+            value = super().construct_yaml_int(node)
+            float(value)
+        except (ValueError, OverflowError):
+            raise _Refused(
+                f"the number {excerpt(node.value, 20)} is out of range", node.start_mark
+            ) from None
+        return value
+
+    def construct_document(self, node):
+        # An alias bomb (9 aliases of 9 aliases of ...) is a few lines that expand to
+        # billions of values when walked or quoted: bound the expanded size first.
+        if _expanded_size(node, MAX_YAML_NODES) > MAX_YAML_NODES:
+            raise _Refused(
+                f"more than {MAX_YAML_NODES} values once aliases are expanded (an alias bomb?)",
+                node.start_mark,
+            )
+        return super().construct_document(node)
+
+
+SafeUniqueLoader.add_constructor("tag:yaml.org,2002:int", SafeUniqueLoader.construct_yaml_int)
+
+MAX_YAML_NODES = 100_000  # a config holds about fifty
+FULL_SCALE_RANGE = (1e-12, 1e12)
+
+
+class _Refused(yaml.constructor.ConstructorError):
+    """A config refused for its size or range, with its own message."""
+
+    def __init__(self, message: str, mark):
+        super().__init__(None, None, message, mark)
+
+
+def _expanded_size(root, limit: int) -> int:
+    """Number of nodes of the document with every alias expanded, or ``limit + 1``
+    as soon as it is larger (a recursive alias expands without end)."""
+    sizes: dict[int, int] = {}
+    open_nodes: set[int] = set()
+
+    def size(node) -> int:
+        key = id(node)
+        if key in sizes:
+            return sizes[key]
+        if key in open_nodes:
+            return limit + 1
+        open_nodes.add(key)
+        total = 1
+        if isinstance(node.value, list):
+            for item in node.value:
+                for child in item if isinstance(item, tuple) else (item,):
+                    total += size(child)
+                    if total > limit:
+                        break
+                if total > limit:
+                    break
+        open_nodes.discard(key)
+        sizes[key] = min(total, limit + 1)
+        return sizes[key]
+
+    return size(root)
+
 
 def _yaml_problem(err: yaml.YAMLError) -> str:
     problem = str(getattr(err, "problem", "") or "")
@@ -346,20 +411,37 @@ def load_config(path: str | Path | None = None, **overrides: Any) -> Settings:
         settings = Settings()
     else:
         path = Path(path)
+        name = printable(path)
         try:
-            text = path.read_text(encoding="utf-8-sig")
+            data = read_bounded(path, CONFIG_LIMIT, "a config file", ConfigError)
+            text = data.decode("utf-8-sig")
         except FileNotFoundError:
-            raise ConfigError(f"{path}: config file not found") from None
-        except (OSError, UnicodeDecodeError) as err:
-            raise ConfigError(f"{path}: cannot read config ({err})") from None
+            raise ConfigError(f"{name}: config file not found") from None
+        except UnicodeDecodeError:
+            raise ConfigError(f"{name}: cannot read config (not a UTF-8 text file)") from None
+        except OSError as err:
+            raise ConfigError(f"{name}: cannot read config ({err.strerror})") from None
         try:
             raw = yaml.load(text, Loader=SafeUniqueLoader)  # noqa: S506 (a SafeLoader)
         except yaml.YAMLError as err:
             mark = getattr(err, "problem_mark", None)
             loc = f", row {mark.line + 1}, column {mark.column + 1}" if mark else ""
-            raise ConfigError(f"{path}{loc}: {_yaml_problem(err)}") from None
-        settings = settings_from_dict(raw, str(path))
-    return apply_overrides(settings, **overrides)
+            problem = err.problem if isinstance(err, _Refused) else _yaml_problem(err)
+            raise ConfigError(f"{name}{loc}: {excerpt(problem, 200)}") from None
+        except RecursionError:
+            raise ConfigError(f"{name}: not a config (YAML nested too deeply)") from None
+        if raw is not None and not isinstance(raw, dict):
+            # e.g. `-c data.csv`: the whole file is one YAML string; quote only its start
+            raise ConfigError(f"{name}: expected a mapping of settings, found "
+                              f"{type(raw).__name__} {excerpt(repr(raw))}")
+        settings = settings_from_dict(raw, name)
+    settings = apply_overrides(settings, **overrides)
+    for axis, value in zip(AXES, settings.full_scale, strict=True):
+        low, high = FULL_SCALE_RANGE
+        if not low <= value <= high:
+            raise ConfigError(f"{name if path is not None else 'config'}: full_scale: {axis}: "
+                              f"{value!r} is outside {low:g} .. {high:g}")
+    return settings
 
 
 def apply_overrides(settings: Settings, **overrides: Any) -> Settings:

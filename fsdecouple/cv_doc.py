@@ -11,7 +11,8 @@ import json
 from pathlib import Path
 from typing import Any
 
-from .errors import InputError
+from .errors import InputError, excerpt, printable, where
+from .iotools.files import CV_LIMIT, read_bounded
 
 FORMAT = "fsdecouple.cv"
 FORMAT_VERSION = 1
@@ -33,13 +34,17 @@ def load_cv_results(path: str | Path) -> dict[str, Any]:
     """Read a cv.json document written by ``fsdecouple cv``."""
     path = Path(path)
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
+        doc = json.loads(read_bounded(path, CV_LIMIT, "cv results").decode("utf-8"))
     except FileNotFoundError:
-        raise InputError(f"{path}: cv results not found") from None
+        raise InputError(f"{printable(path)}: cv results not found") from None
     except (OSError, UnicodeDecodeError) as err:
-        raise InputError(f"{path}: cannot read cv results ({err})") from None
+        raise InputError(f"{printable(path)}: cannot read cv results ({err})") from None
     except json.JSONDecodeError as err:
-        raise InputError(f"{path}, row {err.lineno}: not valid JSON (truncated?)") from None
+        raise InputError(f"{where(path, err.lineno)}: not valid JSON (truncated?)") from None
+    except RecursionError:
+        raise InputError(f"{printable(path)}: not a cv.json (JSON too deeply nested)") from None
+    except ValueError as err:  # e.g. an integer of more than 4300 digits
+        raise InputError(f"{printable(path)}: not a cv.json ({excerpt(err)})") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise InputError(f"{path}: not a cv.json of fsdecouple cv (format is not '{FORMAT}')")
     version = doc.get("format_version")

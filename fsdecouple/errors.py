@@ -6,6 +6,7 @@ and keeps its traceback.
 
 from __future__ import annotations
 
+import unicodedata
 from pathlib import Path
 
 
@@ -25,6 +26,26 @@ class ModelFileError(FsdecoupleError):
     """A model file is not a usable fsdecouple model."""
 
 
+def printable(text: object) -> str:
+    """``text`` with control characters (a newline in a file name) escaped as repr does,
+    so that a message stays on one line; other characters, accents too, are kept."""
+    text = str(text)
+    if text.isprintable():
+        return text
+    return "".join(
+        c if c == " " or not unicodedata.category(c).startswith(("C", "Z")) else repr(c)[1:-1]
+        for c in text
+    )
+
+
+def excerpt(text: object, limit: int = 60) -> str:
+    """A value from a file, quoted in a message: one line, at most about ``limit`` characters."""
+    text = printable(text)
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit]}... ({len(text)} characters)"
+
+
 def where(file: str | Path | None, row: int | None = None, column: str | None = None) -> str:
     """Format a location as ``file, row 17, column 'uy'`` for error messages.
 
@@ -32,9 +53,9 @@ def where(file: str | Path | None, row: int | None = None, column: str | None = 
     """
     parts = []
     if file is not None:
-        parts.append(str(file))
+        parts.append(printable(file))
     if row is not None:
         parts.append(f"row {row}")
     if column is not None:
-        parts.append(f"column '{column}'")
+        parts.append(f"column '{excerpt(column)}'")
     return ", ".join(parts)

@@ -17,8 +17,8 @@ import numpy as np
 from . import __version__
 from .axes import AXES, CHI_NAMES
 from .config import settings_from_dict
-from .errors import ModelFileError
-from .iotools.files import atomic_write
+from .errors import ModelFileError, excerpt
+from .iotools.files import MODEL_LIMIT, atomic_write, read_bounded
 from .model import Chi, CouplingErrorModel, FitReport
 
 FORMAT = "fsdecouple.model"
@@ -210,7 +210,8 @@ def load_model(path: str | Path) -> CouplingErrorModel:
     """Read and verify a model file."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8-sig")  # a BOM from a Windows editor is not content
+        # a BOM from a Windows editor is not content
+        text = read_bounded(path, MODEL_LIMIT, "a model file", ModelFileError).decode("utf-8-sig")
     except FileNotFoundError:
         raise ModelFileError(f"{path}: model file not found") from None
     except (OSError, UnicodeDecodeError) as err:
@@ -226,15 +227,15 @@ def load_model(path: str | Path) -> CouplingErrorModel:
         ) from None
     except _DuplicateKey as err:
         raise ModelFileError(
-            f"{path}: key '{err.args[0]}' appears twice in one object (edited by hand?); "
+            f"{path}: key '{excerpt(err.args[0])}' appears twice in one object (edited by hand?); "
             "json would keep the last one silently"
         ) from None
     except _NonFinite as err:
         raise ModelFileError(
-            f"{path}: holds {err.args[0]!r}; NaN and infinity are not allowed in a model file"
+            f"{path}: holds {excerpt(repr(err.args[0]))}; NaN and infinity are not allowed in a model file"
         ) from None
     except RecursionError:
         raise ModelFileError(f"{path}: not a model file (JSON too deeply nested)") from None
     except ValueError as err:  # e.g. an integer of more than 4300 digits
-        raise ModelFileError(f"{path}: not a model file ({err})") from None
+        raise ModelFileError(f"{path}: not a model file ({excerpt(err)})") from None
     return model_from_dict(doc, str(path))

@@ -20,7 +20,7 @@ import pandas as pd
 from .axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .calibration import GrossError
 from .errors import InputError
-from .iotools.files import atomic_write, check_output
+from .iotools.files import atomic_files, check_output
 from .simulate_lab import write_lab_csv
 
 # Section 3 and eq. (13)
@@ -184,11 +184,11 @@ def simulate_task(
     return volts, forces
 
 
-def _write_csv(df: pd.DataFrame, path: Path, formats: dict[str, str], force: bool) -> None:
+def _write_csv(df: pd.DataFrame, path: Path, formats: dict[str, str], group: atomic_files) -> None:
     out = df.copy()
     for col, fmt in formats.items():
         out[col] = out[col].map(lambda v, fmt=fmt: fmt % v)
-    with atomic_write(path, force=force) as fh:
+    with group.open(path) as fh:
         out.to_csv(fh, index=False, lineterminator="\n")
 
 
@@ -241,20 +241,21 @@ def simulate(
                  out / "task_voltages.csv", out / "task_forces.csv"):
         if path.parent.is_dir():  # all or nothing: refuse before the first file is written
             check_output(path, force=force)
-    (out / "calibration").mkdir(parents=True, exist_ok=True)
     table = simulate_calibration(sensor, repetitions=n_reps, seed=seed)
     if gross_error is not None:
         table = gross_error.apply(table)
     volt_fmt = {c: "%.7f" for c in VOLTAGE_COLUMNS}
     force_fmt = {c: "%.3f" for c in FORCE_COLUMNS}
     written = []
-    for rep, g in table.groupby("repetition"):
-        path = out / "calibration" / f"rep{rep}.csv"
-        _write_csv(g.drop(columns="repetition"), path, {**force_fmt, **volt_fmt}, force)
-        written.append(path)
-    volts, forces = simulate_task(sensor, seed=seed)
-    _write_csv(volts, out / "task_voltages.csv", {"t": "%.3f", **volt_fmt}, force)
-    _write_csv(forces, out / "task_forces.csv", {"t": "%.3f", **force_fmt}, force)
+    # every file, and the directories made for them, appear together or not at all
+    with atomic_files(force=force) as group:
+        for rep, g in table.groupby("repetition"):
+            path = out / "calibration" / f"rep{rep}.csv"
+            _write_csv(g.drop(columns="repetition"), path, {**force_fmt, **volt_fmt}, group)
+            written.append(path)
+        volts, forces = simulate_task(sensor, seed=seed)
+        _write_csv(volts, out / "task_voltages.csv", {"t": "%.3f", **volt_fmt}, group)
+        _write_csv(forces, out / "task_forces.csv", {"t": "%.3f", **force_fmt}, group)
     written += [out / "task_voltages.csv", out / "task_forces.csv"]
     return written
 
@@ -276,7 +277,7 @@ def _simulate_lab(
     valid = simulate_lab_calibration(
         sensor, valid_rng, levels=levels, repetitions=repetitions, reach=VALIDATION_REACH
     )
-    out.mkdir(parents=True, exist_ok=True)
-    for table, path in zip((calib, valid), targets, strict=True):
-        write_lab_csv(table, path, force=force)
+    with atomic_files(force=force) as group:
+        for table, path in zip((calib, valid), targets, strict=True):
+            write_lab_csv(table, path, force=force, group=group)
     return targets

@@ -17,7 +17,7 @@ from pathlib import Path
 import pandas as pd
 
 from .axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
-from .iotools.files import atomic_write
+from .iotools.files import atomic_files, atomic_write
 
 LOAD_UNIT = "gf"
 LAB_LOAD_COLUMNS = tuple(f"F{a} [{LOAD_UNIT}]" for a in AXES)
@@ -82,7 +82,12 @@ def lab_rows(table: pd.DataFrame) -> list[list[str]]:
     return rows
 
 
-def write_lab_csv(table: pd.DataFrame, path: Path, *, force: bool) -> None:
-    """Write ``table`` as a lab spreadsheet export (comma CSV, ``\\n`` line ends)."""
-    with atomic_write(path, force=force) as fh:
+def write_lab_csv(table: pd.DataFrame, path: Path, *, force: bool,
+                  group: atomic_files | None = None) -> None:
+    """Write ``table`` as a lab spreadsheet export (comma CSV, ``\\n`` line ends).
+
+    Given an :class:`~fsdecouple.iotools.files.atomic_files` ``group``, the file
+    is placed with the group's other outputs, together or not at all.
+    """
+    with (group.open(path) if group is not None else atomic_write(path, force=force)) as fh:
         csv.writer(fh, lineterminator="\n").writerows(lab_rows(table))

@@ -14,6 +14,7 @@ import math
 import os
 import signal
 import sys
+import warnings
 from pathlib import Path
 from typing import Annotated
 
@@ -26,7 +27,7 @@ from rich.progress import (
 from rich.text import Text
 
 from .. import __version__
-from ..errors import FsdecoupleError, InputError
+from ..errors import FsdecoupleError, InputError, printable
 
 # Each command imports what only it needs (pandas, libsvm, scipy, matplotlib),
 # so that `apply` and `show` start in a fraction of a second.
@@ -54,12 +55,25 @@ JsonOpt = Annotated[bool, typer.Option("--json", help="Print a JSON document on 
 
 @contextlib.contextmanager
 def user_errors():
-    """Turn library errors into one red line on stderr and exit code 2."""
+    """Turn library errors into one red line on stderr and exit code 2.
+
+    The line is one line whatever it quotes (control characters escaped, cut at
+    MAX_MESSAGE characters).  numpy's RuntimeWarnings (overflow near 1e308) are
+    not printed: the error, or the row's status, says what happened.
+    """
     try:
-        yield
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            yield
     except FsdecoupleError as err:
-        err_console.print(Text("error: ", "red") + Text(str(err)), soft_wrap=True)
+        message = printable(err)
+        if len(message) > MAX_MESSAGE:
+            message = f"{message[:MAX_MESSAGE]}... (cut)"
+        err_console.print(Text("error: ", "red") + Text(message), soft_wrap=True)
         raise typer.Exit(2) from None
+
+
+MAX_MESSAGE = 1000
 
 
 def interactive() -> bool:

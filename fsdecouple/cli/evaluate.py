@@ -12,7 +12,7 @@ from rich.progress import MofNCompleteColumn
 
 from ..config import load_config
 from ..errors import InputError
-from ..iotools.files import atomic_write, check_output, refuse_overwriting_input
+from ..iotools.files import atomic_files, atomic_write, check_output, refuse_overwriting_input
 from ..modelfile import load_model
 from .app import (
     ConfigOpt,
@@ -137,6 +137,10 @@ def validate(
     raise typer.Exit(0 if doc["gate"] is None or doc["gate"]["passed"] else 1)
 
 
+# names that are files, not the directory --png wants
+FILE_SUFFIXES = {".html", ".htm", ".png", ".svg", ".pdf", ".json", ".csv", ".txt", ".md"}
+
+
 @app.command()
 def report(
     model_file: Annotated[Path, typer.Argument(help="Model file (JSON).")],
@@ -165,7 +169,9 @@ def report(
         if png is not None:
             if png.exists() and not png.is_dir():
                 raise InputError(f"--png {png}: exists and is not a directory")
-            png.mkdir(parents=True, exist_ok=True)
+            if not png.exists() and png.suffix.lower() in FILE_SUFFIXES:
+                raise InputError(f"--png {png}: looks like a file name; give a directory "
+                                 "for the PNG figures")
         inputs = [model_file, *_given(cv), *(_read(cs) if cs is not None else [])]
         check_output(output, force=force)
         refuse_overwriting_input(output, inputs)
@@ -173,13 +179,15 @@ def report(
         if png is not None:
             targets += [png / f"{name}.png" for name in result.figures]
         for t in targets:
-            check_output(t, force=force)
+            if t.parent.is_dir():
+                check_output(t, force=force)
             refuse_overwriting_input(t, inputs)
-        with atomic_write(output, force=True) as fh:
-            fh.write(result.html)
-        for name, data in result.figures.items():
-            if png is not None:
-                with atomic_write(png / f"{name}.png", "wb", force=True) as fh:
+        # the report and its PNGs (and the --png directory) appear together or not at all
+        with atomic_files(force=force) as group:
+            with group.open(output) as fh:
+                fh.write(result.html)
+            for name, data in result.figures.items() if png is not None else ():
+                with group.open(png / f"{name}.png", "wb") as fh:
                     fh.write(data)
     console.print(f"report written to {output} ({len(result.figures)} figures)", highlight=False)
     if png is not None:
