@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pandas as pd
+import pytest
 from conftest import SAMPLE, invoke
 
 
@@ -207,6 +208,7 @@ def _on_a_terminal(args, env):
     return b"".join(chunks).decode(errors="replace")
 
 
+@pytest.mark.slow  # runs the CLI under a pseudo-terminal, several times
 def test_progress_bars_show_on_a_terminal_and_never_in_ci(tmp_path, sample_model):
     import os
 

@@ -28,6 +28,8 @@ from fsdecouple.model import CouplingErrorModel
 from fsdecouple.modelfile import model_to_dict
 from fsdecouple.units import Units
 
+pytestmark = pytest.mark.slow  # compiles C headers and runs 1e5 vectors through them
+
 CC = shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
 needs_cc = pytest.mark.skipif(CC is None, reason="no C compiler (cc, gcc or clang) on PATH")
 FLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]

@@ -17,6 +17,8 @@ from fsdecouple.simulate import SimulatedSensor, simulate
 from fsdecouple.units import Units
 from fsdecouple.verdict import calibrate
 
+pytestmark = pytest.mark.slow  # fits several sensors in worker processes
+
 THREE_REPS = "min_repetitions: 3\n"
 
 

@@ -16,6 +16,8 @@ from fsdecouple.cli import app
 from fsdecouple.errors import excerpt, printable, where
 from fsdecouple.iotools.files import CONFIG_LIMIT, CV_LIMIT, MODEL_LIMIT
 
+pytestmark = pytest.mark.slow  # measures peak memory of subprocesses on hostile inputs
+
 CAL = SAMPLE / "calibration"
 
 

@@ -24,6 +24,8 @@ from fsdecouple.calibration import from_table
 from fsdecouple.config import Settings
 from fsdecouple.fit import fit
 
+pytestmark = pytest.mark.slow  # hypothesis explores hundreds of generated files
+
 SETTINGS = settings(
     max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
 )

@@ -18,6 +18,8 @@ from fsdecouple.errors import InputError
 from fsdecouple.iotools import files
 from fsdecouple.iotools.files import atomic_files, atomic_write
 
+pytestmark = pytest.mark.slow  # runs concurrent commands against one output
+
 
 def _appear_before_placing(monkeypatch, content=b"written by someone else\n"):
     """Make another writer create the output between the start and the final step."""

@@ -12,6 +12,8 @@ import pytest
 from conftest import SAMPLE, invoke
 from matplotlib.image import imread
 
+pytestmark = pytest.mark.slow  # renders every figure of the report with matplotlib
+
 FIGURES = ("fig-omega", "fig-chi", "fig-residuals")
 PNGS = ("figure6_omega.png", "figure7_chi.png", "residuals.png")
 TABLES = ("table-summary", "table-provenance", "table-settings", "table-omega", "table-chi",
