@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from .decouple import PROMISE
+from .decouple import PROMISE, decouple_exact
 from .errors import ConfigError, FsdecoupleError
 from .export_tables import CHECKS_PER_INTERVAL, coarsest_tables, table_bound
 from .iotools.files import atomic_write
@@ -367,7 +367,13 @@ def float_bound(plan: ExportPlan, seed: int = 0) -> float:
 
 def expected_status(plan: ExportPlan, u: np.ndarray, f: np.ndarray) -> int:
     """The C's status word for one double input ``u`` and its forces ``f``."""
-    from .export_c import BIT_INPUT_NOT_FINITE, BIT_NOT_FINITE, BIT_OUTSIDE_TABLE, BIT_SATURATED
+    from .export_c import (
+        BIT_INPUT_NOT_FINITE,
+        BIT_NOT_CONVERGED,
+        BIT_NOT_FINITE,
+        BIT_OUTSIDE_TABLE,
+        BIT_SATURATED,
+    )
 
     st = 0
     for b in range(plan.n):
@@ -385,6 +391,13 @@ def expected_status(plan: ExportPlan, u: np.ndarray, f: np.ndarray) -> int:
         st |= 1 << BIT_INPUT_NOT_FINITE
     if not np.isfinite(f).all():
         st |= 1 << BIT_NOT_FINITE
+    if plan.refine > 0:  # the refinement's settle test, as decouple.settled decides it
+        converged = np.empty(1, dtype=bool)
+        decouple_exact(np.asarray(u, dtype=float).reshape(1, -1), plan.k,
+                       [c.exact for c in plan.chis], refine=plan.refine,
+                       full_scale_output=np.abs(plan.k) * plan.full_scale, converged=converged)
+        if not converged[0]:
+            st |= 1 << BIT_NOT_CONVERGED
     return st
 
 

@@ -19,12 +19,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .decouple import REFINE_TOLERANCE
+
 if TYPE_CHECKING:
     from .export import ChiPlan, ExportPlan
 
 # Status bits above the per-channel range bits (channels 0 .. MAX_CHANNELS - 1).
 MAX_CHANNELS = 16
 BIT_OUTSIDE_TABLE, BIT_INPUT_NOT_FINITE, BIT_NOT_FINITE, BIT_SATURATED = 16, 17, 18, 19
+BIT_NOT_CONVERGED = 20
 
 
 def c_string(text: str) -> str:
@@ -126,6 +129,9 @@ def _preamble(plan: ExportPlan) -> str:
  *      evaluated (slower; the forces are as accurate; never set without tables);
  *   bit {BIT_INPUT_NOT_FINITE}: an input is NaN or infinite (apply: NaN = "missing");
  *   bit {BIT_NOT_FINITE}: a force is not finite (apply: "not_finite");
+ *   bit {BIT_NOT_CONVERGED}: the second-order refinement ({P}REFINE_STEPS > 0) did not
+ *     settle: the last step moved a prime output by more than REFINE_TOLERANCE of its
+ *     full-scale output (apply: "not_converged", no forces); do not use f;
  *   bit {BIT_SATURATED}: a raw channel is at or beyond its limit.  The limits are compared
  *      with the values passed in u, i.e. after any zero correction:
 {limits}
@@ -165,6 +171,7 @@ extern "C" {{
 #define {P}STATUS_INPUT_NOT_FINITE ((uint32_t)1 << {BIT_INPUT_NOT_FINITE})
 #define {P}STATUS_NOT_FINITE ((uint32_t)1 << {BIT_NOT_FINITE})
 #define {P}STATUS_SATURATED ((uint32_t)1 << {BIT_SATURATED})
+#define {P}STATUS_NOT_CONVERGED ((uint32_t)1 << {BIT_NOT_CONVERGED})
 
 /* The model, for the record (the functions use inline constants): full-scale load
  * per component [{P}LOAD_UNIT]; omega slopes k_aa (eq. 2) [{P}OUTPUT_UNIT per {P}LOAD_UNIT];
@@ -307,6 +314,11 @@ def _decouple(plan: ExportPlan, ctype: str) -> str:
         else:  # sensor frame -> reference frame
             expr = " + ".join(f"{fmt(plan.rotation[i][j])} * g{j}" for j in range(n))
         lines.append(f"    f[{i}] = {expr};")
+    if plan.refine > 0:  # settled, as decouple.settled decides: |k_a g_a - p_a| <= tol * u_FS,a
+        for a in range(n):
+            tol = REFINE_TOLERANCE * abs(plan.k[a]) * plan.full_scale[a]
+            lines.append(f"    if (!(fabs(g{a} * {fmt(plan.k[a])} - p[{a}]) <= {fmt(tol)})) "
+                         f"st |= (uint32_t)1 << {BIT_NOT_CONVERGED};")
     ffinite = " || ".join(f"!isfinite(f[{a}])" for a in range(n))
     lines += [f"    if ({ffinite}) st |= (uint32_t)1 << {BIT_NOT_FINITE};", "    return st;", "}", ""]
     return "\n".join(lines)
