@@ -28,3 +28,17 @@ def chi_name(a: int, b: int, axes=AXES) -> str:
 
 
 CHI_NAMES = tuple(chi_name(a, b) for a, b in chi_pairs(len(AXES)))
+
+
+class NamedChi:
+    """Mixin for a chi_ab named ``"ab"`` (``name`` attribute): its output and input index."""
+
+    name: str
+
+    @property
+    def output_axis(self) -> int:
+        return AXES.index(self.name[0])
+
+    @property
+    def input_axis(self) -> int:
+        return AXES.index(self.name[1])

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from .axes import AXES
+from .axes import NamedChi
 from .config import Settings, check_refine
 from .decouple import TableDecoupler, decouple_exact, initial_forces
 from .decouple import coupling_errors as _coupling_errors
@@ -67,7 +67,7 @@ def refine_advice(checks: Iterable, n: int) -> dict:
 
 
 @dataclass(frozen=True)
-class Chi:
+class Chi(NamedChi):
     """A corrected coupling function chi_ab (eq. 4) fitted by epsilon-SVR.
 
     ``chi(u) = output_scale * (sum_i dual_coef_i exp(-gamma (u/input_scale - sv_i)^2) - rho)``
@@ -83,14 +83,6 @@ class Chi:
     input_range: tuple[float, float] = (-np.inf, np.inf)  # prime voltages trained on [V]
     n_points: int = 0
     surrogate: ChiSurrogate | None = None  # fast, verified stand-in (surrogate.py)
-
-    @property
-    def output_axis(self) -> int:
-        return AXES.index(self.name[0])
-
-    @property
-    def input_axis(self) -> int:
-        return AXES.index(self.name[1])
 
     def __call__(self, u: np.ndarray) -> np.ndarray:
         """Coupling error element [V] at prime voltage(s) ``u`` [V], exact kernel sum.

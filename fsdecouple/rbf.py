@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import qr, solve_triangular
 
-from .axes import AXES
+from .axes import AXES, NamedChi
 from .decouple import decouple_exact
 
 SPREAD = 1.0  # Section 4.1: "the variance is set to 1"
@@ -199,19 +199,11 @@ def fit_mimo(
 
 
 @dataclass(frozen=True)
-class SisoChi:
+class SisoChi(NamedChi):
     """A corrected coupling function chi_ab (eq. 4) approximated by a 1-D RBF network."""
 
     name: str
     net: RBFNetwork
-
-    @property
-    def output_axis(self) -> int:
-        return AXES.index(self.name[0])
-
-    @property
-    def input_axis(self) -> int:
-        return AXES.index(self.name[1])
 
     def __call__(self, u: np.ndarray) -> np.ndarray:
         u = np.asarray(u, dtype=float)

@@ -69,3 +69,13 @@ def sample_model(tmp_path_factory):
     path = tmp_path_factory.mktemp("model") / "model.json"
     invoke(["fit", SAMPLE / "calibration", "-o", path])
     return path
+
+
+def assert_one_line_error(r, *needles) -> str:
+    """The error contract: one line on stderr starting 'error:', no traceback, the needles in it."""
+    msg = r.stderr.strip()
+    assert msg.startswith("error:") and len(msg.splitlines()) == 1, msg
+    assert "Traceback" not in r.stderr + r.stdout
+    for n in needles:
+        assert n in msg, (n, msg)
+    return msg

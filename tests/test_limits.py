@@ -9,7 +9,7 @@ import sys
 import textwrap
 
 import pytest
-from conftest import ROOT, SAMPLE, invoke
+from conftest import ROOT, SAMPLE, assert_one_line_error, invoke
 from typer.testing import CliRunner
 
 from fsdecouple.cli import app
@@ -27,13 +27,6 @@ def _sparse(path, size=1 << 30):
     return path
 
 
-def _one_line(r, *needles):
-    msg = r.stderr.strip()
-    assert msg.startswith("error:") and len(msg.splitlines()) == 1, msg
-    assert "Traceback" not in r.stderr + r.stdout
-    for n in needles:
-        assert n in msg, (n, msg)
-    return msg
 
 
 def _commands(path, good_model, out):
@@ -56,7 +49,7 @@ def test_sparse_gigabyte_is_refused_before_reading(tmp_path, good_model, kind):
     big = _sparse(tmp_path / "big.json")
     out = tmp_path / "out.html"
     r = invoke(_commands(big, good_model, out)[kind], code=2)
-    _one_line(r, "big.json", "1024 MB", "limit", "not read")
+    assert_one_line_error(r, "big.json", "1024 MB", "limit", "not read")
     assert not out.exists()
 
 
@@ -64,7 +57,7 @@ def test_sparse_gigabyte_is_refused_before_reading(tmp_path, good_model, kind):
 def test_dev_zero_is_read_to_the_limit_only(tmp_path, good_model, kind):
     out = tmp_path / "out.html"
     r = invoke(_commands("/dev/zero", good_model, out)[kind], code=2)
-    _one_line(r, "/dev/zero", "more than the", "limit")
+    assert_one_line_error(r, "/dev/zero", "more than the", "limit")
     assert not out.exists()
 
 
@@ -78,7 +71,7 @@ def test_limits_are_as_documented():
 def test_config_just_over_the_limit(tmp_path):
     cfg = tmp_path / "c.yaml"
     cfg.write_text("# " + "x" * CONFIG_LIMIT + "\n")
-    _one_line(invoke(["fit", CAL, "-c", cfg, "-o", tmp_path / "m.json"], code=2),
+    assert_one_line_error(invoke(["fit", CAL, "-c", cfg, "-o", tmp_path / "m.json"], code=2),
               "c.yaml", "larger than the 1 MB limit for a config file")
 
 
@@ -86,7 +79,7 @@ def test_big_csv_as_config_quotes_an_excerpt(tmp_path):
     """`-c data.csv` under the limit: the message quotes the start of the file only."""
     cfg = tmp_path / "data.csv"
     cfg.write_text("t,ux,uy,uz\n" + "0,0.1,0.2,0.3\n" * 50_000)
-    msg = _one_line(invoke(["fit", CAL, "-c", cfg, "-o", tmp_path / "m.json"], code=2),
+    msg = assert_one_line_error(invoke(["fit", CAL, "-c", cfg, "-o", tmp_path / "m.json"], code=2),
                     "data.csv", "expected a mapping")
     assert len(msg) < 300, len(msg)
 
@@ -131,16 +124,16 @@ def test_alias_bomb_is_quick_and_small(tmp_path):
 def test_json_nested_deep_in_cv(tmp_path, good_model):
     cv = tmp_path / "cv.json"
     cv.write_text("[" * 100_000 + "]" * 100_000)
-    _one_line(invoke(["report", good_model, "--cv", cv, "-o", tmp_path / "r.html"], code=2),
+    assert_one_line_error(invoke(["report", good_model, "--cv", cv, "-o", tmp_path / "r.html"], code=2),
               "cv.json", "too deeply nested")
 
 
-def test_file_name_with_a_newline_stays_one_line(tmp_path, good_model):
+def test_file_name_with_a_newline_staysassert_one_line_error(tmp_path, good_model):
     bad = tmp_path / "two\nlines.json"
     bad.write_text("{not json")
-    msg = _one_line(invoke(["show", bad], code=2), "two\\nlines.json")
+    msg = assert_one_line_error(invoke(["show", bad], code=2), "two\\nlines.json")
     cfg = tmp_path / "c\n.yaml"
-    _one_line(invoke(["fit", CAL, "-c", cfg, "-o", tmp_path / "m.json"], code=2), "c\\n.yaml")
+    assert_one_line_error(invoke(["fit", CAL, "-c", cfg, "-o", tmp_path / "m.json"], code=2), "c\\n.yaml")
     assert msg
 
 

@@ -5,18 +5,10 @@ from __future__ import annotations
 import errno
 
 import pytest
-from conftest import SAMPLE, invoke
+from conftest import SAMPLE, assert_one_line_error, invoke
 
 from fsdecouple import simulate as simulate_module
 from fsdecouple.iotools import files
-
-
-def _one_line(r, *needles):
-    msg = r.stderr.strip()
-    assert msg.startswith("error:") and len(msg.splitlines()) == 1, msg
-    assert "Traceback" not in r.stderr + r.stdout
-    for n in needles:
-        assert n in msg, (n, msg)
 
 
 def test_simulate_failing_late_leaves_nothing(tmp_path, monkeypatch):
@@ -26,7 +18,7 @@ def test_simulate_failing_late_leaves_nothing(tmp_path, monkeypatch):
 
     monkeypatch.setattr(simulate_module, "simulate_task", fail)
     out = tmp_path / "new" / "sim"
-    _one_line(invoke(["simulate", out], code=2), "No space left")
+    assert_one_line_error(invoke(["simulate", out], code=2), "No space left")
     assert list(tmp_path.iterdir()) == []
 
 
@@ -41,7 +33,7 @@ def test_simulate_output_appearing_meanwhile_takes_back_all(tmp_path, monkeypatc
         return real(tmp, path, force=force)
 
     monkeypatch.setattr(files, "place", racing)
-    _one_line(invoke(["simulate", tmp_path / "sim", "--layout", layout], code=2),
+    assert_one_line_error(invoke(["simulate", tmp_path / "sim", "--layout", layout], code=2),
               last, "appeared while writing")
     left = sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*"))
     assert left == ["sim", f"sim/{last}"], left
@@ -49,18 +41,18 @@ def test_simulate_output_appearing_meanwhile_takes_back_all(tmp_path, monkeypatc
 
 def test_simulate_under_a_regular_file(tmp_path):
     (tmp_path / "afile").write_text("x")
-    _one_line(invoke(["simulate", tmp_path / "afile" / "sub"], code=2), "afile")
+    assert_one_line_error(invoke(["simulate", tmp_path / "afile" / "sub"], code=2), "afile")
     assert [p.name for p in tmp_path.iterdir()] == ["afile"]
 
 
 def test_simulate_into_a_dir_holding_a_file_named_calibration(tmp_path):
     (tmp_path / "calibration").write_text("x")
-    _one_line(invoke(["simulate", tmp_path], code=2), "calibration", "not a directory")
+    assert_one_line_error(invoke(["simulate", tmp_path], code=2), "calibration", "not a directory")
     assert [p.name for p in tmp_path.iterdir()] == ["calibration"]
 
 
 def test_simulate_negative_seed():
-    _one_line(invoke(["simulate", "never", "--seed", "-1"], code=2), "--seed -1")
+    assert_one_line_error(invoke(["simulate", "never", "--seed", "-1"], code=2), "--seed -1")
 
 
 @pytest.fixture(scope="module")
@@ -73,13 +65,13 @@ def model(tmp_path_factory):
 def test_report_png_failure_creates_no_directory(tmp_path, model):
     cv = tmp_path / "cv.json"
     cv.write_text("{truncated")
-    _one_line(invoke(["report", model, "--cv", cv, "-o", tmp_path / "r.html",
+    assert_one_line_error(invoke(["report", model, "--cv", cv, "-o", tmp_path / "r.html",
                       "--png", tmp_path / "figs" / "sub"], code=2), "cv.json")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cv.json"]
 
 
 def test_report_png_that_looks_like_a_file(tmp_path, model):
-    _one_line(invoke(["report", model, "-o", tmp_path / "r.html", "--png", tmp_path / "r2.html"],
+    assert_one_line_error(invoke(["report", model, "-o", tmp_path / "r.html", "--png", tmp_path / "r2.html"],
                      code=2), "r2.html", "looks like a file name")
     assert list(tmp_path.iterdir()) == []
 
@@ -95,7 +87,7 @@ def test_read_only_directory_at_mkstemp(tmp_path, monkeypatch):
         raise OSError(errno.EROFS, "Read-only file system")
 
     monkeypatch.setattr(files.tempfile, "mkstemp", erofs)
-    _one_line(invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "m.json"], code=2),
+    assert_one_line_error(invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "m.json"], code=2),
               "m.json", "Read-only file system")
     assert list(tmp_path.iterdir()) == []
 
@@ -104,5 +96,5 @@ def test_read_only_directory_refused_before_work(tmp_path, monkeypatch):
     real = files.os.access
     monkeypatch.setattr(files.os, "access",
                         lambda p, mode, **k: p != tmp_path and real(p, mode, **k))
-    _one_line(invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "m.json"], code=2),
+    assert_one_line_error(invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "m.json"], code=2),
               "m.json", "read-only filesystem or no permission")

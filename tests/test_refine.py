@@ -14,7 +14,7 @@ from conftest import SAMPLE, invoke
 from fsdecouple import decouple as decouple_module
 from fsdecouple import load_config, load_model
 from fsdecouple.apply import STATUSES, apply_file
-from fsdecouple.axes import AXES
+from fsdecouple.axes import NamedChi
 from fsdecouple.calibration import from_table
 from fsdecouple.checks import assumption_checks
 from fsdecouple.config import Settings, settings_from_dict
@@ -37,19 +37,11 @@ MAIN_FORCES = {
 
 
 @dataclass(frozen=True)
-class TrueChi:
+class TrueChi(NamedChi):
     """The simulator's coupling phi_ab as a chi of the prime output: chi_ab(u) = phi_ab(u / k_b)."""
 
     sensor: SimulatedSensor
     name: str
-
-    @property
-    def output_axis(self) -> int:
-        return AXES.index(self.name[0])
-
-    @property
-    def input_axis(self) -> int:
-        return AXES.index(self.name[1])
 
     def __call__(self, u):
         return self.sensor.phi(self.name, np.asarray(u) / self.sensor.k[self.input_axis])
