@@ -85,15 +85,20 @@ def test_big_csv_as_config_quotes_an_excerpt(tmp_path):
 
 
 def _maxrss_kb(args):
-    """Run the CLI in a fresh interpreter; its exit code, stderr and peak RSS [kB]."""
+    """Run the CLI in a fresh interpreter; its exit code, stderr and peak RSS [kB].
+
+    The peak is the process's own VmHWM: getrusage's ru_maxrss survives exec, so a
+    child forked from a large pytest process would report the parent's peak.
+    """
     code = textwrap.dedent(f"""
-        import resource, sys
+        import sys
         sys.argv = ["fsdecouple", *{[str(a) for a in args]!r}]
         from fsdecouple.cli import main
         try:
             main()
         finally:
-            print("MAXRSS", resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)
+            hwm = next(line for line in open("/proc/self/status") if line.startswith("VmHWM"))
+            print("MAXRSS", hwm.split()[1], file=sys.stderr)
     """)
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                        env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=120)
