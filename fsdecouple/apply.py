@@ -132,6 +132,13 @@ def apply_file(
     """
     path, out = Path(voltages), Path(out)
     settings = settings or model.settings
+    if settings.units != model.settings.units:
+        # the model's k and ranges are in its calibration's units: a log in others
+        # would be decoupled silently wrong by a factor of 1000 or more
+        raise InputError(
+            f"the config's units ({settings.output_unit} outputs, {settings.load_unit} loads) are "
+            f"not the model's ({model.settings.output_unit}, {model.settings.load_unit}); "
+            "convert the log with scale: or use the calibration's config")
     if tare is not None and zero is not None:
         raise InputError("give either --tare or --zero, not both")
     unit = model.settings.load_unit if unit is None else unit

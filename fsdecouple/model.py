@@ -206,6 +206,11 @@ class CouplingErrorModel:
     matrix: np.ndarray | None = None
     _tables: Any = field(default=None, init=False, repr=False, compare=False)
 
+    def __getstate__(self) -> dict:
+        # the table evaluator holds thread-local scratch space: rebuilt where the
+        # model lands (a Dask or Spark worker), never pickled
+        return {**self.__dict__, "_tables": None}
+
     @property
     def n_components(self) -> int:
         return len(self.k)

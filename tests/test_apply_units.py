@@ -286,3 +286,16 @@ def test_apply_and_c_saturation_agree_without_a_tare(tmp_path):
     got = apply_statuses(model, u, tmp_path)
     assert (got == want).all()
     assert (got == "saturated").sum() > 1000
+
+
+def test_a_config_in_other_units_than_the_model_is_refused(tmp_path):
+    """A log in counts read with a model fitted in volts would be off by orders of magnitude."""
+    from conftest import SAMPLE, invoke
+
+    model = tmp_path / "m.json"
+    invoke(["fit", SAMPLE / "calibration", "-o", model, "--no-verdict"])
+    cfg = tmp_path / "counts.yaml"
+    cfg.write_text("units: {load: N, output: count}\n")
+    out = tmp_path / "f.csv"
+    r = invoke(["apply", model, SAMPLE / "task_voltages.csv", "-c", cfg, "-o", out], code=2)
+    assert "not the model's" in r.stderr and not out.exists()

@@ -134,3 +134,13 @@ def test_full_scale_scaling_handles_millivolts(sim_dir, settings):
     np.testing.assert_allclose(scaled.decouple(u * 1e3), v_model.decouple(u), atol=0.2)
     for axis in AXES:
         assert scaled.report.gamma_after[axis] < 0.5 * scaled.report.gamma_before[axis]
+
+
+def test_a_used_model_pickles_for_workers(model):
+    """Dask and Spark ship the model to workers: its table scratch space is not pickled."""
+    import pickle
+
+    u = np.random.default_rng(4).uniform(-0.5, 0.5, (1000, 3))
+    before = model.decouple(u)  # builds the tables and their thread-local scratch
+    again = pickle.loads(pickle.dumps(model))
+    assert np.array_equal(again.decouple(u), before)
