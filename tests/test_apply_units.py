@@ -290,8 +290,6 @@ def test_apply_and_c_saturation_agree_without_a_tare(tmp_path):
 
 def test_a_config_in_other_units_than_the_model_is_refused(tmp_path):
     """A log in counts read with a model fitted in volts would be off by orders of magnitude."""
-    from conftest import SAMPLE, invoke
-
     model = tmp_path / "m.json"
     invoke(["fit", SAMPLE / "calibration", "-o", model, "--no-verdict"])
     cfg = tmp_path / "counts.yaml"
