@@ -9,6 +9,7 @@ into one line.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -61,6 +62,14 @@ class SafeUniqueLoader(yaml.SafeLoader):
 
 
 SafeUniqueLoader.add_constructor("tag:yaml.org,2002:int", SafeUniqueLoader.construct_yaml_int)
+# YAML 1.1 wants a dot in a float, so `epsilon: 1e-4` would be the string "1e-4"
+# and be refused as "expected a number"; read 1e-4, 1E5 and +2e3 as the floats a
+# technician means (the resolvers are the loader's own copy, not PyYAML's global)
+SafeUniqueLoader.yaml_implicit_resolvers = {
+    k: list(v) for k, v in SafeUniqueLoader.yaml_implicit_resolvers.items()}
+SafeUniqueLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float", re.compile(r"^[-+]?[0-9][0-9_]*[eE][-+]?[0-9]+$"),
+    list("-+0123456789"))
 
 MAX_YAML_NODES = 100_000  # a config holds about fifty
 

@@ -333,3 +333,13 @@ def test_a_log_from_a_pipe_is_read_once_and_whole(sample_model_file, tmp_path):
     writer.wait(timeout=60)
     assert run.returncode == 0, run.stderr.decode()
     assert out.read_bytes() == ref.read_bytes()
+
+
+def test_scientific_notation_without_a_dot_is_a_number(tmp_path):
+    """YAML 1.1 reads `1e-4` as text; a technician means the number (Table 2's epsilon)."""
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("svr: {epsilon: 1e-4, C: 1E3, tolerance: +1e-3}\n")
+    s = load_config(cfg)
+    assert (s.svr.epsilon, s.svr.C, s.svr.tolerance) == (1e-4, 1000.0, 1e-3)
+    cfg.write_text("sensor: rig1e5\n")  # not a number: stays a name
+    assert load_config(cfg).sensor == "rig1e5"
