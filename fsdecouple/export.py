@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from .decouple import PROMISE, decouple_exact
+from .decouple import FORCE_LIMIT, PROMISE, decouple_exact
 from .errors import ConfigError, FsdecoupleError
 from .export_tables import CHECKS_PER_INTERVAL, coarsest_tables, table_bound
 from .iotools.files import atomic_write
@@ -389,8 +389,8 @@ def expected_status(plan: ExportPlan, u: np.ndarray, f: np.ndarray) -> int:
                 st |= 1 << BIT_OUTSIDE_TABLE
     if not np.isfinite(u).all():
         st |= 1 << BIT_INPUT_NOT_FINITE
-    if not np.isfinite(f).all():
-        st |= 1 << BIT_NOT_FINITE
+    if not (np.abs(f) <= FORCE_LIMIT * np.abs(plan.full_scale).max()).all():
+        st |= 1 << BIT_NOT_FINITE  # apply's not_finite: NaN, inf or beyond FORCE_LIMIT x F.S.
     if plan.refine > 0:  # the refinement's settle test, as decouple.settled decides it
         converged = np.empty(1, dtype=bool)
         decouple_exact(np.asarray(u, dtype=float).reshape(1, -1), plan.k,

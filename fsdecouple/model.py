@@ -129,9 +129,12 @@ class Chi(NamedChi):
             raise ValueError(f"gamma = {chi.gamma!r}, expected a positive number")
         if not (np.isfinite(sv).all() and np.isfinite(coef).all() and np.isfinite(chi.rho)):
             raise ValueError("support vectors, dual coefficients and rho must be finite")
-        for scale in (chi.input_scale, chi.output_scale):
-            if not (np.isfinite(scale) and scale != 0):
-                raise ValueError(f"scale {scale!r}, expected a finite non-zero number")
+        for key in ("input_scale", "output_scale"):
+            scale = getattr(chi, key)
+            if not (np.isfinite(scale) and scale > 0):  # fit writes positive scales only
+                raise ValueError(f"{key} {scale!r}, expected a finite positive number")
+        if not lo <= hi:
+            raise ValueError(f"input_range [{lo!r}, {hi!r}] is inverted, expected lo <= hi")
         return chi
 
 
