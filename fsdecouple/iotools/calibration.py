@@ -34,7 +34,14 @@ def list_calibration(path: str | Path) -> tuple[list[Path], list[Path]]:
     if not path.is_dir():
         return [path], []
     entries = [p for p in path.iterdir() if p.suffix.lower() == ".csv"]
-    files = sorted((p for p in entries if not p.name.startswith(".") and p.is_file()),
+    for p in sorted(entries, key=lambda p: natural_key(p.name)):
+        if not p.name.startswith(".") and not p.is_file():
+            # a repetition that cannot be read is never skipped without a word
+            what = ("a symbolic link to a missing file" if p.is_symlink() and not p.exists()
+                    else "a directory" if p.is_dir() else "not a regular file (a device or pipe?)")
+            raise InputError(f"{p}: named like a repetition file but is {what}; "
+                             "restore the file or move it out of the calibration directory")
+    files = sorted((p for p in entries if not p.name.startswith(".")),
                    key=lambda p: natural_key(p.name))
     if not files:
         raise InputError(f"{path}: directory holds no .csv files")
