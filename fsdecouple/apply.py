@@ -28,13 +28,12 @@ import pyarrow.compute as pc
 
 from .axes import FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .config import Settings
-from .decouple import FORCE_LIMIT
 from .errors import InputError, where
 from .iotools.files import atomic_write, refuse_overwriting_input
 from .iotools.logs import Block, LogFile, is_parquet
 from .iotools.sinks import CsvSink, ParquetSink, force_decimals
 from .iotools.text import HEADER_ROW, require_columns
-from .model import CouplingErrorModel
+from .model import FORCE_LIMIT, CouplingErrorModel
 from .units import LOAD_UNITS, load_factor
 from .zero import tare_offsets
 
@@ -53,7 +52,7 @@ STATUSES = {
     "missing": "a voltage is empty or missing (blank or short row): no forces",
     "truncated": "last line of a log that does not end with a newline (the writer "
                  "was cut off, a number may be cut short): no forces",
-    "not_finite": "a force is not finite (eq. (11) overflows) or beyond decouple.FORCE_LIMIT "
+    "not_finite": "a force is not finite (eq. (11) overflows) or beyond model.FORCE_LIMIT "
                   "times the largest full-scale load: no forces",
     "not_converged": "the model's second-order refinement (refine: K) did not settle "
                      "for this row (decouple.REFINE_TOLERANCE): no forces",

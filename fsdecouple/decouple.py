@@ -46,10 +46,6 @@ import numpy as np
 # be exceeded a little between check points.  So a surrogate is used only if its
 # recorded error is at most a quarter of the promise (fit builds them to a tenth).
 PROMISE = 1e-9
-# A force beyond this many times the largest full-scale load is no measurement (a
-# voltage of 1e300, a slope of 1e300 in a model file): apply gives it the status
-# not_finite, as it does an overflow, and the C export its NOT_FINITE bit.
-FORCE_LIMIT = 1e6
 MAX_SURROGATE_ERROR = PROMISE / 4
 # Up to this many rows, a call goes row by row through the plain-Python evaluator
 # (~1 us a row, bit-identical) rather than the block path (~50 us of numpy calls).

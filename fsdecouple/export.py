@@ -24,11 +24,11 @@ from typing import Any
 
 import numpy as np
 
-from .decouple import FORCE_LIMIT, PROMISE, decouple_exact
+from .decouple import PROMISE, decouple_exact
 from .errors import ConfigError, FsdecoupleError
 from .export_tables import CHECKS_PER_INTERVAL, coarsest_tables, table_bound
 from .iotools.files import atomic_write
-from .model import RANGE_MARGIN
+from .model import FORCE_LIMIT, RANGE_MARGIN
 from .modelfile import model_to_dict
 
 PRECISIONS = ("double", "float")

@@ -19,7 +19,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .decouple import FORCE_LIMIT, REFINE_TOLERANCE
+from .decouple import REFINE_TOLERANCE
+from .model import FORCE_LIMIT
 
 if TYPE_CHECKING:
     from .export import ChiPlan, ExportPlan

@@ -139,6 +139,10 @@ class Chi(NamedChi):
 
 
 RANGE_MARGIN = 0.01  # of the calibrated span: see CouplingErrorModel.extrapolation_limits
+# A force beyond this many times the largest full-scale load is no measurement (a
+# voltage of 1e300, a slope of 1e300 in a model file): apply gives it the status
+# not_finite, as it does an overflow, and the C export its NOT_FINITE bit.
+FORCE_LIMIT = 1e6
 
 
 @dataclass

@@ -9,9 +9,9 @@ import pyarrow.parquet as pq
 from conftest import assert_one_line_error, invoke
 
 from fsdecouple.apply import RowRules, decouple_rows
-from fsdecouple.decouple import FORCE_LIMIT
 from fsdecouple.iotools.logs import Block
 from fsdecouple.iotools.sinks import CsvSink
+from fsdecouple.model import FORCE_LIMIT
 from fsdecouple.modelfile import load_model
 
 
