@@ -33,7 +33,7 @@ from .iotools.files import atomic_write, refuse_overwriting_input
 from .iotools.logs import Block, LogFile, is_parquet
 from .iotools.sinks import CsvSink, ParquetSink, force_decimals
 from .iotools.text import HEADER_ROW, require_columns
-from .model import CouplingErrorModel
+from .model import FORCE_LIMIT, CouplingErrorModel
 from .units import LOAD_UNITS, load_factor
 from .zero import tare_offsets
 
@@ -52,7 +52,8 @@ STATUSES = {
     "missing": "a voltage is empty or missing (blank or short row): no forces",
     "truncated": "last line of a log that does not end with a newline (the writer "
                  "was cut off, a number may be cut short): no forces",
-    "not_finite": "the voltages are so large that eq. (11) overflows: no forces",
+    "not_finite": "a force is not finite (eq. (11) overflows) or beyond model.FORCE_LIMIT "
+                  "times the largest full-scale load: no forces",
     "not_converged": "the model's second-order refinement (refine: K) did not settle "
                      "for this row (decouple.REFINE_TOLERANCE): no forces",
 }
@@ -190,7 +191,9 @@ def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarra
         unsettled = ~converged & ~empty
         code[unsettled] = NOT_CONVERGED_
         empty |= unsettled
-        huge = ~np.isfinite(f).all(axis=1) & ~empty
+        # not finite, or beyond FORCE_LIMIT x full scale: physically meaningless
+        bound = FORCE_LIMIT * float(np.max(np.abs(model.settings.full_scale)))
+        huge = ~(np.abs(f) <= bound).all(axis=1) & ~empty
         code[huge] = NOT_FINITE_
         empty |= huge
         outside = ((u < rules.lo) | (u > rules.hi)).any(axis=1) & ~empty

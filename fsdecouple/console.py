@@ -112,8 +112,9 @@ def apply_warnings(summary) -> list[str]:
         w.append(f"row {summary.rows + 1}, the last, does not end with a newline (the writer was "
                  "cut off?); kept with empty forces and status 'truncated'")
     if summary.not_finite_rows:
-        w.append(f"{summary.not_finite_rows} rows have voltages so large that eq. (11) "
-                 "overflows; kept with empty forces and status 'not_finite'")
+        w.append(f"{summary.not_finite_rows} rows have forces that overflow or pass 1e6 x "
+                 "full scale (voltages far too large, or a broken model); kept with empty "
+                 "forces and status 'not_finite'")
     if summary.saturated_rows:
         w.append(f"{summary.saturated_rows} rows have an output at or beyond its limit "
                  "(limits:), so the channel may have clipped; their forces are written "

@@ -28,7 +28,7 @@ from .decouple import PROMISE, decouple_exact
 from .errors import ConfigError, FsdecoupleError
 from .export_tables import CHECKS_PER_INTERVAL, coarsest_tables, table_bound
 from .iotools.files import atomic_write
-from .model import RANGE_MARGIN
+from .model import FORCE_LIMIT, RANGE_MARGIN
 from .modelfile import model_to_dict
 
 PRECISIONS = ("double", "float")
@@ -389,8 +389,8 @@ def expected_status(plan: ExportPlan, u: np.ndarray, f: np.ndarray) -> int:
                 st |= 1 << BIT_OUTSIDE_TABLE
     if not np.isfinite(u).all():
         st |= 1 << BIT_INPUT_NOT_FINITE
-    if not np.isfinite(f).all():
-        st |= 1 << BIT_NOT_FINITE
+    if not (np.abs(f) <= FORCE_LIMIT * np.abs(plan.full_scale).max()).all():
+        st |= 1 << BIT_NOT_FINITE  # apply's not_finite: NaN, inf or beyond FORCE_LIMIT x F.S.
     if plan.refine > 0:  # the refinement's settle test, as decouple.settled decides it
         converged = np.empty(1, dtype=bool)
         decouple_exact(np.asarray(u, dtype=float).reshape(1, -1), plan.k,

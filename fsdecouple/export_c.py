@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .decouple import REFINE_TOLERANCE
+from .model import FORCE_LIMIT
 
 if TYPE_CHECKING:
     from .export import ChiPlan, ExportPlan
@@ -128,7 +129,7 @@ def _preamble(plan: ExportPlan) -> str:
  *   bit {BIT_OUTSIDE_TABLE}: an input lay outside a table, so an exact kernel sum was
  *      evaluated (slower; the forces are as accurate; never set without tables);
  *   bit {BIT_INPUT_NOT_FINITE}: an input is NaN or infinite (apply: NaN = "missing");
- *   bit {BIT_NOT_FINITE}: a force is not finite (apply: "not_finite");
+ *   bit {BIT_NOT_FINITE}: a force is not finite or beyond 1e6 x full scale (apply: "not_finite");
  *   bit {BIT_NOT_CONVERGED}: the second-order refinement ({P}REFINE_STEPS > 0) did not
  *     settle: the last step moved a prime output by more than REFINE_TOLERANCE of its
  *     full-scale output (apply: "not_converged", no forces); do not use f;
@@ -319,7 +320,9 @@ def _decouple(plan: ExportPlan, ctype: str) -> str:
             tol = REFINE_TOLERANCE * abs(plan.k[a]) * plan.full_scale[a]
             lines.append(f"    if (!(fabs(g{a} * {fmt(plan.k[a])} - p[{a}]) <= {fmt(tol)})) "
                          f"st |= (uint32_t)1 << {BIT_NOT_CONVERGED};")
-    ffinite = " || ".join(f"!isfinite(f[{a}])" for a in range(n))
+    # apply's not_finite: NaN, infinite, or beyond FORCE_LIMIT x the largest full scale
+    bound = fmt(FORCE_LIMIT * max(abs(v) for v in plan.full_scale))
+    ffinite = " || ".join(f"!(fabs(f[{a}]) <= {bound})" for a in range(n))
     lines += [f"    if ({ffinite}) st |= (uint32_t)1 << {BIT_NOT_FINITE};", "    return st;", "}", ""]
     return "\n".join(lines)
 

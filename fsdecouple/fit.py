@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .axes import AXES, CHI_NAMES, VOLTAGE_COLUMNS
+from .axes import AXES, CHI_NAMES, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .config import Settings
 from .decouple import MAX_SURROGATE_ERROR, usable
 from .errors import InputError
@@ -99,16 +99,34 @@ def fit(
         return _establish(calib, settings, workers, fit_svr, tables)
 
 
+def _omega_failure(calib: CalibrationSet, a: int) -> str:
+    """Why omega_a has no finite non-zero slope: values too large, or a flat sweep.
+
+    k = sum(f u) / sum(f^2) (eq. 2): sums that overflow a double give an infinite,
+    NaN or zero k too, and that is not a voltage that does not change.
+    """
+    axis = AXES[a]
+    s = calib.sweep(axis)
+    f = s[FORCE_COLUMNS[a]].to_numpy(dtype=float)
+    u = s[VOLTAGE_COLUMNS[a]].to_numpy(dtype=float)
+    with np.errstate(over="ignore", invalid="ignore"):
+        sums = (float(f @ f), float(f @ u))
+    if not np.isfinite(sums).all():
+        big = max(float(np.abs(f).max(initial=0.0)), float(np.abs(u).max(initial=0.0)))
+        return (f"{calib.source}: the {axis} sweeps' values are too large (up to {big:.3g}): "
+                f"the sums of eq. (2) overflow a double, so omega_{axis} cannot be fitted; "
+                "check the units and scale: of the data")
+    return (f"{calib.source}: the {axis} sweeps' prime voltage u{axis} does not change with "
+            f"f{axis}; cannot fit omega_{axis} (eq. 2)")
+
+
 def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
                fit_svr, with_tables: bool) -> CouplingErrorModel:
     omega = fit_omega(calib.points)
     warnings = list(calib.warnings)
     for a, axis in enumerate(AXES):
         if not np.isfinite(omega.k[a]) or omega.k[a] == 0.0:
-            raise InputError(
-                f"{calib.source}: the {axis} sweeps' prime voltage u{axis} does not change with f{axis}; "
-                f"cannot fit omega_{axis} (eq. 2)"
-            )
+            raise InputError(_omega_failure(calib, a))
         if not omega.r2[a] >= settings.min_r2:
             warnings.append(
                 f"omega_{axis}: R^2 = {omega.r2[a]:.5f} is below {settings.min_r2} "

@@ -129,13 +129,20 @@ class Chi(NamedChi):
             raise ValueError(f"gamma = {chi.gamma!r}, expected a positive number")
         if not (np.isfinite(sv).all() and np.isfinite(coef).all() and np.isfinite(chi.rho)):
             raise ValueError("support vectors, dual coefficients and rho must be finite")
-        for scale in (chi.input_scale, chi.output_scale):
-            if not (np.isfinite(scale) and scale != 0):
-                raise ValueError(f"scale {scale!r}, expected a finite non-zero number")
+        for key in ("input_scale", "output_scale"):
+            scale = getattr(chi, key)
+            if not (np.isfinite(scale) and scale > 0):  # fit writes positive scales only
+                raise ValueError(f"{key} {scale!r}, expected a finite positive number")
+        if not lo <= hi:
+            raise ValueError(f"input_range [{lo!r}, {hi!r}] is inverted, expected lo <= hi")
         return chi
 
 
 RANGE_MARGIN = 0.01  # of the calibrated span: see CouplingErrorModel.extrapolation_limits
+# A force beyond this many times the largest full-scale load is no measurement (a
+# voltage of 1e300, a slope of 1e300 in a model file): apply gives it the status
+# not_finite, as it does an overflow, and the C export its NOT_FINITE bit.
+FORCE_LIMIT = 1e6
 
 
 @dataclass

@@ -17,9 +17,11 @@ import numpy as np
 from . import __version__
 from .axes import AXES, CHI_NAMES
 from .config import settings_from_dict
+from .decouple import MAX_SURROGATE_ERROR, usable
 from .errors import ModelFileError, excerpt
 from .iotools.files import MODEL_LIMIT, atomic_write, read_bounded
 from .model import Chi, CouplingErrorModel, FitReport
+from .surrogate import spot_check
 
 FORMAT = "fsdecouple.model"
 FORMAT_VERSION = 2
@@ -127,10 +129,60 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
     report = doc.get("report")
     _check_report(report, source)
     method, matrix = _method(doc, len(k), source)
-    return CouplingErrorModel(
+    model = CouplingErrorModel(
         settings, k, chi, FitReport.from_dict(report), doc.get("provenance", {}),
         doc.get("created", ""), method, matrix,
     )
+    _check_slopes(model, source)
+    _check_tables(model, source)
+    return model
+
+
+# A slope's full-scale output |k_b| F_FS,b and the prime-voltage span the chi were
+# trained on (input_range) come from the same sweeps: within a factor of ~10 in any
+# fitted model.  Beyond this factor either way the slope cannot be the fit's.
+SLOPE_SPAN_FACTOR = 1e6
+
+
+def _check_slopes(model: CouplingErrorModel, source: str) -> None:
+    """Each slope k agrees with the voltage span the model was calibrated on.
+
+    A digest-valid file with k = 1e300 would otherwise decouple every force to 0.
+    """
+    fs_out, unit = model.full_scale_output, model.settings.output_unit
+    for b, axis in enumerate(AXES):
+        lo, hi = model.calibrated_range[b]
+        span = hi - lo
+        if not span > 0:
+            continue  # nothing to compare with
+        ratio = fs_out[b] / span
+        if not (1 / SLOPE_SPAN_FACTOR <= ratio <= SLOPE_SPAN_FACTOR):
+            raise ModelFileError(
+                f"{source}: omega {axis}: slope k = {float(model.k[b])!r} puts full scale at "
+                f"{fs_out[b]:.3g} {unit}, but the calibration spanned {span:.3g} {unit}; "
+                "the slope is not the fit's (edited?), refit the model"
+            )
+
+
+def _check_tables(model: CouplingErrorModel, source: str) -> None:
+    """Each table the fast path would use agrees with its own kernel sum (spot checks).
+
+    The digest proves the file is as written, not that its tables are right: a
+    table that disagrees beyond the gate the fast path trusts
+    (:func:`fsdecouple.decouple.usable`) is refused, never applied silently.
+    """
+    fs_out = model.full_scale_output
+    for c in model.chi.values():
+        gate = MAX_SURROGATE_ERROR * fs_out[c.output_axis]
+        if not usable(c.surrogate, fs_out[c.output_axis]):
+            continue  # the fast path leaves it to the exact kernel sum anyway
+        err, x = spot_check(c, c.surrogate)
+        if not err <= gate:
+            raise ModelFileError(
+                f"{source}: chi '{c.name}': its surrogate table differs from its own kernel "
+                f"sum by {err:.3g} at u = {x:.6g} (the fast path trusts {gate:.3g}); "
+                "the model is inconsistent, refit it"
+            )
 
 
 def _method(doc: dict[str, Any], n: int, source: str) -> tuple[str, np.ndarray | None]:

@@ -188,6 +188,33 @@ def measured_error(chi, table: ChiSurrogate) -> float:
     return _max_error(chi.name, table, x, chi(x))
 
 
+# Kernel terms (points x support vectors) that verifying one table at load may
+# spend: ~5 ms, so loading a model stays fast however large its tables.
+LOAD_CHECK_BUDGET = 1e6
+LOAD_CHECK_MIN_POINTS = 16
+
+
+def spot_check(chi, table: ChiSurrogate) -> tuple[float, float]:
+    """``(largest |table - chi|, where)`` at interval midpoints: a model file's check at load.
+
+    Midpoints are points of the check grid that ``max_error`` was measured on (so
+    a table as fit built it passes exactly), and each depends on both knot values
+    and both slopes of its interval: every midpoint when the budget
+    (:data:`LOAD_CHECK_BUDGET`) allows, else at least
+    :data:`LOAD_CHECK_MIN_POINTS` spread evenly over the table.
+    """
+    n = table.intervals
+    count = min(n, max(LOAD_CHECK_MIN_POINTS, int(LOAD_CHECK_BUDGET // max(1, chi.support_vectors.size))))
+    i = np.unique(np.linspace(0, n - 1, count).round().astype(np.intp))
+    # check_points' expression for the midpoints (sub = 1/2), so the same doubles
+    x = table.lo + (table.hi - table.lo) * (i / n + 0.5 / n)
+    with np.errstate(all="ignore"):
+        err = np.abs(table(x) - chi(x))
+    err = np.where(np.isnan(err), np.inf, err)
+    worst = int(np.argmax(err))
+    return float(err[worst]), float(x[worst])
+
+
 def _interleave(even: np.ndarray, odd: np.ndarray) -> np.ndarray:
     out = np.empty(even.size + odd.size)
     out[::2], out[1::2] = even, odd

@@ -6,7 +6,8 @@ it applies, ``row N`` and ``column 'x'``).  Placeholders in the command:
 
 ``{case}``   a copy of the case directory;
 ``{cal}``    a copy of sample_data/calibration with the case's ``cal/`` files laid
-             over it (and the files listed in ``remove`` deleted);
+             over it (the files listed in ``remove`` deleted, and the ``symlinks``
+             (name: target) and ``dirs`` given made);
 ``{model}``  a good model file fitted on sample_data/calibration;
 ``{log}``    sample_data/task_voltages.csv.
 
@@ -53,6 +54,11 @@ def prepare(name: str, tmp_path: Path, good_model: Path) -> tuple[dict, list[str
                 shutil.copy(f, cal / f.name)
         for f in spec.get("remove", []):
             (cal / f).unlink()
+        # what git cannot carry: a dangling symbolic link, an empty directory
+        for f, target in spec.get("symlinks", {}).items():
+            (cal / f).symlink_to(target)
+        for f in spec.get("dirs", []):
+            (cal / f).mkdir()
         values["cal"] = str(cal)
     return spec, [a.format(**values) for a in spec["command"]]
 

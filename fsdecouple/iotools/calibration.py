@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import io
 from dataclasses import dataclass
+from decimal import Decimal, InvalidOperation
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -12,7 +13,7 @@ import numpy as np
 
 from ..axes import FORCE_COLUMNS, VOLTAGE_COLUMNS
 from ..config import Settings
-from ..errors import InputError, where
+from ..errors import InputError, excerpt, where
 from .files import natural_key, reading
 from .text import HEADER_ROW, read_csv_text, read_header, require_columns, to_numbers
 
@@ -33,11 +34,57 @@ def list_calibration(path: str | Path) -> tuple[list[Path], list[Path]]:
     if not path.is_dir():
         return [path], []
     entries = [p for p in path.iterdir() if p.suffix.lower() == ".csv"]
-    files = sorted((p for p in entries if not p.name.startswith(".") and p.is_file()),
+    for p in sorted(entries, key=lambda p: natural_key(p.name)):
+        if not p.name.startswith(".") and not p.is_file():
+            # a repetition that cannot be read is never skipped without a word
+            what = ("a symbolic link to a missing file" if p.is_symlink() and not p.exists()
+                    else "a directory" if p.is_dir() else "not a regular file (a device or pipe?)")
+            raise InputError(f"{p}: named like a repetition file but is {what}; "
+                             "restore the file or move it out of the calibration directory")
+    files = sorted((p for p in entries if not p.name.startswith(".")),
                    key=lambda p: natural_key(p.name))
     if not files:
         raise InputError(f"{path}: directory holds no .csv files")
     return files, sorted(p for p in entries if p.name.startswith("."))
+
+
+# Repetition labels are whole numbers 1 .. 2**53, read exactly from their text: a
+# label through a float would merge 2**53 and 2**53 + 1, and 1e20 would wrap.
+MAX_REPETITION = 2**53
+
+
+def _repetition_labels(cells, path: Path, column: str, rows, decimal: str) -> np.ndarray:
+    """Repetition numbers as exact integers, or name the first cell that is not one."""
+    text = np.asarray([str(c).strip().replace(decimal, ".") for c in cells], dtype=object)
+    uniq, inverse = np.unique(text, return_inverse=True)  # a few labels, many rows
+    values, bad = np.zeros(len(uniq), dtype=np.int64), np.zeros(len(uniq), dtype=bool)
+    for j, t in enumerate(uniq):
+        try:
+            value = Decimal(t)
+        except InvalidOperation:
+            bad[j] = True
+            continue
+        if not value.is_finite() or value != value.to_integral_value() \
+                or not 1 <= value <= MAX_REPETITION:
+            bad[j] = True
+        else:
+            values[j] = int(value)
+    if bad.any():
+        i = int(np.argmax(bad[inverse]))
+        big = _too_big(text[i])
+        raise InputError(
+            f"{where(path, int(rows[i]), column)}: {excerpt(str(cells.iloc[i]).strip())!r} is "
+            f"not a repetition number (1, 2, ...{', at most 2**53' if big else ''})"
+        )
+    return values[inverse]
+
+
+def _too_big(text: str) -> bool:
+    try:
+        value = Decimal(text)
+    except InvalidOperation:
+        return False
+    return value.is_finite() and value > MAX_REPETITION
 
 
 def calibration_files(path: str | Path) -> list[Path]:
@@ -112,15 +159,8 @@ def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationT
             raise InputError(f"{f}: header only, no data rows")
         out = pd.DataFrame({"file": str(f), "row": rows})
         if numbered:
-            reps = to_numbers(raw[cols["repetition"]], f, cols["repetition"], rows)
-            bad = (reps != np.round(reps)) | (reps < 1)
-            if bad.any():
-                i = int(np.argmax(bad))
-                raise InputError(
-                    f"{where(f, int(rows[i]), cols['repetition'])}: "
-                    f"{raw[cols['repetition']].iloc[i]!r} is not a repetition number (1, 2, ...)"
-                )
-            out["repetition"] = reps.astype(int)
+            out["repetition"] = _repetition_labels(raw[cols["repetition"]], f,
+                                                   cols["repetition"], rows, settings.decimal)
         else:
             out["repetition"] = rep_index  # a directory's file order, or the one CSV
         if cols["axis"] in header:

@@ -65,7 +65,11 @@ class CsvSink:
         ``empty``: rows written with empty forces; ``extra``: string arrays appended.
         """
         if self.decimals is not None:
-            f = np.round(f, self.decimals)
+            # rounding scales by 10**decimals: near 1e300 that overflows, and a finite
+            # force must never be written as inf; such values keep their own digits
+            with np.errstate(over="ignore", invalid="ignore"):
+                rounded = np.round(f, self.decimals)
+            f = np.where(np.isfinite(rounded) | ~np.isfinite(f), rounded, f)
         text = [self._text(a) for a in _forces_table(f, empty)]
         if block.lines is not None:
             parts = [a.cast(pa.binary()) for a in (*text, *extra)]
