@@ -197,6 +197,22 @@ def main() -> int:
     row("9. ingest 3,000 files vs 300 files", t_many, "s", t_few, "300 files [s]",
         t_many / t_few, "<= 12 (linear: 10)", t_many / t_few <= 12)
 
+    # --- 9b. fit against the number of repetitions: libsvm's training limits it ------
+    # 300 repetitions take over 4 min here (libsvm training grows faster than the
+    # points), too long for this run: 6 and 60 show the growth
+    print("fit (simulated sets of 6 and 60 repetitions)")
+    from fsdecouple.simulate import simulate
+
+    fit_t = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in (6, 60):
+            simulate(Path(tmp) / f"s{n}", seed=1, repetitions=n)
+            c = load_calibration(Path(tmp) / f"s{n}" / "calibration", settings)
+            fit_t[n] = median_time(lambda c=c: fit(c, settings), repeats if n == 6 else 1)
+    for n in (60,):
+        row(f"9b. fit, {n} repetitions vs 6", fit_t[n], "s", fit_t[6], "6 repetitions [s]",
+            fit_t[n] / fit_t[6], f"info ({n // 6}x the points)", True)
+
     # --- 4. fitting: six SVRs in parallel threads ------------------------------------
     print("fit (sample data, six SVRs + surrogates)")
     seq = median_time(lambda: fit(calib, settings, workers=1), repeats)
