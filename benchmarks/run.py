@@ -177,6 +177,42 @@ def main() -> int:
         print(f"  {name}: {value:.4g} {unit}; {base_name} {base:.4g}; ratio {ratio:.3g} "
               f"({goal}): {'PASS' if ok else 'FAIL'}", flush=True)
 
+    # --- 9. ingest of many repetition files: linear in the number of files ----------
+    print("ingest (3,000 vs 300 copies of the sample repetition files)")
+    reps_src = sorted((ROOT / "sample_data" / "calibration").glob("rep*.csv"))
+
+    def rep_dir(tmp: Path, n: int) -> Path:
+        out = tmp / f"reps{n}"
+        out.mkdir()
+        for i in range(n):
+            (out / f"rep{i + 1}.csv").write_bytes(reps_src[i % len(reps_src)].read_bytes())
+        return out
+
+    with tempfile.TemporaryDirectory() as tmp:
+        few, many = rep_dir(Path(tmp), 300), rep_dir(Path(tmp), 3000)
+        # in-process, so the ratio is the work's, not Python's start-up; one run of
+        # 3,000 files (about 25 s here) keeps the benchmark's extra time modest
+        t_few = median_time(lambda: load_calibration(few, settings), 3)
+        t_many = median_time(lambda: load_calibration(many, settings), 1)
+    row("9. ingest 3,000 files vs 300 files", t_many, "s", t_few, "300 files [s]",
+        t_many / t_few, "<= 12 (linear: 10)", t_many / t_few <= 12)
+
+    # --- 9b. fit against the number of repetitions: libsvm's training limits it ------
+    # 300 repetitions take over 4 min here (libsvm training grows faster than the
+    # points), too long for this run: 6 and 60 show the growth
+    print("fit (simulated sets of 6 and 60 repetitions)")
+    from fsdecouple.simulate import simulate
+
+    fit_t = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in (6, 60):
+            simulate(Path(tmp) / f"s{n}", seed=1, repetitions=n)
+            c = load_calibration(Path(tmp) / f"s{n}" / "calibration", settings)
+            fit_t[n] = median_time(lambda c=c: fit(c, settings), repeats if n == 6 else 1)
+    for n in (60,):
+        row(f"9b. fit, {n} repetitions vs 6", fit_t[n], "s", fit_t[6], "6 repetitions [s]",
+            fit_t[n] / fit_t[6], f"info ({n // 6}x the points)", True)
+
     # --- 4. fitting: six SVRs in parallel threads ------------------------------------
     print("fit (sample data, six SVRs + surrogates)")
     seq = median_time(lambda: fit(calib, settings, workers=1), repeats)

@@ -93,8 +93,19 @@ class CalibrationSet:
     def load_grid(self, axis: str) -> dict[int, np.ndarray]:
         """Sorted distinct loads [N] of each repetition's ``axis`` sweep."""
         s = self.sweep(axis)
-        col = FORCE_COLUMNS[AXES.index(axis)]
-        return {int(r): np.unique(g[col].to_numpy()) for r, g in s.groupby("repetition")}
+        reps = s["repetition"].to_numpy()
+        loads = s[FORCE_COLUMNS[AXES.index(axis)]].to_numpy()
+        if not reps.size:
+            return {}
+        # one sort for all repetitions: a groupby loop costs a pandas frame per repetition
+        order = np.lexsort((loads, reps))
+        reps, loads = reps[order], loads[order]
+        new = np.ones(reps.size, dtype=bool)
+        new[1:] = (reps[1:] != reps[:-1]) | (loads[1:] != loads[:-1])
+        reps, loads = reps[new], loads[new]
+        cuts = np.flatnonzero(reps[1:] != reps[:-1]) + 1
+        return {int(r[0]): g for r, g in zip(np.split(reps, cuts), np.split(loads, cuts),
+                                             strict=True)}
 
 
 def _source(files) -> str:
@@ -117,8 +128,11 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=()) ->
             + (f"; a single CSV without a '{settings.columns['repetition']}' column is one "
                "repetition" if len(files) == 1 and len(reps) == 1 else "")
         )
-    for rep in reps:
-        have = set(table.loc[table["repetition"] == rep, "axis"])
+    # one grouping, not a scan of the table per repetition (quadratic in thousands)
+    pairs = table[["repetition", "axis"]].drop_duplicates()
+    n_axes = pairs.groupby("repetition", sort=True).size()
+    for rep in n_axes.index[n_axes.to_numpy() < len(AXES)][:1]:
+        have = set(pairs.loc[pairs["repetition"] == rep, "axis"])
         missing = [a for a in AXES if a not in have]
         if missing:
             first = table.loc[table["repetition"] == rep].iloc[0]

@@ -90,33 +90,47 @@ def zero_correct(table: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
     Returns the corrected points (raw voltages kept as ``ux_raw`` ...) and the
     offsets removed, one row per (repetition, axis) sweep.
     """
+    import pandas as pd
+
     points = table.copy()
     for c in VOLTAGE_COLUMNS:
         points[f"{c}_raw"] = points[c]
     zero = (points[list(FORCE_COLUMNS)] == 0.0).all(axis=1).to_numpy()
-    offsets = []
-    for (rep, axis), idx in points.groupby(["repetition", "axis"], sort=True).indices.items():
-        z = idx[zero[idx]]
-        first = points.iloc[idx[0]]
-        sweep = f"the {axis} sweep of repetition {rep}"
-        if z.size == 0:
-            raise InputError(
-                f"{where(first['file'])}: {sweep} (from row {first['row']}) has no zero-load "
-                "row (fx = fy = fz = 0), so it cannot be zero-corrected"
-            )
-        if z.size == idx.size:
-            raise InputError(
-                f"{where(first['file'])}: {sweep} (from row {first['row']}) has only "
-                "zero-load rows; a sweep needs loaded points"
-            )
-        mean = points.iloc[z][list(VOLTAGE_COLUMNS)].mean().to_numpy()
-        for k, c in enumerate(VOLTAGE_COLUMNS):
-            points.iloc[idx, points.columns.get_loc(c)] -= mean[k]
-        offsets.append({"repetition": rep, "axis": axis, "n_zero": int(z.size),
-                        **{c: float(mean[k]) for k, c in enumerate(VOLTAGE_COLUMNS)}})
-    import pandas as pd
-
-    return points, pd.DataFrame(offsets)
+    # one pass over all sweeps: a write per sweep would copy the columns each time,
+    # which made a set of thousands of repetitions quadratic
+    grouped = points.groupby(["repetition", "axis"], sort=True)
+    sweep = grouped.ngroup().to_numpy()
+    keys = list(grouped.groups)  # (repetition, axis), sorted as ngroup numbers them
+    n_all = np.bincount(sweep, minlength=len(keys))
+    n_zero = np.bincount(sweep[zero], minlength=len(keys))
+    bad = np.flatnonzero((n_zero == 0) | (n_zero == n_all))
+    if bad.size:
+        g = int(bad[0])
+        first = points.iloc[int(np.argmax(sweep == g))]
+        rep, axis = keys[g]
+        what = f"{where(first['file'])}: the {axis} sweep of repetition {rep} (from row {first['row']})"
+        if n_zero[g] == 0:
+            raise InputError(f"{what} has no zero-load row (fx = fy = fz = 0), so it cannot be "
+                             "zero-corrected")
+        raise InputError(f"{what} has only zero-load rows; a sweep needs loaded points")
+    # each sweep's zero rows in file order, side by side: the mean of a contiguous
+    # run is the same pairwise sum, divided by the count, as pandas' mean of them
+    rows = np.flatnonzero(zero)[np.argsort(sweep[zero], kind="stable")]
+    starts = np.concatenate(([0], np.cumsum(n_zero)[:-1]))
+    u = points[list(VOLTAGE_COLUMNS)].to_numpy(dtype=float)
+    mean = np.empty((len(keys), len(VOLTAGE_COLUMNS)))
+    for k in range(len(VOLTAGE_COLUMNS)):
+        col = np.ascontiguousarray(u[rows, k])
+        for g, (s, n) in enumerate(zip(starts, n_zero, strict=True)):
+            mean[g, k] = col[s:s + n].sum() / n
+    for k, c in enumerate(VOLTAGE_COLUMNS):
+        points[c] = u[:, k] - mean[sweep, k]
+    offsets = pd.DataFrame({
+        "repetition": [rep for rep, _ in keys], "axis": [axis for _, axis in keys],
+        "n_zero": n_zero.astype(int),
+        **{c: mean[:, k] for k, c in enumerate(VOLTAGE_COLUMNS)},
+    })
+    return points, offsets
 
 
 def tare_offsets(u: np.ndarray, n: int, source=None) -> np.ndarray:
