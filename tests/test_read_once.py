@@ -30,14 +30,15 @@ def short_wait(monkeypatch):
     monkeypatch.setattr(files, "FIFO_WAIT", 0.3)
 
 
-@pytest.mark.parametrize("which", ["log", "config", "model"])
+@pytest.mark.parametrize("which", ["log", "config", "model", "calibration"])
 def test_a_fifo_without_writer_is_refused_not_waited_on(tmp_path, sample_model, short_wait, which):
     fifo = tmp_path / "pipe.csv"
     os.mkfifo(fifo)
     out = tmp_path / "f.csv"
     args = {"log": ["apply", sample_model, fifo],
             "config": ["apply", sample_model, LOG, "-c", fifo],
-            "model": ["apply", fifo, LOG]}[which]
+            "model": ["apply", fifo, LOG],
+            "calibration": ["fit", fifo]}[which]
     r = invoke([*args, "-o", out], code=2)
     assert_one_line_error(r, "pipe.csv", "no data after 0.3 s")
     assert not out.exists() and list(tmp_path.iterdir()) == [fifo]
