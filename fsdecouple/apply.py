@@ -12,6 +12,7 @@ keep empty forces and are counted.  CSV output uses the log's dialect (``sep``,
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import os
 import queue
@@ -273,14 +274,21 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
             return len(block), counts, first, block.done, block.total, \
                 sink.encode(block, f, empty, (status,))
 
-        with ThreadPoolExecutor(workers) as pool:
-            pending: deque = deque()
-            for job in _prefetch(jobs, workers + 1):
-                pending.append(pool.submit(work, job))
-                while len(pending) > workers or (pending and pending[0].done()):
+        try:
+            with ThreadPoolExecutor(workers) as pool:
+                pending: deque = deque()
+                for job in _prefetch(jobs, workers + 1):
+                    pending.append(pool.submit(work, job))
+                    while len(pending) > workers or (pending and pending[0].done()):
+                        _collect(pending.popleft().result(), sink, summary, progress)
+                while pending:
                     _collect(pending.popleft().result(), sink, summary, progress)
-            while pending:
-                _collect(pending.popleft().result(), sink, summary, progress)
+        except BaseException:
+            # a Parquet writer left open would fail again when collected, after the
+            # temporary file is gone: a second message under the one-line error
+            with contextlib.suppress(Exception):
+                sink.close()
+            raise
         sink.close()
         if summary.rows == 0:
             raise InputError(f"{path}: header only, no data rows")

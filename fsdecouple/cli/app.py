@@ -40,10 +40,12 @@ app = typer.Typer(
     rich_markup_mode=None,
     help="Static decoupling of 3-axis force sensors: coupling error model + six eps-SVRs.",
 )
-# No markup and no highlighting: every name and cell from a user's file is printed
-# literally.  Redirected output (a CI log) is not cut at 80 columns.
-console = Console(markup=False, highlight=False, width=None if sys.stdout.isatty() else WIDE)
-err_console = Console(stderr=True, markup=False, highlight=False,
+# No markup, no emoji codes and no highlighting: every name and cell from a user's
+# file is printed literally (a sensor named ':thumbs_up:' or 'a[/]b' included, in
+# table titles too).  Redirected output (a CI log) is not cut at 80 columns.
+console = Console(markup=False, emoji=False, highlight=False,
+                  width=None if sys.stdout.isatty() else WIDE)
+err_console = Console(stderr=True, markup=False, emoji=False, highlight=False,
                       width=None if sys.stderr.isatty() else WIDE)
 
 ConfigOpt = Annotated[

@@ -14,7 +14,7 @@ import numpy as np
 from ..axes import FORCE_COLUMNS, VOLTAGE_COLUMNS
 from ..config import Settings
 from ..errors import InputError, excerpt, where
-from .files import natural_key, reading
+from .files import natural_key, open_input, reading
 from .text import HEADER_ROW, read_csv_text, read_header, require_columns, to_numbers
 
 if TYPE_CHECKING:
@@ -121,8 +121,8 @@ def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationT
     cols = settings.columns
     numeric = {c: cols[c] for c in (*FORCE_COLUMNS, *VOLTAGE_COLUMNS)}
     for rep_index, f in enumerate(files, start=1):
-        with reading(f):
-            data = f.read_bytes()
+        with reading(f), open_input(f) as fh:  # a FIFO: read once, never waited on for ever
+            data = fh.read()
         digests.append((str(f), hashlib.sha256(data).hexdigest()))
         header = read_header(f, settings, data, strict=False)
         if {"ux_raw", "uy_raw", "uz_raw"} <= set(header):
@@ -197,10 +197,12 @@ def read_task_log(
     """
     out = []
     for path, canon in ((Path(voltages), VOLTAGE_COLUMNS), (Path(forces), FORCE_COLUMNS)):
-        header = read_header(path, settings)
+        with reading(path), open_input(path) as fh:  # read once: it may be a pipe
+            data = fh.read()
+        header = read_header(path, settings, data)
         names = {c: settings.columns[c] for c in canon}
         require_columns(header, names, path)
-        raw = read_csv_text(path, settings)
+        raw = read_csv_text(io.BytesIO(data), settings, path=path)
         if raw.empty:
             raise InputError(f"{path}: header only, no data rows")
         out.append(np.column_stack([

@@ -7,6 +7,7 @@ import ctypes
 import errno
 import os
 import re
+import select
 import stat
 import sys
 import tempfile
@@ -31,6 +32,40 @@ def reading(path: str | Path, what: str = "a CSV file") -> Iterator[None]:
         raise InputError(f"{path}: cannot read ({err.strerror})") from None
 
 
+# A FIFO (named pipe) given as an input waits this long for its first bytes, then is
+# refused: a FIFO that no process writes to would otherwise block open() for ever.
+FIFO_WAIT = 20.0  # seconds
+
+
+def open_input(path: str | Path):
+    """Open ``path`` for reading (binary), never hanging on a FIFO without a writer.
+
+    The file is opened non-blocking, which returns at once whatever it is; a FIFO
+    (a named pipe, ``/dev/stdin`` fed by a pipe) is then polled for up to
+    :data:`FIFO_WAIT` seconds for data or its writer's end, and refused with one
+    line if neither comes.  Reads after that block as usual.  A directory raises
+    :class:`IsADirectoryError` (for :func:`reading`).
+    """
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    try:
+        mode = os.fstat(fd).st_mode
+        if stat.S_ISDIR(mode):
+            raise IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR), str(path))
+        if stat.S_ISFIFO(mode):
+            poll = select.poll()
+            poll.register(fd, select.POLLIN)
+            if not poll.poll(int(FIFO_WAIT * 1000)):
+                raise InputError(
+                    f"{printable(path)}: a pipe with no data after {FIFO_WAIT:g} s (no process "
+                    "writing to it?); not read"
+                )
+        os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+
+
 MB = 1 << 20
 # Size limits per input kind, checked before reading (README, "Errors and exit codes").
 CONFIG_LIMIT = 1 * MB
@@ -49,10 +84,8 @@ def read_bounded(path: str | Path, limit: int, what: str, error: type = InputErr
     sparse file costs nothing; anything else (``/dev/zero``, a pipe) is read to at
     most ``limit + 1`` bytes.  OS errors (not found, a directory) are the caller's.
     """
-    with open(path, "rb") as fh:
+    with open_input(path) as fh:
         st = os.fstat(fh.fileno())
-        if stat.S_ISDIR(st.st_mode):
-            raise IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR), str(path))
         if stat.S_ISREG(st.st_mode) and st.st_size > limit:
             raise error(f"{printable(path)}: {_size(st.st_size)}, larger than the {_size(limit)} "
                         f"limit for {what}; not read")

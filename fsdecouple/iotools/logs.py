@@ -30,13 +30,15 @@ import pyarrow.csv as pcsv
 import pyarrow.parquet as pq
 
 from ..config import Settings
-from ..errors import InputError, where
-from .files import reading
-from .text import HEADER_ROW, MAX_HEADER_CHARS, MISSING_CELLS, read_header, to_numbers
+from ..errors import InputError, excerpt, printable, where
+from .files import open_input, reading
+from .text import HEADER_ROW, MAX_HEADER_CHARS, MISSING_CELLS, read_header, require_utf8, to_numbers
 
 BLOCK_BYTES = 4 << 20  # ~100 K rows of a 4-column log; a block in flight costs ~15x this
 MAX_LINE_BYTES = 16 << 20  # a log line is tens of bytes
 PARQUET_SUFFIXES = (".parquet", ".pq")
+NOT_UTF8_PARQUET = ("Parquet output stores text as UTF-8 (CSV output passes a line's bytes "
+                    "through unchanged)")
 PARQUET_BATCH_ROWS = 1 << 17  # ~15 MB of blocks in flight each
 # Column chunks are read through a buffer of this size rather than whole: a file
 # written as one huge row group would otherwise be held in memory column by column.
@@ -155,14 +157,16 @@ class LogFile:
             self.header_line, self.eol = b"", b"\n"
             return
         with reading(self.path):
-            self._fh = sys.stdin.buffer if self.stdin else open(self.path, "rb")  # noqa: SIM115
+            # a FIFO without a writer is refused after FIFO_WAIT s rather than hanging
+            self._fh = sys.stdin.buffer if self.stdin else open_input(self.path)
         try:
             with reading(self.path):
                 line = self._fh.readline(MAX_HEADER_CHARS)
-                more = self._fh.peek(1)[:1] if hasattr(self._fh, "peek") else b""
+                # only whether more follows: the next byte may be half a character
+                more = bool(self._fh.peek(1)[:1]) if hasattr(self._fh, "peek") else False
                 if not self.stdin and stat.S_ISREG(os.fstat(self._fh.fileno()).st_mode):
                     self.total = max(1, os.fstat(self._fh.fileno()).st_size)
-            self.header = read_header(self.path, settings, line + more)
+            self.header = read_header(self.path, settings, line, more=more)
         except BaseException:
             self.close()
             raise
@@ -185,10 +189,12 @@ class LogFile:
         """Jobs, in file order, each returning one :class:`Block` when called.
 
         CSV blocks are cut here and parsed when the job runs (on a worker thread);
-        Parquet blocks are decoded here.
+        Parquet blocks are decoded here.  ``want_table``: the output is Parquet;
+        otherwise it is CSV, and a Parquet log's columns must be writable as text.
         """
         if self.parquet:
-            for b in parquet_blocks(self.path, names, self.settings, chunk_rows=chunk_rows):
+            for b in parquet_blocks(self.path, names, self.settings, chunk_rows=chunk_rows,
+                                    to_csv=not want_table):
                 yield lambda b=b: b
             return
         parse = CsvParser(self.path, self.header, names, self.settings, self.eol, want_table)
@@ -225,6 +231,8 @@ class CsvParser:
 
     def __call__(self, chunk: CsvBody) -> Block:
         body, row = chunk.body, chunk.first_row
+        if self.want_table:  # the same rule for every block, whichever path parses it
+            require_utf8(body, self.path, row, self.header, self.settings.sep, NOT_UTF8_PARQUET)
         # A carriage return in an LF log could split a row for pyarrow and make up
         # for a blank line it skips; such blocks are read line by line.
         if chunk.truncated or (self.eol == b"\n" and b"\r" in body):
@@ -276,7 +284,9 @@ class CsvParser:
                     f"{where(self.path, row + i)}: a carriage return (\\r) inside the line "
                     "(old Mac line ends, or a corrupt log?); lines must end with \\n or \\r\\n"
                 )
-            text = line.decode("utf-8", "surrogateescape")
+            # cells are decoded only to be parsed (voltages) or stored as text (Parquet
+            # output, where the block was checked to be UTF-8); the line passes as bytes
+            text = line.decode("utf-8", "backslashreplace")
             fields = next(csv.reader([text], delimiter=sep)) if text else []
             if len(fields) > width:
                 raise InputError(
@@ -315,17 +325,68 @@ def _lines(body: bytes, buffer: pa.Buffer, rows: int) -> pa.Array:
     return pa.Array.from_buffers(pa.binary(), rows, [None, pa.py_buffer(offsets), buffer])
 
 
+def _csv_writable(schema: pa.Schema, path: Path) -> None:
+    """Refuse, before any row is read, a pass-through column CSV cannot hold as text.
+
+    Lists, structs and maps have no CSV text; Parquet output passes them through.
+    """
+    for fld in schema:
+        try:
+            pcsv.write_csv(pa.table({"c": pa.array([], fld.type)}), pa.BufferOutputStream())
+        except (pa.ArrowInvalid, pa.ArrowNotImplementedError, pa.ArrowTypeError):
+            raise InputError(
+                f"{where(path, None, fld.name)}: type {fld.type} has no CSV text; write "
+                "Parquet output (-o NAME.parquet) to pass it through"
+            ) from None
+
+
+def _binary_as_text(table: pa.Table, path: Path, first_row: int) -> pa.Table:
+    """Binary columns as UTF-8 strings for CSV output, or name the first row that is not."""
+    for i, fld in enumerate(table.schema):
+        if pa.types.is_binary(fld.type) or pa.types.is_large_binary(fld.type):
+            try:
+                table = table.set_column(i, fld.name, table.column(i).cast(pa.string()))
+            except pa.ArrowInvalid:
+                for k, v in enumerate(table.column(i).to_pylist()):
+                    try:
+                        v is None or v.decode("utf-8")
+                    except UnicodeDecodeError:
+                        shown = v.decode("utf-8", "backslashreplace")
+                        raise InputError(
+                            f"{where(path, first_row + k, fld.name)}: '{excerpt(shown)}' is "
+                            "not UTF-8 text; CSV output writes text as UTF-8 (Parquet output "
+                            "passes the bytes through)"
+                        ) from None
+                raise
+    return table
+
+
 def parquet_blocks(path: Path, names: list[str], settings: Settings, *,
-                   chunk_rows: int) -> Iterator[Block]:
-    """The rows of a Parquet log in record batches of at most ``chunk_rows`` rows."""
+                   chunk_rows: int, to_csv: bool = False) -> Iterator[Block]:
+    """The rows of a Parquet log in record batches of at most ``chunk_rows`` rows.
+
+    ``to_csv``: the blocks go to a CSV output, so every column must have a text
+    form: nested types are refused before the first row, and binary values must be
+    UTF-8 (the row is named).  A list or struct voltage column is refused either way.
+    """
     try:
         pf = pq.ParquetFile(path, pre_buffer=False, buffer_size=PARQUET_READ_BUFFER)
     except (pa.ArrowInvalid, OSError) as err:
-        raise InputError(f"{path}: not a readable Parquet file ({err})") from None
+        raise InputError(f"{path}: not a readable Parquet file ({excerpt(err)})") from None
+    for n in names:  # before any row is decoded
+        if n in pf.schema_arrow.names:
+            typ = pf.schema_arrow.field(n).type
+            if not (pa.types.is_string(typ) or pa.types.is_large_string(typ)
+                    or pa.types.is_integer(typ) or pa.types.is_floating(typ)):
+                raise InputError(f"{where(path, None, n)}: type {typ}, expected numbers")
+    if to_csv:
+        _csv_writable(pf.schema_arrow, path)
     total = max(1, pf.metadata.num_rows)
     row, done = HEADER_ROW + 1, 0
     for batch in pf.iter_batches(batch_size=min(chunk_rows, PARQUET_BATCH_ROWS)):
         table = pa.Table.from_batches([batch])
+        if to_csv:
+            table = _binary_as_text(table, path, row)
         cols = []
         for n in names:
             col = table.column(n)
@@ -348,6 +409,9 @@ def parquet_blocks(path: Path, names: list[str], settings: Settings, *,
 
 def parquet_header(path: Path) -> list[str]:
     try:
+        if not stat.S_ISREG(os.stat(path).st_mode):  # a FIFO would block; its footer comes first
+            raise InputError(f"{printable(path)}: a Parquet log must be a regular file "
+                             "(its footer is read first), not a pipe or device")
         return list(pq.read_schema(path).names)
     except FileNotFoundError:
         raise InputError(f"{path}: file not found") from None

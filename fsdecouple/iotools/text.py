@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..config import Settings
-from ..errors import InputError, where
+from ..errors import InputError, excerpt, where
 from .files import reading
 
 if TYPE_CHECKING:  # pandas loads on first use: apply and show never need it
@@ -30,14 +30,16 @@ MAX_HEADER_CHARS = 1 << 20
 
 
 def read_header(path: Path, settings: Settings, data: bytes | None = None, *,
-                strict: bool = True) -> list[str]:
+                strict: bool = True, more: bool | None = None) -> list[str]:
     """The header row as written (names stripped), refusing empty files.
 
     ``data``: the file's bytes when the caller has read them already (a file is
     read once per command).  ``strict``: refuse duplicated and empty names too
     (a log passes every column through); otherwise only the columns the config
     maps must be unique (:func:`require_columns`), and the rest, a side table
-    or columns without a name, are ignored.
+    or columns without a name, are ignored.  ``more``: whether anything follows
+    ``data`` in the file (then ``data`` is the first line only: the header must be
+    UTF-8, the rows after it are not decoded here).
     """
     with reading(path):
         if data is None:
@@ -48,8 +50,8 @@ def read_header(path: Path, settings: Settings, data: bytes | None = None, *,
         else:
             fh = io.TextIOWrapper(io.BytesIO(data), encoding="utf-8-sig", newline="")
             first = fh.readline(MAX_HEADER_CHARS)
-            more = bool(fh.read(1))
-            size = len(data)
+            size = len(data) + bool(more)
+            more = bool(fh.read(1)) or bool(more)
     if first.endswith("\r") and not first.endswith("\r\n"):
         raise InputError(
             f"{where(path, HEADER_ROW)}: lines end with a carriage return only (old Mac line "
@@ -182,6 +184,38 @@ def to_numbers(
         raise InputError(f"{where(path, row, column)}: {what}, expected a finite number")
     return nums
 
+
+
+def require_utf8(body: bytes, path: Path, first_row: int, header: list[str], sep: str,
+                 why: str) -> None:
+    """Refuse ``body`` (whole lines, the first at spreadsheet row ``first_row``) unless it
+    is UTF-8, naming the row and column of the first byte that is not.
+
+    The rule for a log's bytes (README, "Errors and exit codes"): the header must be
+    UTF-8; data lines are bytes, passed through to CSV unchanged and never decoded,
+    and must be UTF-8 only where they become text (Parquet output: ``why``).  Every
+    block is checked the same way, whatever its row.
+    """
+    try:
+        body.decode("utf-8")
+    except UnicodeDecodeError as err:
+        start = body.rfind(b"\n", 0, err.start) + 1
+        end = body.find(b"\n", err.start)
+        line = body[start:len(body) if end < 0 else end].removesuffix(b"\r")
+        text = line.decode("utf-8", "surrogateescape")
+        try:
+            fields = next(csv.reader([text], delimiter=sep)) if text else []
+        except csv.Error:
+            fields = []
+        bad = [j for j, f in enumerate(fields) if any("\udc80" <= c <= "\udcff" for c in f)]
+        column = header[bad[0]] if bad and bad[0] < len(header) else None
+        cell = fields[bad[0]] if bad else text
+        shown = cell.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+        row = first_row + body.count(b"\n", 0, err.start)
+        raise InputError(
+            f"{where(path, row, column)}: "
+            f"'{excerpt(shown)}' is not UTF-8 text; {why}"
+        ) from None
 
 
 def require_columns(header: list[str], wanted: dict[str, str], path: Path) -> None:

@@ -1,0 +1,82 @@
+"""User text reaches the terminal literally: rich markup and emoji codes are never read.
+
+File names, column names and the sensor name here contain ``[/]`` (a closing tag
+that raises rich's MarkupError if parsed), ``[bold]`` (silently dropped if parsed)
+and ``:thumbs_up:`` (silently replaced by an emoji).  Every command that prints
+them must exit 0 and show them as written.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from conftest import SAMPLE, invoke
+
+RENAME = {"ux": "ux[/]", "uy": "uy[bold]", "uz": "uz:thumbs_up:",
+          "fx": "fx[/]", "fy": "fy[bold]", "fz": "fz[red]"}
+SENSOR = "s[/]n[bold]:thumbs_up:"
+
+
+def _renamed(text: str) -> str:
+    head, _, rest = text.partition("\n")
+    return ",".join(RENAME.get(c, c) for c in head.split(",")) + "\n" + rest
+
+
+@pytest.fixture(scope="module")
+def tricky(tmp_path_factory) -> dict[str, Path]:
+    root = tmp_path_factory.mktemp("lit")
+    # a directory 'x[' holding ']...' makes paths that read 'x[/]...': a '/' cannot be
+    # part of a file name, but a path can hold the closing tag all the same
+    base = root / "x["
+    base.mkdir()
+    cal = base / "]cal[bold]:thumbs_up:"
+    cal.mkdir()
+    for f in (SAMPLE / "calibration").iterdir():
+        (cal / f.name).write_text(_renamed(f.read_text()))
+    log = base / "]log[bold].csv"
+    log.write_text(_renamed((SAMPLE / "task_voltages.csv").read_text()) + "\n")  # + a blank row
+    cfg = root / "cfg.yaml"
+    cols = ", ".join(f'{k}: "{v}"' for k, v in RENAME.items())
+    cfg.write_text(f'sensor: "{SENSOR}"\ncolumns: {{{cols}}}\n')
+    model = base / "]m[bold].json"
+    fit = invoke(["fit", "-c", cfg, cal, "-o", model])
+    return {"root": root, "cal": cal, "log": log, "cfg": cfg, "model": model, "fit": fit}
+
+
+def _literal(r, *texts) -> None:
+    shown = r.stdout + r.stderr
+    assert "Traceback" not in shown and "MarkupError" not in shown
+    assert "\N{THUMBS UP SIGN}" not in shown
+    for t in texts:
+        assert str(t) in shown, (t, shown)
+
+
+def test_fit_and_show_print_names_literally(tricky):
+    _literal(tricky["fit"], SENSOR, tricky["model"])
+    _literal(invoke(["show", tricky["model"]]), SENSOR)
+
+
+def test_apply_prints_names_and_warnings_literally(tricky):
+    out = tricky["log"].parent / "]out[bold].csv"
+    r = invoke(["apply", tricky["model"], tricky["log"], "-c", tricky["cfg"], "-o", out])
+    _literal(r, out)
+    assert "warning:" in r.stderr  # the blank row: a warning that quotes nothing odd
+    header = out.read_text().partition("\n")[0]
+    assert header.startswith("t,ux[/],uy[bold],uz:thumbs_up:,")
+
+
+def test_validate_cv_and_report_print_names_literally(tricky):
+    _literal(invoke(["validate", tricky["model"], tricky["cal"], "-c", tricky["cfg"]]),
+             tricky["cal"], tricky["model"])
+    cv = tricky["cal"].parent / "]cv[bold].json"
+    _literal(invoke(["cv", "-c", tricky["cfg"], tricky["cal"], "-o", cv]), cv, tricky["cal"])
+    html = tricky["cal"].parent / "]r[bold].html"
+    _literal(invoke(["report", tricky["model"], "--cv", cv, "-o", html]), html)
+
+
+def test_errors_quote_names_literally(tricky):
+    missing = tricky["cal"].parent / "]nope[bold].csv"
+    r = invoke(["apply", tricky["model"], missing, "-o", tricky["root"] / "o.csv"], code=2)
+    _literal(r, missing)
+    assert r.stderr.startswith("error:")
