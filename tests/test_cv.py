@@ -216,6 +216,7 @@ def test_cv_command_bad_input_exits_2(args, message):
     assert message in r.stderr and "Traceback" not in r.stderr
 
 
+@pytest.mark.slow  # cv with 30 load-level rounds
 def test_fewer_than_three_repetitions_hold_out_load_levels(tmp_path):
     d = tmp_path / "two"
     d.mkdir()

@@ -313,6 +313,7 @@ def test_a_nan_cell_is_missing_whichever_reader_takes_its_block(tmp_path, sample
     assert statuses[0] == statuses[1] == ["ok", "missing", "ok"]
 
 
+@pytest.mark.slow  # two subprocess runs through a pipe and a FIFO
 def test_a_log_from_a_pipe_is_read_once_and_whole(sample_model_file, tmp_path):
     """`cat log | apply model -` and a FIFO give the same rows as the file: nothing dropped."""
     ref = tmp_path / "ref.csv"

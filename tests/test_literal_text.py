@@ -66,6 +66,7 @@ def test_apply_prints_names_and_warnings_literally(tricky):
     assert header.startswith("t,ux[/],uy[bold],uz:thumbs_up:,")
 
 
+@pytest.mark.slow  # runs cv and renders a report
 def test_validate_cv_and_report_print_names_literally(tricky):
     _literal(invoke(["validate", tricky["model"], tricky["cal"], "-c", tricky["cfg"]]),
              tricky["cal"], tricky["model"])

@@ -76,6 +76,7 @@ def test_report_png_that_looks_like_a_file(tmp_path, model):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow  # renders the report figures
 def test_report_and_pngs_together(tmp_path, model):
     invoke(["report", model, "-o", tmp_path / "r.html", "--png", tmp_path / "figs"])
     assert (tmp_path / "r.html").is_file() and len(list((tmp_path / "figs").glob("*.png"))) >= 2

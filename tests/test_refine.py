@@ -110,6 +110,7 @@ def test_refine_zero_is_the_default_on_every_path(model):
         assert one(*v) == one0(*v)
 
 
+@pytest.mark.slow  # dense points through both paths, several K
 def test_fast_and_exact_agree_under_refinement(model):
     """Within the table promise (PROMISE of each full-scale output): the tables' error
     enters p once per step but the contraction shrinks what it carries forward."""

@@ -62,6 +62,7 @@ def test_zero_correct_bit_identical_on_sample(settings):
     assert_same_bits(table)
 
 
+@pytest.mark.slow  # writes and reads 300 repetition files
 def test_zero_correct_bit_identical_on_300_files(tmp_path, settings):
     simulate(tmp_path, seed=5, repetitions=300)
     table = assign_sweeps(read_calibration_table(tmp_path / "calibration", settings).table)
