@@ -4,6 +4,7 @@ at most an excerpt and stay on one line; memory stays bounded."""
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -158,3 +159,14 @@ def test_numpy_warnings_are_not_printed_before_an_error(tmp_path, good_model):
     assert r.exit_code in (0, 2)
     if r.exit_code == 2:
         assert len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_a_nul_padded_calibration_file_is_refused_small(tmp_path):
+    """A 50 MB NUL-padded repetition once gave a 210 MB error and 1.5 GB of memory."""
+    cal = tmp_path / "cal"
+    shutil.copytree(CAL, cal)
+    with open(cal / "rep1.csv", "ab") as fh:
+        fh.write(b"\x00" * 50_000_000)
+    code, lines, rss = _maxrss_kb(["ingest", cal])
+    assert code == 2 and len(lines) == 1 and "NUL byte" in lines[0] and len(lines[0]) < 300
+    assert rss < 500_000, f"{rss} kB"

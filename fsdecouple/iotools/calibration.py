@@ -14,7 +14,7 @@ import numpy as np
 from ..axes import FORCE_COLUMNS, VOLTAGE_COLUMNS
 from ..config import Settings
 from ..errors import InputError, excerpt, where
-from .files import natural_key, open_input, reading
+from .files import CALIBRATION_LIMIT, natural_key, open_input, read_bounded, reading
 from .text import HEADER_ROW, read_csv_text, read_header, require_columns, to_numbers
 
 if TYPE_CHECKING:
@@ -121,8 +121,13 @@ def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationT
     cols = settings.columns
     numeric = {c: cols[c] for c in (*FORCE_COLUMNS, *VOLTAGE_COLUMNS)}
     for rep_index, f in enumerate(files, start=1):
-        with reading(f), open_input(f) as fh:  # a FIFO: read once, never waited on for ever
-            data = fh.read()
+        with reading(f):  # a FIFO: read once, never waited on for ever
+            data = read_bounded(f, CALIBRATION_LIMIT, "a calibration file")
+        nul = data.find(b"\x00")
+        if nul >= 0:  # NUL padding (a crashed logger, a pre-allocated file): not text
+            row = data.count(b"\n", 0, nul) + 1
+            raise InputError(f"{where(f, row)}: a NUL byte: not a UTF-8 text file (binary, "
+                             "UTF-16, or padding from a crashed writer?)")
         digests.append((str(f), hashlib.sha256(data).hexdigest()))
         header = read_header(f, settings, data, strict=False)
         if {"ux_raw", "uy_raw", "uz_raw"} <= set(header):
@@ -170,7 +175,7 @@ def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationT
                 i = int(np.argmax(bad.to_numpy()))
                 raise InputError(
                     f"{where(f, int(rows[i]), cols['axis'])}: "
-                    f"{raw[cols['axis']].iloc[i]!r}, expected x, y or z"
+                    f"{excerpt(repr(raw[cols['axis']].iloc[i]))}, expected x, y or z"
                 )
             out["axis"] = axis.to_numpy()
         else:

@@ -71,6 +71,7 @@ MB = 1 << 20
 CONFIG_LIMIT = 1 * MB
 MODEL_LIMIT = 64 * MB
 CV_LIMIT = 64 * MB
+CALIBRATION_LIMIT = 64 * MB  # per file: a calibration is thousands of rows, not millions
 
 
 def _size(n: int) -> str:

@@ -180,7 +180,7 @@ def to_numbers(
         i = int(np.argmax(bad))
         row = int(rows[i]) if np.ndim(rows) else int(rows) + i
         cell = str(values.iloc[i]).strip()
-        what = "is empty" if cell == "" else f"is {cell!r}"
+        what = "is empty" if cell == "" else f"is {excerpt(repr(cell))}"
         raise InputError(f"{where(path, row, column)}: {what}, expected a finite number")
     return nums
 
