@@ -16,7 +16,7 @@ from typing import Any
 import yaml
 
 from .errors import ConfigError, excerpt
-from .iotools.files import CONFIG_LIMIT, read_bounded
+from .iotools.files import CONFIG_LIMIT, read_bounded, reading
 
 
 class SafeUniqueLoader(yaml.SafeLoader):
@@ -122,15 +122,8 @@ def _yaml_problem(err: yaml.YAMLError) -> str:
 
 def read_yaml(path: Path, name: str) -> Any:
     """The parsed YAML document of a config file (``name``: the path as printed)."""
-    try:
-        data = read_bounded(path, CONFIG_LIMIT, "a config file", ConfigError)
-        text = data.decode("utf-8-sig")
-    except FileNotFoundError:
-        raise ConfigError(f"{name}: config file not found") from None
-    except UnicodeDecodeError:
-        raise ConfigError(f"{name}: cannot read config (not a UTF-8 text file)") from None
-    except OSError as err:
-        raise ConfigError(f"{name}: cannot read config ({err.strerror})") from None
+    with reading(path, "a config file (YAML)", noun="config", error=ConfigError):
+        text = read_bounded(path, CONFIG_LIMIT, "a config file", ConfigError).decode("utf-8-sig")
     try:
         raw = yaml.load(text, Loader=SafeUniqueLoader)  # noqa: S506 (a SafeLoader)
     except yaml.YAMLError as err:

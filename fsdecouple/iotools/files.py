@@ -18,18 +18,26 @@ from ..errors import InputError, printable
 
 
 @contextlib.contextmanager
-def reading(path: str | Path, what: str = "a CSV file") -> Iterator[None]:
-    """Turn the OS errors of opening and reading ``path`` into one-line InputErrors."""
+def reading(path: str | Path, what: str = "a CSV file", *, noun: str = "",
+            error: type = InputError) -> Iterator[None]:
+    """Turn the OS errors of opening and reading ``path`` into one-line ``error``s.
+
+    ``noun`` names the kind of input in the messages ("config": "config file not
+    found", "cannot read config (...)"); the path is printed with its control
+    characters escaped, so the message stays one line.
+    """
+    name, kind = printable(path), f"{noun} " if noun else ""
     try:
         yield
     except FileNotFoundError:
-        raise InputError(f"{path}: file not found") from None
+        raise error(f"{name}: {kind}file not found") from None
     except IsADirectoryError:
-        raise InputError(f"{path}: is a directory, expected {what}") from None
+        raise error(f"{name}: is a directory, expected {what}") from None
     except UnicodeDecodeError:
-        raise InputError(f"{path}: not a UTF-8 text file") from None
+        why = "not a UTF-8 text file"
+        raise error(f"{name}: cannot read {noun} ({why})" if noun else f"{name}: {why}") from None
     except OSError as err:
-        raise InputError(f"{path}: cannot read ({err.strerror})") from None
+        raise error(f"{name}: cannot read {kind}({err.strerror})") from None
 
 
 # A FIFO (named pipe) given as an input waits this long for its first bytes, then is
