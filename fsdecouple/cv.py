@@ -37,7 +37,7 @@ from .heldout import (
 )
 from .iotools.calibration import read_task_log
 from .linear import fit_omega
-from .metrics import interference_error
+from .metrics import check_max_gamma, interference_error
 from .parallel import single_threaded_libraries
 from .rbf import B_FACTOR, MSE_GOAL, OUTPUT_LAYER, SPREAD, basic_solution
 from .verdict import gamma_records
@@ -190,8 +190,7 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
     rounds = rounds_for(calib, protocol, folds)
     if repeats < 1:
         raise InputError(f"--repeats {repeats}: needs at least 1 timing pass")
-    if max_gamma is not None and not (np.isfinite(max_gamma) and max_gamma > 0):
-        raise InputError(f"--max-gamma {max_gamma}: expected a fraction greater than 0, e.g. 0.016")
+    check_max_gamma(max_gamma)
     workers = workers or os.cpu_count() or 1
     task_data = None
     if task is not None:

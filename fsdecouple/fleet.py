@@ -185,10 +185,10 @@ def fit_many(sensors_dir: str | Path, models_dir: str | Path, *, method: str = "
         Called as ``progress(done, total)`` in sensors.
     """
     from .drift import check_max_drift
+    from .metrics import check_max_gamma
     from .verdict import FIT_METHODS
 
-    if max_gamma is not None and not (max_gamma > 0 and max_gamma < float("inf")):
-        raise InputError(f"--max-gamma {max_gamma}: expected a fraction greater than 0, e.g. 0.016")
+    check_max_gamma(max_gamma)
     check_max_drift(max_drift)
     if method not in FIT_METHODS:
         raise InputError(f"--method {method!r}: expected one of {', '.join(FIT_METHODS)}")

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .axes import AXES
+from .errors import InputError
 
 
 def interference_error(forces: np.ndarray, axis: int, full_scale: float) -> float:
@@ -40,3 +43,9 @@ def interference_errors(points, forces: np.ndarray, full_scale) -> dict[str, flo
 def pct(fraction: float | None, digits: int = 2) -> str:
     """A fraction of full scale as percent text, ``0.0123`` -> ``1.23 %``; ``–`` for none."""
     return "–" if fraction is None else f"{100.0 * fraction:.{digits}f} %"
+
+
+def check_max_gamma(max_gamma: float | None) -> None:
+    """A ``--max-gamma`` gate must be a finite fraction of full scale above 0 (NaN never fails)."""
+    if max_gamma is not None and not (math.isfinite(max_gamma) and max_gamma > 0):
+        raise InputError(f"--max-gamma {max_gamma}: expected a fraction greater than 0, e.g. 0.016")

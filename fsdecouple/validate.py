@@ -21,7 +21,6 @@ model extrapolates.  Zero-load rows are points at 0 load, as in :mod:`metrics`.
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -31,9 +30,8 @@ import numpy as np
 from . import __version__
 from .axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .config import Settings
-from .errors import InputError
 from .iotools.files import atomic_write, check_output, refuse_overwriting_input
-from .metrics import interference_error
+from .metrics import check_max_gamma, interference_error
 from .model import CouplingErrorModel
 from .modelfile import content_digest, load_model, model_to_dict
 
@@ -57,14 +55,6 @@ def force_errors(forces: np.ndarray, loads: np.ndarray, full_scale) -> dict[str,
     """Max and RMS of |f_c - F_c| / F_c(FS) over every point and component."""
     e = np.abs(np.asarray(forces) - np.asarray(loads)) / np.asarray(full_scale, dtype=float)
     return {"max_error": float(e.max()), "rms_error": float(np.sqrt(np.mean(e * e)))}
-
-
-def check_max_gamma(max_gamma: float | None) -> None:
-    if max_gamma is not None and not (math.isfinite(max_gamma) and max_gamma > 0):
-        raise InputError(
-            f"--max-gamma {max_gamma!r}: expected a fraction of full scale greater than 0, "
-            "e.g. 0.016 for 1.6 %"
-        )
 
 
 def validate(

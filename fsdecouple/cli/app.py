@@ -106,11 +106,6 @@ def _main(
     pass
 
 
-def _check_gate(max_gamma: float | None) -> None:
-    if max_gamma is not None and not (math.isfinite(max_gamma) and max_gamma > 0):
-        raise InputError(f"--max-gamma {max_gamma}: expected a fraction greater than 0, e.g. 0.016")
-
-
 def _read(calib) -> list[Path]:
     """The files a calibration set was read from."""
     return [Path(f) for f, _ in calib.files]

@@ -11,12 +11,12 @@ from rich.text import Text
 from ..config import load_config
 from ..console import fit_checks_table, fit_tables
 from ..iotools.files import check_output, refuse_overwriting_input
+from ..metrics import check_max_gamma
 from ..modelfile import load_model, save_model
 from .app import (
     ConfigOpt,
     ForceOpt,
     JsonOpt,
-    _check_gate,
     _given,
     _read,
     app,
@@ -74,7 +74,7 @@ def fit(
             config, C=C, epsilon=epsilon, gamma=gamma, delta2=delta2, tolerance=tolerance,
             scaling=scaling, refine=refine,
         )
-        _check_gate(max_gamma)
+        check_max_gamma(max_gamma)
         check_output(output, force=force)
         cs = load_calibration(calib, settings, exclude=exclude or ())
         refuse_overwriting_input(output, [*_read(cs), *_given(config)])
