@@ -11,7 +11,7 @@ written as a lab's spreadsheet by :mod:`fsdecouple.simulate_lab`.
 from __future__ import annotations
 
 import numbers
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -192,6 +192,26 @@ def _write_csv(df: pd.DataFrame, path: Path, formats: dict[str, str], group: ato
         out.to_csv(fh, index=False, lineterminator="\n")
 
 
+# --coupling: the peak of a coupling function, as a fraction of full-scale output
+COUPLING_RANGE = (0.0, 0.3)
+
+
+def with_coupling(sensor: SimulatedSensor, coupling: float) -> SimulatedSensor:
+    """``sensor`` with every coupling function's peak at ``coupling`` x full-scale output.
+
+    The shapes stay the sensor's; only ``amplitude`` (peak |phi_ab| over the
+    calibrated loads, as a fraction of u_FS,a) changes, off the diagonal.
+    """
+    lo, hi = COUPLING_RANGE
+    if isinstance(coupling, bool) or not isinstance(coupling, numbers.Real) \
+            or not lo <= coupling <= hi:
+        raise InputError(f"--coupling {coupling!r}: expected the peak coupling as a fraction of "
+                         f"full-scale output, from {lo:g} to {hi:g} (e.g. 0.05 for 5 %)")
+    n = len(sensor.amplitude)
+    amp = tuple(tuple(0.0 if a == b else float(coupling) for b in range(n)) for a in range(n))
+    return replace(sensor, amplitude=amp)
+
+
 def _whole(value: int, name: str, minimum: int) -> None:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < minimum:
         raise InputError(f"--{name} {value!r}: expected a whole number >= {minimum}")
@@ -207,6 +227,7 @@ def simulate(
     layout: str = "paper",
     repetitions: int | None = None,
     levels: int | None = None,
+    coupling: float | None = None,
 ) -> list[Path]:
     """Write a simulated calibration data set; all files or, on an error, none.
 
@@ -219,6 +240,8 @@ def simulate(
     ``levels`` loads per sweep up to full scale (one repetition unless given) and
     ``OUT_DIR/validation.csv``, the same sensor with its own noise and offsets and
     loads up to 120 % of full scale.  ``gross_error`` moves a calibration point.
+    ``coupling`` sets every coupling function's peak to that fraction of its
+    output's full scale (:func:`with_coupling`); default: the sensor's own.
     """
     if layout not in LAYOUTS:
         raise InputError(f"--layout {layout!r}: expected one of {', '.join(LAYOUTS)}")
@@ -232,6 +255,9 @@ def simulate(
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: is a file, expected a directory to write into")
+    if coupling is not None:
+        sensor = with_coupling(sensor or (load_cell_sensor() if layout == "lab"
+                                          else SimulatedSensor()), coupling)
     if layout == "lab":
         return _simulate_lab(out, seed=seed, gross_error=gross_error, sensor=sensor,
                              force=force, repetitions=repetitions or 1, levels=levels or 4)

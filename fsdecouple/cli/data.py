@@ -42,6 +42,10 @@ def simulate(
     levels: Annotated[
         int | None, typer.Option(help="Loads per sweep after its zero row (lab only; default 4).")
     ] = None,
+    coupling: Annotated[
+        float | None, typer.Option(help="Peak of every coupling function, as a fraction of "
+                                        "full-scale output (0 to 0.3; default: the sensor's own).")
+    ] = None,
     force: ForceOpt = False,
 ) -> None:
     """Write a simulated calibration set: the paper's (with a combined-load task log) or a lab's."""
@@ -51,7 +55,7 @@ def simulate(
     with user_errors():
         ge = GrossError.parse(gross_error) if gross_error else None
         files = simulate_sensor(out_dir, seed=seed, gross_error=ge, force=force, layout=layout,
-                                repetitions=repetitions, levels=levels)
+                                repetitions=repetitions, levels=levels, coupling=coupling)
     console.print(f"wrote {len(files)} files under {out_dir}")
 
 
