@@ -162,10 +162,11 @@ class FitReport:
     warnings: list[str] = field(default_factory=list)
     verdict: dict[str, Any] | None = None  # held-out comparison (fsdecouple.verdict)
     outliers: list[dict[str, Any]] | None = None  # possible gross errors (fsdecouple.outliers)
+    tune: dict[str, Any] | None = None  # fit --tune's grid and choice (fsdecouple.tune); None: untuned
 
     def to_dict(self) -> dict[str, Any]:
         d = {f.name: getattr(self, f.name) for f in fields(self)}
-        for key in ("surrogate_max_error", "verdict", "outliers"):
+        for key in ("surrogate_max_error", "verdict", "outliers", "tune"):
             if d[key] is None:  # files from before these figures
                 del d[key]
         return d

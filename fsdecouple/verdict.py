@@ -116,13 +116,16 @@ def summary(verdict: dict[str, Any]) -> dict[str, Any]:
 
 
 def calibrate(calib: CalibrationSet, settings: Settings, *, method: str = "svr",
-              verdict: bool = True, workers: int | None = None):
+              verdict: bool = True, workers: int | None = None, tune: bool = False,
+              tune_grid=None, progress=None):
     """``fit`` as the command runs it: the model, its held-out verdict, and the method chosen.
 
     ``method``: ``svr`` (the paper's), ``linear`` (the calibration matrix) or ``auto``
     (the lower held-out worst gamma of the two).  The verdict is recorded in the
     model's report; when the protocol cannot run (e.g. a sweep with a single loaded
     point) the model is still written, with a warning, unless ``auto`` needs it.
+    ``tune``: choose the SVR settings first (:func:`fsdecouple.tune.tune_settings`,
+    over ``tune_grid``); the grid and the choice go into ``report.tune``.
     """
     from .fit import fit
     from .linear import fit_calibration_matrix
@@ -132,7 +135,13 @@ def calibrate(calib: CalibrationSet, settings: Settings, *, method: str = "svr",
         raise InputError(f"--method {method!r}: expected one of {', '.join(FIT_METHODS)}")
     if method == "auto" and not verdict:
         raise InputError("--method auto chooses by the held-out verdict; drop --no-verdict")
+    record = None
+    if tune:
+        from .tune import tune_settings
+        settings, record = tune_settings(calib, settings, grid=tune_grid, workers=workers,
+                                         progress=progress)
     model = fit(calib, settings, workers=workers)
+    model.report.tune = record
     outliers = gross_errors(calib.points, model.k, settings.full_scale)
     model.report.outliers = [dataclasses.asdict(o) for o in outliers]
     model.report.warnings += [o.message(settings.load_unit) for o in outliers]

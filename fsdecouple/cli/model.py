@@ -6,10 +6,12 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.progress import MofNCompleteColumn
 from rich.text import Text
 
 from ..config import load_config
 from ..console import fit_checks_table, fit_tables
+from ..errors import InputError
 from ..iotools.files import check_output, refuse_overwriting_input
 from ..metrics import check_max_gamma
 from ..modelfile import load_model, save_model
@@ -17,6 +19,7 @@ from .app import (
     ConfigOpt,
     ForceOpt,
     JsonOpt,
+    _bar,
     _given,
     _read,
     app,
@@ -56,6 +59,14 @@ def fit(
         int | None, typer.Option(help="Second-order refinement steps K stored in the model "
                                       "(0: eq. (11) as the paper writes it).")
     ] = None,
+    tune: Annotated[
+        bool, typer.Option("--tune", help="Choose gamma, C and epsilon by held-out error from "
+                                          "a grid (Table 2 is one candidate).")
+    ] = False,
+    tune_grid: Annotated[
+        str | None, typer.Option(help='The --tune grid, e.g. "gamma=1,2,4,8;C=1,10,100;'
+                                      'epsilon=0.5,1,2" (epsilon: multiples of the noise).')
+    ] = None,
     no_verdict: Annotated[
         bool, typer.Option("--no-verdict", help="Skip the held-out comparison with the "
                                                 "calibration matrix.")
@@ -66,7 +77,9 @@ def fit(
     """Fit the coupling error model, judge it on held-out points, write one JSON model file."""
     from ..calibration import load_calibration
     from ..checks import assumption_checks
+    from ..console_tune import tune_table
     from ..model import refine_advice
+    from ..tune import parse_grid
     from ..verdict import calibrate, verdict_line
 
     with user_errors():
@@ -75,18 +88,27 @@ def fit(
             scaling=scaling, refine=refine,
         )
         check_max_gamma(max_gamma)
+        if tune_grid is not None and not tune:
+            raise InputError("--tune-grid is the grid of --tune: add --tune")
+        grid = parse_grid(tune_grid) if tune_grid is not None else None
         check_output(output, force=force)
         cs = load_calibration(calib, settings, exclude=exclude or ())
         refuse_overwriting_input(output, [*_read(cs), *_given(config)])
-        model = calibrate(cs, settings, method=method, verdict=not no_verdict)
+        with _bar(MofNCompleteColumn()) as bar:
+            job = bar.add_task("tuning", total=None)
+            model = calibrate(cs, settings, method=method, verdict=not no_verdict, tune=tune,
+                              tune_grid=grid, progress=lambda done, total: bar.update(
+                                  job, completed=done, total=total))
         checks = assumption_checks(model)
         advice = refine_advice(checks, model.n_components)
         save_model(model, output, force=force)
     if json_out:
         print_json({"model": str(output), "method": model.method, **model.report.to_dict(),
                     "checks": [c.to_dict() for c in checks], "refine": settings.refine,
-                    "refine_advice": advice})
+                    "refine_advice": advice, "tune": model.report.tune})
     else:
+        if model.report.tune is not None:
+            console.print(tune_table(model.report.tune, model.settings.load_unit))
         for t in [*fit_tables(model), fit_checks_table(checks)]:
             console.print(t)
         console.print(_refine_line(advice, settings.refine))

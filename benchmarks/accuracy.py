@@ -1,0 +1,160 @@
+"""Combined-load accuracy against the floor, on simulated sensors (issue 12).
+
+    python benchmarks/accuracy.py              # every scenario, five seeds each
+    python benchmarks/accuracy.py --readme     # the same, printed as the README's table
+    python benchmarks/accuracy.py --seeds 2 --scenarios 5%
+
+Each scenario simulates sensors with :mod:`fsdecouple.simulate` (six repetitions on
+the paper's grid) and a combined-load log of 3000 rows (tared by its first 200
+unloaded rows, as ``apply --tare 200`` does).  The **floor** is the error left when
+the simulator's true coupling functions are known and eq. (1) is solved exactly
+for the forces: noise and the tare's own noise only.  Each method's figure is its
+RMS force error on the log divided by the floor's, per axis; the worst axis, then
+the mean over seeds.
+
+Methods and scenarios are registries: add a row with one entry in ``SCENARIOS``,
+a method with one function in ``METHODS``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from fsdecouple import load_config
+from fsdecouple.calibration import from_table
+from fsdecouple.fit import fit
+from fsdecouple.linear import fit_calibration_matrix
+from fsdecouple.simulate import SimulatedSensor, simulate_calibration, simulate_task, with_coupling
+from fsdecouple.tune import tune_settings
+
+TARE_ROWS = 200
+REFINE = 3
+
+
+@dataclass(frozen=True)
+class Scenario:
+    label: str
+    coupling: float | None  # peak coupling [fraction of F.S. output]; None: the sample's
+    reach: float = 1.0  # largest load in the log [fraction of F.S.]; 1.0: simulate's task
+
+
+SCENARIOS = [
+    Scenario("as the sample data (1.1–2.7 %)", None),
+    Scenario("3 %", 0.03),
+    Scenario("5 %", 0.05),
+    Scenario("10 %", 0.10),
+    Scenario("loads up to 120 % of full scale (sample's coupling)", None, 1.2),
+]
+
+
+def _paper(calib, settings):
+    return fit(calib, settings, workers=1)
+
+
+def _refine(calib, settings):
+    return fit(calib, replace(settings, refine=REFINE), workers=1)
+
+
+def _tune(calib, settings):
+    tuned, _ = tune_settings(calib, settings, workers=1)
+    return fit(calib, tuned, workers=1)
+
+
+def _tune_refine(calib, settings):
+    return _tune(calib, replace(settings, refine=REFINE))
+
+
+def _linear(calib, settings):
+    return fit_calibration_matrix(calib.voltages, calib.forces)
+
+
+# name -> (calibration set, settings) -> object with decouple(u, rotate=False)
+METHODS: dict[str, Callable] = {
+    "paper default (Table 2, K = 0)": _paper,
+    f"refine K = {REFINE}": _refine,
+    "tune": _tune,
+    f"tune + refine K = {REFINE}": _tune_refine,
+    "linear matrix": _linear,
+}
+
+
+def task(sensor: SimulatedSensor, seed: int, reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """(tared outputs, true forces) of a combined-load log reaching ``reach`` x F.S."""
+    volts, forces = simulate_task(sensor, seed=seed, tare_rows=TARE_ROWS)
+    f = forces[["fx", "fy", "fz"]].to_numpy()
+    u = volts[["ux", "uy", "uz"]].to_numpy()
+    if reach != 1.0:  # the same log, loads stretched: outputs from the same noise and offsets
+        scale = reach * np.asarray(sensor.full_scale) / np.abs(f).max(axis=0)
+        noise_and_offset = u - sensor.voltages(f)
+        f = f * scale
+        u = sensor.voltages(f) + noise_and_offset
+    return u - u[:TARE_ROWS].mean(axis=0), f
+
+
+def floor_forces(sensor: SimulatedSensor, u: np.ndarray, steps: int = 500) -> np.ndarray:
+    """Eq. (1) solved for f with the true coupling functions (fixed point to 1e-13)."""
+    k = sensor.k
+    f = u / k
+    for _ in range(steps):
+        e = sensor.voltages(f) - f * k  # sum_b phi_ab(f_b), eq. (3)
+        new = (u - e) / k
+        if np.max(np.abs(new - f) / np.asarray(sensor.full_scale)) < 1e-13:
+            return new
+        f = new
+    return f
+
+
+def rms(f: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.nanmean((f - truth) ** 2, axis=0))
+
+
+def run(scenarios, seeds: int, methods=METHODS, progress=print) -> dict[str, dict[str, float]]:
+    """scenario label -> method -> mean over seeds of the worst axis's RMS / floor RMS."""
+    settings = load_config()
+    out = {}
+    for sc in scenarios:
+        ratios: dict[str, list[float]] = {m: [] for m in methods}
+        for seed in range(seeds):
+            base = SimulatedSensor()
+            sensor = base if sc.coupling is None else with_coupling(base, sc.coupling)
+            calib = from_table(simulate_calibration(sensor, seed=seed), settings)
+            u, f = task(sensor, seed, sc.reach)
+            floor = rms(floor_forces(sensor, u), f)
+            for name, method in methods.items():
+                model = method(calib, settings)
+                ratios[name].append(float(np.max(rms(model.decouple(u, rotate=False), f) / floor)))
+        out[sc.label] = {m: float(np.mean(v)) for m, v in ratios.items()}
+        progress(f"{sc.label}: " + ", ".join(f"{m} {v:.2f}x" for m, v in out[sc.label].items()))
+    return out
+
+
+def markdown(results: dict[str, dict[str, float]], seeds: int) -> str:
+    methods = list(next(iter(results.values())))
+    lines = ["| peak coupling | " + " | ".join(methods) + " |",
+             "|---|" + "---|" * len(methods)]
+    for label, row in results.items():
+        lines.append(f"| {label} | " + " | ".join(f"{row[m]:.2f}×" for m in methods) + " |")
+    lines.append("")
+    lines.append(f"Worst axis's combined-load RMS error / the floor's, mean of {seeds} simulated "
+                 "sensors (`python benchmarks/accuracy.py --readme`).")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--readme", action="store_true", help="print the README's markdown table")
+    ap.add_argument("--scenarios", help="comma-separated labels (prefixes) to run")
+    args = ap.parse_args()
+    chosen = SCENARIOS if not args.scenarios else [
+        s for s in SCENARIOS if any(s.label.startswith(p) for p in args.scenarios.split(","))]
+    t0 = time.perf_counter()
+    res = run(chosen, args.seeds)
+    print(f"({time.perf_counter() - t0:.0f} s)")
+    if args.readme:
+        print(markdown(res, args.seeds))
