@@ -138,6 +138,8 @@ def run_cv(
     repeats: int = 1,
     progress: Callable[[int, int], None] | None = None,
     protocol: str | None = None,
+    tune: bool = False,
+    tune_grid=None,
 ) -> dict[str, Any]:
     """Run the validation protocol of Section 4 and return the ``cv.json`` document.
 
@@ -165,18 +167,27 @@ def run_cv(
     protocol : {"repetitions", "levels"}, optional
         What a round holds out (:mod:`fsdecouple.heldout`); default: repetitions
         with three or more, else load levels.
+    tune : bool
+        Choose the SVR settings first, as ``fit --tune`` does on the whole set
+        (:mod:`fsdecouple.tune`, over ``tune_grid``), and cross-validate with them;
+        the record goes to ``doc["tune"]``.
     """
     with single_threaded_libraries():
         return _run_cv(calib, settings, folds=folds, task=task, task_tare=task_tare,
                        gross_error=gross_error, max_gamma=max_gamma, workers=workers,
-                       repeats=repeats, progress=progress, protocol=protocol)
+                       repeats=repeats, progress=progress, protocol=protocol, tune=tune,
+                       tune_grid=tune_grid)
 
 
 def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, workers, repeats,
-            progress, protocol) -> dict[str, Any]:
+            progress, protocol, tune=False, tune_grid=None) -> dict[str, Any]:
     settings = settings or Settings()
     if not isinstance(calib, CalibrationSet):
         calib = load_calibration(calib, settings)
+    tune_record = None
+    if tune:
+        from .tune import tune_settings
+        settings, tune_record = tune_settings(calib, settings, grid=tune_grid, workers=workers)
     calib_path = calib.source
     reps = calib.repetitions
     protocol = choose_protocol(calib, protocol if protocol is not None or folds is None
@@ -299,6 +310,8 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
         "gate": None,
         "warnings": warnings,
     }
+    if tune_record is not None:
+        doc["tune"] = tune_record
     if task_data is not None:
         doc["task"] = {"voltages": str(task[0]), "forces": str(task[1]),
                        "rows": int(len(task_data[0])), "tare": task_tare,

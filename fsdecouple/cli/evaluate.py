@@ -65,14 +65,23 @@ def cv(
         str | None, typer.Option(help="What a round holds out: repetitions|levels (default: "
                                       "repetitions with 3 or more, else load levels).")
     ] = None,
+    tune: Annotated[
+        bool, typer.Option("--tune", help="Cross-validate with SVR settings chosen as fit --tune "
+                                          "chooses them (on the whole set).")
+    ] = False,
+    tune_grid: Annotated[
+        str | None, typer.Option(help="The --tune grid (as for fit).")
+    ] = None,
     force: ForceOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
     """Cross-validate the model against the baselines of Section 4 (Tables 1, 3, 4, 5)."""
     from ..calibration import GrossError, load_calibration
     from ..console import cv_renderables
+    from ..console_tune import tune_table
     from ..cv import run_cv
     from ..heldout import parse_folds
+    from ..tune import parse_grid
 
     with user_errors():
         settings = load_config(config)
@@ -82,6 +91,9 @@ def cv(
             raise InputError("--task-tare needs --task")
         if workers is not None and workers < 1:
             raise InputError(f"--workers {workers}: needs at least 1")
+        if tune_grid is not None and not tune:
+            raise InputError("--tune-grid is the grid of --tune: add --tune")
+        grid = parse_grid(tune_grid) if tune_grid is not None else None
         if output is not None:
             check_output(output, force=force)
         cs = load_calibration(calib, settings)
@@ -94,6 +106,7 @@ def cv(
                 task=(task, task_forces) if task is not None else None, task_tare=task_tare,
                 gross_error=GrossError.parse(gross_error) if gross_error else None,
                 max_gamma=max_gamma, workers=workers, repeats=repeats, protocol=protocol,
+                tune=tune, tune_grid=grid,
                 progress=lambda done, total: bar.update(job, completed=done, total=total),
             )
         text = json.dumps(doc, indent=1, sort_keys=True, allow_nan=False)
@@ -103,6 +116,8 @@ def cv(
     if json_out:
         sys.stdout.write(text + "\n")
     else:
+        if "tune" in doc:
+            console.print(tune_table(doc["tune"], settings.load_unit))
         for r in cv_renderables(doc):
             console.print(r)
         if output is not None:
