@@ -21,6 +21,7 @@ from .units import LOAD_UNITS, OUTPUT_UNITS, Units
 from .yamlfile import SafeUniqueLoader, read_yaml  # noqa: F401 (the loader, for tests)
 
 SCALINGS = ("none", "full_scale")
+ZERO_MODES = ("rows", "fit")  # how sweeps are zeroed: Section 3, or zero_fit.py
 # Second-order refinement steps (decouple.py): each gains about a decimal digit
 # under Section 2.1's slopes, so beyond this many a K is a typo, not a setting.
 MAX_REFINE = 100
@@ -70,6 +71,7 @@ class Settings:
     rotation: tuple[tuple[float, float, float], ...] | None = None
     min_r2: float = 0.99
     refine: int = 0  # fixed-point steps on the prime outputs before eq. (11) (decouple.py)
+    zero: str = "rows"  # sweep offsets from the zero rows, or from all points (zero_fit.py)
     units: Units = Units()
 
     @property
@@ -88,6 +90,8 @@ class Settings:
         d["rotation"] = None if self.rotation is None else [list(r) for r in self.rotation]
         d["csv"] = {"sep": d.pop("sep"), "decimal": d.pop("decimal")}
         d["checks"] = {"min_r2": d.pop("min_r2")}
+        if self.zero == "rows":
+            del d["zero"]  # Section 3's zero rows: files from before zero keep their bytes
         if self.refine == 0:
             del d["refine"]  # eq. (11) as written: files from before refine keep their bytes
         if self.units == Units():
@@ -97,7 +101,7 @@ class Settings:
 
 _TOP_KEYS = {
     "limits",
-    "refine",
+    "refine", "zero",
     "sensor", "full_scale", "min_repetitions", "columns", "scale", "csv", "svr",
     "scaling", "rotation", "checks", "units",
 }
@@ -130,6 +134,13 @@ def check_refine(value: Any, where: str = "refine") -> int:
         raise ConfigError(f"{where}: expected a whole number of refinement steps from 0 to "
                           f"{MAX_REFINE}, found {value!r}")
     return int(value)
+
+
+def check_zero(value: Any, where: str = "zero") -> str:
+    """How sweeps are zeroed: ``rows`` (Section 3) or ``fit`` (all points, zero_fit.py)."""
+    if value not in ZERO_MODES:
+        raise ConfigError(f"{where}: expected one of {', '.join(ZERO_MODES)}, found {value!r}")
+    return value
 
 
 def _mapping(value: Any, where: str) -> dict:
@@ -294,6 +305,8 @@ def settings_from_dict(raw: Any, source: str = "config") -> Settings:
         kw["limits"] = _limits(raw["limits"], f"{source}: limits")
     if "refine" in raw:
         kw["refine"] = check_refine(raw["refine"], f"{source}: refine")
+    if "zero" in raw:
+        kw["zero"] = check_zero(raw["zero"], f"{source}: zero")
     if "units" in raw:
         kw["units"] = _units(raw["units"], f"{source}: units")
         if "scaling" not in raw and kw["units"].output != "V":

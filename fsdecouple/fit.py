@@ -29,6 +29,7 @@ from .metrics import interference_errors
 from .model import Chi, CouplingErrorModel, FitReport
 from .parallel import single_threaded_libraries
 from .surrogate import TOLERANCE, build_pair, table_interval
+from .zero_fit import fit_offsets
 
 if TYPE_CHECKING:
     from .calibration import CalibrationSet
@@ -138,6 +139,9 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         scale = np.abs(omega.k) * np.asarray(settings.full_scale)
     else:
         scale = np.ones(3)
+    if settings.zero == "fit":
+        calib = fit_offsets(calib, settings.svr, scale, fit_svr)
+        omega = fit_omega(calib.points)
     jobs = []
     for name in CHI_NAMES:
         x, y = chi_training_data(calib, name)
