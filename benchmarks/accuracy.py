@@ -69,6 +69,14 @@ def _tune_refine(calib, settings):
     return _tune(calib, replace(settings, refine=REFINE))
 
 
+def _zero_fit(calib, settings):
+    return fit(calib, replace(settings, zero="fit"), workers=1)
+
+
+def _zero_fit_refine(calib, settings):
+    return fit(calib, replace(settings, zero="fit", refine=REFINE), workers=1)
+
+
 def _linear(calib, settings):
     return fit_calibration_matrix(calib.voltages, calib.forces)
 
@@ -79,6 +87,8 @@ METHODS: dict[str, Callable] = {
     f"refine K = {REFINE}": _refine,
     "tune": _tune,
     f"tune + refine K = {REFINE}": _tune_refine,
+    "zero: fit": _zero_fit,
+    f"zero: fit + refine K = {REFINE}": _zero_fit_refine,
     "linear matrix": _linear,
 }
 

@@ -140,7 +140,7 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
     else:
         scale = np.ones(3)
     if settings.zero == "fit":
-        calib = fit_offsets(calib, settings.svr, scale, fit_svr)
+        calib = fit_offsets(calib)
         omega = fit_omega(calib.points)
     jobs = []
     for name in CHI_NAMES:

@@ -16,7 +16,6 @@ from fsdecouple.config import Settings, settings_from_dict
 from fsdecouple.errors import ConfigError
 from fsdecouple.fit import fit
 from fsdecouple.simulate import SimulatedSensor, simulate_calibration
-from fsdecouple.svr import fit_svr
 from fsdecouple.zero_fit import fit_offsets
 
 
@@ -45,7 +44,7 @@ def test_prime_offsets_come_from_every_point():
     sweep's prime offset by delta times the zero row's leverage h_00, not by delta."""
     sensor, calib = _noise_free_with_bad_zero_rows(delta=1e-3)
     rows = calib.points
-    fixed = fit_offsets(calib, Settings().svr, np.ones(3), fit_svr).points
+    fixed = fit_offsets(calib).points
     for b, axis in enumerate(AXES):
         s = rows["axis"] == axis
         truth = rows.loc[s, f"f{axis}"].to_numpy() * sensor.k[b]  # u_bb = k_bb f_b
@@ -64,7 +63,7 @@ def test_cross_offsets_put_chi_through_zero():
     """chi_ab(0) = 0 (eq. 4) fixes each cross-channel level; a zero row off by 1 mV no longer
     sets it alone where loads on both sides of zero pin the smooth chi there."""
     sensor, calib = _noise_free_with_bad_zero_rows(delta=1e-3)
-    fixed = fit_offsets(calib, Settings().svr, np.ones(3), fit_svr).points
+    fixed = fit_offsets(calib).points
     for b, axis in enumerate(AXES):
         s = (calib.points["axis"] == axis) & (calib.points[f"f{axis}"] != 0)
         f = calib.points.loc[s, f"f{axis}"].to_numpy()
@@ -83,7 +82,7 @@ def test_cross_offsets_put_chi_through_zero():
 
 def test_offsets_table_records_the_whole_offset_removed():
     calib = from_table(_table(SimulatedSensor(), seed=3), Settings())
-    fixed = fit_offsets(calib, Settings().svr, np.ones(3), fit_svr)
+    fixed = fit_offsets(calib)
     p, o = fixed.points, fixed.offsets
     for _, sweep in o.iterrows():
         s = (p["repetition"] == sweep["repetition"]) & (p["axis"] == sweep["axis"])
