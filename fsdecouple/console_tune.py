@@ -28,6 +28,8 @@ def tune_table(record: dict[str, Any], load_unit: str) -> Table:
     for i, c in enumerate(cands):
         rms = [f"{c['rms'][a]:.4g}" if c["rms"][a] is not None else "–" for a in axes]
         units = "Table 2, as configured" if c["table2"] else "full scale"
+        if "tolerance" in c:  # records from before the tuned tolerance have none
+            units += f", tol {c['tolerance']:g}"
         note = Text("chosen", "bold green") if i == record["chosen"] else Text(
             "clearly better" if c["clearly_better"] else "")
         t.add_row(str(i), f"{c['gamma']:g}", f"{c['C']:g}", f"{c['epsilon']:.3g}", units, *rms,
