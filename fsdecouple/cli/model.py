@@ -64,7 +64,7 @@ def fit(
                                           "a grid (Table 2 is one candidate).")
     ] = False,
     tune_grid: Annotated[
-        str | None, typer.Option(help='The --tune grid, e.g. "gamma=1,2,4,8;C=1,10,100;'
+        str | None, typer.Option(help='The --tune grid, e.g. "gamma=1,2,4,8;C=1,10;'
                                       'epsilon=0.5,1,2" (epsilon: multiples of the noise).')
     ] = None,
     no_verdict: Annotated[
