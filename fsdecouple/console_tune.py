@@ -22,8 +22,10 @@ def tune_table(record: dict[str, Any], load_unit: str) -> Table:
     noise = f"sigma {pct(sigma, 3)} F.S." if sigma is not None else "no repeats: fixed epsilon"
     t = Table(title=f"SVR settings by held-out error ({record['protocol']} protocol, "
                     f"{record['rounds']} rounds, K = {record['refine']}; {noise})")
+    edge = any(c.get("edge") is not None for c in cands)  # records from before: no column
     for col in ("#", "gamma", "C", "epsilon", "units",
-                *(f"RMS {a} [{load_unit}]" for a in axes), "worst % F.S.", ""):
+                *(f"RMS {a} [{load_unit}]" for a in axes), "worst % F.S.",
+                *(["edge % F.S."] if edge else []), ""):
         t.add_column(col, justify="left" if col in ("units", "") else "right")
     for i, c in enumerate(cands):
         rms = [f"{c['rms'][a]:.4g}" if c["rms"][a] is not None else "–" for a in axes]
@@ -33,5 +35,5 @@ def tune_table(record: dict[str, Any], load_unit: str) -> Table:
         note = Text("chosen", "bold green") if i == record["chosen"] else Text(
             "clearly better" if c["clearly_better"] else "")
         t.add_row(str(i), f"{c['gamma']:g}", f"{c['C']:g}", f"{c['epsilon']:.3g}", units, *rms,
-                  pct(c["figure"], 4), note)
+                  pct(c["figure"], 4), *([pct(c.get("edge"), 4)] if edge else []), note)
     return t

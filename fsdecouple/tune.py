@@ -48,7 +48,7 @@ from .axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .calibration import CalibrationSet
 from .config import Settings
 from .errors import InputError
-from .heldout import choose_protocol, rounds_for
+from .heldout import HeldOutRound, choose_protocol, level_index, rounds_for
 from .parallel import single_threaded_libraries
 
 # The default grid, in full-scale units (see the module docstring).  The issue's
@@ -176,6 +176,26 @@ def _rounds(calib: CalibrationSet):
     return protocol, rounds
 
 
+def edge_round(calib: CalibrationSet) -> HeldOutRound | None:
+    """Train without each sweep's end points (loads beyond all its others); test on them.
+
+    Decoupling them extrapolates every chi fed by the swept axis one load step beyond
+    its training range: what loads beyond the calibrated range ask of a kernel.
+    None when no sweep has such a point, or an axis would keep fewer than two loaded
+    points to train on.
+    """
+    k, prime = level_index(calib)
+    end = np.zeros(len(prime), dtype=bool)
+    for idx in calib.points.groupby(["repetition", "axis"], sort=False).indices.values():
+        for i in idx[k[idx] > 0]:
+            others = prime[idx[idx != i]]
+            end[i] = others.size > 0 and (prime[i] > others.max() or prime[i] < others.min())
+    axis = calib.points["axis"].to_numpy()
+    if not end.any() or any(((axis == a) & (k > 0) & ~end).sum() < 2 for a in set(axis)):
+        return None  # nothing to hold out, or too little left to fit a sweep's chi
+    return HeldOutRound(0, calib.select(~end), ((0, calib.select(end)),))
+
+
 def _squared_errors(round_models, rounds, settings) -> np.ndarray:
     """(force error / F.S.)^2 of every held-out point, shape (n, N), rounds in order."""
     fs = np.asarray(settings.full_scale)
@@ -241,19 +261,27 @@ def tune_settings(
     protocol, rounds = _rounds(calib)
     sigma = noise(calib, settings)
     cands, basis = candidates(settings, grid, sigma)
-    errors = heldout_errors(calib, settings, cands, rounds, workers, progress)
+    edge = edge_round(calib)
+    both = heldout_errors(calib, settings, cands, [*rounds, *([edge] if edge else [])],
+                          workers, progress)
+    n_in = sum(len(test.points) for rnd in rounds for _, test in rnd.tests)
+    errors = [e[:n_in] for e in both]
+    edges = [np.sqrt(e[n_in:].mean(axis=0)).max() if edge else math.nan for e in both]
     fs = np.asarray(settings.full_scale)
     scored = []
     for c, (cand, e) in enumerate(zip(cands, errors, strict=True)):
         rms = np.sqrt(e.mean(axis=0))
         finite = bool(np.isfinite(rms).all())
+        # beyond the calibrated range no worse than Table 2 either (edge_round)
+        edge_ok = not edge or bool(edges[c] <= edges[0]) or not math.isfinite(edges[0])
         scored.append({"gamma": cand.gamma, "C": cand.C, "epsilon": cand.epsilon,
                        "scaling": cand.scaling, "table2": cand.table2,
                        "tolerance": cand.settings(settings).svr.tolerance,
                        "rms": {a: float(v) if finite else None
                                for a, v in zip(AXES, rms * fs, strict=True)},
                        "figure": float(rms.max()) if finite else None,
-                       "clearly_better": c > 0 and clearly_better(e, errors[0])})
+                       "edge": float(edges[c]) if math.isfinite(edges[c]) else None,
+                       "clearly_better": c > 0 and edge_ok and clearly_better(e, errors[0])})
     best = 0  # Table 2 unless a candidate is clearly better (and then the best of those)
     for c, s in enumerate(scored):
         if s["clearly_better"] and (scored[best]["figure"] is None

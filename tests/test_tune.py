@@ -19,7 +19,7 @@ from fsdecouple.heldout import rounds_for
 from fsdecouple.modelfile import load_model, model_to_dict
 from fsdecouple.simulate import SimulatedSensor, with_coupling
 from fsdecouple.svr import predict, train
-from fsdecouple.tune import TUNE_TOLERANCE, Grid, clearly_better, parse_grid, tune_settings
+from fsdecouple.tune import TUNE_TOLERANCE, Grid, clearly_better, edge_round, parse_grid, tune_settings
 
 runner = CliRunner()
 SAMPLE = "sample_data/calibration"
@@ -99,6 +99,34 @@ def test_the_tuned_tolerance_reaches_the_converged_svr_and_table2s_does_not():
     # measured: 3.7e-5 and 5.7e-4 F.S.; the noise sigma is ~4e-4 F.S.
     assert np.abs(chi(TUNE_TOLERANCE) - converged).max() < 1e-4
     assert np.abs(chi(1e-3) - converged).max() > 3e-4
+
+
+def test_edge_round_holds_out_each_sweeps_loads_beyond_its_others():
+    settings = load_config()
+    calib = load_calibration(SAMPLE, settings)
+    rnd = edge_round(calib)
+    test = rnd.tests[0][1].points
+    # the sample's grids (Section 3): X and Y from -100 to 100 N, Z from 0 to -150 N;
+    # the zero rows stay in training, so Z's only end is -150 N
+    ends = {"x": {-100.0, 100.0}, "y": {-100.0, 100.0}, "z": {-150.0}}
+    reps = calib.repetitions
+    assert len(test) == len(reps) * 5 and len(rnd.train.points) + len(test) == len(calib.points)
+    for (axis, rep), g in test.groupby(["axis", "repetition"]):
+        assert set(g["f" + axis]) == ends[axis] and rep in reps
+    for axis, loads in ends.items():  # none left in training
+        assert not rnd.train.sweep(axis)["f" + axis].isin(loads).any()
+
+
+def test_a_candidate_worse_than_table2_beyond_the_range_is_never_chosen():
+    # gamma = 8 per F.S.^2: better than Table 2 on the held-out points inside the
+    # loads (figure), worse extrapolating one load step (edge): its kernel is narrow
+    settings = load_config()
+    calib = load_calibration(SAMPLE, settings)
+    chosen, record = tune_settings(calib, settings, grid=Grid(gamma=(8.0,), C=(10.0,),
+                                                              epsilon=(0.25,)), workers=2)
+    t2, narrow = record["candidates"]
+    assert narrow["figure"] < t2["figure"] and narrow["edge"] > t2["edge"]
+    assert not narrow["clearly_better"] and record["chosen"] == 0 and chosen == settings
 
 
 def test_a_candidate_worse_than_table2_on_any_axis_is_never_chosen(monkeypatch):
@@ -258,3 +286,18 @@ def test_clearly_better_needs_a_lower_figure_and_a_gain_beyond_the_noise():
     # lower on z but a new worst axis above Table 2's figure: never
     shifted = t2 * np.array([2.5, 1.0, 0.5])
     assert not clearly_better(shifted, t2, margin=0.0)
+
+
+def test_no_edge_round_when_an_axis_would_keep_too_little_to_train():
+    # every sweep loaded at -50 and +50 only: both are ends, nothing loaded is left
+    rows = [("x", 1, 0.0), ("x", 1, -50.0), ("x", 1, 50.0)]
+    table = pd.DataFrame([(1, a, *(f if a == b else 0.0 for b in "xyz"), 0.0, 0.0, 0.0)
+                          for a in "xyz" for _, _, f in rows],
+                         columns=["repetition", "axis", "fx", "fy", "fz", "ux", "uy", "uz"])
+    from fsdecouple.calibration import from_table
+
+    from dataclasses import replace
+
+    calib = from_table(table, replace(load_config(), min_repetitions=1))
+    assert edge_round(calib) is None
+    assert edge_round(load_calibration(SAMPLE, load_config())) is not None
