@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -10,7 +11,7 @@ import pytest
 from typer.testing import CliRunner
 
 from fsdecouple import load_config
-from fsdecouple.calibration import load_calibration
+from fsdecouple.calibration import from_table, load_calibration
 from fsdecouple.cli import app
 from fsdecouple.config import SVRSettings
 from fsdecouple.errors import InputError
@@ -294,10 +295,6 @@ def test_no_edge_round_when_an_axis_would_keep_too_little_to_train():
     table = pd.DataFrame([(1, a, *(f if a == b else 0.0 for b in "xyz"), 0.0, 0.0, 0.0)
                           for a in "xyz" for _, _, f in rows],
                          columns=["repetition", "axis", "fx", "fy", "fz", "ux", "uy", "uz"])
-    from fsdecouple.calibration import from_table
-
-    from dataclasses import replace
-
     calib = from_table(table, replace(load_config(), min_repetitions=1))
     assert edge_round(calib) is None
     assert edge_round(load_calibration(SAMPLE, load_config())) is not None

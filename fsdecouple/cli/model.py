@@ -65,7 +65,7 @@ def fit(
     ] = False,
     tune_grid: Annotated[
         str | None, typer.Option(help='The --tune grid, e.g. "gamma=1,2,4,8;C=1,10;'
-                                      'epsilon=0.5,1,2" (epsilon: multiples of the noise).')
+                                      'epsilon=0.25,0.5,1" (epsilon: multiples of the noise).')
     ] = None,
     no_verdict: Annotated[
         bool, typer.Option("--no-verdict", help="Skip the held-out comparison with the "
