@@ -17,6 +17,8 @@ from typing import Any
 
 from .axes import AXES, CANONICAL_COLUMNS, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .errors import ConfigError, printable
+from .extrapolation import DEFAULT as DEFAULT_EXTRAPOLATION
+from .extrapolation import check_extrapolation
 from .units import LOAD_UNITS, OUTPUT_UNITS, Units
 from .yamlfile import SafeUniqueLoader, read_yaml  # noqa: F401 (the loader, for tests)
 
@@ -72,6 +74,8 @@ class Settings:
     min_r2: float = 0.99
     refine: int = 0  # fixed-point steps on the prime outputs before eq. (11) (decouple.py)
     zero: str = "rows"  # sweep offsets from the zero rows, or from all points (zero_fit.py)
+    # chi beyond its calibrated range (extrapolation.py); model files without it: kernel
+    extrapolation: str = DEFAULT_EXTRAPOLATION
     units: Units = Units()
 
     @property
@@ -101,7 +105,7 @@ class Settings:
 
 _TOP_KEYS = {
     "limits",
-    "refine", "zero",
+    "refine", "zero", "extrapolation",
     "sensor", "full_scale", "min_repetitions", "columns", "scale", "csv", "svr",
     "scaling", "rotation", "checks", "units",
 }
@@ -307,6 +311,8 @@ def settings_from_dict(raw: Any, source: str = "config") -> Settings:
         kw["refine"] = check_refine(raw["refine"], f"{source}: refine")
     if "zero" in raw:
         kw["zero"] = check_zero(raw["zero"], f"{source}: zero")
+    if "extrapolation" in raw:
+        kw["extrapolation"] = check_extrapolation(raw["extrapolation"], f"{source}: extrapolation")
     if "units" in raw:
         kw["units"] = _units(raw["units"], f"{source}: units")
         if "scaling" not in raw and kw["units"].output != "V":
@@ -356,4 +362,6 @@ def apply_overrides(settings: Settings, **overrides: Any) -> Settings:
         )
     if "refine" in given:
         given["refine"] = check_refine(given["refine"], "--refine")
+    if "extrapolation" in given:
+        given["extrapolation"] = check_extrapolation(given["extrapolation"], "--extrapolation")
     return replace(settings, **given)

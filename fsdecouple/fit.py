@@ -24,6 +24,7 @@ from .axes import AXES, CHI_NAMES, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .config import Settings
 from .decouple import MAX_SURROGATE_ERROR, usable
 from .errors import InputError
+from .extrapolation import table_interval as tangent_interval
 from .linear import fit_omega
 from .metrics import interference_errors
 from .model import Chi, CouplingErrorModel, FitReport
@@ -163,7 +164,7 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         s = fit_svr(x / in_scale, y / out_scale, settings.svr)
         return Chi(
             name, s.gamma, s.support_vectors, s.dual_coef, s.rho, in_scale, out_scale,
-            (float(x.min()), float(x.max())), int(x.size),
+            (float(x.min()), float(x.max())), int(x.size), extrapolation=settings.extrapolation,
         )
 
     u_fs = np.abs(omega.k) * np.asarray(settings.full_scale)
@@ -172,8 +173,9 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         # the chi fed by one input axis share one grid (one index per input value);
         # the tolerance is a fraction of the full-scale output of the chi's output
         pair = [c for c in chis if c.name[1] == axis]
-        lo, hi = table_interval(min(c.input_range[0] for c in pair),
-                                max(c.input_range[1] for c in pair))
+        # tangent tables have knots at the range's ends (extrapolation.table_interval)
+        interval = tangent_interval if settings.extrapolation == "tangent" else table_interval
+        lo, hi = interval(min(c.input_range[0] for c in pair), max(c.input_range[1] for c in pair))
         tolerance = TOLERANCE * min(u_fs[c.output_axis] for c in pair)
         return [replace(c, surrogate=s)
                 for c, s in zip(pair, build_pair(pair, lo, hi, tolerance), strict=True)]

@@ -19,6 +19,7 @@ from .axes import AXES, CHI_NAMES
 from .config import settings_from_dict
 from .decouple import MAX_SURROGATE_ERROR, usable
 from .errors import ModelFileError, excerpt
+from .extrapolation import LEGACY as LEGACY_EXTRAPOLATION
 from .iotools.files import MODEL_LIMIT, atomic_write, read_bounded
 from .model import Chi, CouplingErrorModel, FitReport
 from .surrogate import spot_check
@@ -224,6 +225,7 @@ def _check_report(report: Any, source: str) -> None:
 def _settings_yaml_form(d: dict[str, Any]) -> dict[str, Any]:
     """Settings.to_dict() output back into the YAML config's shape."""
     d = dict(d)
+    d.setdefault("extrapolation", LEGACY_EXTRAPOLATION)  # files from before the option
     svr = dict(d.pop("svr"))
     return {**d, "svr": svr}
 
