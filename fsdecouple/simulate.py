@@ -161,12 +161,15 @@ def simulate_lab_calibration(
 
 def simulate_task(
     sensor: SimulatedSensor, n: int = 3000, rate: float = 1000.0, tare_rows: int = 200,
-    seed: int = 0,
+    seed: int = 0, reach: float | None = None,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """A combined-load task log: all three forces non-zero at once.
 
     The first ``tare_rows`` rows are unloaded (for ``apply --tare``).  Returns the
     voltage log (``t, ux, uy, uz``, raw with a zero offset) and the true forces.
+    ``reach``: scale the loads so each component peaks at ``reach`` x its full scale
+    (1.2: loads beyond the calibrated range, for extrapolation); default: the sample
+    log's loads, 60-90 % of full scale.
     """
     rng = np.random.default_rng(seed + 1_000_003)
     t = np.arange(n) / rate
@@ -177,6 +180,8 @@ def simulate_task(
     f[moving, 0] = 70.0 * ramp * np.sin(2 * np.pi * 0.7 * tm)
     f[moving, 1] = 60.0 * ramp * np.sin(2 * np.pi * 1.1 * tm + 1.0)
     f[moving, 2] = -75.0 * ramp * (1.0 - 0.8 * np.cos(2 * np.pi * 0.5 * tm))
+    if reach is not None:
+        f *= reach * np.asarray(sensor.full_scale) / np.abs(f).max(axis=0, initial=0.0).clip(1e-300)
     offset = rng.uniform(-0.05, 0.05, size=3)
     u = sensor.voltages(f) + offset + rng.normal(0.0, sensor.noise, size=f.shape)
     volts = pd.DataFrame({"t": t, "ux": u[:, 0], "uy": u[:, 1], "uz": u[:, 2]})
