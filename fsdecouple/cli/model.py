@@ -110,6 +110,7 @@ def fit(
     if json_out:
         print_json({"model": str(output), "method": model.method, **model.report.to_dict(),
                     "checks": [c.to_dict() for c in checks], "refine": settings.refine,
+                    "extrapolation": settings.extrapolation,
                     "refine_advice": advice, "tune": model.report.tune})
     else:
         if model.report.tune is not None:
