@@ -65,7 +65,7 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
         return
     n = workers or os.cpu_count() or 1
     with distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                  dashboard_address=None, silence_logs=logging.ERROR) as cluster, \
+                                  dashboard_address=":0", silence_logs=logging.CRITICAL) as cluster, \
             distributed.Client(cluster, set_as_default=False) as client:
         yield client
 
@@ -110,6 +110,7 @@ def _dataset_graph(spec: ApplySpec, job: Job, target):
     dd, _ = _dask()
     model = spec.model()
     settings, unit = check_options(model, spec.settings, spec.tare, spec.zero, spec.unit)
+    _same_columns(job)
     zero = dataset_zero(spec, job)
     frame = dd.read_parquet([str(p) for p in job.parts], split_row_groups=False,
                             dtype_backend="pyarrow", index=False)
@@ -130,6 +131,24 @@ def _dataset_graph(spec: ApplySpec, job: Job, target):
                                             OUTPUT_UNIT_KEY: model.settings.output_unit})
     counts = out[STATUS_COLUMN].value_counts()
     return dask.delayed(_summary)(write, counts)
+
+
+def _same_columns(job: Job) -> None:
+    """Every part readable and with the first part's columns (Dask takes the first's schema)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    first = None
+    for part in job.parts:
+        try:
+            names = pq.read_schema(part).names
+        except (pa.ArrowInvalid, OSError) as err:
+            raise InputError(f"{printable(part)}: not a readable Parquet file ({excerpt(err)})") from None
+        if first is None:
+            first = names
+        elif names != first:
+            raise InputError(f"{printable(part)}: columns {', '.join(map(excerpt, names))} differ from "
+                             f"the dataset's first part ({', '.join(map(excerpt, first))})")
 
 
 def _summary(_written, counts) -> tuple[int, dict[str, int]]:
