@@ -32,10 +32,11 @@ import os
 import shutil
 import tempfile
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from .apply import MAX_WORKERS
 from .batch_jobs import ApplySpec, Job, apply_job
 from .config import Settings
 from .errors import FsdecoupleError, InputError, printable
@@ -239,7 +240,7 @@ def apply_many(model_path: str | Path, inputs, out_dir: str | Path, *, engine: s
     check_out_dir(out, jobs, dirs, [model_path, *([config] if config is not None else [])])
     spec = ApplySpec(str(Path(model_path).resolve()), refine, settings, tare,
                      None if zero is None else tuple(float(v) for v in zero), unit, round_trip,
-                     workers if engine == "local" else 1)
+                     1)
     results = [FileResult(str(j.input), str(out / j.rel)) for j in jobs]
     todo = []
     for i, job in enumerate(jobs):
@@ -268,12 +269,8 @@ def apply_many(model_path: str | Path, inputs, out_dir: str | Path, *, engine: s
 
     try:
         if engine == "local":
-            for i in todo:
-                try:
-                    outcome = apply_job(spec, jobs[i], _staged(stage, i, jobs[i]))
-                except FsdecoupleError as err:
-                    outcome = str(err)
-                finish(i, outcome)
+            _run_local(spec, {i: (jobs[i], _staged(stage, i, jobs[i])) for i in todo}, workers,
+                       finish)
         else:
             from .batch_dask import run_dask
 
@@ -285,6 +282,35 @@ def apply_many(model_path: str | Path, inputs, out_dir: str | Path, *, engine: s
             with contextlib.suppress(OSError):
                 out.rmdir()  # only if nothing was written
     return BatchResult(engine, str(out_dir), results, force_unit)
+
+
+def _run_local(spec: ApplySpec, todo: dict[int, tuple[Job, Path]], workers: int | None,
+               finish: Callable[[int, object], None]) -> None:
+    """Several logs at once on threads: a log of one block (50,000 rows) has no parallelism
+    of its own.  ``workers`` threads in all: as many logs at once, up to the logs; a log
+    alone gets them all for its blocks."""
+    from concurrent.futures import ThreadPoolExecutor, as_completed
+
+    cores = workers or min(MAX_WORKERS, os.cpu_count() or 1)
+    at_once = max(1, min(cores, len(todo)))
+    spec = replace(spec, threads=max(1, cores // at_once))
+
+    def one(i: int):
+        job, target = todo[i]
+        try:
+            return i, apply_job(spec, job, target)
+        except FsdecoupleError as err:
+            return i, str(err)
+
+    with ThreadPoolExecutor(at_once) as pool:
+        futures = [pool.submit(one, i) for i in todo]
+        try:
+            for fut in as_completed(futures):
+                finish(*fut.result())
+        except BaseException:
+            for fut in futures:  # Ctrl-C: start no other log; those running finish
+                fut.cancel()
+            raise
 
 
 def _staged(stage: Path, i: int, job: Job) -> Path:

@@ -125,11 +125,16 @@ def _dataset_graph(spec: ApplySpec, job: Job, target):
     factor = load_factor(model.settings.load_unit, unit)
     out = frame.map_partitions(decouple_partition, spec, zero, factor, meta=meta)
     names = [p.name for p in job.parts]
+    # as apply's ParquetSink: dictionary-encoding measured doubles, which seldom repeat,
+    # is wasted work
+    keep = [c for c, t in meta.dtypes.items() if not pd.api.types.is_float_dtype(t)]
     write = out.to_parquet(str(target), write_index=False, name_function=names.__getitem__,
-                           write_metadata_file=False, compute=False,
+                           write_metadata_file=False, compute=False, use_dictionary=keep,
                            custom_metadata={FORCE_UNIT_KEY: unit,
                                             OUTPUT_UNIT_KEY: model.settings.output_unit})
-    counts = out[STATUS_COLUMN].value_counts()
+    # a tree reduction, not value_counts (which shuffles between the workers)
+    counts = out[STATUS_COLUMN].reduction(_count_chunk, aggregate=_count_total,
+                                          meta=pd.Series([], dtype=float))
     return dask.delayed(_summary)(write, counts)
 
 
@@ -149,6 +154,16 @@ def _same_columns(job: Job) -> None:
         elif names != first:
             raise InputError(f"{printable(part)}: columns {', '.join(map(excerpt, names))} differ from "
                              f"the dataset's first part ({', '.join(map(excerpt, first))})")
+
+
+def _count_chunk(status):
+    import pandas as pd
+
+    return pd.DataFrame([status.value_counts().to_dict()])  # one row: {status: rows}
+
+
+def _count_total(chunks):
+    return chunks.sum()  # the chunks' rows, concatenated
 
 
 def _summary(_written, counts) -> tuple[int, dict[str, int]]:

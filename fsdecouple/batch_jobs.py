@@ -11,6 +11,7 @@ same whichever engine ran it.
 from __future__ import annotations
 
 import functools
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -62,7 +63,7 @@ def _load(path: str, refine: int | None):
 def apply_job(spec: ApplySpec, job: Job, target: str | Path, zero=None) -> tuple[int, dict[str, int]]:
     """Decouple one input into ``target`` (a file, or a directory for a dataset).
 
-    A dataset's parts are decoupled one by one with the dataset's zero (``zero``,
+    A dataset's parts are decoupled ``spec.threads`` at a time with the dataset's zero (``zero``,
     else :func:`dataset_zero`), each into ``target/<part name>``.
     Returns the rows and status counts.
     """
@@ -78,10 +79,13 @@ def apply_job(spec: ApplySpec, job: Job, target: str | Path, zero=None) -> tuple
         zero = dataset_zero(spec, job)
     target.mkdir()
     rows, counts = 0, dict.fromkeys(STATUSES, 0)
-    for part in job.parts:
-        s = apply_file(model, part, target / part.name, zero=zero, **kw)
-        rows += s.rows
-        counts = {k: counts[k] + s.status_counts[k] for k in counts}
+    # parts at once rather than blocks at once: a part is often one block
+    kw["workers"] = 1
+    with ThreadPoolExecutor(spec.threads or 1) as pool:
+        for s in pool.map(lambda part: apply_file(model, part, target / part.name, zero=zero,
+                                                  **kw), job.parts):
+            rows += s.rows
+            counts = {k: counts[k] + s.status_counts[k] for k in counts}
     return rows, counts
 
 
