@@ -20,7 +20,7 @@ the same bytes), ``--tare`` taken per log (a dataset's first rows, parts in natu
 order, for a dataset).  Outputs are first written to a hidden staging directory
 inside ``OUT_DIR`` and moved into place when finished, so a log that fails (bad
 input, a worker killed for good) leaves nothing behind, and does not stop the
-others.  The engines: ``local`` (one log after another, each on its own threads)
+others.  The engines: ``local`` (threads, several logs at once)
 and ``dask`` (:mod:`fsdecouple.batch_dask`).
 """
 
@@ -214,7 +214,7 @@ def apply_many(model_path: str | Path, inputs, out_dir: str | Path, *, engine: s
     Parameters
     ----------
     engine : str
-        ``local`` (logs one after another, ``workers`` threads each) or ``dask``
+        ``local`` (``workers`` threads, as many logs at once) or ``dask``
         (``scheduler``: a Dask scheduler address; none starts a LocalCluster of
         ``workers`` processes).
     settings, tare, zero, unit, refine, round_trip

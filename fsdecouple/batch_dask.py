@@ -30,11 +30,11 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .apply import FORCE_UNIT_KEY, OUTPUT_UNIT_KEY, STATUS_COLUMN, check_options
+from .apply import FORCE_UNIT_KEY, OUTPUT_UNIT_KEY, STATUS_COLUMN, STATUS_NAMES, check_options
 from .axes import FORCE_COLUMNS
 from .batch_jobs import ApplySpec, Job, apply_job, dataset_zero
 from .errors import FsdecoupleError, InputError, excerpt, printable
-from .frame import decouple_frame, frame_outputs
+from .frame import frame_forces, frame_outputs
 from .units import load_factor
 
 CONNECT_TIMEOUT = 5.0  # seconds to reach a --scheduler before giving up
@@ -174,22 +174,22 @@ def _summary(_written, counts) -> tuple[int, dict[str, int]]:
 
 
 def decouple_partition(df, spec: ApplySpec, zero, factor: float = 1.0):
-    """One partition of a dataset: ``decouple_frame`` with ``apply``'s Parquet column types.
+    """One partition of a dataset: ``decouple_frame``'s arrays, in ``apply``'s Parquet types.
 
     ``zero``: the dataset's zero (its ``--tare`` rows' mean, or ``--zero``);
-    ``factor``: to the force unit asked for (``--unit``).
+    ``factor``: to the force unit asked for (``--unit``).  Forces are Arrow doubles,
+    null where a row has none, and ``status`` Arrow strings, as ``apply`` writes them.
     """
     import pandas as pd
     import pyarrow as pa
+    import pyarrow.compute as pc
 
-    out = decouple_frame(spec.model(), df, zero=zero, settings=spec.settings)
-    for c in FORCE_COLUMNS:
-        f = out[c].to_numpy(dtype=float)
-        if factor != 1.0:
-            f = f * factor
-        empty = np.isnan(f)  # decouple_frame's rows without forces, as apply's nulls
-        out[c] = pd.arrays.ArrowExtensionArray(pa.array(f, pa.float64(),
-                                                        mask=empty if empty.any() else None))
-    status = out[STATUS_COLUMN].to_numpy(dtype=object)
-    out[STATUS_COLUMN] = pd.arrays.ArrowExtensionArray(pa.array(status, pa.string()))
-    return out
+    f, code = frame_forces(spec.model(), df, zero=zero, settings=spec.settings)
+    if factor != 1.0:
+        f = f * factor
+    empty = np.isnan(f[:, 0])  # the rows without forces have none at all
+    mask = empty if empty.any() else None
+    cols = {c: pd.arrays.ArrowExtensionArray(pa.array(f[:, a], pa.float64(), mask=mask))
+            for a, c in enumerate(FORCE_COLUMNS)}
+    cols[STATUS_COLUMN] = pd.arrays.ArrowExtensionArray(pc.take(STATUS_NAMES, pa.array(code)))
+    return df.assign(**cols)

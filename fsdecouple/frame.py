@@ -104,6 +104,21 @@ def decouple_frame(model: CouplingErrorModel, frame: pd.DataFrame, *, tare: int 
         A copy of ``frame`` with ``fx, fy, fz`` [load unit] (NaN where a row has no
         forces) and ``status`` (:data:`fsdecouple.apply.STATUSES`).
     """
+    f, code = frame_forces(model, frame, tare=tare, zero=zero, settings=settings)
+    out = frame.copy()
+    for a, name in enumerate(FORCE_COLUMNS):
+        out[name] = f[:, a]
+    out[STATUS_COLUMN] = _NAMES[code]
+    return out
+
+
+def frame_forces(model: CouplingErrorModel, frame: pd.DataFrame, *, tare: int | None = None,
+                 zero=None, settings: Settings | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The arrays of :func:`decouple_frame`, for engines that build their own columns.
+
+    Returns ``(f, code)``: forces, shape (n, N) [load unit], NaN where a row has
+    none, and each row's status as an index into :data:`fsdecouple.apply.STATUSES`.
+    """
     if tare is not None and zero is not None:
         raise InputError("give either tare or zero, not both")
     settings, _ = check_options(model, settings, None, None, None)  # its units: the model's
@@ -117,8 +132,4 @@ def decouple_frame(model: CouplingErrorModel, frame: pd.DataFrame, *, tare: int 
             raise InputError(f"zero {zero!r}: expected {model.n_components} finite outputs")
     f, code, empty = decouple_rows(model, raw, offsets, RowRules.for_model(model, settings))
     f[empty] = np.nan
-    out = frame.copy()
-    for a, name in enumerate(FORCE_COLUMNS):
-        out[name] = f[:, a]
-    out[STATUS_COLUMN] = _NAMES[code]
-    return out
+    return f, code

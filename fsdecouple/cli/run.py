@@ -60,14 +60,14 @@ def apply(
     round_trip: Annotated[
         bool, typer.Option("--round-trip", help="CSV: write forces as round-trip exact text.")
     ] = False,
-    engine: Annotated[str, typer.Option(help="Many logs: local (one after another) or dask.")] = "local",
+    engine: Annotated[str, typer.Option(help="Many logs: local (threads here) or dask.")] = "local",
     scheduler: Annotated[
         str | None, typer.Option(help="Many logs, --engine dask: the address of a running Dask "
                                       "scheduler; default: a LocalCluster on this machine.")
     ] = None,
     workers: Annotated[
-        int | None, typer.Option(help="Many logs: Dask worker processes of the LocalCluster, or "
-                                      "threads per log (local); default: the cores.")
+        int | None, typer.Option(help="Many logs: threads, as many logs at once (local), or the "
+                                      "LocalCluster's worker processes (dask); default: the cores.")
     ] = None,
     force: ForceOpt = False,
     json_out: JsonOpt = False,
