@@ -91,19 +91,21 @@ def run_dask(spec: ApplySpec, todo: dict[int, tuple[Job, object]], *, scheduler:
             futures[fut] = i
         for fut in distributed.as_completed(list(futures), loop=client.loop):
             i = futures[fut]
+            job, target = todo[i]
             try:
                 outcome = fut.result()
+                if job.dataset:
+                    outcome = _count_written(target)
             except FsdecoupleError as err:
                 outcome = str(err)
             except distributed.KilledWorker as err:
-                outcome = (f"{printable(todo[i][0].input)}: Dask workers died while decoupling it "
+                outcome = (f"{printable(job.input)}: Dask workers died while decoupling it "
                            f"({excerpt(err, 200)}); nothing written")
             finish(i, outcome)
 
 
 def _dataset_graph(spec: ApplySpec, job: Job, target):
     """The Dask graph that decouples a Parquet dataset into ``target``: (rows, counts)."""
-    import dask
     import pandas as pd
     import pyarrow as pa
 
@@ -132,10 +134,10 @@ def _dataset_graph(spec: ApplySpec, job: Job, target):
                            write_metadata_file=False, compute=False, use_dictionary=keep,
                            custom_metadata={FORCE_UNIT_KEY: unit,
                                             OUTPUT_UNIT_KEY: model.settings.output_unit})
-    # a tree reduction, not value_counts (which shuffles between the workers)
-    counts = out[STATUS_COLUMN].reduction(_count_chunk, aggregate=_count_total,
-                                          meta=pd.Series([], dtype=float))
-    return dask.delayed(_summary)(write, counts)
+    # the statuses are counted from the parts written (_count_written): a second
+    # consumer of the partitions would keep them in memory and stop Dask fusing
+    # read, decouple and write into one task per part
+    return write
 
 
 def _same_columns(job: Job) -> None:
@@ -156,21 +158,19 @@ def _same_columns(job: Job) -> None:
                              f"the dataset's first part ({', '.join(map(excerpt, first))})")
 
 
-def _count_chunk(status):
-    import pandas as pd
+def _count_written(directory) -> tuple[int, dict[str, int]]:
+    """Rows and status counts of a dataset written: its status column, read back."""
+    import pyarrow.compute as pc
+    import pyarrow.parquet as pq
 
-    return pd.DataFrame([status.value_counts().to_dict()])  # one row: {status: rows}
-
-
-def _count_total(chunks):
-    return chunks.sum()  # the chunks' rows, concatenated
-
-
-def _summary(_written, counts) -> tuple[int, dict[str, int]]:
     from .apply import STATUSES
 
-    found = {str(k): int(v) for k, v in counts.items()}
-    return sum(found.values()), {s: found.get(s, 0) for s in STATUSES}
+    counts = dict.fromkeys(STATUSES, 0)
+    for part in sorted(os.listdir(directory)):
+        status = pq.read_table(os.path.join(directory, part), columns=[STATUS_COLUMN])[STATUS_COLUMN]
+        for entry in pc.value_counts(status).to_pylist():
+            counts[entry["values"]] += entry["counts"]
+    return sum(counts.values()), counts
 
 
 def decouple_partition(df, spec: ApplySpec, zero, factor: float = 1.0):
