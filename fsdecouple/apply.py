@@ -133,6 +133,16 @@ def apply_file(
     byte; Parquet columns keep their types (CSV columns become strings).
     """
     path, out = Path(voltages), Path(out)
+    settings, unit = check_options(model, settings, tare, zero, unit)
+    refuse_overwriting_input(out, [path])
+    with LogFile(path, settings) as log:
+        return _apply(model, log, out, settings, tare, zero, unit, force, chunk_rows, progress,
+                      workers, round_trip)
+
+
+def check_options(model: CouplingErrorModel, settings: Settings | None, tare, zero,
+                  unit: str | None) -> tuple[Settings, str]:
+    """``apply``'s settings and force unit, with the defaults; refused if they cannot be used."""
     settings = settings or model.settings
     if settings.units != model.settings.units:
         # the model's k and ranges are in its calibration's units: a log in others
@@ -147,10 +157,7 @@ def apply_file(
     if unit not in LOAD_UNITS:
         raise InputError(f"--unit {unit!r}: unknown load unit; expected one of "
                          f"{', '.join(LOAD_UNITS)}")
-    refuse_overwriting_input(out, [path])
-    with LogFile(path, settings) as log:
-        return _apply(model, log, out, settings, tare, zero, unit, force, chunk_rows, progress,
-                      workers, round_trip)
+    return settings, unit
 
 
 @dataclass(frozen=True)
