@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
+from .axes import AXES, DEFAULT, VOLTAGE_COLUMNS, Layout
 from .config import Settings
 from .errors import InputError
 from .iotools.calibration import read_calibration_table
@@ -37,6 +37,8 @@ class CalibrationSet:
         provenance).
     warnings : tuple of str
         Things a technician should look at; the data are still usable.
+    layout : Layout
+        The sensor's components (axes.py): sweep labels, load and output columns.
     """
 
     points: pd.DataFrame
@@ -45,6 +47,7 @@ class CalibrationSet:
     skipped: tuple[str, ...] = ()
     warnings: tuple[str, ...] = field(default=())
     excluded: tuple[str, ...] = ()
+    layout: Layout = DEFAULT
 
     @property
     def source(self) -> str:
@@ -84,17 +87,17 @@ class CalibrationSet:
 
     @property
     def forces(self) -> np.ndarray:
-        return self.points[list(FORCE_COLUMNS)].to_numpy()
+        return self.points[list(self.layout.loads)].to_numpy()
 
     @property
     def voltages(self) -> np.ndarray:
-        return self.points[list(VOLTAGE_COLUMNS)].to_numpy()
+        return self.points[list(self.layout.outputs)].to_numpy()
 
     def load_grid(self, axis: str) -> dict[int, np.ndarray]:
         """Sorted distinct loads [N] of each repetition's ``axis`` sweep."""
         s = self.sweep(axis)
         reps = s["repetition"].to_numpy()
-        loads = s[FORCE_COLUMNS[AXES.index(axis)]].to_numpy()
+        loads = s[self.layout.loads[self.layout.index(axis)]].to_numpy()
         if not reps.size:
             return {}
         # one sort for all repetitions: a groupby loop costs a pandas frame per repetition
@@ -118,7 +121,8 @@ def _source(files) -> str:
 
 def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=()) -> CalibrationSet:
     """Validate a long table (as :func:`read_calibration_table` returns) and zero-correct it."""
-    table = assign_sweeps(table)
+    layout = settings.layout
+    table = assign_sweeps(table, layout)
     reps = sorted(table["repetition"].unique())
     if len(reps) < settings.min_repetitions:
         raise InputError(
@@ -131,19 +135,20 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=()) ->
     # one grouping, not a scan of the table per repetition (quadratic in thousands)
     pairs = table[["repetition", "axis"]].drop_duplicates()
     n_axes = pairs.groupby("repetition", sort=True).size()
-    for rep in n_axes.index[n_axes.to_numpy() < len(AXES)][:1]:
+    for rep in n_axes.index[n_axes.to_numpy() < layout.n][:1]:
         have = set(pairs.loc[pairs["repetition"] == rep, "axis"])
-        missing = [a for a in AXES if a not in have]
+        missing = [a for a in layout.labels if a not in have]
         if missing:
             first = table.loc[table["repetition"] == rep].iloc[0]
+            every = "all three axes" if layout.is_default else f"all {layout.n} components"
             raise InputError(
                 f"{first['file']}: repetition {rep} has no {' or '.join(missing)} sweep; "
-                "every repetition must calibrate all three axes"
+                f"every repetition must calibrate {every}"
             )
-    points, offsets = zero_correct(table)
+    points, offsets = zero_correct(table, layout, settings.zero_method)
     warnings = []
-    cs = CalibrationSet(points, offsets, tuple(files), tuple(skipped))
-    for axis in AXES:
+    cs = CalibrationSet(points, offsets, tuple(files), tuple(skipped), layout=layout)
+    for axis in layout.labels:
         grids = cs.load_grid(axis)
         ref_rep, ref = next(iter(grids.items()))
         for rep, g in grids.items():
@@ -153,15 +158,15 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=()) ->
                     f"repetition {ref_rep}; gamma compares repetitions at different loads"
                 )
                 break
-    for a, axis in enumerate(AXES):
+    for a, axis in enumerate(layout.labels):
         # loads far from the full scale usually mean other units (kN, kgf) or a
         # wrong full_scale, and gamma (eq. 12) is a fraction of the full scale
-        peak = float(np.abs(cs.sweep(axis)[FORCE_COLUMNS[a]]).max())
-        fs = settings.full_scale[a]
+        peak = float(np.abs(cs.sweep(axis)[layout.loads[a]]).max())
+        fs, unit = settings.full_scale[a], settings.units.load_of(a)
         if peak > 1.05 * fs or peak < 0.2 * fs:
             warnings.append(
-                f"the {axis} loads reach {peak:g} {settings.load_unit}, the full scale is {fs:g} "
-                f"{settings.load_unit}: check the units (units: and scale: in the config) and "
+                f"the {axis} loads reach {peak:g} {unit}, the full scale is {fs:g} "
+                f"{unit}: check the units (units: and scale: in the config) and "
                 "full_scale"
             )
     seen: dict[str, str] = {}
@@ -170,7 +175,8 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=()) ->
             warnings.append(f"{name} is byte for byte the same file as {seen[digest]}; "
                             "a repetition copied twice counts twice")
         seen.setdefault(digest, name)
-    return CalibrationSet(points, offsets, tuple(files), tuple(skipped), tuple(warnings))
+    return CalibrationSet(points, offsets, tuple(files), tuple(skipped), tuple(warnings),
+                          layout=layout)
 
 
 def load_calibration(path: str | Path, settings: Settings, exclude=()) -> CalibrationSet:
@@ -258,9 +264,9 @@ class GrossError:
 def ingest_summary(calib, settings) -> dict[str, Any]:
     """Everything ``ingest`` reports, as plain data (also the ``--json`` document)."""
     axes = {}
-    for a, axis in enumerate(AXES):
+    for a, axis in enumerate(calib.layout.labels):
         s = calib.sweep(axis)
-        grid = np.unique(s[FORCE_COLUMNS[a]].to_numpy())
+        grid = np.unique(s[calib.layout.loads[a]].to_numpy())
         axes[axis] = {
             "points": int(len(s)),
             "points_per_repetition": {

@@ -14,7 +14,7 @@ from rich import box
 from rich.table import Table
 from rich.text import Text
 
-from .axes import AXES, VOLTAGE_COLUMNS
+from .axes import AXES
 from .cv_doc import gamma_index, test_name
 from .guess import KEYS as GUESS_KEYS
 from .guess import Guess
@@ -28,7 +28,11 @@ def _units(settings_or_doc) -> Units:
     u = getattr(settings_or_doc, "units", None)
     if isinstance(u, Units):
         return u
-    return Units(**settings_or_doc.get("units", {})) if isinstance(settings_or_doc, dict) else Units()
+    if not isinstance(settings_or_doc, dict):
+        return Units()
+    u = settings_or_doc.get("units", {})
+    return Units(**{k: (" / ".join(dict.fromkeys(v.values())) if isinstance(v, dict) else v)
+                    for k, v in u.items()})
 
 
 def ingest_tables(summary: dict[str, Any]) -> list:
@@ -48,11 +52,13 @@ def ingest_tables(summary: dict[str, Any]) -> list:
                   f"{d['full_scale']:g}")
     factor, shown = output_display(units.output)
     o = Table(title=f"Zero offsets removed [{shown}] (mean of each sweep's zero-load rows)")
-    for col in ("repetition", "axis", "zero rows", *VOLTAGE_COLUMNS):
+    outputs = [c for c in (summary["offsets"] or [{}])[0] if c not in ("repetition", "axis",
+                                                                        "n_zero")]
+    for col in ("repetition", "axis", "zero rows", *outputs):
         o.add_column(col, justify="right")
     for r in summary["offsets"]:
         o.add_row(str(r["repetition"]), r["axis"], str(r["n_zero"]),
-                  *(f"{factor * r[c]:+.3f}" for c in VOLTAGE_COLUMNS))
+                  *(f"{factor * r[c]:+.3f}" for c in outputs))
     out = [t, o]
     skipped = summary["skipped"]
     out.append(Text(f"rows skipped: {len(skipped)}" + "".join(f"\n  {s}" for s in skipped)))
@@ -67,7 +73,8 @@ def fit_tables(model) -> list:
     for col in ("axis", f"k [{units.slope()}]", f"1/k [{units.inverse_slope()}] (eq. 13)", "R^2",
                 "points"):
         t.add_column(col, justify="right")
-    for a, axis in enumerate(AXES):
+    layout = model.layout
+    for a, axis in enumerate(layout.labels):
         r2 = rep.r2[axis]
         r2_text = Text(f"{r2:.6f}", style="" if r2 >= model.settings.min_r2 else "bold red")
         inverse = f"{1.0 / model.k[a]:.5f}" if volts else f"{1.0 / model.k[a]:.6g}"
@@ -79,12 +86,13 @@ def fit_tables(model) -> list:
         c.add_column(col, justify="right")
     span = "{:+.4f} .. {:+.4f}" if volts else "{:+.6g} .. {:+.6g}"
     for name, chi in model.chi.items():
-        c.add_row(f"chi_{name}", f"u{name[1]}", f"{chi.support_vectors.size} / {chi.n_points}",
+        c.add_row(f"chi_{name}", layout.outputs[chi.input_axis],
+                  f"{chi.support_vectors.size} / {chi.n_points}",
                   span.format(*chi.input_range))
     g = Table(title="Interference error gamma (eq. 12) on the calibration data, % F.S.")
     for col in ("loaded axis", "before (omega^-1 only)", "after (eq. 11)"):
         g.add_column(col, justify="right")
-    for axis in AXES:
+    for axis in layout.labels:
         before, after = rep.gamma_before.get(axis), rep.gamma_after.get(axis)
         style = "bold red" if after is not None and before is not None and after > before else ""
         g.add_row(axis, pct(before), Text(pct(after), style=style))
@@ -97,7 +105,7 @@ def apply_lines(summary, out) -> list[str]:
              f"status: {counts})"]
     if np.any(summary.offsets):
         lines.append(f"zero removed [{summary.output_unit}]: " + ", ".join(
-            f"{c}={v:+.6f}" for c, v in zip(VOLTAGE_COLUMNS, summary.offsets, strict=True)))
+            f"{c}={v:+.6f}" for c, v in zip(summary.outputs, summary.offsets, strict=True)))
     return lines
 
 

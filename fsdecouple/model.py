@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from .axes import NamedChi
+from .axes import Layout, NamedChi, chi_labels
 from .config import Settings, check_refine
 from .decouple import TableDecoupler, decouple_exact, initial_forces
 from .decouple import coupling_errors as _coupling_errors
@@ -83,6 +83,7 @@ class Chi(NamedChi):
     input_range: tuple[float, float] = (-np.inf, np.inf)  # prime voltages trained on [V]
     n_points: int = 0
     surrogate: ChiSurrogate | None = None  # fast, verified stand-in (surrogate.py)
+    pair: tuple[int, int] | None = None  # (output a, input b); None: read from an "xy" name
 
     def __call__(self, u: np.ndarray) -> np.ndarray:
         """Coupling error element [V] at prime voltage(s) ``u`` [V], exact kernel sum.
@@ -96,9 +97,10 @@ class Chi(NamedChi):
         )
 
     def to_dict(self) -> dict[str, Any]:
+        out, inp = chi_labels(self.name)
         d = {
-            "output_axis": self.name[0],
-            "input_axis": self.name[1],
+            "output_axis": out,
+            "input_axis": inp,
             "kernel": "rbf",
             "gamma": self.gamma,
             "support_vectors": self.support_vectors.tolist(),
@@ -114,7 +116,7 @@ class Chi(NamedChi):
         return d
 
     @classmethod
-    def from_dict(cls, name: str, d: dict[str, Any]) -> Chi:
+    def from_dict(cls, name: str, d: dict[str, Any], pair: tuple[int, int] | None = None) -> Chi:
         sv = np.asarray(d["support_vectors"], dtype=float)
         coef = np.asarray(d["dual_coef"], dtype=float)
         if sv.ndim != 1 or sv.shape != coef.shape:
@@ -123,7 +125,7 @@ class Chi(NamedChi):
         surrogate = ChiSurrogate.from_dict(d["surrogate"]) if "surrogate" in d else None
         chi = cls(
             name, float(d["gamma"]), sv, coef, float(d["rho"]), float(d["input_scale"]),
-            float(d["output_scale"]), (lo, hi), int(d["n_points"]), surrogate,
+            float(d["output_scale"]), (lo, hi), int(d["n_points"]), surrogate, pair,
         )
         if not (np.isfinite(chi.gamma) and chi.gamma > 0):
             raise ValueError(f"gamma = {chi.gamma!r}, expected a positive number")
@@ -221,6 +223,11 @@ class CouplingErrorModel:
     @property
     def n_components(self) -> int:
         return len(self.k)
+
+    @property
+    def layout(self) -> Layout:
+        """The components' labels, load and output columns (axes.py)."""
+        return self.settings.layout
 
     @property
     def warnings(self) -> list[str]:
