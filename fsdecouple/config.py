@@ -18,6 +18,7 @@ from typing import Any
 from .axes import CANONICAL_COLUMNS, CHI_SEPARATOR, DEFAULT, FORCE_COLUMNS, VOLTAGE_COLUMNS, Layout
 from .errors import ConfigError, printable
 from .units import LOAD_UNITS, MOMENT_UNITS, OUTPUT_UNITS, Units
+from .wrench import Frame, parse_frame, parse_rotation
 from .yamlfile import SafeUniqueLoader, read_yaml  # noqa: F401 (the loader, for tests)
 
 SCALINGS = ("none", "full_scale")
@@ -75,6 +76,7 @@ class Settings:
     components: tuple[str, ...] | None = None
     outputs: tuple[str, ...] | None = None
     zero: str | None = None  # zero.ZERO_METHODS; None: rows for x, y, z, fit for components
+    frame: Frame | None = None  # six axes: the wrench transform after eq. (11) (wrench.py)
 
     @property
     def zero_method(self) -> str:
@@ -102,6 +104,10 @@ class Settings:
         d["full_scale"] = dict(zip(layout.labels, self.full_scale, strict=True))
         if self.zero is None:
             del d["zero"]
+        if self.frame is None:
+            del d["frame"]
+        else:
+            d["frame"] = self.frame.to_dict()
         if self.components is None:
             del d["components"], d["outputs"]  # files from before components keep their bytes
         else:
@@ -123,6 +129,7 @@ _TOP_KEYS = {
     "refine",
     "sensor", "full_scale", "min_repetitions", "columns", "scale", "csv", "svr",
     "scaling", "rotation", "checks", "units", "components", "outputs", "zero",
+    "frame",
 }
 _SVR_KEYS = {"C", "epsilon", "gamma", "delta2", "tolerance"}
 
@@ -175,34 +182,6 @@ def _svr_settings(raw: Any, where: str, base: SVRSettings) -> SVRSettings:
     if "delta2" in raw:
         kw["gamma"] = 1.0 / (2.0 * _number(raw["delta2"], f"{where}: delta2", positive=True))
     return replace(base, **kw)
-
-
-def _rotation(raw: Any, where: str) -> tuple[tuple[float, float, float], ...] | None:
-    if raw is None:
-        return None
-    if not (isinstance(raw, list) and len(raw) == 3 and all(
-        isinstance(r, list) and len(r) == 3 for r in raw
-    )):
-        raise ConfigError(f"{where}: expected a 3x3 list of lists, found {raw!r}")
-    rows = tuple(
-        tuple(_number(v, f"{where}[{i}][{j}]") for j, v in enumerate(r)) for i, r in enumerate(raw)
-    )
-    # A rotation from the sensor frame to the reference frame (end of Section 2.3)
-    # must be orthonormal with det +1, or forces would be scaled or mirrored.
-    m = [[rows[i][j] for j in range(3)] for i in range(3)]
-    for i in range(3):
-        for j in range(3):
-            dot = sum(m[i][k] * m[j][k] for k in range(3))
-            if abs(dot - (1.0 if i == j else 0.0)) > 1e-6:
-                raise ConfigError(f"{where}: not a rotation matrix (rows are not orthonormal)")
-    det = (
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    )
-    if det < 0:
-        raise ConfigError(f"{where}: determinant is -1, a reflection, not a rotation")
-    return rows
 
 
 def _units(raw: Any, where: str, layout: Layout = DEFAULT) -> Units:
@@ -392,7 +371,12 @@ def settings_from_dict(raw: Any, source: str = "config") -> Settings:
             )
         kw["scaling"] = raw["scaling"]
     if "rotation" in raw:
-        kw["rotation"] = _rotation(raw["rotation"], f"{source}: rotation")
+        kw["rotation"] = parse_rotation(raw["rotation"], f"{source}: rotation")
+        if kw["rotation"] is not None and layout.n != 3:
+            raise ConfigError(f"{source}: rotation: rotates three forces; a sensor of "
+                              f"{layout.n} components takes frame: {{rotation, origin}}")
+    if raw.get("frame") is not None:
+        kw["frame"] = parse_frame(raw["frame"], f"{source}: frame", layout.n)
     if "limits" in raw:
         kw["limits"] = _limits(raw["limits"], f"{source}: limits", layout.outputs)
     if "refine" in raw:

@@ -240,6 +240,9 @@ class CouplingErrorModel:
 
     @property
     def rotation(self) -> np.ndarray | None:
+        """The transform after eq. (11): the config's rotation (N x N), or a frame's 6 x 6."""
+        if self.settings.frame is not None:
+            return self.settings.frame.matrix()
         r = self.settings.rotation
         return None if r is None else np.asarray(r, dtype=float)
 

@@ -270,3 +270,101 @@ def test_golden_six_axis_file_loads_and_decouples_like_a_fresh_fit(six_model):
     u = u - u[:TARE_ROWS].mean(axis=0)
     # same data, settings and libsvm: the fit is deterministic (tests/test_golden.py)
     np.testing.assert_allclose(golden.decouple(u), six_model.decouple(u), rtol=0, atol=1e-6)
+
+
+# --- the frame transform (wrench.py) -------------------------------------------------
+
+QUARTER_TURN_Z = [[0, -1, 0], [1, 0, 0], [0, 0, 1]]
+
+
+def test_frame_moves_moments_to_the_reference_origin_hand_worked():
+    """R: a quarter turn about z; the sensor's measuring point at r = (0.1, 0, 0) m.
+
+    A sensor wrench F = (10, 0, 0) N, M = (0, 0, 1) N·m is, in the reference
+    frame, a force of 10 N along y through (0.1, 0, 0) plus the couple: about the
+    reference origin that is F' = (0, 10, 0) N and M' = (0, 0, 1 + 0.1 * 10) N·m.
+    """
+    s = settings_from_dict({"components": list(COMPONENTS), "outputs": list(OUTPUTS),
+                            "full_scale": dict.fromkeys(COMPONENTS, 1),
+                            "frame": {"rotation": QUARTER_TURN_Z, "origin": [0.1, 0, 0]}})
+    got = s.frame.matrix() @ np.array([10.0, 0, 0, 0, 0, 1.0])
+    np.testing.assert_allclose(got, [0, 10, 0, 0, 0, 2.0], rtol=0, atol=1e-12)
+    # a moment alone only turns with the frame: a couple is free
+    np.testing.assert_allclose(s.frame.matrix() @ np.array([0, 0, 0, 1.0, 0, 0]),
+                               [0, 0, 0, 0, 1.0, 0], atol=1e-12)
+
+
+def test_frame_applies_after_eq_11(six_model):
+    from fsdecouple.wrench import Frame
+
+    frame = Frame(tuple(map(tuple, QUARTER_TURN_Z)), (0.05, -0.02, 0.3))
+    framed = replace(six_model, settings=replace(six_model.settings, frame=frame))
+    u = np.random.default_rng(2).uniform(-1, 1, (40, 6))
+    f = six_model.decouple(u)
+    force, moment = f[:, :3] @ np.asarray(QUARTER_TURN_Z, float).T, f[:, 3:] @ np.asarray(
+        QUARTER_TURN_Z, float).T
+    want = np.hstack([force, moment + np.cross(frame.origin, force)])  # M' = R M + r x (R F)
+    np.testing.assert_allclose(framed.decouple(u), want, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(framed.decouple(u, rotate=False), f, rtol=0, atol=0)
+    one = framed.decoupler()
+    np.testing.assert_allclose(one(*u[0]), want[0], rtol=0, atol=1e-12)
+    back = model_from_dict(json.loads(json.dumps(model_to_dict(framed))))
+    assert back.settings.frame == frame
+
+
+@pytest.mark.parametrize(("raw", "match"), [
+    ({"frame": {"origin": [0.1, 0.2]}}, r"origin: expected \[x, y, z\], three numbers, found 2"),
+    ({"frame": {"rotation": [[1, 0, 0], [0, 1, 0], [0, 0, -1]]}}, "reflection"),
+    ({"frame": {"origin": [0, 0, 0], "offset": 1}}, "unknown key 'offset'"),
+    ({"rotation": QUARTER_TURN_Z}, "takes frame"),
+])
+def test_bad_frames_are_refused(raw, match):
+    with pytest.raises(ConfigError, match=match):
+        settings_from_dict({"components": list(COMPONENTS), "outputs": list(OUTPUTS),
+                            "full_scale": dict.fromkeys(COMPONENTS, 1), **raw})
+
+
+def test_a_frame_needs_six_components():
+    with pytest.raises(ConfigError, match="this one has 3: use rotation"):
+        settings_from_dict({"frame": {"origin": [0, 0, 0]}})
+
+
+# --- gamma for mixed units (metrics.py) ----------------------------------------------
+
+def test_gamma_is_eq_12_as_printed_for_a_three_axis_force_sensor():
+    from fsdecouple.metrics import interference_errors
+
+    rng = np.random.default_rng(4)
+    f = rng.normal(0, 3, (60, 3))
+    points = pd.DataFrame({"axis": np.repeat(["x", "y", "z"], 20)})
+    fs = (100.0, 100.0, 150.0)  # the paper's unequal full scales
+    for units in (None, ("N", "N", "N")):
+        got = interference_errors(points, f, fs, DEFAULT, units)
+        x, y, z = f[:20], f[20:40], f[40:]
+        # eq. (12) written out: gamma_x = (max|f_y(m)| + max|f_z(m)|) / f_x(FS), likewise y, z
+        assert got == {
+            "x": (np.abs(x[:, 1]).max() + np.abs(x[:, 2]).max()) / 100.0,
+            "y": (np.abs(y[:, 0]).max() + np.abs(y[:, 2]).max()) / 100.0,
+            "z": (np.abs(z[:, 0]).max() + np.abs(z[:, 1]).max()) / 150.0,
+        }
+
+
+def test_gamma_with_forces_and_moments_is_dimensionless():
+    from fsdecouple.metrics import interference_error
+
+    rng = np.random.default_rng(5)
+    f = rng.normal(0, 1, (30, 6)) * [1, 1, 1, 0.05, 0.05, 0.05]
+    fs = np.array([100.0, 100.0, 200.0, 5.0, 5.0, 5.0])
+    units = ("N",) * 3 + ("N·m",) * 3
+    mm = np.array([1, 1, 1, 1000, 1000, 1000.0])  # the same moments in N·mm
+    for a in range(6):
+        g = interference_error(f, a, fs, units)
+        assert g == pytest.approx(interference_error(f * mm, a, fs * mm, units), rel=1e-12)
+        # by hand: shared-unit components over the loaded one's full scale, others over their own
+        same = [b for b in range(6) if b != a and units[b] == units[a]]
+        other = [b for b in range(6) if units[b] != units[a]]
+        want = sum(np.abs(f[:, b]).max() for b in same) / fs[a] + sum(
+            np.abs(f[:, b]).max() / fs[b] for b in other)
+        assert g == pytest.approx(want, rel=1e-12)
+    # eq. (12) as printed would add N·m to N: its value changes with the moment unit
+    assert interference_error(f, 0, fs[0]) != pytest.approx(interference_error(f * mm, 0, fs[0]))
