@@ -119,10 +119,14 @@ def _source(files) -> str:
     return str(Path(files[0][0]).parent)
 
 
-def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=()) -> CalibrationSet:
-    """Validate a long table (as :func:`read_calibration_table` returns) and zero-correct it."""
+def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
+               combined: bool = False) -> CalibrationSet:
+    """Validate a long table (as :func:`read_calibration_table` returns) and zero-correct it.
+
+    ``combined``: rows loading several components are kept (``validate``), not refused.
+    """
     layout = settings.layout
-    table = assign_sweeps(table, layout)
+    table = assign_sweeps(table, layout, combined)
     reps = sorted(table["repetition"].unique())
     if len(reps) < settings.min_repetitions:
         raise InputError(
@@ -179,7 +183,8 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=()) ->
                           layout=layout)
 
 
-def load_calibration(path: str | Path, settings: Settings, exclude=()) -> CalibrationSet:
+def load_calibration(path: str | Path, settings: Settings, exclude=(),
+                     combined: bool = False) -> CalibrationSet:
     """Read, validate and zero-correct a calibration set (a directory or one CSV).
 
     ``exclude``: ``FILE:ROW`` points to drop before zero correction (``fit --exclude``);
@@ -187,7 +192,7 @@ def load_calibration(path: str | Path, settings: Settings, exclude=()) -> Calibr
     """
     read = read_calibration_table(path, settings)
     table, dropped = _exclude(read.table, exclude)
-    cs = from_table(table, settings, read.files, [*read.skipped, *dropped])
+    cs = from_table(table, settings, read.files, [*read.skipped, *dropped], combined)
     hidden = tuple(f"{f}: hidden file, not read as a repetition" for f in read.hidden)
     cs = replace(cs, excluded=tuple(dropped))
     return replace(cs, warnings=hidden + cs.warnings) if hidden else cs

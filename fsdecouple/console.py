@@ -147,6 +147,15 @@ def _num(fraction: float) -> str:
     return f"{100.0 * fraction:.2f}"
 
 
+def _labels(records) -> list[str]:
+    """The components scored, in the order the records give them (x, y, z; fx .. mz)."""
+    return list(dict.fromkeys(r["axis"] for r in records)) or list(AXES)
+
+
+def _load_name(a: str) -> str:
+    return f"f{a}" if len(a) == 1 else a  # fx for the x axis; a named component as it is
+
+
 def gamma_table(doc: dict[str, Any], records=None, title=None, clean=None) -> Table:
     """Tables 1 and 3 side by side: rows round x test set, a column group per method.
 
@@ -164,16 +173,17 @@ def gamma_table(doc: dict[str, Any], records=None, title=None, clean=None) -> Ta
     t.add_column("round", no_wrap=True)
     t.add_column("test (level)" if levels else "test (rep)", no_wrap=True)
     cell_width = 5 if ref is not None else 4
+    axes = _labels(doc["records"] if records is None else records)
     for m in doc["methods"]:
-        for a in AXES:
-            # the method names its column group once, over its gamma_x column
-            t.add_column(f"{m if a == 'x' else ''}\nγ{a}", justify="right", no_wrap=True,
-                         min_width=max(len(m), cell_width) if a == "x" else cell_width)
+        for a in axes:
+            # the method names its column group once, over its first gamma column
+            t.add_column(f"{m if a == axes[0] else ''}\nγ{a}", justify="right", no_wrap=True,
+                         min_width=max(len(m), cell_width) if a == axes[0] else cell_width)
     for r, fold in enumerate(doc["folds"], start=1):
         for i, rep in enumerate(fold):
             cells = []
             for m in doc["methods"]:
-                for a in AXES:
+                for a in axes:
                     v = idx.get((r, rep, m, a))
                     if v is None:  # no held-out point of this axis in the round
                         cells.append(Text("-"))
@@ -224,18 +234,19 @@ def task_table(doc: dict[str, Any]) -> Table:
     t = Table(title=f"Combined loads: {task['voltages']} ({task['rows']} rows{tare}) against "
                     "true forces; error % F.S., worst round (!: over 10x the best method's)")
     t.add_column("method")
+    axes = _labels(task["records"])
     for metric in ("max", "RMS"):
-        for a in AXES:
-            t.add_column(f"{metric if a == 'x' else ''}\n|Δf{a}|", justify="right")
+        for a in axes:
+            t.add_column(f"{metric if a == axes[0] else ''}\n|Δ{_load_name(a)}|", justify="right")
     worst: dict[tuple, float] = defaultdict(float)
     for rec in task["records"]:
         key = (rec["method"], rec["metric"], rec["axis"])
         worst[key] = max(worst[key], rec["value"])
-    best = min(worst[(m, "max_error", a)] for m in doc["methods"] for a in AXES)
+    best = min(worst[(m, "max_error", a)] for m in doc["methods"] for a in axes)
     for m in doc["methods"]:
         cells = []
         for metric in ("max_error", "rms_error"):
-            for a in AXES:
+            for a in axes:
                 v = worst[(m, metric, a)]
                 # an error above 10x the best method's is an explosion worth seeing
                 explodes = v > 10 * max(best, 1e-12)
@@ -270,15 +281,16 @@ def gross_tables(doc: dict[str, Any]) -> list[Table]:
                  box=box.SIMPLE_HEAD, pad_edge=False)
     side.add_column("round")
     side.add_column("test (rep)")
+    axes = _labels(doc["records"])
     for label in ("clean", "moved"):
-        for a in AXES:
-            side.add_column(f"{label if a == 'x' else ''}\nγ{a}", justify="right")
+        for a in axes:
+            side.add_column(f"{label if a == axes[0] else ''}\nγ{a}", justify="right")
     side.add_column("largest\nchange", justify="right")
     clean, moved = gamma_index(doc["records"]), gamma_index(g["records"])
     for r in g["rounds_affected"]:
         for i, rep in enumerate(doc["folds"][r - 1]):
-            c = [clean[(r, rep, "svr", a)] for a in AXES]
-            m = [moved[(r, rep, "svr", a)] for a in AXES]
+            c = [clean[(r, rep, "svr", a)] for a in axes]
+            m = [moved[(r, rep, "svr", a)] for a in axes]
             change = max(abs(x - y) for x, y in zip(c, m, strict=True))
             side.add_row(str(r) if i == 0 else "",
                          f"{test_name(i)} ({rep})",
@@ -382,7 +394,8 @@ def validation_renderables(doc: dict[str, Any], output=None, *, as_json: bool = 
     unit = doc["units"]["load"]
     by = {(r["range"], r["axis"], r["method"], r["metric"]): r for r in doc["records"]}
     for rng in RANGES if not as_json else ():
-        axes = [a for a in AXES if any((rng, a, m, "gamma") in by for m in METHODS)]
+        axes = [a for a in _labels(doc["records"]) if any((rng, a, m, "gamma") in by
+                                                          for m in METHODS)]
         if not axes:
             continue
         t = Table(title=Text(f"{rng} points of {doc['set']['path']}, model {doc['model']}: "

@@ -29,7 +29,8 @@ def loaded_axes(forces: np.ndarray) -> np.ndarray:
     return np.where(count > 1, -2, idx)
 
 
-def assign_sweeps(table: pd.DataFrame, layout: Layout = DEFAULT) -> pd.DataFrame:
+def assign_sweeps(table: pd.DataFrame, layout: Layout = DEFAULT,
+                  combined: bool = False) -> pd.DataFrame:
     """Check that each row loads one axis at most and give every row its sweep axis.
 
     With an ``axis`` column, a row's load must lie on that axis.  Without one, the
@@ -37,13 +38,19 @@ def assign_sweeps(table: pd.DataFrame, layout: Layout = DEFAULT) -> pd.DataFrame
     leads (the next loaded row of the same repetition), and trailing zero-load rows
     join the sweep before them.  A row loading two components at once (a
     combined load: a force at a lever arm is Fy and Mx together) is refused here,
-    for fitting; ``validate`` and ``cv --task`` read combined loads their own way.
+    for fitting.  With ``combined`` (``validate``) such rows are kept: they belong
+    to their labelled sweep, or without labels to the sweep they continue (a
+    first row to its largest load).
     """
     table = table.copy()
     loads, labels = layout.loads, layout.labels
     forces = table[list(loads)].to_numpy()
     loaded = loaded_axes(forces)
     two = np.flatnonzero(loaded == -2)
+    if combined and two.size:
+        loaded = loaded.copy()
+        loaded[two] = np.argmax(np.abs(forces[two]), axis=1)  # overridden by a label below
+        two = two[:0]
     if two.size:
         i = int(two[0])
         cols = [c for c, v in zip(loads, forces[i], strict=True) if v != 0]
@@ -55,7 +62,8 @@ def assign_sweeps(table: pd.DataFrame, layout: Layout = DEFAULT) -> pd.DataFrame
         )
     if (table["axis"] != "").all():
         labelled = table["axis"].map({a: k for k, a in enumerate(labels)}).to_numpy()
-        wrong = np.flatnonzero((loaded >= 0) & (loaded != labelled))
+        single = (forces != 0.0).sum(axis=1) == 1  # a combined row may load its label and more
+        wrong = np.flatnonzero(single & (loaded != labelled))
         if wrong.size:
             i = int(wrong[0])
             col = loads[loaded[i]]

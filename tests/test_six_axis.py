@@ -368,3 +368,46 @@ def test_gamma_with_forces_and_moments_is_dimensionless():
         assert g == pytest.approx(want, rel=1e-12)
     # eq. (12) as printed would add N·m to N: its value changes with the moment unit
     assert interference_error(f, 0, fs[0]) != pytest.approx(interference_error(f * mm, 0, fs[0]))
+
+
+# --- cv and validate -----------------------------------------------------------------
+
+def test_cv_runs_every_baseline_on_six_axes(six_settings):
+    from fsdecouple.cv import run_cv
+
+    doc = run_cv(SIX / "calibration", six_settings, workers=1,
+                 task=(SIX / "task_voltages.csv", SIX / "task_forces.csv"), task_tare=TARE_ROWS)
+    gammas = [r for r in doc["records"] if r["metric"] == "gamma"]
+    assert {r["axis"] for r in gammas} == set(COMPONENTS)
+    assert {r["method"] for r in gammas} == {"initial", "linear", "rbf-mimo", "rbf-siso", "svr"}
+    worst = {m: max(r["value"] for r in gammas if r["method"] == m) for m in ("initial", "linear",
+                                                                              "svr")}
+    assert worst["svr"] < worst["linear"] < worst["initial"]  # the coupling is nonlinear
+    task = doc["task"]["records"]
+    rms = {(r["method"], r["axis"]): r["value"] for r in task if r["metric"] == "rms_error"}
+    assert all(rms[("svr", c)] < rms[("linear", c)] for c in COMPONENTS)
+    assert len(doc["curves"]["chi"]) == 30
+
+
+def test_validate_accepts_combined_loads(six_model, six_settings, tmp_path):
+    """A lever arm: the fy sweep of a validation set loads fy and mx = 0.02 m x fy at once."""
+    from fsdecouple.validate import validate
+
+    sensor = six_axis_sensor(0)
+    t = simulate_calibration(sensor, 1, seed=9)
+    # each row's offset and noise as simulated, then the outputs of the combined load
+    drift = t[list(OUTPUTS)].to_numpy() - sensor.voltages(t[list(COMPONENTS)].to_numpy())
+    fy = (t["axis"] == "fy").to_numpy()
+    t.loc[fy, "mx"] = 0.02 * t.loc[fy, "fy"]
+    t[list(OUTPUTS)] = sensor.voltages(t[list(COMPONENTS)].to_numpy()) + drift
+    (tmp_path / "set").mkdir()
+    t.drop(columns="repetition").to_csv(tmp_path / "set" / "rep1.csv", index=False)
+    with pytest.raises(InputError, match="loads fy and mx at once"):  # never for fitting
+        load_calibration(tmp_path / "set", replace(six_settings, min_repetitions=1))
+    doc = validate(six_model, tmp_path / "set", six_settings)
+    assert any("20 combined-load points" in w for w in doc["warnings"])
+    rec = {(r["axis"], r["method"], r["metric"]): r["value"] for r in doc["records"]
+           if r["range"] == "calibrated"}
+    # the combined points are decoupled as well as single loads: both near the noise
+    assert rec[("fy", "model", "rms_error")] < 3 * rec[("fx", "model", "rms_error")]
+    assert rec[("fy", "model", "rms_error")] < 0.2 * rec[("fy", "initial", "rms_error")]
