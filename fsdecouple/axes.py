@@ -111,6 +111,16 @@ class Layout:
 DEFAULT = Layout()
 
 
+def labels_in(records) -> list[str]:
+    """The component labels of result records (``axis`` keys), in the order given; x, y, z if none."""
+    return list(dict.fromkeys(r["axis"] for r in records or ())) or list(AXES)
+
+
+def load_name(label: str) -> str:
+    """A label's load column: ``fx`` for the x axis, a named component as it is."""
+    return f"f{label}" if label in AXES else label
+
+
 class NamedChi:
     """Mixin for a chi_ab named ``"ab"`` or ``"a:b"``: its output and input index.
 

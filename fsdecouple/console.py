@@ -14,7 +14,7 @@ from rich import box
 from rich.table import Table
 from rich.text import Text
 
-from .axes import AXES
+from .axes import labels_in, load_name
 from .cv_doc import gamma_index, test_name
 from .guess import KEYS as GUESS_KEYS
 from .guess import Guess
@@ -147,15 +147,6 @@ def _num(fraction: float) -> str:
     return f"{100.0 * fraction:.2f}"
 
 
-def _labels(records) -> list[str]:
-    """The components scored, in the order the records give them (x, y, z; fx .. mz)."""
-    return list(dict.fromkeys(r["axis"] for r in records)) or list(AXES)
-
-
-def _load_name(a: str) -> str:
-    return f"f{a}" if len(a) == 1 else a  # fx for the x axis; a named component as it is
-
-
 def gamma_table(doc: dict[str, Any], records=None, title=None, clean=None) -> Table:
     """Tables 1 and 3 side by side: rows round x test set, a column group per method.
 
@@ -173,7 +164,7 @@ def gamma_table(doc: dict[str, Any], records=None, title=None, clean=None) -> Ta
     t.add_column("round", no_wrap=True)
     t.add_column("test (level)" if levels else "test (rep)", no_wrap=True)
     cell_width = 5 if ref is not None else 4
-    axes = _labels(doc["records"] if records is None else records)
+    axes = labels_in(doc["records"] if records is None else records)
     for m in doc["methods"]:
         for a in axes:
             # the method names its column group once, over its first gamma column
@@ -234,10 +225,10 @@ def task_table(doc: dict[str, Any]) -> Table:
     t = Table(title=f"Combined loads: {task['voltages']} ({task['rows']} rows{tare}) against "
                     "true forces; error % F.S., worst round (!: over 10x the best method's)")
     t.add_column("method")
-    axes = _labels(task["records"])
+    axes = labels_in(task["records"])
     for metric in ("max", "RMS"):
         for a in axes:
-            t.add_column(f"{metric if a == axes[0] else ''}\n|Δ{_load_name(a)}|", justify="right")
+            t.add_column(f"{metric if a == axes[0] else ''}\n|Δ{load_name(a)}|", justify="right")
     worst: dict[tuple, float] = defaultdict(float)
     for rec in task["records"]:
         key = (rec["method"], rec["metric"], rec["axis"])
@@ -281,7 +272,7 @@ def gross_tables(doc: dict[str, Any]) -> list[Table]:
                  box=box.SIMPLE_HEAD, pad_edge=False)
     side.add_column("round")
     side.add_column("test (rep)")
-    axes = _labels(doc["records"])
+    axes = labels_in(doc["records"])
     for label in ("clean", "moved"):
         for a in axes:
             side.add_column(f"{label if a == axes[0] else ''}\nγ{a}", justify="right")
@@ -394,7 +385,7 @@ def validation_renderables(doc: dict[str, Any], output=None, *, as_json: bool = 
     unit = doc["units"]["load"]
     by = {(r["range"], r["axis"], r["method"], r["metric"]): r for r in doc["records"]}
     for rng in RANGES if not as_json else ():
-        axes = [a for a in _labels(doc["records"]) if any((rng, a, m, "gamma") in by
+        axes = [a for a in labels_in(doc["records"]) if any((rng, a, m, "gamma") in by
                                                           for m in METHODS)]
         if not axes:
             continue

@@ -411,3 +411,27 @@ def test_validate_accepts_combined_loads(six_model, six_settings, tmp_path):
     # the combined points are decoupled as well as single loads: both near the noise
     assert rec[("fy", "model", "rms_error")] < 3 * rec[("fx", "model", "rms_error")]
     assert rec[("fy", "model", "rms_error")] < 0.2 * rec[("fy", "initial", "rms_error")]
+
+
+@pytest.mark.slow
+def test_report_has_a_panel_per_component_and_every_chi(six_model, six_calib, tmp_path):
+    from fsdecouple.cv import run_cv
+    from fsdecouple.report import build_report
+
+    cv = json.loads(json.dumps(run_cv(six_calib, six_model.settings, workers=1,
+                                      task=(SIX / "task_voltages.csv", SIX / "task_forces.csv"),
+                                      task_tare=TARE_ROWS)))
+    report = build_report(six_model, cv, six_calib)
+    html = report.html
+    assert set(report.figures) == {"figure6_omega", "figure7_chi", "residuals"}
+    for text in ("χfx:fy", "χmz:my", "γmz", ">mz<", "u6"):
+        assert text in html, text
+    fig = chi_figure_axes(six_model)
+    assert len([ax for ax in fig.axes if ax.get_visible()]) == 30
+
+
+def chi_figure_axes(model):
+    from fsdecouple.plots import chi_figure, omega_figure
+
+    assert len([ax for ax in omega_figure(model).axes if ax.get_visible()]) == 6
+    return chi_figure(model)
