@@ -70,15 +70,18 @@ def fit_tables(model) -> list:
     units = model.settings.units
     volts = units == Units()  # the paper's figures keep their paper-like format
     t = Table(title=f"Non-coupling functions omega (eq. 2), sensor {model.settings.sensor}")
-    for col in ("axis", f"k [{units.slope()}]", f"1/k [{units.inverse_slope()}] (eq. 13)", "R^2",
-                "points"):
+    mixed = bool(units.loads)  # forces and moments: each row says its load unit
+    slope, inverse_slope = ((f"{units.output}/load", f"load/{units.output}") if mixed
+                            else (units.slope(), units.inverse_slope()))
+    for col in ("axis", f"k [{slope}]", f"1/k [{inverse_slope}] (eq. 13)", "R^2", "points"):
         t.add_column(col, justify="right")
     layout = model.layout
     for a, axis in enumerate(layout.labels):
         r2 = rep.r2[axis]
         r2_text = Text(f"{r2:.6f}", style="" if r2 >= model.settings.min_r2 else "bold red")
         inverse = f"{1.0 / model.k[a]:.5f}" if volts else f"{1.0 / model.k[a]:.6g}"
-        t.add_row(axis, f"{model.k[a]:.6g}", inverse, r2_text, str(rep.n_points[axis]))
+        t.add_row(f"{axis} [{units.load_of(a)}]" if mixed else axis, f"{model.k[a]:.6g}", inverse,
+                  r2_text, str(rep.n_points[axis]))
     s = model.settings.svr
     c = Table(title=f"Corrected coupling functions chi (eq. 4): eps-SVR, gamma={s.gamma:g} "
                     f"C={s.C:g} eps={s.epsilon:g} tol={s.tolerance:g}")
