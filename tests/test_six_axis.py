@@ -435,3 +435,18 @@ def chi_figure_axes(model):
 
     assert len([ax for ax in omega_figure(model).axes if ax.get_visible()]) == 6
     return chi_figure(model)
+
+
+def test_decouple_frame_and_compare_take_the_layout(six_model):
+    import fsdecouple
+    from fsdecouple.drift import compare
+
+    log = pd.read_csv(SIX / "task_voltages.csv")
+    out = fsdecouple.decouple_frame(six_model, log, tare=TARE_ROWS)
+    assert list(out.columns) == [*log.columns, *COMPONENTS, "status"]
+    u = log[list(OUTPUTS)].to_numpy()
+    np.testing.assert_allclose(out[list(COMPONENTS)].to_numpy(),
+                               six_model.decouple(u - u[:TARE_ROWS].mean(axis=0)), atol=1e-12)
+    doc = compare(six_model, six_model)
+    assert list(doc["components"]) == list(COMPONENTS)
+    assert doc["components"]["my"]["chi_max_pct"]["my:fz"] == 0.0
