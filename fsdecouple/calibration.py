@@ -289,6 +289,7 @@ def ingest_summary(calib, settings) -> dict[str, Any]:
         "repetitions": calib.repetitions,
         "axes": axes,
         "offsets": calib.offsets.to_dict(orient="records"),
+        **({"zero": "fit"} if settings.zero_method == "fit" else {}),
         "skipped": list(calib.skipped),
         "warnings": list(calib.warnings),
     }

@@ -51,7 +51,9 @@ def ingest_tables(summary: dict[str, Any]) -> list:
                   f"{d['load_min']:g} .. {d['load_max']:g}", str(d["load_levels"]),
                   f"{d['full_scale']:g}")
     factor, shown = output_display(units.output)
-    o = Table(title=f"Zero offsets removed [{shown}] (mean of each sweep's zero-load rows)")
+    how = ("fitted to all of each sweep's points, zero: fit" if summary.get("zero") == "fit"
+           else "mean of each sweep's zero-load rows")
+    o = Table(title=f"Zero offsets removed [{shown}] ({how})")
     outputs = [c for c in (summary["offsets"] or [{}])[0] if c not in ("repetition", "axis",
                                                                         "n_zero")]
     for col in ("repetition", "axis", "zero rows", *outputs):

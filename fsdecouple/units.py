@@ -17,7 +17,8 @@ LOAD_UNITS = {"N": 1.0, "kN": 1000.0, "gf": 9.80665e-3, "kgf": 9.80665, "lbf": 4
 OUTPUT_UNITS = ("V", "mV", "uV", "count", "mV/V")
 # Moments, for the components of a six-axis sensor (one N·m in N·m; display only:
 # ``apply --unit`` converts forces of one unit, never a wrench of mixed units).
-MOMENT_UNITS = {"N·m": 1.0, "Nm": 1.0, "N*m": 1.0, "N·mm": 1e-3, "Nmm": 1e-3, "kN·m": 1e3,
+MOMENT_UNITS = {"N·m": 1.0, "Nm": 1.0, "N*m": 1.0, "N.m": 1.0, "N-m": 1.0, "N m": 1.0,
+                "N·mm": 1e-3, "Nmm": 1e-3, "kN·m": 1e3,
                 "kgf·m": 9.80665, "lbf·in": 0.1129848290276167, "lbf·ft": 1.3558179483314004}
 
 
