@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .axes import AXES, DEFAULT, VOLTAGE_COLUMNS, Layout
+from .axes import DEFAULT, Layout
 from .config import Settings
 from .errors import InputError
 from .iotools.calibration import read_calibration_table
@@ -233,12 +233,13 @@ class GrossError:
     offset: float
 
     @classmethod
-    def parse(cls, spec: str) -> GrossError:
+    def parse(cls, spec: str, layout: Layout = DEFAULT) -> GrossError:
+        """``AXIS:REP:POINT:OFFSET``; AXIS a label of ``layout`` (x; or a component, fx)."""
         parts = spec.split(":")
         try:
             axis, rep, point, offset = parts
-            axis = axis.strip().lower()
-            if axis not in AXES:
+            axis = layout.label_map().get(axis.strip().lower(), "")
+            if not axis:
                 raise ValueError
             ge = cls(axis, int(rep), int(point), float(offset))
         except ValueError:
@@ -249,7 +250,7 @@ class GrossError:
             raise InputError(f"--gross-error {spec!r}: REP and POINT count from 1")
         return ge
 
-    def apply(self, table: pd.DataFrame) -> pd.DataFrame:
+    def apply(self, table: pd.DataFrame, layout: Layout = DEFAULT) -> pd.DataFrame:
         """A copy of ``table`` with this point's prime voltage moved by ``offset``."""
         idx = np.flatnonzero(
             (table["repetition"] == self.repetition).to_numpy()
@@ -261,7 +262,7 @@ class GrossError:
                 f"{idx.size} points, no point {self.point}"
             )
         out = table.copy()
-        col = out.columns.get_loc(VOLTAGE_COLUMNS[AXES.index(self.axis)])
+        col = out.columns.get_loc(layout.outputs[layout.index(self.axis)])
         out.iloc[idx[self.point - 1], col] += self.offset
         return out
 

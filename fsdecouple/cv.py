@@ -200,12 +200,16 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
         task_data = (u_task, f_task)
     gross_calib = None
     if gross_error is not None:
+        if gross_error.axis not in calib.layout.labels:
+            raise InputError(f"--gross-error: no component '{gross_error.axis}' (the sensor has "
+                             f"{', '.join(calib.layout.labels)})")
         if gross_error.repetition not in reps:
             raise InputError(
                 f"--gross-error: repetition {gross_error.repetition} is not in the calibration "
                 f"set (it has {', '.join(map(str, reps))})"
             )
-        gross_calib = CalibrationSet(gross_error.apply(calib.points), calib.offsets, calib.files,
+        gross_calib = CalibrationSet(gross_error.apply(calib.points, calib.layout), calib.offsets,
+                                     calib.files,
                                      calib.skipped, calib.warnings, layout=calib.layout)
 
     trains = {rnd.index: rnd.train for rnd in rounds}

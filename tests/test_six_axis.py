@@ -467,3 +467,17 @@ def test_refinement_works_for_six_components(six_model):
     err0 = np.sqrt(np.mean(((six_model.decouple(u) - f) / fs) ** 2))
     err2 = np.sqrt(np.mean(((tables - f) / fs) ** 2))
     assert err2 < err0  # eq. (11)'s second-order error (eq. 6) shrinks with K
+
+
+def test_cv_moves_a_point_of_a_named_component(six_settings, six_calib):
+    from fsdecouple.calibration import GrossError
+    from fsdecouple.cv import run_cv
+
+    ge = GrossError.parse("MY:2:5:0.2", six_settings.layout)
+    assert ge.axis == "my"
+    doc = run_cv(six_calib, six_settings, workers=1, gross_error=ge, folds=[[1, 2], [3, 4]])
+    assert doc["gross_error"]["rounds_affected"] == [2]  # repetition 2 trains round 2 only
+    with pytest.raises(InputError, match="AXIS:REP:POINT:OFFSET"):
+        GrossError.parse("x:1:5:0.2", six_settings.layout)
+    with pytest.raises(InputError, match="no component 'x'"):
+        run_cv(six_calib, six_settings, gross_error=GrossError.parse("x:1:5:0.2"))
