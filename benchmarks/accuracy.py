@@ -52,50 +52,39 @@ SCENARIOS = [
 ]
 
 
-def _paper(calib, settings):
-    return fit(calib, settings, workers=1)
+def _fitted(**changes) -> Callable:
+    """A method: ingest the raw table and fit, with these settings changed."""
+    def method(table, settings):
+        settings = replace(settings, **changes)  # zero: fit acts at ingest
+        return fit(from_table(table, settings), settings, workers=1)
+    return method
 
 
-def _kernel(calib, settings):
-    # chi beyond its calibrated range as the kernel sum (decaying to -rho), as fits
-    # were before extrapolation: tangent became the default
-    return fit(calib, replace(settings, extrapolation="kernel"), workers=1)
+def _tuned(**changes) -> Callable:
+    def method(table, settings):
+        settings = replace(settings, **changes)
+        calib = from_table(table, settings)
+        tuned, _ = tune_settings(calib, settings, workers=1)
+        return fit(calib, tuned, workers=1)
+    return method
 
 
-def _refine(calib, settings):
-    return fit(calib, replace(settings, refine=REFINE), workers=1)
-
-
-def _tune(calib, settings):
-    tuned, _ = tune_settings(calib, settings, workers=1)
-    return fit(calib, tuned, workers=1)
-
-
-def _tune_refine(calib, settings):
-    return _tune(calib, replace(settings, refine=REFINE))
-
-
-def _zero_fit(calib, settings):
-    return fit(calib, replace(settings, zero="fit"), workers=1)
-
-
-def _zero_fit_refine(calib, settings):
-    return fit(calib, replace(settings, zero="fit", refine=REFINE), workers=1)
-
-
-def _linear(calib, settings):
+def _linear(table, settings):
+    calib = from_table(table, settings)
     return fit_calibration_matrix(calib.voltages, calib.forces)
 
 
-# name -> (calibration set, settings) -> object with decouple(u, rotate=False)
+# name -> (raw calibration table, settings) -> object with decouple(u, rotate=False)
 METHODS: dict[str, Callable] = {
-    "paper default (Table 2, K = 0)": _paper,
-    "paper default, extrapolation: kernel": _kernel,
-    f"refine K = {REFINE}": _refine,
-    "tune": _tune,
-    f"tune + refine K = {REFINE}": _tune_refine,
-    "zero: fit": _zero_fit,
-    f"zero: fit + refine K = {REFINE}": _zero_fit_refine,
+    "paper default (Table 2, K = 0)": _fitted(),
+    # chi beyond its calibrated range as the kernel sum (decaying to -rho), as fits
+    # were before tangent extrapolation became the default
+    "paper default, extrapolation: kernel": _fitted(extrapolation="kernel"),
+    f"refine K = {REFINE}": _fitted(refine=REFINE),
+    "tune": _tuned(),
+    f"tune + refine K = {REFINE}": _tuned(refine=REFINE),
+    "zero: fit": _fitted(zero="fit"),
+    f"zero: fit + refine K = {REFINE}": _fitted(zero="fit", refine=REFINE),
     "linear matrix": _linear,
 }
 
@@ -139,11 +128,11 @@ def run(scenarios, seeds: int, methods=METHODS, progress=print) -> dict[str, dic
         for seed in range(seeds):
             base = SimulatedSensor()
             sensor = base if sc.coupling is None else with_coupling(base, sc.coupling)
-            calib = from_table(simulate_calibration(sensor, seed=seed), settings)
+            table = simulate_calibration(sensor, seed=seed)
             u, f = task(sensor, seed, sc.reach)
             floor = rms(floor_forces(sensor, u), f)
             for name, method in methods.items():
-                model = method(calib, settings)
+                model = method(table, settings)
                 ratios[name].append(float(np.max(rms(model.decouple(u, rotate=False), f) / floor)))
         out[sc.label] = {m: float(np.mean(v)) for m, v in ratios.items()}
         progress(f"{sc.label}: " + ", ".join(f"{m} {v:.2f}x" for m, v in out[sc.label].items()))

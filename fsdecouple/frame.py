@@ -21,7 +21,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .apply import STATUS_COLUMN, STATUSES, RowRules, check_options, decouple_rows
-from .axes import FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .errors import InputError
 from .model import CouplingErrorModel
 from .zero import tare_offsets
@@ -46,12 +45,13 @@ def frame_outputs(model: CouplingErrorModel, frame: pd.DataFrame,
     import pandas as pd
 
     settings = settings or model.settings
-    names = [settings.columns[c] for c in VOLTAGE_COLUMNS]
+    layout = model.layout
+    names = [settings.columns[c] for c in layout.outputs]
     absent = [n for n in names if n not in frame.columns]
     if absent:
         raise InputError(f"the frame has no column '{absent[0]}' (columns: "
                          f"{', '.join(map(str, frame.columns))})")
-    clash = [c for c in (*FORCE_COLUMNS, STATUS_COLUMN) if c in frame.columns]
+    clash = [c for c in (*layout.loads, STATUS_COLUMN) if c in frame.columns]
     if clash:
         raise InputError(f"the frame already has a column named '{clash[0]}', which the output "
                          "would overwrite")
@@ -65,7 +65,7 @@ def frame_outputs(model: CouplingErrorModel, frame: pd.DataFrame,
             raise InputError(f"frame row {frame.index[i]!r}, column '{name}': "
                              f"{col.iloc[i]!r}, expected a number")
         cols.append(values)
-    scale = np.array([settings.scale[c] for c in VOLTAGE_COLUMNS])
+    scale = np.array([settings.scale[c] for c in layout.outputs])
     # C order, as apply's parsed blocks: the tare's mean then sums in the same order
     return np.ascontiguousarray(np.column_stack(cols)) * scale
 
@@ -106,7 +106,7 @@ def decouple_frame(model: CouplingErrorModel, frame: pd.DataFrame, *, tare: int 
     """
     f, code = frame_forces(model, frame, tare=tare, zero=zero, settings=settings)
     out = frame.copy()
-    for a, name in enumerate(FORCE_COLUMNS):
+    for a, name in enumerate(model.layout.loads):
         out[name] = f[:, a]
     out[STATUS_COLUMN] = _NAMES[code]
     return out

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from .axes import NamedChi
+from .axes import Layout, NamedChi, chi_labels
 from .config import Settings, check_refine
 from .decouple import TableDecoupler, decouple_exact, initial_forces
 from .decouple import coupling_errors as _coupling_errors
@@ -90,6 +90,7 @@ class Chi(NamedChi):
     n_points: int = 0
     surrogate: ChiSurrogate | None = None  # fast, verified stand-in (surrogate.py)
     extrapolation: str = "kernel"  # beyond input_range: "kernel" sum or "tangent"
+    pair: tuple[int, int] | None = None  # (output a, input b); None: read from an "xy" name
 
     def kernel(self, u: np.ndarray) -> np.ndarray:
         """The kernel sum [V] at prime voltage(s) ``u`` [V] (eq. 10), also beyond the range."""
@@ -129,9 +130,10 @@ class Chi(NamedChi):
         return out if e is None else continue_slopes(u, out, e)
 
     def to_dict(self) -> dict[str, Any]:
+        out, inp = chi_labels(self.name)
         d = {
-            "output_axis": self.name[0],
-            "input_axis": self.name[1],
+            "output_axis": out,
+            "input_axis": inp,
             "kernel": "rbf",
             "gamma": self.gamma,
             "support_vectors": self.support_vectors.tolist(),
@@ -147,7 +149,7 @@ class Chi(NamedChi):
         return d
 
     @classmethod
-    def from_dict(cls, name: str, d: dict[str, Any]) -> Chi:
+    def from_dict(cls, name: str, d: dict[str, Any], pair: tuple[int, int] | None = None) -> Chi:
         sv = np.asarray(d["support_vectors"], dtype=float)
         coef = np.asarray(d["dual_coef"], dtype=float)
         if sv.ndim != 1 or sv.shape != coef.shape:
@@ -156,7 +158,7 @@ class Chi(NamedChi):
         surrogate = ChiSurrogate.from_dict(d["surrogate"]) if "surrogate" in d else None
         chi = cls(
             name, float(d["gamma"]), sv, coef, float(d["rho"]), float(d["input_scale"]),
-            float(d["output_scale"]), (lo, hi), int(d["n_points"]), surrogate,
+            float(d["output_scale"]), (lo, hi), int(d["n_points"]), surrogate, pair=pair,
         )
         if not (np.isfinite(chi.gamma) and chi.gamma > 0):
             raise ValueError(f"gamma = {chi.gamma!r}, expected a positive number")
@@ -263,6 +265,11 @@ class CouplingErrorModel:
         return len(self.k)
 
     @property
+    def layout(self) -> Layout:
+        """The components' labels, load and output columns (axes.py)."""
+        return self.settings.layout
+
+    @property
     def warnings(self) -> list[str]:
         return list(self.report.warnings) if self.report is not None else []
 
@@ -273,6 +280,9 @@ class CouplingErrorModel:
 
     @property
     def rotation(self) -> np.ndarray | None:
+        """The transform after eq. (11): the config's rotation (N x N), or a frame's 6 x 6."""
+        if self.settings.frame is not None:
+            return self.settings.frame.matrix()
         r = self.settings.rotation
         return None if r is None else np.asarray(r, dtype=float)
 

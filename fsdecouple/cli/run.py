@@ -72,7 +72,7 @@ def apply(
     force: ForceOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
-    """Decouple logged voltages into forces fx, fy, fz by eq. (11); one log, or many."""
+    """Decouple logged voltages into forces fx, fy, fz (a model's components) by eq. (11)."""
     from ..apply import apply_file
     from ..batch import is_batch
     from ..iotools.logs import is_parquet
@@ -89,7 +89,7 @@ def apply(
         if refine is not None:
             model = model.refined(refine)
         settings = load_config(config) if config is not None else None
-        offsets = _parse_zero(zero) if zero is not None else None
+        offsets = _parse_zero(zero, model.layout.outputs) if zero is not None else None
         check_output(output, force=force)
         refuse_overwriting_input(output, [model_file, *_given(config)])
         # apply counts progress in bytes of a CSV log, in rows of a Parquet one
