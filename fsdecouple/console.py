@@ -86,7 +86,10 @@ def fit_tables(model) -> list:
                   r2_text, str(rep.n_points[axis]))
     s = model.settings.svr
     c = Table(title=f"Corrected coupling functions chi (eq. 4): eps-SVR, gamma={s.gamma:g} "
-                    f"C={s.C:g} eps={s.epsilon:g} tol={s.tolerance:g}")
+                    f"C={s.C:g} eps={s.epsilon:g} tol={s.tolerance:g}",
+              caption=f"beyond the input range: {model.settings.extrapolation} (extrapolation); "
+                      f"zero offsets: {model.settings.zero_method}; refinement steps K = "
+                      f"{model.settings.refine}")
     for col in ("chi", "input", "support vectors", f"input range [{units.output}]"):
         c.add_column(col, justify="right")
     span = "{:+.4f} .. {:+.4f}" if volts else "{:+.6g} .. {:+.6g}"

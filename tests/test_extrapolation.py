@@ -254,3 +254,12 @@ def test_tangent_beats_kernel_on_loads_up_to_120_percent_of_full_scale(tmp_path)
     assert (t < k).all(), worst
     assert t.mean() < 0.85 * k.mean(), worst
 
+
+
+def test_show_names_the_modes_the_model_carries(sample_model):
+    """An old file shows kernel extrapolation; a new fit shows tangent (``show``'s caption)."""
+    old = " ".join(invoke(["show", GOLDEN]).stdout.split())
+    new = " ".join(invoke(["show", sample_model]).stdout.split())
+    assert "beyond the input range: kernel (extrapolation)" in old
+    assert "beyond the input range: tangent (extrapolation)" in new
+    assert "zero offsets: rows; refinement steps K = 0" in new
