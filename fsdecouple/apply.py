@@ -27,7 +27,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from .axes import FORCE_COLUMNS, VOLTAGE_COLUMNS
+from .axes import VOLTAGE_COLUMNS
 from .config import Settings
 from .errors import InputError, where
 from .iotools.files import atomic_write, refuse_overwriting_input
@@ -81,6 +81,7 @@ class ApplySummary:
     offsets: np.ndarray = field(default_factory=lambda: np.zeros(3))
     force_unit: str = "N"
     output_unit: str = "V"
+    outputs: tuple[str, ...] = VOLTAGE_COLUMNS  # the names of ``offsets``
 
 
 def apply_file(
@@ -133,6 +134,16 @@ def apply_file(
     byte; Parquet columns keep their types (CSV columns become strings).
     """
     path, out = Path(voltages), Path(out)
+    settings, unit = check_options(model, settings, tare, zero, unit)
+    refuse_overwriting_input(out, [path])
+    with LogFile(path, settings) as log:
+        return _apply(model, log, out, settings, tare, zero, unit, force, chunk_rows, progress,
+                      workers, round_trip)
+
+
+def check_options(model: CouplingErrorModel, settings: Settings | None, tare, zero,
+                  unit: str | None) -> tuple[Settings, str]:
+    """``apply``'s settings and force unit, with the defaults; refused if they cannot be used."""
     settings = settings or model.settings
     if settings.units != model.settings.units:
         # the model's k and ranges are in its calibration's units: a log in others
@@ -143,14 +154,21 @@ def apply_file(
             "convert the log with scale: or use the calibration's config")
     if tare is not None and zero is not None:
         raise InputError("give either --tare or --zero, not both")
-    unit = model.settings.load_unit if unit is None else unit
-    if unit not in LOAD_UNITS:
+    if settings.layout != model.layout:
+        raise InputError(
+            f"the config names outputs {', '.join(settings.layout.outputs)}, the model "
+            f"{', '.join(model.layout.outputs)}; use the calibration's config")
+    if zero is not None and len(zero) != model.n_components:
+        raise InputError(f"--zero: {len(zero)} values for the model's {model.n_components} "
+                         f"outputs ({', '.join(model.layout.outputs)})")
+    if unit is not None and model.settings.units.loads:
+        raise InputError(f"--unit {unit}: the model's loads have mixed units "
+                         f"({model.settings.load_unit}); they are written in their own")
+    given, unit = unit is not None, model.settings.load_unit if unit is None else unit
+    if given and unit not in LOAD_UNITS or model.settings.load_unit not in LOAD_UNITS and given:
         raise InputError(f"--unit {unit!r}: unknown load unit; expected one of "
                          f"{', '.join(LOAD_UNITS)}")
-    refuse_overwriting_input(out, [path])
-    with LogFile(path, settings) as log:
-        return _apply(model, log, out, settings, tare, zero, unit, force, chunk_rows, progress,
-                      workers, round_trip)
+    return settings, unit
 
 
 @dataclass(frozen=True)
@@ -208,27 +226,30 @@ def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarra
 def _limit_bounds(settings: Settings, model: CouplingErrorModel) -> tuple[np.ndarray, np.ndarray]:
     """(lo, hi) per output; +-inf where no limit is given (never saturated)."""
     limits = settings.limits or model.settings.limits
-    lo = np.array([limits.get(c, (-np.inf, np.inf))[0] for c in VOLTAGE_COLUMNS])
-    hi = np.array([limits.get(c, (-np.inf, np.inf))[1] for c in VOLTAGE_COLUMNS])
+    outputs = model.layout.outputs
+    lo = np.array([limits.get(c, (-np.inf, np.inf))[0] for c in outputs])
+    hi = np.array([limits.get(c, (-np.inf, np.inf))[1] for c in outputs])
     return lo, hi
 
 
 def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit, force,
            chunk_rows, progress, workers, round_trip) -> ApplySummary:
     path, header = log.path, log.header
-    names = [settings.columns[c] for c in VOLTAGE_COLUMNS]
-    require_columns(header, dict(zip(VOLTAGE_COLUMNS, names, strict=True)), path)
-    clash = [c for c in (*FORCE_COLUMNS, STATUS_COLUMN) if c in header]
+    layout = model.layout
+    names = [settings.columns[c] for c in layout.outputs]
+    require_columns(header, dict(zip(layout.outputs, names, strict=True)), path)
+    clash = [c for c in (*layout.loads, STATUS_COLUMN) if c in header]
     if clash:
         raise InputError(
             f"{where(path, HEADER_ROW, clash[0])}: the log already has a column named "
             f"'{clash[0]}', which the output would overwrite"
         )
-    scale = np.array([settings.scale[c] for c in VOLTAGE_COLUMNS])
+    scale = np.array([settings.scale[c] for c in layout.outputs])
     jobs: Iterator[Callable[[], Block]] = log.blocks(names, chunk_rows=chunk_rows,
                                                      want_table=is_parquet(out))
-    summary = ApplySummary(force_unit=unit, output_unit=model.settings.output_unit)
-    to_unit = load_factor(model.settings.load_unit, unit)
+    summary = ApplySummary(force_unit=unit, output_unit=model.settings.output_unit,
+                           outputs=layout.outputs, offsets=np.zeros(layout.n))
+    to_unit = 1.0 if unit == model.settings.load_unit else load_factor(model.settings.load_unit, unit)
     sat_lo, sat_hi = _limit_bounds(settings, model)
     if tare is not None:
         # the tare rows are read once: their blocks are kept and decoupled first
@@ -240,7 +261,7 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
             n += len(head[-1])
             if n >= tare:
                 break
-        summary.offsets = tare_offsets(np.concatenate(head) if head else np.empty((0, 3)), tare,
+        summary.offsets = tare_offsets(np.concatenate(head) if head else np.empty((0, layout.n)), tare,
                                        source=path)
         jobs = itertools.chain(kept, jobs)
     elif zero is not None:
@@ -252,12 +273,14 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
     with atomic_write(out, "wb", force=force) as fh:
         if is_parquet(out):
             sink = ParquetSink(fh, (STATUS_COLUMN,), {FORCE_UNIT_KEY: unit,
-                                                      OUTPUT_UNIT_KEY: summary.output_unit})
+                                                      OUTPUT_UNIT_KEY: summary.output_unit},
+                               columns=layout.loads)
         else:
             full_scale = np.asarray(model.settings.full_scale) * to_unit
             decimals = None if round_trip else force_decimals(full_scale)
             sink = CsvSink(fh, header, None if log.parquet else log.header_line, decimals,
-                           sep=settings.sep, decimal=settings.decimal, extra=(STATUS_COLUMN,))
+                           sep=settings.sep, decimal=settings.decimal, extra=(STATUS_COLUMN,),
+                           columns=layout.loads)
 
         def work(job):
             # parse, eq. (11) and format one block; numpy and pyarrow release the

@@ -17,7 +17,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .axes import CHI_NAMES
 from .calibration import CalibrationSet
 from .config import Settings
 from .decouple import initial_forces
@@ -44,7 +43,7 @@ def input_scale(train: CalibrationSet, settings: Settings) -> np.ndarray | None:
     """RBF input units: volts as they are, or full-scale outputs as the SVRs see them."""
     if settings.scaling != "full_scale":
         return None
-    return np.abs(fit_omega(train.points).k) * np.asarray(settings.full_scale)
+    return np.abs(fit_omega(train.points, train.layout).k) * np.asarray(settings.full_scale)
 
 
 def establish(method: str, train: CalibrationSet, settings: Settings, *, workers: int = 1,
@@ -54,16 +53,16 @@ def establish(method: str, train: CalibrationSet, settings: Settings, *, workers
     ``tables``: build the svr model's fast-path tables (not needed to score it).
     """
     if method == "initial":
-        return InitialMethod(fit_omega(train.points).k)
+        return InitialMethod(fit_omega(train.points, train.layout).k)
     if method == "linear":
         return fit_calibration_matrix(train.voltages, train.forces)
     if method == "rbf-mimo":
         return fit_mimo(train.voltages, train.forces, spread=SPREAD,
                         input_scale=input_scale(train, settings))
     if method == "rbf-siso":
-        data = {name: chi_training_data(train, name) for name in CHI_NAMES}
-        return fit_siso(fit_omega(train.points).k, data, spread=SPREAD,
-                        input_scale=input_scale(train, settings))
+        data = {name: chi_training_data(train, name) for name in train.layout.chi_names}
+        return fit_siso(fit_omega(train.points, train.layout).k, data, spread=SPREAD,
+                        input_scale=input_scale(train, settings), layout=train.layout)
     if method == "svr":
         return fit(train, settings, workers=workers, tables=tables)
     raise ValueError(f"unknown method {method!r}")

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
+from .axes import DEFAULT, Layout
 from .config import Settings
 from .errors import InputError
 from .iotools.calibration import read_calibration_table
@@ -37,6 +37,8 @@ class CalibrationSet:
         provenance).
     warnings : tuple of str
         Things a technician should look at; the data are still usable.
+    layout : Layout
+        The sensor's components (axes.py): sweep labels, load and output columns.
     """
 
     points: pd.DataFrame
@@ -45,6 +47,7 @@ class CalibrationSet:
     skipped: tuple[str, ...] = ()
     warnings: tuple[str, ...] = field(default=())
     excluded: tuple[str, ...] = ()
+    layout: Layout = DEFAULT
 
     @property
     def source(self) -> str:
@@ -84,17 +87,17 @@ class CalibrationSet:
 
     @property
     def forces(self) -> np.ndarray:
-        return self.points[list(FORCE_COLUMNS)].to_numpy()
+        return self.points[list(self.layout.loads)].to_numpy()
 
     @property
     def voltages(self) -> np.ndarray:
-        return self.points[list(VOLTAGE_COLUMNS)].to_numpy()
+        return self.points[list(self.layout.outputs)].to_numpy()
 
     def load_grid(self, axis: str) -> dict[int, np.ndarray]:
         """Sorted distinct loads [N] of each repetition's ``axis`` sweep."""
         s = self.sweep(axis)
         reps = s["repetition"].to_numpy()
-        loads = s[FORCE_COLUMNS[AXES.index(axis)]].to_numpy()
+        loads = s[self.layout.loads[self.layout.index(axis)]].to_numpy()
         if not reps.size:
             return {}
         # one sort for all repetitions: a groupby loop costs a pandas frame per repetition
@@ -116,9 +119,14 @@ def _source(files) -> str:
     return str(Path(files[0][0]).parent)
 
 
-def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=()) -> CalibrationSet:
-    """Validate a long table (as :func:`read_calibration_table` returns) and zero-correct it."""
-    table = assign_sweeps(table)
+def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
+               combined: bool = False) -> CalibrationSet:
+    """Validate a long table (as :func:`read_calibration_table` returns) and zero-correct it.
+
+    ``combined``: rows loading several components are kept (``validate``), not refused.
+    """
+    layout = settings.layout
+    table = assign_sweeps(table, layout, combined)
     reps = sorted(table["repetition"].unique())
     if len(reps) < settings.min_repetitions:
         raise InputError(
@@ -131,19 +139,20 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=()) ->
     # one grouping, not a scan of the table per repetition (quadratic in thousands)
     pairs = table[["repetition", "axis"]].drop_duplicates()
     n_axes = pairs.groupby("repetition", sort=True).size()
-    for rep in n_axes.index[n_axes.to_numpy() < len(AXES)][:1]:
+    for rep in n_axes.index[n_axes.to_numpy() < layout.n][:1]:
         have = set(pairs.loc[pairs["repetition"] == rep, "axis"])
-        missing = [a for a in AXES if a not in have]
+        missing = [a for a in layout.labels if a not in have]
         if missing:
             first = table.loc[table["repetition"] == rep].iloc[0]
+            every = "all three axes" if layout.is_default else f"all {layout.n} components"
             raise InputError(
                 f"{first['file']}: repetition {rep} has no {' or '.join(missing)} sweep; "
-                "every repetition must calibrate all three axes"
+                f"every repetition must calibrate {every}"
             )
-    points, offsets = zero_correct(table)
+    points, offsets = zero_correct(table, layout, settings.zero_method)
     warnings = []
-    cs = CalibrationSet(points, offsets, tuple(files), tuple(skipped))
-    for axis in AXES:
+    cs = CalibrationSet(points, offsets, tuple(files), tuple(skipped), layout=layout)
+    for axis in layout.labels:
         grids = cs.load_grid(axis)
         ref_rep, ref = next(iter(grids.items()))
         for rep, g in grids.items():
@@ -153,15 +162,15 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=()) ->
                     f"repetition {ref_rep}; gamma compares repetitions at different loads"
                 )
                 break
-    for a, axis in enumerate(AXES):
+    for a, axis in enumerate(layout.labels):
         # loads far from the full scale usually mean other units (kN, kgf) or a
         # wrong full_scale, and gamma (eq. 12) is a fraction of the full scale
-        peak = float(np.abs(cs.sweep(axis)[FORCE_COLUMNS[a]]).max())
-        fs = settings.full_scale[a]
+        peak = float(np.abs(cs.sweep(axis)[layout.loads[a]]).max())
+        fs, unit = settings.full_scale[a], settings.units.load_of(a)
         if peak > 1.05 * fs or peak < 0.2 * fs:
             warnings.append(
-                f"the {axis} loads reach {peak:g} {settings.load_unit}, the full scale is {fs:g} "
-                f"{settings.load_unit}: check the units (units: and scale: in the config) and "
+                f"the {axis} loads reach {peak:g} {unit}, the full scale is {fs:g} "
+                f"{unit}: check the units (units: and scale: in the config) and "
                 "full_scale"
             )
     seen: dict[str, str] = {}
@@ -170,10 +179,12 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=()) ->
             warnings.append(f"{name} is byte for byte the same file as {seen[digest]}; "
                             "a repetition copied twice counts twice")
         seen.setdefault(digest, name)
-    return CalibrationSet(points, offsets, tuple(files), tuple(skipped), tuple(warnings))
+    return CalibrationSet(points, offsets, tuple(files), tuple(skipped), tuple(warnings),
+                          layout=layout)
 
 
-def load_calibration(path: str | Path, settings: Settings, exclude=()) -> CalibrationSet:
+def load_calibration(path: str | Path, settings: Settings, exclude=(),
+                     combined: bool = False) -> CalibrationSet:
     """Read, validate and zero-correct a calibration set (a directory or one CSV).
 
     ``exclude``: ``FILE:ROW`` points to drop before zero correction (``fit --exclude``);
@@ -181,7 +192,7 @@ def load_calibration(path: str | Path, settings: Settings, exclude=()) -> Calibr
     """
     read = read_calibration_table(path, settings)
     table, dropped = _exclude(read.table, exclude)
-    cs = from_table(table, settings, read.files, [*read.skipped, *dropped])
+    cs = from_table(table, settings, read.files, [*read.skipped, *dropped], combined)
     hidden = tuple(f"{f}: hidden file, not read as a repetition" for f in read.hidden)
     cs = replace(cs, excluded=tuple(dropped))
     return replace(cs, warnings=hidden + cs.warnings) if hidden else cs
@@ -222,12 +233,13 @@ class GrossError:
     offset: float
 
     @classmethod
-    def parse(cls, spec: str) -> GrossError:
+    def parse(cls, spec: str, layout: Layout = DEFAULT) -> GrossError:
+        """``AXIS:REP:POINT:OFFSET``; AXIS a label of ``layout`` (x; or a component, fx)."""
         parts = spec.split(":")
         try:
             axis, rep, point, offset = parts
-            axis = axis.strip().lower()
-            if axis not in AXES:
+            axis = layout.label_map().get(axis.strip().lower(), "")
+            if not axis:
                 raise ValueError
             ge = cls(axis, int(rep), int(point), float(offset))
         except ValueError:
@@ -238,7 +250,7 @@ class GrossError:
             raise InputError(f"--gross-error {spec!r}: REP and POINT count from 1")
         return ge
 
-    def apply(self, table: pd.DataFrame) -> pd.DataFrame:
+    def apply(self, table: pd.DataFrame, layout: Layout = DEFAULT) -> pd.DataFrame:
         """A copy of ``table`` with this point's prime voltage moved by ``offset``."""
         idx = np.flatnonzero(
             (table["repetition"] == self.repetition).to_numpy()
@@ -250,7 +262,7 @@ class GrossError:
                 f"{idx.size} points, no point {self.point}"
             )
         out = table.copy()
-        col = out.columns.get_loc(VOLTAGE_COLUMNS[AXES.index(self.axis)])
+        col = out.columns.get_loc(layout.outputs[layout.index(self.axis)])
         out.iloc[idx[self.point - 1], col] += self.offset
         return out
 
@@ -258,9 +270,9 @@ class GrossError:
 def ingest_summary(calib, settings) -> dict[str, Any]:
     """Everything ``ingest`` reports, as plain data (also the ``--json`` document)."""
     axes = {}
-    for a, axis in enumerate(AXES):
+    for a, axis in enumerate(calib.layout.labels):
         s = calib.sweep(axis)
-        grid = np.unique(s[FORCE_COLUMNS[a]].to_numpy())
+        grid = np.unique(s[calib.layout.loads[a]].to_numpy())
         axes[axis] = {
             "points": int(len(s)),
             "points_per_repetition": {
@@ -278,6 +290,7 @@ def ingest_summary(calib, settings) -> dict[str, Any]:
         "repetitions": calib.repetitions,
         "axes": axes,
         "offsets": calib.offsets.to_dict(orient="records"),
+        **({"zero": "fit"} if settings.zero_method == "fit" else {}),
         "skipped": list(calib.skipped),
         "warnings": list(calib.warnings),
     }

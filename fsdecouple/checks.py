@@ -12,8 +12,6 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .axes import AXES
-
 COUPLING_LIMIT = 0.05  # fraction of full-scale output (Section 2.1)
 SLOPE_LIMIT = 0.05  # |d chi/du| (Section 2.1)
 SECOND_ORDER_LIMIT = COUPLING_LIMIT * SLOPE_LIMIT  # 0.25 %, eq. (6)
@@ -63,14 +61,15 @@ def assumption_checks(model) -> list[Check]:
     """
     u_fs = np.abs(model.k) * np.asarray(model.settings.full_scale)
     checks = []
-    for axis in AXES:
+    labels = model.layout.labels
+    for axis in labels:
         r2 = float(model.report.r2.get(axis, np.nan)) if model.report else np.nan
         limit = model.settings.min_r2
         checks.append(Check("linearity", axis, r2, limit, "pass" if r2 >= limit else "warn"))
     peak = {name: float(np.abs(c(_grid(c))).max()) for name, c in model.chi.items()}
     coupling = {}
-    for a, axis in enumerate(AXES):
-        total = sum(v for name, v in peak.items() if name[0] == axis)
+    for a, axis in enumerate(labels):
+        total = sum(v for name, v in peak.items() if model.chi[name].output_axis == a)
         coupling[axis] = float(total / u_fs[a])
         checks.append(Check("coupling", axis, coupling[axis], COUPLING_LIMIT,
                             "pass" if coupling[axis] <= COUPLING_LIMIT else "warn"))
@@ -78,7 +77,7 @@ def assumption_checks(model) -> list[Check]:
         slope = float(np.abs(chi_slope(c, _grid(c))).max())
         checks.append(Check("slope", name, slope, SLOPE_LIMIT,
                             "pass" if slope <= SLOPE_LIMIT else "warn"))
-        bound = float(slope * coupling[name[1]])
+        bound = float(slope * coupling[labels[c.input_axis]])
         checks.append(Check("second_order", name, bound, SECOND_ORDER_LIMIT,
                             "pass" if bound <= SECOND_ORDER_LIMIT else "warn"))
     return checks

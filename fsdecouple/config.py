@@ -15,13 +15,16 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from .axes import AXES, CANONICAL_COLUMNS, FORCE_COLUMNS, VOLTAGE_COLUMNS
+from .axes import CANONICAL_COLUMNS, CHI_SEPARATOR, DEFAULT, FORCE_COLUMNS, VOLTAGE_COLUMNS, Layout
 from .errors import ConfigError, printable
-from .units import LOAD_UNITS, OUTPUT_UNITS, Units
+from .extrapolation import DEFAULT as DEFAULT_EXTRAPOLATION
+from .extrapolation import check_extrapolation
+from .units import LOAD_UNITS, MOMENT_UNITS, OUTPUT_UNITS, Units
+from .wrench import Frame, parse_frame, parse_rotation
 from .yamlfile import SafeUniqueLoader, read_yaml  # noqa: F401 (the loader, for tests)
 
 SCALINGS = ("none", "full_scale")
-ZERO_MODES = ("rows", "fit")  # how sweeps are zeroed: Section 3, or zero_fit.py
+ZERO_MODES = ("rows", "fit")  # how sweeps are zeroed: Section 3, or zero.fitted_offsets
 # Second-order refinement steps (decouple.py): each gains about a decimal digit
 # under Section 2.1's slopes, so beyond this many a K is a typo, not a setting.
 MAX_REFINE = 100
@@ -56,7 +59,7 @@ class Settings:
     """Everything given (not learned) for fitting and applying a model."""
 
     sensor: str = "paper-3axis"
-    full_scale: tuple[float, float, float] = (100.0, 100.0, 150.0)  # [N], Section 3
+    full_scale: tuple[float, ...] = (100.0, 100.0, 150.0)  # [N], Section 3; per component
     min_repetitions: int = 6
     columns: dict[str, str] = field(default_factory=lambda: {c: c for c in CANONICAL_COLUMNS})
     scale: dict[str, float] = field(
@@ -71,8 +74,24 @@ class Settings:
     rotation: tuple[tuple[float, float, float], ...] | None = None
     min_r2: float = 0.99
     refine: int = 0  # fixed-point steps on the prime outputs before eq. (11) (decouple.py)
-    zero: str = "rows"  # sweep offsets from the zero rows, or from all points (zero_fit.py)
+    # chi beyond its calibrated range (extrapolation.py); model files without it: kernel
+    extrapolation: str = DEFAULT_EXTRAPOLATION
     units: Units = Units()
+    # the sensor's components and their prime outputs (axes.Layout); None: x, y, z
+    components: tuple[str, ...] | None = None
+    outputs: tuple[str, ...] | None = None
+    zero: str | None = None  # ZERO_MODES; None: rows for x, y, z, fit for components
+    frame: Frame | None = None  # six axes: the wrench transform after eq. (11) (wrench.py)
+
+    @property
+    def zero_method(self) -> str:
+        return self.zero or ("rows" if self.components is None else "fit")
+
+    @property
+    def layout(self) -> Layout:
+        if self.components is None:
+            return DEFAULT
+        return Layout.named(self.components, self.outputs)
 
     @property
     def load_unit(self) -> str:
@@ -86,24 +105,36 @@ class Settings:
         d = asdict(self)
         if not self.limits:
             del d["limits"]  # files from before limits keep their bytes
-        d["full_scale"] = dict(zip(AXES, self.full_scale, strict=True))
+        layout = self.layout
+        d["full_scale"] = dict(zip(layout.labels, self.full_scale, strict=True))
+        if self.zero is None:
+            del d["zero"]
+        if self.frame is None:
+            del d["frame"]
+        else:
+            d["frame"] = self.frame.to_dict()
+        if self.components is None:
+            del d["components"], d["outputs"]  # files from before components keep their bytes
+        else:
+            d["components"], d["outputs"] = list(self.components), list(self.outputs)
         d["rotation"] = None if self.rotation is None else [list(r) for r in self.rotation]
         d["csv"] = {"sep": d.pop("sep"), "decimal": d.pop("decimal")}
         d["checks"] = {"min_r2": d.pop("min_r2")}
-        if self.zero == "rows":
-            del d["zero"]  # Section 3's zero rows: files from before zero keep their bytes
         if self.refine == 0:
             del d["refine"]  # eq. (11) as written: files from before refine keep their bytes
         if self.units == Units():
             del d["units"]  # the paper's N and V: files from before units keep their bytes
+        else:
+            d["units"] = self.units.to_dict(layout.loads, layout.outputs)
         return d
 
 
 _TOP_KEYS = {
     "limits",
-    "refine", "zero",
+    "refine", "extrapolation",
     "sensor", "full_scale", "min_repetitions", "columns", "scale", "csv", "svr",
-    "scaling", "rotation", "checks", "units",
+    "scaling", "rotation", "checks", "units", "components", "outputs", "zero",
+    "frame",
 }
 _SVR_KEYS = {"C", "epsilon", "gamma", "delta2", "tolerance"}
 
@@ -137,7 +168,7 @@ def check_refine(value: Any, where: str = "refine") -> int:
 
 
 def check_zero(value: Any, where: str = "zero") -> str:
-    """How sweeps are zeroed: ``rows`` (Section 3) or ``fit`` (all points, zero_fit.py)."""
+    """How sweeps are zeroed: ``rows`` (Section 3) or ``fit`` (all points, zero.fitted_offsets)."""
     if value not in ZERO_MODES:
         raise ConfigError(f"{where}: expected one of {', '.join(ZERO_MODES)}, found {value!r}")
     return value
@@ -165,57 +196,94 @@ def _svr_settings(raw: Any, where: str, base: SVRSettings) -> SVRSettings:
     return replace(base, **kw)
 
 
-def _rotation(raw: Any, where: str) -> tuple[tuple[float, float, float], ...] | None:
-    if raw is None:
-        return None
-    if not (isinstance(raw, list) and len(raw) == 3 and all(
-        isinstance(r, list) and len(r) == 3 for r in raw
-    )):
-        raise ConfigError(f"{where}: expected a 3x3 list of lists, found {raw!r}")
-    rows = tuple(
-        tuple(_number(v, f"{where}[{i}][{j}]") for j, v in enumerate(r)) for i, r in enumerate(raw)
-    )
-    # A rotation from the sensor frame to the reference frame (end of Section 2.3)
-    # must be orthonormal with det +1, or forces would be scaled or mirrored.
-    m = [[rows[i][j] for j in range(3)] for i in range(3)]
-    for i in range(3):
-        for j in range(3):
-            dot = sum(m[i][k] * m[j][k] for k in range(3))
-            if abs(dot - (1.0 if i == j else 0.0)) > 1e-6:
-                raise ConfigError(f"{where}: not a rotation matrix (rows are not orthonormal)")
-    det = (
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    )
-    if det < 0:
-        raise ConfigError(f"{where}: determinant is -1, a reflection, not a rotation")
-    return rows
-
-
-def _units(raw: Any, where: str) -> Units:
+def _units(raw: Any, where: str, layout: Layout = DEFAULT) -> Units:
+    """``{load: N, output: V}``, or per column: ``{load: {fx: N, mx: N·m}, output: {u1: V}}``."""
     raw = _mapping(raw, where)
-    allowed = {"load": tuple(LOAD_UNITS), "output": OUTPUT_UNITS}
+    moments = tuple(MOMENT_UNITS) if not layout.is_default else ()
+    allowed = {"load": (*LOAD_UNITS, *moments), "output": OUTPUT_UNITS}
+    columns = {"load": layout.loads, "output": layout.outputs}
     for key in raw:
         if key not in allowed:
             raise _unknown(str(key), set(allowed), where)
-    kw = {}
+    kw: dict[str, Any] = {}
     for key, units in allowed.items():
-        if key in raw:
-            if raw[key] not in units:
-                raise ConfigError(f"{where}: {key}: unknown unit {raw[key]!r}; expected one of "
+        if key not in raw:
+            continue
+        value = raw[key]
+        if isinstance(value, dict):
+            for col in value:
+                if col not in columns[key]:
+                    raise _unknown(str(col), set(columns[key]), f"{where}: {key}")
+            missing = [c for c in columns[key] if c not in value]
+            if missing:
+                raise ConfigError(f"{where}: {key}: no unit for {', '.join(missing)}; give one "
+                                  "per column, or one unit for all")
+            per = tuple(value[c] for c in columns[key])
+        else:
+            per = (value,)
+        for unit in per:
+            if unit not in units:
+                raise ConfigError(f"{where}: {key}: unknown unit {unit!r}; expected one of "
                                   f"{', '.join(units)}")
-            kw[key] = raw[key]
+        if len(set(per)) == 1:
+            kw[key] = per[0]
+        else:  # mixed units: shown column by column, never converted as one
+            kw[key] = " / ".join(dict.fromkeys(per))
+            kw[f"{key}s"] = per
     return Units(**kw)
 
 
-def _limits(raw: Any, where: str) -> dict[str, tuple[float, float]]:
+def _names(raw: Any, where: str) -> tuple[str, ...]:
+    """A list of distinct column names (``components:`` or ``outputs:``)."""
+    if not (isinstance(raw, list) and raw):
+        raise ConfigError(f"{where}: expected a list of names, found {raw!r}")
+    for name in raw:
+        if not isinstance(name, str) or not name.strip() or CHI_SEPARATOR in name \
+                or name != name.strip():
+            raise ConfigError(f"{where}: {name!r} is not a name (text without '{CHI_SEPARATOR}' "
+                              "or surrounding spaces)")
+    seen: dict[str, int] = {}
+    for i, name in enumerate(raw):
+        if name.lower() in seen:
+            raise ConfigError(f"{where}: '{name}' is listed twice (places {seen[name.lower()] + 1} "
+                              f"and {i + 1}); each needs its own")
+        seen[name.lower()] = i
+    return tuple(raw)
+
+
+def _layout(raw: dict, source: str) -> tuple[tuple[str, ...], tuple[str, ...]] | None:
+    """``components`` and ``outputs``: the sensor's N loads and each one's prime output."""
+    if "components" not in raw and "outputs" not in raw:
+        return None
+    if "components" not in raw or "outputs" not in raw:
+        given, other = ("components", "outputs") if "components" in raw else ("outputs", "components")
+        raise ConfigError(f"{source}: {given} needs {other}: the prime output of each component, "
+                          "in the same order")
+    comps = _names(raw["components"], f"{source}: components")
+    outs = _names(raw["outputs"], f"{source}: outputs")
+    if len(comps) != len(outs):
+        raise ConfigError(f"{source}: outputs: {len(outs)} names for {len(comps)} components; "
+                          "each component has one prime output, in the same order")
+    if len(comps) < 2:
+        raise ConfigError(f"{source}: components: a coupling model needs at least 2 components")
+    clash = sorted({c.lower() for c in comps} & {o.lower() for o in outs})
+    if clash or {"repetition", "axis"} & {n.lower() for n in (*comps, *outs)}:
+        name = clash[0] if clash else "repetition/axis"
+        raise ConfigError(f"{source}: outputs: '{name}' names a component and an output at once "
+                          "(or a reserved column)")
+    if "full_scale" not in raw:
+        raise ConfigError(f"{source}: full_scale: a sensor with components needs the full scale "
+                          "of each")
+    return comps, outs
+
+
+def _limits(raw: Any, where: str, outputs=VOLTAGE_COLUMNS) -> dict[str, tuple[float, float]]:
     """``{ux: [lo, hi], ...}``: the raw range of each output, in the data's units."""
     raw = _mapping(raw, where)
     out = {}
     for key, pair in raw.items():
-        if key not in VOLTAGE_COLUMNS:
-            raise _unknown(str(key), set(VOLTAGE_COLUMNS), where)
+        if key not in outputs:
+            raise _unknown(str(key), set(outputs), where)
         if not (isinstance(pair, list | tuple) and len(pair) == 2):
             raise ConfigError(f"{where}: {key}: expected [lo, hi], found {pair!r}")
         lo, hi = (_number(v, f"{where}: {key}") for v in pair)
@@ -238,6 +306,14 @@ def settings_from_dict(raw: Any, source: str = "config") -> Settings:
             raise _unknown(str(key), _TOP_KEYS, source)
     s = Settings()
     kw: dict[str, Any] = {}
+    named = _layout(raw, source)
+    if named is not None:
+        layout = Layout.named(*named)
+        s = replace(s, components=named[0], outputs=named[1],
+                    columns={c: c for c in layout.canonical},
+                    scale={c: 1.0 for c in (*layout.loads, *layout.outputs)},
+                    full_scale=(1.0,) * layout.n)
+    layout = s.layout
     if "sensor" in raw:
         if not isinstance(raw["sensor"], str) or not raw["sensor"].strip():
             raise ConfigError(f"{source}: sensor: expected a name, found {raw['sensor']!r}")
@@ -245,13 +321,13 @@ def settings_from_dict(raw: Any, source: str = "config") -> Settings:
     if "full_scale" in raw:
         fs = _mapping(raw["full_scale"], f"{source}: full_scale")
         for key in fs:
-            if key not in AXES:
-                raise _unknown(str(key), set(AXES), f"{source}: full_scale")
-        missing = [a for a in AXES if a not in fs]
+            if key not in layout.labels:
+                raise _unknown(str(key), set(layout.labels), f"{source}: full_scale")
+        missing = [a for a in layout.labels if a not in fs]
         if missing:
             raise ConfigError(f"{source}: full_scale: missing axis {', '.join(missing)}")
         kw["full_scale"] = tuple(
-            _number(fs[a], f"{source}: full_scale: {a}", positive=True) for a in AXES
+            _number(fs[a], f"{source}: full_scale: {a}", positive=True) for a in layout.labels
         )
     if "min_repetitions" in raw:
         v = raw["min_repetitions"]
@@ -262,13 +338,16 @@ def settings_from_dict(raw: Any, source: str = "config") -> Settings:
         cols = _mapping(raw["columns"], f"{source}: columns")
         merged = dict(s.columns)
         for key, name in cols.items():
-            if key not in CANONICAL_COLUMNS:
-                raise _unknown(str(key), set(CANONICAL_COLUMNS), f"{source}: columns")
+            if key not in layout.canonical:
+                raise _unknown(str(key), set(layout.canonical), f"{source}: columns")
             if not isinstance(name, str) or not name:
                 raise ConfigError(f"{source}: columns: {key}: expected a column name, found {name!r}")
             merged[key] = name
         if len(set(merged.values())) != len(merged):
-            raise ConfigError(f"{source}: columns: two quantities map to the same file column")
+            twice = next(v for v in merged.values() if list(merged.values()).count(v) > 1)
+            keys = [k for k, v in merged.items() if v == twice]
+            raise ConfigError(f"{source}: columns: two quantities map to the same file column "
+                              f"('{twice}': {' and '.join(keys)})")
         kw["columns"] = merged
     if "scale" in raw:
         sc = _mapping(raw["scale"], f"{source}: scale")
@@ -300,15 +379,22 @@ def settings_from_dict(raw: Any, source: str = "config") -> Settings:
             )
         kw["scaling"] = raw["scaling"]
     if "rotation" in raw:
-        kw["rotation"] = _rotation(raw["rotation"], f"{source}: rotation")
+        kw["rotation"] = parse_rotation(raw["rotation"], f"{source}: rotation")
+        if kw["rotation"] is not None and layout.n != 3:
+            raise ConfigError(f"{source}: rotation: rotates three forces; a sensor of "
+                              f"{layout.n} components takes frame: {{rotation, origin}}")
+    if raw.get("frame") is not None:
+        kw["frame"] = parse_frame(raw["frame"], f"{source}: frame", layout.n)
     if "limits" in raw:
-        kw["limits"] = _limits(raw["limits"], f"{source}: limits")
+        kw["limits"] = _limits(raw["limits"], f"{source}: limits", layout.outputs)
     if "refine" in raw:
         kw["refine"] = check_refine(raw["refine"], f"{source}: refine")
     if "zero" in raw:
         kw["zero"] = check_zero(raw["zero"], f"{source}: zero")
+    if "extrapolation" in raw:
+        kw["extrapolation"] = check_extrapolation(raw["extrapolation"], f"{source}: extrapolation")
     if "units" in raw:
-        kw["units"] = _units(raw["units"], f"{source}: units")
+        kw["units"] = _units(raw["units"], f"{source}: units", layout)
         if "scaling" not in raw and kw["units"].output != "V":
             # Table 2's kernel width assumes outputs of order 1 V
             kw["scaling"] = "full_scale"
@@ -335,7 +421,7 @@ def load_config(path: str | Path | None = None, **overrides: Any) -> Settings:
         raw = read_yaml(path, name)
         settings = settings_from_dict(raw, name)
     settings = apply_overrides(settings, **overrides)
-    for axis, value in zip(AXES, settings.full_scale, strict=True):
+    for axis, value in zip(settings.layout.labels, settings.full_scale, strict=True):
         low, high = FULL_SCALE_RANGE
         if not low <= value <= high:
             raise ConfigError(f"{name if path is not None else 'config'}: full_scale: {axis}: "
@@ -356,4 +442,6 @@ def apply_overrides(settings: Settings, **overrides: Any) -> Settings:
         )
     if "refine" in given:
         given["refine"] = check_refine(given["refine"], "--refine")
+    if "extrapolation" in given:
+        given["extrapolation"] = check_extrapolation(given["extrapolation"], "--extrapolation")
     return replace(settings, **given)

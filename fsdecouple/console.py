@@ -14,7 +14,7 @@ from rich import box
 from rich.table import Table
 from rich.text import Text
 
-from .axes import AXES, VOLTAGE_COLUMNS
+from .axes import labels_in, load_name
 from .cv_doc import gamma_index, test_name
 from .guess import KEYS as GUESS_KEYS
 from .guess import Guess
@@ -28,7 +28,11 @@ def _units(settings_or_doc) -> Units:
     u = getattr(settings_or_doc, "units", None)
     if isinstance(u, Units):
         return u
-    return Units(**settings_or_doc.get("units", {})) if isinstance(settings_or_doc, dict) else Units()
+    if not isinstance(settings_or_doc, dict):
+        return Units()
+    u = settings_or_doc.get("units", {})
+    return Units(**{k: (" / ".join(dict.fromkeys(v.values())) if isinstance(v, dict) else v)
+                    for k, v in u.items()})
 
 
 def ingest_tables(summary: dict[str, Any]) -> list:
@@ -47,12 +51,16 @@ def ingest_tables(summary: dict[str, Any]) -> list:
                   f"{d['load_min']:g} .. {d['load_max']:g}", str(d["load_levels"]),
                   f"{d['full_scale']:g}")
     factor, shown = output_display(units.output)
-    o = Table(title=f"Zero offsets removed [{shown}] (mean of each sweep's zero-load rows)")
-    for col in ("repetition", "axis", "zero rows", *VOLTAGE_COLUMNS):
+    how = ("fitted to all of each sweep's points, zero: fit" if summary.get("zero") == "fit"
+           else "mean of each sweep's zero-load rows")
+    o = Table(title=f"Zero offsets removed [{shown}] ({how})")
+    outputs = [c for c in (summary["offsets"] or [{}])[0] if c not in ("repetition", "axis",
+                                                                        "n_zero")]
+    for col in ("repetition", "axis", "zero rows", *outputs):
         o.add_column(col, justify="right")
     for r in summary["offsets"]:
         o.add_row(str(r["repetition"]), r["axis"], str(r["n_zero"]),
-                  *(f"{factor * r[c]:+.3f}" for c in VOLTAGE_COLUMNS))
+                  *(f"{factor * r[c]:+.3f}" for c in outputs))
     out = [t, o]
     skipped = summary["skipped"]
     out.append(Text(f"rows skipped: {len(skipped)}" + "".join(f"\n  {s}" for s in skipped)))
@@ -64,27 +72,35 @@ def fit_tables(model) -> list:
     units = model.settings.units
     volts = units == Units()  # the paper's figures keep their paper-like format
     t = Table(title=f"Non-coupling functions omega (eq. 2), sensor {model.settings.sensor}")
-    for col in ("axis", f"k [{units.slope()}]", f"1/k [{units.inverse_slope()}] (eq. 13)", "R^2",
-                "points"):
+    mixed = bool(units.loads)  # forces and moments: each row says its load unit
+    slope, inverse_slope = ((f"{units.output}/load", f"load/{units.output}") if mixed
+                            else (units.slope(), units.inverse_slope()))
+    for col in ("axis", f"k [{slope}]", f"1/k [{inverse_slope}] (eq. 13)", "R^2", "points"):
         t.add_column(col, justify="right")
-    for a, axis in enumerate(AXES):
+    layout = model.layout
+    for a, axis in enumerate(layout.labels):
         r2 = rep.r2[axis]
         r2_text = Text(f"{r2:.6f}", style="" if r2 >= model.settings.min_r2 else "bold red")
         inverse = f"{1.0 / model.k[a]:.5f}" if volts else f"{1.0 / model.k[a]:.6g}"
-        t.add_row(axis, f"{model.k[a]:.6g}", inverse, r2_text, str(rep.n_points[axis]))
+        t.add_row(f"{axis} [{units.load_of(a)}]" if mixed else axis, f"{model.k[a]:.6g}", inverse,
+                  r2_text, str(rep.n_points[axis]))
     s = model.settings.svr
     c = Table(title=f"Corrected coupling functions chi (eq. 4): eps-SVR, gamma={s.gamma:g} "
-                    f"C={s.C:g} eps={s.epsilon:g} tol={s.tolerance:g}")
+                    f"C={s.C:g} eps={s.epsilon:g} tol={s.tolerance:g}",
+              caption=f"beyond the input range: {model.settings.extrapolation} (extrapolation); "
+                      f"zero offsets: {model.settings.zero_method}; refinement steps K = "
+                      f"{model.settings.refine}")
     for col in ("chi", "input", "support vectors", f"input range [{units.output}]"):
         c.add_column(col, justify="right")
     span = "{:+.4f} .. {:+.4f}" if volts else "{:+.6g} .. {:+.6g}"
     for name, chi in model.chi.items():
-        c.add_row(f"chi_{name}", f"u{name[1]}", f"{chi.support_vectors.size} / {chi.n_points}",
+        c.add_row(f"chi_{name}", layout.outputs[chi.input_axis],
+                  f"{chi.support_vectors.size} / {chi.n_points}",
                   span.format(*chi.input_range))
     g = Table(title="Interference error gamma (eq. 12) on the calibration data, % F.S.")
     for col in ("loaded axis", "before (omega^-1 only)", "after (eq. 11)"):
         g.add_column(col, justify="right")
-    for axis in AXES:
+    for axis in layout.labels:
         before, after = rep.gamma_before.get(axis), rep.gamma_after.get(axis)
         style = "bold red" if after is not None and before is not None and after > before else ""
         g.add_row(axis, pct(before), Text(pct(after), style=style))
@@ -97,7 +113,7 @@ def apply_lines(summary, out) -> list[str]:
              f"status: {counts})"]
     if np.any(summary.offsets):
         lines.append(f"zero removed [{summary.output_unit}]: " + ", ".join(
-            f"{c}={v:+.6f}" for c, v in zip(VOLTAGE_COLUMNS, summary.offsets, strict=True)))
+            f"{c}={v:+.6f}" for c, v in zip(summary.outputs, summary.offsets, strict=True)))
     return lines
 
 
@@ -156,16 +172,17 @@ def gamma_table(doc: dict[str, Any], records=None, title=None, clean=None) -> Ta
     t.add_column("round", no_wrap=True)
     t.add_column("test (level)" if levels else "test (rep)", no_wrap=True)
     cell_width = 5 if ref is not None else 4
+    axes = labels_in(doc["records"] if records is None else records)
     for m in doc["methods"]:
-        for a in AXES:
-            # the method names its column group once, over its gamma_x column
-            t.add_column(f"{m if a == 'x' else ''}\nγ{a}", justify="right", no_wrap=True,
-                         min_width=max(len(m), cell_width) if a == "x" else cell_width)
+        for a in axes:
+            # the method names its column group once, over its first gamma column
+            t.add_column(f"{m if a == axes[0] else ''}\nγ{a}", justify="right", no_wrap=True,
+                         min_width=max(len(m), cell_width) if a == axes[0] else cell_width)
     for r, fold in enumerate(doc["folds"], start=1):
         for i, rep in enumerate(fold):
             cells = []
             for m in doc["methods"]:
-                for a in AXES:
+                for a in axes:
                     v = idx.get((r, rep, m, a))
                     if v is None:  # no held-out point of this axis in the round
                         cells.append(Text("-"))
@@ -216,18 +233,19 @@ def task_table(doc: dict[str, Any]) -> Table:
     t = Table(title=f"Combined loads: {task['voltages']} ({task['rows']} rows{tare}) against "
                     "true forces; error % F.S., worst round (!: over 10x the best method's)")
     t.add_column("method")
+    axes = labels_in(task["records"])
     for metric in ("max", "RMS"):
-        for a in AXES:
-            t.add_column(f"{metric if a == 'x' else ''}\n|Δf{a}|", justify="right")
+        for a in axes:
+            t.add_column(f"{metric if a == axes[0] else ''}\n|Δ{load_name(a)}|", justify="right")
     worst: dict[tuple, float] = defaultdict(float)
     for rec in task["records"]:
         key = (rec["method"], rec["metric"], rec["axis"])
         worst[key] = max(worst[key], rec["value"])
-    best = min(worst[(m, "max_error", a)] for m in doc["methods"] for a in AXES)
+    best = min(worst[(m, "max_error", a)] for m in doc["methods"] for a in axes)
     for m in doc["methods"]:
         cells = []
         for metric in ("max_error", "rms_error"):
-            for a in AXES:
+            for a in axes:
                 v = worst[(m, metric, a)]
                 # an error above 10x the best method's is an explosion worth seeing
                 explodes = v > 10 * max(best, 1e-12)
@@ -262,15 +280,16 @@ def gross_tables(doc: dict[str, Any]) -> list[Table]:
                  box=box.SIMPLE_HEAD, pad_edge=False)
     side.add_column("round")
     side.add_column("test (rep)")
+    axes = labels_in(doc["records"])
     for label in ("clean", "moved"):
-        for a in AXES:
-            side.add_column(f"{label if a == 'x' else ''}\nγ{a}", justify="right")
+        for a in axes:
+            side.add_column(f"{label if a == axes[0] else ''}\nγ{a}", justify="right")
     side.add_column("largest\nchange", justify="right")
     clean, moved = gamma_index(doc["records"]), gamma_index(g["records"])
     for r in g["rounds_affected"]:
         for i, rep in enumerate(doc["folds"][r - 1]):
-            c = [clean[(r, rep, "svr", a)] for a in AXES]
-            m = [moved[(r, rep, "svr", a)] for a in AXES]
+            c = [clean[(r, rep, "svr", a)] for a in axes]
+            m = [moved[(r, rep, "svr", a)] for a in axes]
             change = max(abs(x - y) for x, y in zip(c, m, strict=True))
             side.add_row(str(r) if i == 0 else "",
                          f"{test_name(i)} ({rep})",
@@ -374,7 +393,8 @@ def validation_renderables(doc: dict[str, Any], output=None, *, as_json: bool = 
     unit = doc["units"]["load"]
     by = {(r["range"], r["axis"], r["method"], r["metric"]): r for r in doc["records"]}
     for rng in RANGES if not as_json else ():
-        axes = [a for a in AXES if any((rng, a, m, "gamma") in by for m in METHODS)]
+        axes = [a for a in labels_in(doc["records"]) if any((rng, a, m, "gamma") in by
+                                                          for m in METHODS)]
         if not axes:
             continue
         t = Table(title=Text(f"{rng} points of {doc['set']['path']}, model {doc['model']}: "

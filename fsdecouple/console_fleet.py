@@ -81,3 +81,23 @@ def fleet_gate_lines(doc: dict[str, Any]) -> list[str]:
 def _largest(drift: dict[str, Any]) -> float:
     return max(max(abs(c["slope_change_pct"]), abs(c["force_max_pct"]), *c["chi_max_pct"].values())
                for c in drift["components"].values())
+
+
+def apply_many_table(doc: dict[str, Any]) -> Table:
+    """One row per input log: its output, rows, status counts (those that occur), result."""
+    t = Table(title=f"apply ({doc['engine']}) -> {doc['output_dir']}, forces in {doc['force_unit']}")
+    for col in ("input", "output", "rows", "statuses", "result"):
+        t.add_column(col, justify="right" if col == "rows" else "left")
+    for f in doc["files"]:
+        if f["error"] is not None:
+            t.add_row(f["input"], "", "", "", Text("error (see below)", FAILED))
+            continue
+        counts = ", ".join(f"{k} {v:,}" for k, v in f["status_counts"].items() if v)
+        t.add_row(f["input"], f["output"], f"{f['rows']:,}", counts, Text("ok"))
+    return t
+
+
+def apply_many_errors(doc: dict[str, Any]) -> list[str]:
+    """One line per input that failed; nothing was written for it."""
+    return [f"{f['input']}: {f['error']}" if not f["error"].startswith(f["input"]) else f["error"]
+            for f in doc["files"] if f["error"] is not None]

@@ -21,7 +21,6 @@ import numpy as np
 
 from . import __version__
 from . import svr as _svr
-from .axes import AXES, CHI_NAMES, FORCE_COLUMNS
 from .baselines import METHODS, establish, train_all
 from .calibration import CalibrationSet, GrossError, load_calibration
 from .checks import assumption_checks
@@ -65,20 +64,21 @@ def _decouple_held_out(tests, models) -> dict[tuple, np.ndarray]:
 def _score(tests, forces, settings, points=None) -> list[dict]:
     """gamma (eq. 12) per (round, test_set, method, axis) on the clean held-out data."""
     records = []
-    fs = settings.full_scale
+    layout, units = settings.layout, settings.units.loads or None
     for (r, label, method), f in forces.items():
         _, axis, loads = tests[(r, label)]
-        for a, name in enumerate(AXES):
+        for a, name in enumerate(layout.labels):
             if (axis == name).any():
+                gamma = interference_error(f[axis == name], a,
+                                           settings.full_scale if units else settings.full_scale[a], units)
                 records.append({"round": r, "test_set": label, "method": method, "axis": name,
-                                "metric": "gamma",
-                                "value": interference_error(f[axis == name], a, fs[a])})
+                                "metric": "gamma", "value": gamma})
         if points is not None:
             for i in range(len(f)):
-                a = AXES.index(axis[i])
+                a = layout.index(axis[i])
                 points.append({"round": r, "test_set": label, "method": method,
                                "axis": axis[i], "load": float(loads[i, a]),
-                               **{c: float(v) for c, v in zip(FORCE_COLUMNS, f[i], strict=True)}})
+                               **{c: float(v) for c, v in zip(layout.loads, f[i], strict=True)}})
     return records
 
 
@@ -88,7 +88,7 @@ def _task_records(u, f_true, rounds, models, settings) -> list[dict]:
     for r in (rnd.index for rnd in rounds):
         for method in METHODS:
             err = np.abs(models[(r, method)].decouple(u, rotate=False) - f_true) / fs
-            for a, name in enumerate(AXES):
+            for a, name in enumerate(settings.layout.labels):
                 base = {"round": r, "method": method, "axis": name}
                 records.append({**base, "metric": "max_error", "value": float(err[:, a].max())})
                 records.append({**base, "metric": "rms_error",
@@ -103,7 +103,7 @@ def _curves(rounds, models, protocol) -> dict[str, Any]:
     train = first.train.repetitions
     test = [label for label, _ in first.tests] if protocol == "repetitions" else []
     chi = {}
-    for name in CHI_NAMES:
+    for name in svr.chi:
         lo, hi = svr.chi[name].input_range
         u = np.linspace(lo, hi, CURVE_POINTS)
         chi[name] = {"u": u.tolist(), "svr": svr.chi[name](u).tolist(),
@@ -211,13 +211,17 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
         task_data = (u_task, f_task)
     gross_calib = None
     if gross_error is not None:
+        if gross_error.axis not in calib.layout.labels:
+            raise InputError(f"--gross-error: no component '{gross_error.axis}' (the sensor has "
+                             f"{', '.join(calib.layout.labels)})")
         if gross_error.repetition not in reps:
             raise InputError(
                 f"--gross-error: repetition {gross_error.repetition} is not in the calibration "
                 f"set (it has {', '.join(map(str, reps))})"
             )
-        gross_calib = CalibrationSet(gross_error.apply(calib.points), calib.offsets, calib.files,
-                                     calib.skipped, calib.warnings)
+        gross_calib = CalibrationSet(gross_error.apply(calib.points, calib.layout), calib.offsets,
+                                     calib.files,
+                                     calib.skipped, calib.warnings, layout=calib.layout)
 
     trains = {rnd.index: rnd.train for rnd in rounds}
     jobs = [((r, m), m, train) for r, train in trains.items() for m in METHODS]
@@ -320,9 +324,9 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
         gmodels = _models_for(all_models, gross=True)
         omega = []
         for r in trains:
-            k_clean = fit_omega(trains[r].points).k
-            k_gross = fit_omega(gross_trains[r].points).k
-            for a, name in enumerate(AXES):
+            k_clean = fit_omega(trains[r].points, calib.layout).k
+            k_gross = fit_omega(gross_trains[r].points, calib.layout).k
+            for a, name in enumerate(calib.layout.labels):
                 omega.append({"round": r, "axis": name, "k_clean": float(k_clean[a]),
                               "k_gross": float(k_gross[a]), "inverse_clean": float(1 / k_clean[a]),
                               "inverse_gross": float(1 / k_gross[a])})
@@ -350,6 +354,6 @@ def _models_for(models: dict, gross: bool) -> dict:
 
 
 def _networks(models, r):
-    yield "rbf-mimo", "fx,fy,fz", models[(r, "rbf-mimo")].net
+    yield "rbf-mimo", ",".join(models[(r, "svr")].layout.loads), models[(r, "rbf-mimo")].net
     for name, c in models[(r, "rbf-siso")].chi.items():
         yield "rbf-siso", name, c.net

@@ -207,7 +207,7 @@ class TableDecoupler:
         self.inv_step = np.array(inv)
         self.intervals = np.array(count, dtype=float)
         self.offsets = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.intp)
-        self.tab = [np.ascontiguousarray(np.concatenate(t)) for t in tabs]
+        self.tab = [np.ascontiguousarray(np.concatenate(t).T) for t in tabs]  # [j][m, interval]
         self._lo, self._inv_step, self._intervals, self._inv_k = (
             v.reshape(n, 1) for v in (self.lo, self.inv_step, self.intervals, self.inv_k)
         )
@@ -243,13 +243,13 @@ class TableDecoupler:
         n, m = self.n, self.n - 1
         if ws is None or ws["t"].shape[1] < rows:
             ws = {k: np.empty((n, rows)) for k in ("ut", "t", "s", "p")}
-            ws.update({k: np.empty((n, rows, m)) for k in ("g", "c", "s2")})
+            ws.update({k: np.empty((m, n, rows)) for k in ("g", "c")})
             ws["i"] = np.empty((n, rows), dtype=np.intp)
             self._local.ws = ws
-        return {k: v[:, :rows] for k, v in ws.items()}
+        return {k: v[..., :rows] for k, v in ws.items()}
 
     def _terms(self, x: np.ndarray, w: dict[str, np.ndarray]) -> np.ndarray | None:
-        """g_ab(x_b) of every table into ``w["g"]`` (N, n, N - 1), for x (N, n).
+        """g_ab(x_b) of every table into ``w["g"]`` (N - 1, N, n), for x (N, n).
 
         Returns None when every x lies inside its table, else the (N, n) mask of
         those that do (not NaN); the others are evaluated at the table's start.
@@ -265,14 +265,14 @@ class TableDecoupler:
         np.copyto(i, t, casting="unsafe")  # truncation = floor, as t >= 0
         np.subtract(t, i, out=s)
         i += self._offsets
-        # one row of a table holds coefficient j of all N - 1 chi fed by an input
-        g, c, s2 = w["g"], w["c"], w["s2"]
+        # g[m, b]: the m-th chi fed by input b, rows contiguous, so s broadcasts over m
+        g, c = w["g"], w["c"]
         for m in range(self.n - 1):
-            s2[..., m] = s
-        np.take(self.tab[3], i, axis=0, out=g, mode="clip")
+            np.take(self.tab[3][m], i, out=g[m], mode="clip")
         for j in (2, 1, 0):  # Horner
-            g *= s2
-            np.take(self.tab[j], i, axis=0, out=c, mode="clip")
+            g *= s
+            for m in range(self.n - 1):
+                np.take(self.tab[j][m], i, out=c[m], mode="clip")
             g += c
         return ok
 
@@ -280,7 +280,7 @@ class TableDecoupler:
         """f_a += g_ab in :func:`_sum_order`: f = u / k on entry, the forces of eq. (11) on exit."""
         for a, terms in enumerate(self._sum):
             for b, m in terms:
-                f[a] += g[b, :, m]
+                f[a] += g[m, b]
 
     def _block(self, u: np.ndarray, out: np.ndarray, rotate: bool, covered, refine: int = 0,
                converged=None) -> None:

@@ -82,7 +82,8 @@ def compare(old: CouplingErrorModel | str | Path, new: CouplingErrorModel | str 
         lo = max(c_old.input_range[0], c_new.input_range[0])
         hi = min(c_old.input_range[1], c_new.input_range[1])
         if not lo <= hi:
-            raise InputError(f"chi {name}: the two calibrations share no range of u_{name[1]} "
+            raise InputError(f"chi {name}: the two calibrations share no range of "
+                             f"{_output(old, c_old.input_axis)} "
                              f"(old {_range(c_old.input_range)}, new {_range(c_new.input_range)})")
         u = np.linspace(lo, hi, CHI_POINTS)
         diff = np.abs(c_new(u) - c_old(u)).max()
@@ -115,11 +116,12 @@ def largest(doc: dict[str, Any]) -> float:
     return max(abs(v) for _, v in _figures(doc["components"]))
 
 
+def _output(model: CouplingErrorModel, b: int) -> str:
+    return f"u_{model.layout.labels[b]}" if model.layout.is_default else model.layout.outputs[b]
+
+
 def _axes(model: CouplingErrorModel) -> list[str]:
-    names = [""] * model.n_components
-    for name, c in model.chi.items():
-        names[c.output_axis] = name[0]
-    return names
+    return list(model.layout.labels)
 
 
 def _figures(components):
@@ -157,7 +159,11 @@ def _output_grid(old: CouplingErrorModel, new: CouplingErrorModel) -> np.ndarray
     bad = np.flatnonzero(~(lo <= hi))
     if bad.size:
         a = _axes(old)[bad[0]]
-        raise InputError(f"component {a}: the two calibrations share no range of u_{a} "
+        raise InputError(f"component {a}: the two calibrations share no range of "
+                         f"{_output(old, bad[0])} "
                          f"(old {_range(r_old[bad[0]])}, new {_range(r_new[bad[0]])})")
-    axes = [np.linspace(lo[i], hi[i], FORCE_POINTS) for i in range(len(lo))]
+    # 21 points a component for three (9261 vectors); fewer for more components,
+    # so the grid stays near 10^5 vectors (seven a component for six)
+    n = FORCE_POINTS if len(lo) <= 3 else max(3, int(2e5 ** (1 / len(lo))))
+    axes = [np.linspace(lo[i], hi[i], n) for i in range(len(lo))]
     return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(lo))

@@ -262,8 +262,8 @@ def _limits(model, limits, n: int) -> list:
     out: list = [(None, None)] * n
     if not limits:
         return out
-    # channel names as the config spells them: 'u' + the input axis letter of its chi
-    names = {f"u{name[1]}": c.input_axis for name, c in model.chi.items() if len(name) == 2}
+    # channel names as the config spells them (ux .. uz, or the config's outputs:)
+    names = {name: b for b, name in enumerate(model.layout.outputs)}
     items = limits.items() if hasattr(limits, "items") else enumerate(limits)
     for key, pair in items:
         b = names.get(key, key) if isinstance(key, str) else key

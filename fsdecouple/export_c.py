@@ -111,7 +111,7 @@ def _preamble(plan: ExportPlan) -> str:
  * (eq. 4), each an eps-SVR kernel sum (eq. 10).  Inside its table a chi is a
  * cubic Hermite interpolant of that kernel sum; outside it, or for a
  * non-finite input, the exact kernel sum over the embedded support vectors.
- * A rotation to the reference frame, if the model has one, follows eq. (11).
+{_extrapolation(plan)} * A rotation to the reference frame, if the model has one, follows eq. (11).
  *
  * Use: in exactly one C file
  *     #define {P}IMPLEMENTATION
@@ -218,8 +218,27 @@ def _implementation_start(plan: ExportPlan) -> str:
     ])
 
 
+def _extrapolation(plan: ExportPlan) -> str:
+    """The header's note on chi beyond its calibrated range (fsdecouple.extrapolation)."""
+    if any(getattr(c.exact, "edges", None) is not None for c in plan.chis):
+        return (" * Beyond its calibrated input range a chi continues along its tangent at\n"
+                " * the range's edge (the model's `extrapolation: tangent`).\n")
+    return ""  # extrapolation: kernel, the kernel sum everywhere
+
+
+def _tangent(chi: ChiPlan) -> str:
+    """C lines of chi's tangent continuation beyond its calibrated range, as the Python model."""
+    e = getattr(chi.exact, "edges", None)
+    if e is None:
+        return ""
+    return (f"    /* tangent continuation beyond the calibrated range [{num(e.lo)}, {num(e.hi)}] */\n"
+            f"    if (u < {num(e.lo)}) return {num(e.value_lo)} + {num(e.slope_lo)} * (u - {num(e.lo)});\n"
+            f"    if (u > {num(e.hi)}) return {num(e.value_hi)} + {num(e.slope_hi)} * (u - {num(e.hi)});\n")
+
+
 def _kernel(plan: ExportPlan, j: int, chi: ChiPlan) -> str:
-    """Exact kernel sum of chi j (eq. 10): the reference, and the path outside its table."""
+    """Exact chi j: the kernel sum (eq. 10), continued by its tangents under ``tangent``
+    extrapolation; the reference, and the path outside its table."""
     p = plan.prefix
     return (
         f"/* chi_{chi.out}{chi.inp}: output {chi.out}, input {chi.inp}; {chi.sv.size} support vectors */\n"
@@ -227,6 +246,7 @@ def _kernel(plan: ExportPlan, j: int, chi: ChiPlan) -> str:
         + _array(f"{p}dc{j}", chi.coef, num)
         + f"""static double {p}kernel{j}(double u)
 {{
+{_tangent(chi)}\
     /* eq. (10): output_scale * (sum_i coef_i exp(-gamma (u/input_scale - sv_i)^2) - rho) */
     const double x = u / {num(chi.in_scale)};
     double s = 0.0;

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .errors import FsdecoupleError
+from .extrapolation import aligned_grid
 
 if TYPE_CHECKING:
     from .export import ChiPlan, ExportPlan
@@ -35,7 +36,10 @@ def hermite(values: np.ndarray, slopes: np.ndarray, h: float) -> np.ndarray:
 
 
 def chi_slope(cp: ChiPlan, u: np.ndarray) -> np.ndarray:
-    """d chi / du [V/V] of the kernel sum (eq. 10) at ``u``, exactly."""
+    """d chi / du [V/V] of the kernel sum (eq. 10) at ``u``, exactly (beyond the calibrated
+    range of a tangent-extrapolating chi, its edge slope: :mod:`fsdecouple.extrapolation`)."""
+    if hasattr(cp.exact, "slope"):  # the model's Chi: the slope of what it evaluates
+        return cp.exact.slope(np.asarray(u, float))
     d = np.asarray(u, float)[:, None] / cp.in_scale - cp.sv[None, :]
     w = cp.coef * np.exp(-cp.gamma * d * d) * (-2.0 * cp.gamma * d)
     return w.sum(axis=1) * (cp.out_scale / cp.in_scale)
@@ -74,16 +78,25 @@ def coarsest_tables(plan: ExportPlan, model, fraction: float, requested: float) 
     if plan.rotation is not None:
         fraction *= float(np.min(fs / (np.abs(plan.rotation) @ fs)))
     for cp, c in zip(plan.chis, model.chi.values(), strict=True):
+        a, b = c.input_range
         if c.surrogate is not None:
             cp.lo, cp.hi = float(c.surrogate.lo), float(c.surrogate.hi)
         else:
-            a, b = c.input_range
             span = max(b - a, 1e-3)
             cp.lo, cp.hi = a - TABLE_MARGIN * span, b + TABLE_MARGIN * span
+        aligned = getattr(c, "edges", None) is not None and b > a
+
+        def grid(m: int, cp=cp, a=a, b=b, aligned=aligned) -> int:
+            # tangent extrapolation: m intervals over the range and whole ones beyond,
+            # so its ends, where chi'' jumps, are knots (extrapolation.aligned_grid)
+            if aligned:
+                cp.lo, cp.hi, m = aligned_grid(a, b, m, TABLE_MARGIN)
+            return m
+
         target = fraction * fs[cp.out] * k[cp.out] / max(n - 1, 1)  # [V], eq. (11): / k_aa
         m, last = 1, np.inf
         while True:
-            coef, err = resample(cp, m)
+            coef, err = resample(cp, grid(m))
             if err <= target:
                 break
             if m >= MAX_INTERVALS or (m >= 64 and err > last / 4):  # h^4 would give /16
@@ -94,11 +107,12 @@ def coarsest_tables(plan: ExportPlan, model, fraction: float, requested: float) 
         lo_m = m // 2  # bisect between the last failing and the first passing count
         while m - lo_m > 1:
             mid = (lo_m + m) // 2
-            c_mid, e_mid = resample(cp, mid)
+            c_mid, e_mid = resample(cp, grid(mid))
             if e_mid <= target:
                 m, coef, err = mid, c_mid, e_mid
             else:
                 lo_m = mid
+        grid(m)  # the kept table's interval
         cp.table, cp.table_error = coef, err
 
 

@@ -20,16 +20,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .axes import AXES, CHI_NAMES, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .config import Settings
 from .decouple import MAX_SURROGATE_ERROR, usable
 from .errors import InputError
+from .extrapolation import table_interval as tangent_interval
 from .linear import fit_omega
 from .metrics import interference_errors
 from .model import Chi, CouplingErrorModel, FitReport
 from .parallel import single_threaded_libraries
 from .surrogate import TOLERANCE, build_pair, table_interval
-from .zero_fit import fit_offsets
 
 if TYPE_CHECKING:
     from .calibration import CalibrationSet
@@ -60,10 +59,12 @@ def chi_training_data(calib: CalibrationSet, name: str) -> tuple[np.ndarray, np.
 
     Section 2.1: in the b-direction calibration data u_b = u_bb and u_a = e_ab.
     """
-    s = calib.sweep(name[1])
+    layout = calib.layout
+    a, b = layout.pair(name)
+    s = calib.sweep(layout.labels[b])
     return (
-        s[VOLTAGE_COLUMNS[AXES.index(name[1])]].to_numpy(dtype=float),
-        s[VOLTAGE_COLUMNS[AXES.index(name[0])]].to_numpy(dtype=float),
+        s[layout.outputs[b]].to_numpy(dtype=float),
+        s[layout.outputs[a]].to_numpy(dtype=float),
     )
 
 
@@ -83,7 +84,7 @@ def fit(
     settings : Settings, optional
         Defaults to the paper's sensor and Table 2.
     workers : int, optional
-        Threads training the six SVRs (libsvm releases the GIL); default: the
+        Threads training the N(N - 1) SVRs (libsvm releases the GIL); default: the
         number of cores.  The result does not depend on it.
     tables : bool
         Build the chi tables of the fast path.  A model fitted only to be scored
@@ -106,10 +107,11 @@ def _omega_failure(calib: CalibrationSet, a: int) -> str:
     k = sum(f u) / sum(f^2) (eq. 2): sums that overflow a double give an infinite,
     NaN or zero k too, and that is not a voltage that does not change.
     """
-    axis = AXES[a]
+    layout = calib.layout
+    axis = layout.labels[a]
     s = calib.sweep(axis)
-    f = s[FORCE_COLUMNS[a]].to_numpy(dtype=float)
-    u = s[VOLTAGE_COLUMNS[a]].to_numpy(dtype=float)
+    f = s[layout.loads[a]].to_numpy(dtype=float)
+    u = s[layout.outputs[a]].to_numpy(dtype=float)
     with np.errstate(over="ignore", invalid="ignore"):
         sums = (float(f @ f), float(f @ u))
     if not np.isfinite(sums).all():
@@ -117,15 +119,20 @@ def _omega_failure(calib: CalibrationSet, a: int) -> str:
         return (f"{calib.source}: the {axis} sweeps' values are too large (up to {big:.3g}): "
                 f"the sums of eq. (2) overflow a double, so omega_{axis} cannot be fitted; "
                 "check the units and scale: of the data")
-    return (f"{calib.source}: the {axis} sweeps' prime voltage u{axis} does not change with "
-            f"f{axis}; cannot fit omega_{axis} (eq. 2)")
+    return (f"{calib.source}: the {axis} sweeps' prime voltage {layout.outputs[a]} does not "
+            f"change with {layout.loads[a]}; cannot fit omega_{axis} (eq. 2)")
 
 
 def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
                fit_svr, with_tables: bool) -> CouplingErrorModel:
-    omega = fit_omega(calib.points)
+    layout = settings.layout
+    if calib.layout != layout:
+        raise InputError(f"{calib.source}: read for components {', '.join(calib.layout.loads)}, "
+                         f"but the settings name {', '.join(layout.loads)}")
+    labels, pairs = layout.labels, dict(zip(layout.chi_names, layout.pairs, strict=True))
+    omega = fit_omega(calib.points, layout)
     warnings = list(calib.warnings)
-    for a, axis in enumerate(AXES):
+    for a, axis in enumerate(labels):
         if not np.isfinite(omega.k[a]) or omega.k[a] == 0.0:
             raise InputError(_omega_failure(calib, a))
         if not omega.r2[a] >= settings.min_r2:
@@ -138,22 +145,18 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
     if settings.scaling == "full_scale":
         scale = np.abs(omega.k) * np.asarray(settings.full_scale)
     else:
-        scale = np.ones(3)
-    if settings.zero == "fit":
-        calib = fit_offsets(calib)
-        omega = fit_omega(calib.points)
+        scale = np.ones(layout.n)
     jobs = []
-    for name in CHI_NAMES:
+    for name, (o, i) in pairs.items():
         x, y = chi_training_data(calib, name)
-        o, i = AXES.index(name[0]), AXES.index(name[1])
         jobs.append((name, x, y, float(scale[i]), float(scale[o])))
-    for a, axis in enumerate(AXES):
-        x = calib.sweep(axis)[VOLTAGE_COLUMNS[a]].to_numpy() / scale[a]
+    for a, axis in enumerate(labels):
+        x = calib.sweep(axis)[layout.outputs[a]].to_numpy() / scale[a]
         span = (x.max() - x.min()) * np.sqrt(2.0 * settings.svr.gamma)
         lo, hi = KERNEL_SPAN_RANGE
         if not lo <= span <= hi:
             warnings.append(
-                f"chi inputs from u{axis} span {span:.3g} kernel widths (expected "
+                f"chi inputs from {layout.outputs[a]} span {span:.3g} kernel widths (expected "
                 f"{lo:g} to {hi:g} for delta^2 = {settings.svr.delta2:g}); the voltages may "
                 "be in mV or ADC counts: set 'scaling: full_scale' in the config"
             )
@@ -163,7 +166,8 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         s = fit_svr(x / in_scale, y / out_scale, settings.svr)
         return Chi(
             name, s.gamma, s.support_vectors, s.dual_coef, s.rho, in_scale, out_scale,
-            (float(x.min()), float(x.max())), int(x.size),
+            (float(x.min()), float(x.max())), int(x.size), extrapolation=settings.extrapolation,
+            pair=None if layout.is_default else pairs[name],
         )
 
     u_fs = np.abs(omega.k) * np.asarray(settings.full_scale)
@@ -171,9 +175,10 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
     def tables(axis: str) -> list[Chi]:
         # the chi fed by one input axis share one grid (one index per input value);
         # the tolerance is a fraction of the full-scale output of the chi's output
-        pair = [c for c in chis if c.name[1] == axis]
-        lo, hi = table_interval(min(c.input_range[0] for c in pair),
-                                max(c.input_range[1] for c in pair))
+        pair = [c for c in chis if labels[c.input_axis] == axis]
+        # tangent tables have knots at the range's ends (extrapolation.table_interval)
+        interval = tangent_interval if settings.extrapolation == "tangent" else table_interval
+        lo, hi = interval(min(c.input_range[0] for c in pair), max(c.input_range[1] for c in pair))
         tolerance = TOLERANCE * min(u_fs[c.output_axis] for c in pair)
         return [replace(c, surrogate=s)
                 for c, s in zip(pair, build_pair(pair, lo, hi, tolerance), strict=True)]
@@ -182,10 +187,10 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
     if n_workers > 1:
         with ThreadPoolExecutor(n_workers) as pool:
             chis = list(pool.map(one, jobs))
-            done = [c for pair in pool.map(tables, AXES) for c in pair] if with_tables else chis
+            done = [c for pair in pool.map(tables, labels) for c in pair] if with_tables else chis
     else:
         chis = [one(j) for j in jobs]
-        done = [c for axis in AXES for c in tables(axis)] if with_tables else chis
+        done = [c for axis in labels for c in tables(axis)] if with_tables else chis
     by_name = {c.name: c for c in done}
     for c in done if with_tables else ():
         if not usable(c.surrogate, u_fs[c.output_axis]):
@@ -195,14 +200,16 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
                 f"the kernel sum (needs <= {MAX_SURROGATE_ERROR:g}); this model decouples by the "
                 "exact kernel sum, about 100x slower"
             )
-    model = CouplingErrorModel(settings, omega.k, {name: by_name[name] for name in CHI_NAMES})
+    model = CouplingErrorModel(settings, omega.k, {name: by_name[name] for name in pairs})
     u = calib.voltages
-    before = interference_errors(calib.points, model.initial_forces(u), settings.full_scale)
+    units = settings.units.loads or None
+    before = interference_errors(calib.points, model.initial_forces(u), settings.full_scale,
+                                 layout, units)
     after = interference_errors(calib.points, model.decouple(u, rotate=False, exact=True),
-                                settings.full_scale)
+                                settings.full_scale, layout, units)
     model.report = FitReport(
-        r2=dict(zip(AXES, map(float, omega.r2), strict=True)),
-        n_points=dict(zip(AXES, map(int, omega.n), strict=True)),
+        r2=dict(zip(labels, map(float, omega.r2), strict=True)),
+        n_points=dict(zip(labels, map(int, omega.n), strict=True)),
         n_support_vectors={c.name: int(c.support_vectors.size) for c in chis},
         surrogate_max_error={n: c.surrogate.max_error for n, c in model.chi.items()}
         if with_tables else None,

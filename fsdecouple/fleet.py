@@ -228,7 +228,4 @@ def fit_many(sensors_dir: str | Path, models_dir: str | Path, *, method: str = "
 
 
 def _axes(model) -> list[str]:
-    names = [""] * model.n_components
-    for name, c in model.chi.items():
-        names[c.output_axis] = name[0]
-    return names
+    return list(model.layout.labels)

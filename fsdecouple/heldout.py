@@ -18,7 +18,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .axes import AXES, FORCE_COLUMNS
 from .calibration import CalibrationSet
 from .errors import InputError
 
@@ -73,8 +72,8 @@ def level_index(calib: CalibrationSet) -> tuple[np.ndarray, np.ndarray]:
     Ranks count from 1 in file order; zero-load rows get 0.
     """
     pts = calib.points
-    forces = pts[list(FORCE_COLUMNS)].to_numpy()
-    axis = pts["axis"].map({a: i for i, a in enumerate(AXES)}).to_numpy()
+    forces = calib.forces
+    axis = pts["axis"].map({a: i for i, a in enumerate(calib.layout.labels)}).to_numpy()
     prime = forces[np.arange(len(pts)), axis]
     loaded = (forces != 0.0).any(axis=1)
     k = np.zeros(len(pts), dtype=int)

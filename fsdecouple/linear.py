@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
+from .axes import DEFAULT, Layout
 
 
 @dataclass(frozen=True)
@@ -15,12 +15,12 @@ class OmegaFit:
 
     Attributes
     ----------
-    k : ndarray, shape (3,)
+    k : ndarray, shape (N,)
         k_xx, k_yy, k_zz [V/N].
-    r2 : ndarray, shape (3,)
+    r2 : ndarray, shape (N,)
         Coefficient of determination of each fit, ``1 - SS_res / SS_tot`` with
         SS_tot about the mean (the stricter form for a fit through the origin).
-    n : ndarray, shape (3,)
+    n : ndarray, shape (N,)
         Number of points per axis.
     """
 
@@ -34,17 +34,18 @@ class OmegaFit:
         return 1.0 / self.k
 
 
-def fit_omega(points) -> OmegaFit:
+def fit_omega(points, layout: Layout = DEFAULT) -> OmegaFit:
     """Least squares through the origin of prime voltage on prime force (Section 2.3, step 2).
 
     ``points`` is a zero-corrected DataFrame with ``axis``, ``fx..fz`` and ``ux..uz``.
     k = sum(f u) / sum(f^2) minimises sum (u - k f)^2.
     """
-    k, r2, n = np.empty(3), np.empty(3), np.empty(3, dtype=int)
-    for a, axis in enumerate(AXES):
+    n_c = layout.n
+    k, r2, n = np.empty(n_c), np.empty(n_c), np.empty(n_c, dtype=int)
+    for a, axis in enumerate(layout.labels):
         s = points[points["axis"] == axis]
-        f = s[FORCE_COLUMNS[a]].to_numpy(dtype=float)
-        u = s[VOLTAGE_COLUMNS[a]].to_numpy(dtype=float)
+        f = s[layout.loads[a]].to_numpy(dtype=float)
+        u = s[layout.outputs[a]].to_numpy(dtype=float)
         ff = float(f @ f)
         k[a] = float(f @ u) / ff if ff > 0 else np.nan
         ss_res = float(((u - k[a] * f) ** 2).sum())
@@ -60,7 +61,7 @@ class CalibrationMatrix:
 
     Attributes
     ----------
-    C : ndarray, shape (3, 3)
+    C : ndarray, shape (N, N)
         Calibration matrix [N/V], row a gives f_a from u_x, u_y, u_z.
     """
 
@@ -69,16 +70,16 @@ class CalibrationMatrix:
     def decouple(self, u: np.ndarray, *, rotate: bool = False) -> np.ndarray:
         """Forces [N] from zero-corrected voltages [V]: ``f = C u`` per row."""
         del rotate  # the baseline works in the sensor frame only
-        return np.asarray(u, dtype=float).reshape(-1, 3) @ self.C.T
+        return np.asarray(u, dtype=float).reshape(-1, self.C.shape[1]) @ self.C.T
 
 
 def fit_calibration_matrix(u: np.ndarray, f: np.ndarray) -> CalibrationMatrix:
     """Least squares ``F ~ U C^T`` over all training points (the pseudo-inverse method).
 
     No intercept: the calibration data are zero-corrected, so zero load gives
-    zero voltage by construction.  ``u`` and ``f`` have shape (n, 3) [V], [N].
+    zero voltage by construction.  ``u`` and ``f`` have shape (n, N) [V], [N].
     """
-    u = np.asarray(u, dtype=float).reshape(-1, 3)
-    f = np.asarray(f, dtype=float).reshape(-1, 3)
+    u = np.atleast_2d(np.asarray(u, dtype=float))
+    f = np.atleast_2d(np.asarray(f, dtype=float))
     ct, *_ = np.linalg.lstsq(u, f, rcond=None)
     return CalibrationMatrix(np.ascontiguousarray(ct.T))

@@ -1,4 +1,16 @@
-"""Interference error gamma (eq. 12) and related figures of merit."""
+"""Interference error gamma (eq. 12) and related figures of merit.
+
+Eq. (12) divides the off-axis forces by the loaded axis's full scale, which needs
+one unit for all components.  A six-axis sensor mixes forces [N] and moments
+[N·m]; there each off-axis component b is divided by a full scale of its own
+unit: the loaded component's, F_a(FS), when b shares a's unit (eq. 12 as
+printed), else its own, F_b(FS).  So
+
+    gamma_a = sum_{b != a} max|f_b| / FS_ab,  FS_ab = F_a(FS) if unit_b = unit_a else F_b(FS),
+
+is dimensionless, and for a sensor whose components share one unit (every
+3-axis force sensor) it *is* eq. (12), whatever the full scales.
+"""
 
 from __future__ import annotations
 
@@ -6,11 +18,11 @@ import math
 
 import numpy as np
 
-from .axes import AXES
+from .axes import DEFAULT, Layout
 from .errors import InputError
 
 
-def interference_error(forces: np.ndarray, axis: int, full_scale: float) -> float:
+def interference_error(forces: np.ndarray, axis: int, full_scale, units=None) -> float:
     """gamma of eq. (12) for single-axis loads along ``axis``.
 
     gamma_x = (max |f_y(m)| + max |f_z(m)|) / f_x(FS): the largest decoupled forces
@@ -18,24 +30,38 @@ def interference_error(forces: np.ndarray, axis: int, full_scale: float) -> floa
 
     Parameters
     ----------
-    forces : ndarray, shape (n, 3)
+    forces : ndarray, shape (n, N)
         Measured (decoupled) forces of the ``axis`` sweep points [N].
     axis : int
-        0, 1, 2 for the loaded axis x, y, z.
-    full_scale : float
-        f_(FS) of the loaded axis [N].
+        0, 1, 2 for the loaded axis x, y, z (the component's index).
+    full_scale : float or sequence of float
+        f_(FS) of the loaded axis [N] (eq. 12 as printed), or the full scale of
+        every component, for the mixed-unit form of the module docstring.
+    units : sequence of str, optional
+        Each component's load unit; None: one unit for all (eq. 12).
     """
-    forces = np.asarray(forces, dtype=float).reshape(-1, 3)
-    others = [a for a in range(3) if a != axis]
-    return float(sum(np.abs(forces[:, o]).max() for o in others) / full_scale)
+    fs = np.atleast_1d(np.asarray(full_scale, dtype=float))
+    n = forces.shape[-1] if np.ndim(forces) == 2 else (fs.size if fs.size > 1 else 3)
+    forces = np.asarray(forces, dtype=float).reshape(-1, n)
+    others = [a for a in range(n) if a != axis]
+    if fs.size == 1:
+        return float(sum(np.abs(forces[:, o]).max() for o in others) / fs[0])
+    own = [o for o in others if units is not None and units[o] != units[axis]]
+    shared = [o for o in others if o not in own]  # eq. (12) as printed, summed as it is
+    return float(sum(np.abs(forces[:, o]).max() for o in shared) / fs[axis]
+                 + sum(np.abs(forces[:, o]).max() / fs[o] for o in own))
 
 
-def interference_errors(points, forces: np.ndarray, full_scale) -> dict[str, float]:
-    """gamma for each loaded axis of a calibration set (all its repetitions pooled)."""
+def interference_errors(points, forces: np.ndarray, full_scale, layout: Layout = DEFAULT,
+                        units=None) -> dict[str, float]:
+    """gamma for each loaded axis of a calibration set (all its repetitions pooled).
+
+    ``units``: each component's load unit (mixed units: module docstring); None: one unit.
+    """
     axis = points["axis"].to_numpy()
     return {
-        a: interference_error(forces[axis == a], i, full_scale[i])
-        for i, a in enumerate(AXES)
+        a: interference_error(forces[axis == a], i, full_scale, units)
+        for i, a in enumerate(layout.labels)
         if (axis == a).any()
     }
 

@@ -10,15 +10,17 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass, field, fields, replace
+from functools import cached_property
 from typing import Any
 
 import numpy as np
 
-from .axes import NamedChi
+from .axes import Layout, NamedChi, chi_labels
 from .config import Settings, check_refine
 from .decouple import TableDecoupler, decouple_exact, initial_forces
 from .decouple import coupling_errors as _coupling_errors
-from .kernel import rbf_sum
+from .extrapolation import Edges, continue_slopes, continue_values, edges
+from .kernel import rbf_sum, rbf_sum_slope
 from .surrogate import ChiSurrogate
 
 # The recommended K (recommend_refine): the largest eq. (6) estimate E2 [fraction
@@ -71,6 +73,10 @@ class Chi(NamedChi):
     """A corrected coupling function chi_ab (eq. 4) fitted by epsilon-SVR.
 
     ``chi(u) = output_scale * (sum_i dual_coef_i exp(-gamma (u/input_scale - sv_i)^2) - rho)``
+
+    inside ``input_range``; beyond it, with ``extrapolation = "tangent"``, the
+    tangent at the nearer edge (:mod:`fsdecouple.extrapolation`).  The model sets
+    ``extrapolation`` from its settings; it is not part of the chi's own record.
     """
 
     name: str
@@ -83,22 +89,51 @@ class Chi(NamedChi):
     input_range: tuple[float, float] = (-np.inf, np.inf)  # prime voltages trained on [V]
     n_points: int = 0
     surrogate: ChiSurrogate | None = None  # fast, verified stand-in (surrogate.py)
+    extrapolation: str = "kernel"  # beyond input_range: "kernel" sum or "tangent"
+    pair: tuple[int, int] | None = None  # (output a, input b); None: read from an "xy" name
 
-    def __call__(self, u: np.ndarray) -> np.ndarray:
-        """Coupling error element [V] at prime voltage(s) ``u`` [V], exact kernel sum.
-
-        Always the kernel sum, never the surrogate: this is the reference the
-        surrogate is checked against.
-        """
+    def kernel(self, u: np.ndarray) -> np.ndarray:
+        """The kernel sum [V] at prime voltage(s) ``u`` [V] (eq. 10), also beyond the range."""
         x = np.asarray(u, dtype=float) / self.input_scale
         return self.output_scale * rbf_sum(
             x, self.support_vectors, self.dual_coef, self.gamma, -self.rho
         )
 
+    def kernel_slope(self, u: np.ndarray) -> np.ndarray:
+        """d/du of :meth:`kernel` [V/V], analytically."""
+        x = np.asarray(u, dtype=float) / self.input_scale
+        return rbf_sum_slope(x, self.support_vectors, self.dual_coef, self.gamma) * (
+            self.output_scale / self.input_scale)
+
+    @cached_property
+    def edges(self) -> Edges | None:
+        """The tangents at the ends of ``input_range``; None for ``kernel`` extrapolation."""
+        if self.extrapolation != "tangent":
+            return None
+        return edges(*self.input_range, self.kernel, self.kernel_slope)
+
+    def __call__(self, u: np.ndarray) -> np.ndarray:
+        """Coupling error element [V] at prime voltage(s) ``u`` [V], exact.
+
+        The kernel sum (continued by its tangents beyond ``input_range`` under
+        ``tangent`` extrapolation), never the surrogate: this is the reference
+        the surrogate is checked against.
+        """
+        out = self.kernel(u)
+        e = self.edges
+        return out if e is None else continue_values(u, out, e)
+
+    def slope(self, u: np.ndarray) -> np.ndarray:
+        """d chi / du [V/V] of :meth:`__call__` (the surrogate tables' knot slopes)."""
+        out = self.kernel_slope(u)
+        e = self.edges
+        return out if e is None else continue_slopes(u, out, e)
+
     def to_dict(self) -> dict[str, Any]:
+        out, inp = chi_labels(self.name)
         d = {
-            "output_axis": self.name[0],
-            "input_axis": self.name[1],
+            "output_axis": out,
+            "input_axis": inp,
             "kernel": "rbf",
             "gamma": self.gamma,
             "support_vectors": self.support_vectors.tolist(),
@@ -114,7 +149,7 @@ class Chi(NamedChi):
         return d
 
     @classmethod
-    def from_dict(cls, name: str, d: dict[str, Any]) -> Chi:
+    def from_dict(cls, name: str, d: dict[str, Any], pair: tuple[int, int] | None = None) -> Chi:
         sv = np.asarray(d["support_vectors"], dtype=float)
         coef = np.asarray(d["dual_coef"], dtype=float)
         if sv.ndim != 1 or sv.shape != coef.shape:
@@ -123,7 +158,7 @@ class Chi(NamedChi):
         surrogate = ChiSurrogate.from_dict(d["surrogate"]) if "surrogate" in d else None
         chi = cls(
             name, float(d["gamma"]), sv, coef, float(d["rho"]), float(d["input_scale"]),
-            float(d["output_scale"]), (lo, hi), int(d["n_points"]), surrogate,
+            float(d["output_scale"]), (lo, hi), int(d["n_points"]), surrogate, pair=pair,
         )
         if not (np.isfinite(chi.gamma) and chi.gamma > 0):
             raise ValueError(f"gamma = {chi.gamma!r}, expected a positive number")
@@ -214,6 +249,12 @@ class CouplingErrorModel:
     matrix: np.ndarray | None = None
     _tables: Any = field(default=None, init=False, repr=False, compare=False)
 
+    def __post_init__(self) -> None:
+        # each chi evaluates itself: it takes the model's extrapolation mode
+        mode = getattr(self.settings, "extrapolation", "kernel")
+        self.chi = {name: c if getattr(c, "extrapolation", mode) == mode else replace(c, extrapolation=mode)
+                    for name, c in self.chi.items()}
+
     def __getstate__(self) -> dict:
         # the table evaluator holds thread-local scratch space: rebuilt where the
         # model lands (a Dask or Spark worker), never pickled
@@ -222,6 +263,11 @@ class CouplingErrorModel:
     @property
     def n_components(self) -> int:
         return len(self.k)
+
+    @property
+    def layout(self) -> Layout:
+        """The components' labels, load and output columns (axes.py)."""
+        return self.settings.layout
 
     @property
     def warnings(self) -> list[str]:
@@ -234,6 +280,9 @@ class CouplingErrorModel:
 
     @property
     def rotation(self) -> np.ndarray | None:
+        """The transform after eq. (11): the config's rotation (N x N), or a frame's 6 x 6."""
+        if self.settings.frame is not None:
+            return self.settings.frame.matrix()
         r = self.settings.rotation
         return None if r is None else np.asarray(r, dtype=float)
 

@@ -15,19 +15,21 @@ from typing import Any
 import numpy as np
 
 from . import __version__
-from .axes import AXES, CHI_NAMES
 from .config import settings_from_dict
 from .decouple import MAX_SURROGATE_ERROR, usable
 from .errors import ModelFileError, excerpt
+from .extrapolation import LEGACY as LEGACY_EXTRAPOLATION
 from .iotools.files import MODEL_LIMIT, atomic_write, read_bounded
 from .model import Chi, CouplingErrorModel, FitReport
 from .surrogate import spot_check
 
 FORMAT = "fsdecouple.model"
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 # Version 2 adds: ``method`` (svr | linear) and ``matrix`` for linear models,
 # ``settings.units``, and ``report.verdict``.  Version 1 files read as svr models
-# in newtons and volts.
+# in newtons and volts.  Version 3 adds ``settings.components`` and ``outputs``
+# (an N-component sensor, axes.Layout; chi keyed "fx:fy"), per-column units and
+# ``settings.frame``; a 3-axis model reads and writes as before otherwise.
 METHODS = ("svr", "linear")
 
 
@@ -43,7 +45,7 @@ def model_to_dict(model: CouplingErrorModel) -> dict[str, Any]:
         "omega": {
             axis: {"k": float(model.k[a]), "inverse": float(1.0 / model.k[a]),
                    "r2": model.report.r2.get(axis) if model.report else None}
-            for a, axis in enumerate(AXES)
+            for a, axis in enumerate(model.layout.labels)
         },
         "chi": {name: c.to_dict() for name, c in model.chi.items()},
         "method": model.method,
@@ -107,27 +109,33 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
         )
     try:
         settings = settings_from_dict(_settings_yaml_form(doc["settings"]), f"{source}: settings")
-        k = np.array([float(doc["omega"][a]["k"]) for a in AXES])
+        layout = settings.layout
+        if version < 3 and not layout.is_default:
+            raise ModelFileError(f"{source}: malformed model file (components in a version "
+                                 f"{version} file)")
+        k = np.array([float(doc["omega"][a]["k"]) for a in layout.labels])
         chi = {}
-        for name in CHI_NAMES:
+        for name, pair in zip(layout.chi_names, layout.pairs, strict=True):
             if name not in doc["chi"]:
                 raise ModelFileError(f"{source}: malformed model file (chi '{name}' is missing)")
             try:
-                chi[name] = Chi.from_dict(name, doc["chi"][name])
+                chi[name] = Chi.from_dict(name, doc["chi"][name],
+                                          None if layout.is_default else pair)
             except (KeyError, TypeError, ValueError) as err:
                 raise ModelFileError(
                     f"{source}: malformed model file (chi '{name}': {err})"
                 ) from None
     except (KeyError, TypeError, ValueError) as err:
         raise ModelFileError(f"{source}: malformed model file ({type(err).__name__}: {err})") from None
-    bad = [a for a, v in zip(AXES, k, strict=True) if not (np.isfinite(v) and v != 0.0)]
+    labels = settings.layout.labels
+    bad = [a for a, v in zip(labels, k, strict=True) if not (np.isfinite(v) and v != 0.0)]
     if bad:
         raise ModelFileError(
-            f"{source}: omega {bad[0]}: slope k = {float(k[AXES.index(bad[0])])!r}, expected a finite "
+            f"{source}: omega {bad[0]}: slope k = {float(k[labels.index(bad[0])])!r}, expected a finite "
             "non-zero number"
         )
     report = doc.get("report")
-    _check_report(report, source)
+    _check_report(report, source, labels)
     method, matrix = _method(doc, len(k), source)
     model = CouplingErrorModel(
         settings, k, chi, FitReport.from_dict(report), doc.get("provenance", {}),
@@ -150,7 +158,7 @@ def _check_slopes(model: CouplingErrorModel, source: str) -> None:
     A digest-valid file with k = 1e300 would otherwise decouple every force to 0.
     """
     fs_out, unit = model.full_scale_output, model.settings.output_unit
-    for b, axis in enumerate(AXES):
+    for b, axis in enumerate(model.layout.labels):
         lo, hi = model.calibrated_range[b]
         span = hi - lo
         if not span > 0:
@@ -203,7 +211,7 @@ def _method(doc: dict[str, Any], n: int, source: str) -> tuple[str, np.ndarray |
     return method, matrix
 
 
-def _check_report(report: Any, source: str) -> None:
+def _check_report(report: Any, source: str, labels) -> None:
     """The fit figures ``show`` prints: per-axis numbers and a list of warnings."""
     def number(v):
         return isinstance(v, int | float) and not isinstance(v, bool)
@@ -212,7 +220,7 @@ def _check_report(report: Any, source: str) -> None:
         raise ModelFileError(f"{source}: malformed model file (report is not a mapping)")
     for key in ("r2", "n_points", "gamma_before", "gamma_after"):
         table = report.get(key)
-        if not (isinstance(table, dict) and all(number(table.get(a)) for a in AXES)):
+        if not (isinstance(table, dict) and all(number(table.get(a)) for a in labels)):
             raise ModelFileError(
                 f"{source}: malformed model file (report: {key} needs a number per axis)"
             )
@@ -224,6 +232,7 @@ def _check_report(report: Any, source: str) -> None:
 def _settings_yaml_form(d: dict[str, Any]) -> dict[str, Any]:
     """Settings.to_dict() output back into the YAML config's shape."""
     d = dict(d)
+    d.setdefault("extrapolation", LEGACY_EXTRAPOLATION)  # files from before the option
     svr = dict(d.pop("svr"))
     return {**d, "svr": svr}
 

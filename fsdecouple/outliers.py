@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
+from .axes import DEFAULT, Layout
 
 FLOOR = 0.005  # 0.5 % of full scale: well above sensor noise, below a typical gross error
 MAD_FACTOR = 5.0  # robust standard deviations
@@ -64,13 +64,13 @@ def loo_residuals(x: np.ndarray, y: np.ndarray, degree: int) -> np.ndarray:
     return out
 
 
-def gross_errors(points, k: np.ndarray, full_scale) -> list[Outlier]:
+def gross_errors(points, k: np.ndarray, full_scale, layout: Layout = DEFAULT) -> list[Outlier]:
     """Every point whose leave-one-out residual on its prime output is an outlier, largest first."""
     sweeps = []
-    for a, axis in enumerate(AXES):
+    for a, axis in enumerate(layout.labels):
         s = points[points["axis"] == axis]
-        f = s[FORCE_COLUMNS[a]].to_numpy(dtype=float)
-        u = s[VOLTAGE_COLUMNS[a]].to_numpy(dtype=float)
+        f = s[layout.loads[a]].to_numpy(dtype=float)
+        u = s[layout.outputs[a]].to_numpy(dtype=float)
         if f.size > 2:
             sweeps.append((a, axis, s, f, u))
     fractions = [loo_residuals(f, u, 1) / abs(k[a]) / full_scale[a] for a, _, _, f, u in sweeps]
@@ -92,7 +92,7 @@ def gross_errors(points, k: np.ndarray, full_scale) -> list[Outlier]:
                 break
             i = idx[worst]
             found.append(Outlier(str(s["file"].iat[i]), int(s["row"].iat[i]), axis,
-                                 VOLTAGE_COLUMNS[a], float(r[worst]),
+                                 layout.outputs[a], float(r[worst]),
                                  float(r[worst] / full_scale[a])))
             keep[i] = False
     return sorted(found, key=lambda o: -abs(o.fraction))

@@ -4,7 +4,9 @@ and a residual plot of the held-out repetitions.
 Each function returns a :class:`matplotlib.figure.Figure` built without pyplot
 (no global state, no display needed: the Agg canvas renders it).  The figures
 must read in black-and-white print, so every distinction is carried by marker
-shape or line style as well as by colour.
+shape or line style as well as by colour.  A sensor of N components gets a
+Figure 6 panel per component (rows of three) and a Figure 7 grid of its N(N - 1)
+chi, a row per output; the 3-axis figures keep the paper's layout.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from .axes import AXES, CHI_NAMES, FORCE_COLUMNS, VOLTAGE_COLUMNS
+from .axes import AXES
 from .units import output_display
 
 OMEGA, CHI = r"\omega", r"\chi"  # mathtext symbols
@@ -62,6 +64,16 @@ def _sub(symbol: str, index: str) -> str:
     return f"${symbol}_{{{index}}}$"
 
 
+def _load_sym(label: str) -> str:
+    """f_x for an axis of the default layout, a named component (mx) as it is."""
+    return _sub("f", label) if label in AXES else label
+
+
+def _out_sym(layout, a: int) -> str:
+    """u_x for an axis of the default layout, else the output's name (u4)."""
+    return _sub("u", layout.labels[a]) if layout.is_default else layout.outputs[a]
+
+
 def _role_label(role: str, points: pd.DataFrame) -> str:
     reps = sorted(points.loc[points["role"] == role, "repetition"].unique())
     return f"{role} (rep {', '.join(map(str, reps))})"
@@ -78,43 +90,56 @@ def omega_figure(model, points: pd.DataFrame | None = None) -> Figure:
         ``role`` column (``training``, ``test I``, ``test II``, ``not used``).
         Without it only the fitted lines are drawn.
     """
-    rows = 2 if points is not None else 1
-    fig = Figure(figsize=(11, 6.4 if rows == 2 else 3.8), layout="constrained")
-    axs = fig.subplots(rows, 3, squeeze=False, sharex="col",
-                       gridspec_kw={"height_ratios": [2.2, 1]} if rows == 2 else None)
+    layout = model.layout
+    per = 2 if points is not None else 1  # a panel, and its residuals beneath
+    blocks = -(-layout.n // 3)
+    fig = Figure(figsize=(11, (6.4 if per == 2 else 3.8) * blocks), layout="constrained")
+    axs = fig.subplots(per * blocks, 3, squeeze=False, sharex="col" if blocks == 1 else False,
+                       gridspec_kw={"height_ratios": [2.2, 1] * blocks} if per == 2 else None)
+    for extra in range(layout.n, 3 * blocks):  # the grid's unused places
+        for row in range(per):
+            axs[per * (extra // 3) + row, extra % 3].set_visible(False)
     lo_hi = model.calibrated_range
     units = model.settings.units
     small, small_unit = output_display(units.output)
-    for a, axis in enumerate(AXES):
+    for a, axis in enumerate(layout.labels):
         k = model.k[a]
-        ax = axs[0, a]
+        top, col = per * (a // 3), a % 3
+        ax = axs[top, col]
+        load, out = layout.loads[a], layout.outputs[a]
+        load_unit, f_sym, u_sym = units.load_of(a), _load_sym(axis), _out_sym(layout, a)
         f_line = np.sort(lo_hi[a] / k)
         if points is not None:
+            res = axs[top + 1, col]
+            if blocks > 1:
+                res.sharex(ax)
             s = points[points["axis"] == axis]
-            f = s[FORCE_COLUMNS[a]].to_numpy()
+            f = s[load].to_numpy()
             f_line = np.array([min(f.min(), f_line[0]), max(f.max(), f_line[1])])
             for role, g in _by_role(s):
                 style = ROLE_STYLE.get(role, ROLE_STYLE["not used"])
-                fa = g[FORCE_COLUMNS[a]].to_numpy()
-                ua = g[VOLTAGE_COLUMNS[a]].to_numpy()
+                fa = g[load].to_numpy()
+                ua = g[out].to_numpy()
                 ax.plot(fa, ua, label=_role_label(role, points), **style)
-                axs[1, a].plot(fa, (ua - k * fa) * small, **style)
-            axs[1, a].axhline(0.0, **SVR_STYLE)
-            axs[1, a].set_ylabel(f"${{u_{axis} - k_{{{axis}{axis}}} f_{axis}}}$ [{small_unit}]")
-            axs[1, a].set_xlabel(f"prime force {_sub('f', axis)} [{units.load}]")
-            axs[1, a].grid(True, color="0.88")
+                res.plot(fa, (ua - k * fa) * small, **style)
+            res.axhline(0.0, **SVR_STYLE)
+            res.set_ylabel(f"${{u_{axis} - k_{{{axis}{axis}}} f_{axis}}}$ [{small_unit}]"
+                           if layout.is_default else f"{out} − k·{load} [{small_unit}]")
+            res.set_xlabel(f"prime force {f_sym} [{load_unit}]")
+            res.grid(True, color="0.88")
         else:
-            ax.set_xlabel(f"prime force {_sub('f', axis)} [{units.load}]")
+            ax.set_xlabel(f"prime force {f_sym} [{load_unit}]")
         ax.plot(f_line, k * f_line, label="fitted line u = k·f", **SVR_STYLE)
         r2 = (model.report.r2.get(axis) if model.report else None)
-        text = (f"{_sub('k', axis + axis)} = {k:.6g} {units.slope()}\n"
-                f"1/{_sub('k', axis + axis)} = {1 / k:.4g} {units.inverse_slope()}")
+        k_sym = _sub('k', axis + axis) if layout.is_default else "k"
+        text = (f"{k_sym} = {k:.6g} {units.output_of(a)}/{load_unit}\n"
+                f"1/{k_sym} = {1 / k:.4g} {load_unit}/{units.output_of(a)}")
         if r2 is not None:
             text += f"\nR² = {r2:.6f}"
         ax.text(0.04, 0.96, text, transform=ax.transAxes, va="top", ha="left", fontsize=9,
                 bbox=dict(boxstyle="round", fc="white", ec="0.6"))
         ax.set_title(f"({PANEL[a]}) {_sub(OMEGA, axis)}: {axis} sweeps, eq. (2)")
-        ax.set_ylabel(f"prime output {_sub('u', axis)} [{units.output}]")
+        ax.set_ylabel(f"prime output {u_sym} [{units.output_of(a)}]")
         ax.grid(True, color="0.88")
     handles, labels = _legend_by_label(axs[0, 0])
     fig.legend(handles, labels, loc="outside lower center", ncol=len(labels), frameon=False)
@@ -140,17 +165,23 @@ def chi_figure(model, points: pd.DataFrame | None = None, curves: dict | None = 
         cv.json ``curves.chi``: per chi name ``u`` [V], ``svr`` [V] and, if that
         baseline was run, ``rbf-siso`` [V].
     """
-    fig = Figure(figsize=(11, 7.2), layout="constrained")
-    axs = fig.subplots(2, 3).ravel()
+    layout = model.layout
+    n = layout.n
+    if layout.is_default:  # the paper's six panels
+        fig = Figure(figsize=(11, 7.2), layout="constrained")
+        axs = fig.subplots(2, 3).ravel()
+    else:  # a row per output a, a column per input b != a
+        fig = Figure(figsize=(2.7 * (n - 1), 2.4 * n + 0.8), layout="constrained")
+        axs = fig.subplots(n, n - 1, squeeze=False).ravel()
     units = model.settings.units
     MV, small_unit = output_display(units.output)  # noqa: N806 (mV for volts, else as is)
-    for i, name in enumerate(CHI_NAMES):
+    for i, name in enumerate(layout.chi_names):
         ax = axs[i]
-        a, b = AXES.index(name[0]), AXES.index(name[1])
+        a, b = layout.pair(name)
         if points is not None:
-            s = points[points["axis"] == name[1]]
+            s = points[points["axis"] == layout.labels[b]]
             for role, g in _by_role(s):
-                ax.plot(g[VOLTAGE_COLUMNS[b]], g[VOLTAGE_COLUMNS[a]] * MV,
+                ax.plot(g[layout.outputs[b]], g[layout.outputs[a]] * MV,
                         label=_role_label(role, points),
                         **ROLE_STYLE.get(role, ROLE_STYLE["not used"]))
         c = (curves or {}).get(name)
@@ -166,10 +197,16 @@ def chi_figure(model, points: pd.DataFrame | None = None, curves: dict | None = 
         else:
             u = np.linspace(*model.chi[name].input_range, 400)
             ax.plot(u, model.chi[name](u) * MV, label="ε-SVR", **SVR_STYLE)
-        ax.set_title(f"({PANEL[i]}) {_sub(CHI, name)}({_sub('u', name[1])}): "
-                     f"load on {name[1]}, error on {_sub('u', name[0])}")
-        ax.set_xlabel(f"prime output {_sub('u', name[1])} [{units.output}]")
-        ax.set_ylabel(f"coupling error {_sub('e', name)} [{small_unit}]")
+        if layout.is_default:
+            ax.set_title(f"({PANEL[i]}) {_sub(CHI, name)}({_sub('u', name[1])}): "
+                         f"load on {name[1]}, error on {_sub('u', name[0])}")
+            ax.set_xlabel(f"prime output {_sub('u', name[1])} [{units.output}]")
+            ax.set_ylabel(f"coupling error {_sub('e', name)} [{small_unit}]")
+        else:
+            ax.set_title(f"χ {name}: load {layout.labels[b]} → {layout.outputs[a]}", fontsize=9)
+            ax.set_xlabel(f"{layout.outputs[b]} [{units.output_of(b)}]", fontsize=8)
+            ax.set_ylabel(f"e on {layout.outputs[a]} [{small_unit}]", fontsize=8)
+            ax.tick_params(labelsize=7)
         ax.grid(True, color="0.88")
     handles, labels = _legend_by_label(axs[0])
     fig.legend(handles, labels, loc="outside lower center", ncol=len(labels), frameon=False)
@@ -203,13 +240,20 @@ def residual_figure(residuals: pd.DataFrame, title: str, load_unit: str = "N") -
     title : str
         Figure title (says where the points come from).
     """
-    fig = Figure(figsize=(11, 9.5), layout="constrained")
-    # one y scale for all nine panels, so off-axis and on-axis errors compare at a glance
-    axs = fig.subplots(3, 3, sharex="row", sharey=True)
+    comps = list(dict.fromkeys(residuals["axis"]))
+    comps = list(AXES) if set(comps) <= set(AXES) else comps
+    n = len(comps)
+    if n == 3:
+        fig = Figure(figsize=(11, 9.5), layout="constrained")
+        # one y scale for all nine panels, so off-axis and on-axis errors compare at a glance
+        axs = fig.subplots(3, 3, sharex="row", sharey=True)
+    else:  # forces and moments: a y scale per panel
+        fig = Figure(figsize=(2.9 * n, 2.5 * n + 0.8), layout="constrained")
+        axs = fig.subplots(n, n, sharex="row", squeeze=False)
     labels = list(dict.fromkeys(residuals["label"]))
-    for r, axis in enumerate(AXES):
+    for r, axis in enumerate(comps):
         s = residuals[residuals["axis"] == axis]
-        for c, comp in enumerate(AXES):
+        for c, comp in enumerate(comps):
             ax = axs[r, c]
             for j, lab in enumerate(labels):
                 g = s[s["label"] == lab].sort_values("load", kind="stable")
@@ -217,9 +261,15 @@ def residual_figure(residuals: pd.DataFrame, title: str, load_unit: str = "N") -
                         ls=REP_LINES[j % len(REP_LINES)], lw=0.9, ms=3.5, mfc="none")
             ax.axhline(0.0, color="0.3", lw=0.8)
             kind = "on-axis" if comp == axis else "off-axis"
-            ax.set_title(f"{axis} loaded: error in {_sub('f', comp)} ({kind})", fontsize=10)
-            ax.set_xlabel(f"applied load {_sub('F', axis)} [{load_unit}]")
-            ax.set_ylabel(f"{_sub('f', comp)} − {_sub('F', comp)} [{load_unit}]")
+            if n == 3:
+                ax.set_title(f"{axis} loaded: error in {_sub('f', comp)} ({kind})", fontsize=10)
+                ax.set_xlabel(f"applied load {_sub('F', axis)} [{load_unit}]")
+                ax.set_ylabel(f"{_sub('f', comp)} − {_sub('F', comp)} [{load_unit}]")
+            else:
+                ax.set_title(f"{axis} loaded: error in {comp}", fontsize=9)
+                ax.set_xlabel(f"applied {axis}", fontsize=8)
+                ax.set_ylabel(f"Δ{comp}", fontsize=8)
+                ax.tick_params(labelsize=7)
             ax.yaxis.set_tick_params(labelleft=True)
             ax.grid(True, color="0.88")
     handles, labs = _legend_by_label(axs[0, 0])

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import qr, solve_triangular
 
-from .axes import AXES, NamedChi
+from .axes import DEFAULT, NamedChi
 from .decouple import decouple_exact
 
 SPREAD = 1.0  # Section 4.1: "the variance is set to 1"
@@ -181,13 +181,13 @@ def fit_rbf(
 
 @dataclass(frozen=True)
 class MimoRBF:
-    """The standard MIMO RBF network of Section 4.1: voltages (3) in, forces (3) out."""
+    """The standard MIMO RBF network of Section 4.1: voltages (N) in, forces (N) out."""
 
     net: RBFNetwork
 
     def decouple(self, u: np.ndarray, *, rotate: bool = False) -> np.ndarray:
         del rotate
-        return self.net(np.asarray(u, dtype=float).reshape(-1, 3))
+        return self.net(np.asarray(u, dtype=float).reshape(-1, self.net.centres.shape[1]))
 
 
 def fit_mimo(
@@ -204,6 +204,7 @@ class SisoChi(NamedChi):
 
     name: str
     net: RBFNetwork
+    pair: tuple[int, int] | None = None  # (output a, input b); None: an "xy" name
 
     def __call__(self, u: np.ndarray) -> np.ndarray:
         u = np.asarray(u, dtype=float)
@@ -226,7 +227,7 @@ class SisoRBFModel:
 
 def fit_siso(
     k: np.ndarray, data: dict[str, tuple[np.ndarray, np.ndarray]], *, spread: float = SPREAD,
-    input_scale=None, goal: float = MSE_GOAL,
+    input_scale=None, goal: float = MSE_GOAL, layout=DEFAULT,
 ) -> SisoRBFModel:
     """Six 1-D networks, ``data[name] = (u_b, u_a)`` of the b sweeps (as for the SVRs).
 
@@ -234,6 +235,8 @@ def fit_siso(
     """
     chi = {}
     for name, (x, y) in data.items():
-        s = None if input_scale is None else [float(input_scale[AXES.index(name[1])])]
-        chi[name] = SisoChi(name, fit_rbf(x, y, spread=spread, input_scale=s, goal=goal))
+        a, b = layout.pair(name)
+        s = None if input_scale is None else [float(input_scale[b])]
+        chi[name] = SisoChi(name, fit_rbf(x, y, spread=spread, input_scale=s, goal=goal),
+                            None if layout.is_default else (a, b))
     return SisoRBFModel(np.asarray(k, dtype=float), chi)

@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from . import __version__
-from .axes import AXES, CHI_NAMES, FORCE_COLUMNS, VOLTAGE_COLUMNS
+from .axes import labels_in, load_name
 from .checks import assumption_checks
 from .cv_doc import gamma_index, test_name
 from .htmlparts import CSS, badge, badge_span, cell, figure_html, note, table, th, tr, worse
@@ -81,20 +81,20 @@ def _cv_residuals(cv) -> pd.DataFrame | None:
     df["label"] = [f"rep {t} (round {r}, {_test_name(cv, r, t)})"
                    for r, t in zip(df["round"], df["test_set"], strict=True)]
     df = df.sort_values(["rep", "round"], kind="stable")
-    for a, axis in enumerate(AXES):
+    for axis in labels_in(pts):
         applied = np.where(df["axis"] == axis, df["load"], 0.0)
-        df[f"e{axis}"] = df[FORCE_COLUMNS[a]] - applied
+        df[f"e{axis}"] = df[load_name(axis)] - applied
     return df
 
 
 def _calib_residuals(model, calib) -> pd.DataFrame:
-    p = calib.points
-    f = model.decouple(p[list(VOLTAGE_COLUMNS)].to_numpy(), rotate=False)
+    p, layout = calib.points, model.layout
+    f = model.decouple(calib.voltages, rotate=False)
     df = pd.DataFrame({"axis": p["axis"], "label": [f"rep {r} (in-sample)" for r in p["repetition"]]})
-    applied = p[list(FORCE_COLUMNS)].to_numpy()
-    df["load"] = applied[np.arange(len(p)), [AXES.index(a) for a in p["axis"]]]
-    for a, axis in enumerate(AXES):
-        df[f"e{axis}"] = f[:, a] - p[FORCE_COLUMNS[a]].to_numpy()
+    applied = calib.forces
+    df["load"] = applied[np.arange(len(p)), [layout.index(a) for a in p["axis"]]]
+    for a, axis in enumerate(layout.labels):
+        df[f"e{axis}"] = f[:, a] - applied[:, a]
     return df
 
 
@@ -170,19 +170,19 @@ def _model_tables(model) -> str:
     rep = model.report.to_dict() if model.report else {}
     rows = [tr(cell(a), cell(f"{model.k[i]:.6g}"), cell(f"{1 / model.k[i]:.4f}"),
                cell(f"{rep.get('r2', {}).get(a, float('nan')):.6f}"),
-               cell(str(rep.get("n_points", {}).get(a, "–")))) for i, a in enumerate(AXES)]
+               cell(str(rep.get("n_points", {}).get(a, "–"))))
+            for i, a in enumerate(model.layout.labels)]
     out = table("table-omega", "Non-coupling functions ω (eq. 2) of the model file",
                 [tr(th("axis"), th("k [V/N]"), th("1/k [N/V] (eq. 13)"), th("R²"), th("points"))], rows)
     rows = []
-    for name in CHI_NAMES:
-        c = model.chi[name]
-        rows.append(tr(cell(f"χ{name}"), cell(f"u{name[1]}"),
+    for name, c in model.chi.items():
+        rows.append(tr(cell(f"χ{name}"), cell(model.layout.outputs[c.input_axis]),
                        cell(f"{c.support_vectors.size} / {c.n_points}"),
                        cell(f"{c.input_range[0]:+.4f} … {c.input_range[1]:+.4f}")))
     out += table("table-chi", "Corrected coupling functions χ (eq. 4): ε-SVRs",
                  [tr(th("χ"), th("input"), th("support vectors / points"), th("input range [V]"))], rows)
     rows = []
-    for a in AXES:
+    for a in model.layout.labels:
         b, g = rep.get("gamma_before", {}).get(a), rep.get("gamma_after", {}).get(a)
         rows.append(tr(cell(a), cell(pct(b)), cell(pct(g), worse(g, b))))
     out += table("table-gamma-fit", "Interference error γ (eq. 12) on the calibration data "
@@ -193,6 +193,7 @@ def _model_tables(model) -> str:
 
 def _gamma_tables(cv) -> str:
     g = gamma_index(cv.get("records"))
+    labels = labels_in(cv.get("records"))  # the components scored
     keys = sorted({(r, t) for r, t, _, _ in g})
     methods = [m for m in cv.get("methods", []) if any(k[2] == m for k in g)]
 
@@ -206,9 +207,9 @@ def _gamma_tables(cv) -> str:
         return cell(pct(v), m != base and worse(v, b))
 
     head = [tr(th("round", rowspan=2), th("held out", rowspan=2),
-               *(th(f"γ{a}", span=len(methods)) for a in AXES)),
-            tr(*(th(METHOD_NAMES.get(m, m)) for _ in AXES for m in methods))]
-    rows = [tr(cell(str(r)), cell(held(r, t)), *(val(r, t, m, a) for a in AXES for m in methods))
+               *(th(f"γ{a}", span=len(methods)) for a in labels)),
+            tr(*(th(METHOD_NAMES.get(m, m)) for _ in labels for m in methods))]
+    rows = [tr(cell(str(r)), cell(held(r, t)), *(val(r, t, m, a) for a in labels for m in methods))
             for r, t in keys]
     out = table("table-gamma-methods", "Table 1 analogue: interference error γ (eq. 12) of the "
                 f"held-out {'load levels' if levels else 'repetitions'} ({cv.get('protocol', 'repetitions')} "
@@ -217,12 +218,12 @@ def _gamma_tables(cv) -> str:
     if absent:
         out += note("Not in cv.json (not run): " + ", ".join(absent) + ".")
     if "svr" in methods:
-        rows = [tr(cell(str(r)), cell(held(r, t)), *(val(r, t, "svr", a) for a in AXES)) for r, t in keys]
-        worst = [max((g.get((r, t, "svr", a)) or 0.0) for r, t in keys) for a in AXES]
+        rows = [tr(cell(str(r)), cell(held(r, t)), *(val(r, t, "svr", a) for a in labels)) for r, t in keys]
+        worst = [max((g.get((r, t, "svr", a)) or 0.0) for r, t in keys) for a in labels]
         rows.append(tr(th("worst"), cell(""), *(cell(pct(w)) for w in worst)))
         out += table("table-gamma-svr", "Table 3 analogue: γ after decoupling by the coupling "
                      "error model and ε-SVRs, % F.S.",
-                     [tr(th("round"), th("held out"), *(th(f"γ{a}") for a in AXES))], rows)
+                     [tr(th("round"), th("held out"), *(th(f"γ{a}") for a in labels))], rows)
     return out
 
 
@@ -233,17 +234,18 @@ def _gross_tables(cv) -> str:
                     "adds Table 5).")
     spec = ge.get("spec", {})
     clean, gross = gamma_index(cv.get("records")), gamma_index(ge.get("records"))
+    labels = labels_in(cv.get("records"))  # the components scored
     keys = sorted({(r, t) for r, t, m, _ in gross if m == "svr"})
     rows = []
     for r, t in keys:
         cells = []
-        for a in AXES:
+        for a in labels:
             c, w = clean.get((r, t, "svr", a)), gross.get((r, t, "svr", a))
             cells += [cell(pct(c)), cell(pct(w), worse(w, gross.get((r, t, "initial", a))))]
         rows.append(tr(cell(str(r)), cell(f"{_test_name(cv, r, t)} (rep {t})"), *cells))
     head = [tr(th("round", rowspan=2), th("held out", rowspan=2),
-               *(th(f"γ{a} (ε-SVR)", span=2) for a in AXES)),
-            tr(*(th(x) for _ in AXES for x in ("without", "with gross error")))]
+               *(th(f"γ{a} (ε-SVR)", span=2) for a in labels)),
+            tr(*(th(x) for _ in labels for x in ("without", "with gross error")))]
     out = note(f"Gross error: prime voltage of point {spec.get('point')} of the {spec.get('axis')} sweep "
                f"of repetition {spec.get('repetition')} moved by {spec.get('offset')} V (Section 4.4).")
     out += table("table-gross-error", "Table 5 analogue: γ with and without the gross error, % F.S.",
@@ -268,18 +270,20 @@ def _task_table(cv) -> str:
                     "--task-forces FORCES adds it).")
     v = {(r["round"], r["method"], r["axis"], r["metric"]): r["value"] for r in task.get("records", [])}
     rounds = sorted({k[0] for k in v})
+    labels = labels_in(task.get("records"))  # the components scored
     methods = [m for m in cv.get("methods", []) if any(k[1] == m for k in v)]
     rows = []
     for r in rounds:
         for m in methods:
             cells = []
-            for a in AXES:
+            for a in labels:
                 for metric in ("max_error", "rms_error"):
                     x, b = v.get((r, m, a, metric)), v.get((r, "initial", a, metric))
                     cells.append(cell(pct(x, 3), m != "initial" and worse(x, b)))
             rows.append(tr(cell(str(r)), cell(METHOD_NAMES.get(m, m)), *cells))
-    head = [tr(th("round", rowspan=2), th("method", rowspan=2), *(th(f"f{a}", span=2) for a in AXES)),
-            tr(*(th(x) for _ in AXES for x in ("max error", "rms error")))]
+    head = [tr(th("round", rowspan=2), th("method", rowspan=2),
+               *(th(load_name(a), span=2) for a in labels)),
+            tr(*(th(x) for _ in labels for x in ("max error", "rms error")))]
     out = note(f"Combined loads: {task.get('voltages')} against {task.get('forces')}, "
                f"{task.get('rows')} rows, tare {task.get('tare')}.")
     return out + table("table-task", "Combined-load comparison: error as % of each axis's full scale",
@@ -365,7 +369,8 @@ def build_report(model, cv: dict | None = None, calib=None) -> Report:
     else:
         src = "ε-SVR curves (solid) of the model file"
     body.append(figure_html(
-        "fig-chi", figs["figure7_chi"], "Figure 7: the six corrected coupling functions",
+        "fig-chi", figs["figure7_chi"], "Figure 7: the "
+        f"{'six' if len(model.chi) == 6 else len(model.chi)} corrected coupling functions",
         f"Each χab: coupling error eab on channel a [mV] against the prime voltage ub [V]. {src}. "
         + (f"Points {where}." if calib is not None else "No calibration points: pass --calib CALIB "
            "to plot the training and held-out points.")))

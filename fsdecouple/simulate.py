@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
+from .axes import AXES, DEFAULT, FORCE_COLUMNS, VOLTAGE_COLUMNS, Layout
 from .calibration import GrossError
 from .errors import InputError
 from .iotools.files import atomic_files, check_output
@@ -63,6 +63,7 @@ class SimulatedSensor:
     noise: float = 0.0005  # [V], standard deviation per channel
     # Section 3: X and Y are loaded both ways, Z only in compression
     load_span: tuple[tuple[float, float], ...] = ((-1.0, 1.0), (-1.0, 1.0), (-1.0, 0.0))
+    layout: Layout = DEFAULT  # components and chi names (six axes: simulate_six.py)
 
     @property
     def k(self) -> np.ndarray:
@@ -74,7 +75,7 @@ class SimulatedSensor:
 
     def phi(self, name: str, f: np.ndarray) -> np.ndarray:
         """Coupling error element e_ab [V] caused by load f_b [N] (eq. 3)."""
-        a, b = AXES.index(name[0]), AXES.index(name[1])
+        a, b = self.layout.pair(name)
         fs = self.full_scale[b]
         lo, hi = self.load_span[b]
         grid = np.linspace(lo, hi, 1 + round(1000 * (hi - lo)))
@@ -83,13 +84,34 @@ class SimulatedSensor:
         return self.amplitude[a][b] * self.full_scale_output[a] * g
 
     def voltages(self, f: np.ndarray) -> np.ndarray:
-        """Noise-free zero-corrected voltages for forces f, shape (n, 3), by eq. (1)-(3)."""
-        f = np.asarray(f, dtype=float).reshape(-1, 3)
+        """Noise-free zero-corrected voltages for forces f, shape (n, N), by eq. (1)-(3)."""
+        f = np.asarray(f, dtype=float).reshape(-1, self.layout.n)
         u = f * self.k
         for name in self.shapes:
-            a, b = AXES.index(name[0]), AXES.index(name[1])
+            a, b = self.layout.pair(name)
             u[:, a] += self.phi(name, f[:, b])
         return u
+
+    def solve(self, u: np.ndarray, steps: int = 200) -> np.ndarray:
+        """Loads whose noise-free outputs are ``u``: eq. (1) solved with the TRUE coupling.
+
+        The floor of any decoupler (tests, benchmarks): fixed-point steps
+        f = (u - sum_b phi_ab(f_b)) / k, a contraction for couplings of a few % F.S.,
+        run until they no longer move a load by 1e-13 of its full scale.
+        """
+        u = np.asarray(u, dtype=float).reshape(-1, self.layout.n)
+        f = u / self.k
+        for _ in range(steps):
+            e = np.zeros_like(u)
+            for name in self.shapes:
+                a, b = self.layout.pair(name)
+                e[:, a] += self.phi(name, f[:, b])
+            new = (u - e) / self.k
+            done = np.abs(new - f).max(initial=0.0) <= 1e-13 * min(self.full_scale)
+            f = new
+            if done:
+                break
+        return f
 
 
 def simulate_calibration(
@@ -161,12 +183,15 @@ def simulate_lab_calibration(
 
 def simulate_task(
     sensor: SimulatedSensor, n: int = 3000, rate: float = 1000.0, tare_rows: int = 200,
-    seed: int = 0,
+    seed: int = 0, reach: float | None = None,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """A combined-load task log: all three forces non-zero at once.
 
     The first ``tare_rows`` rows are unloaded (for ``apply --tare``).  Returns the
     voltage log (``t, ux, uy, uz``, raw with a zero offset) and the true forces.
+    ``reach``: scale the loads so each component peaks at ``reach`` x its full scale
+    (1.2: loads beyond the calibrated range, for extrapolation); default: the sample
+    log's loads, 60-90 % of full scale.
     """
     rng = np.random.default_rng(seed + 1_000_003)
     t = np.arange(n) / rate
@@ -177,6 +202,8 @@ def simulate_task(
     f[moving, 0] = 70.0 * ramp * np.sin(2 * np.pi * 0.7 * tm)
     f[moving, 1] = 60.0 * ramp * np.sin(2 * np.pi * 1.1 * tm + 1.0)
     f[moving, 2] = -75.0 * ramp * (1.0 - 0.8 * np.cos(2 * np.pi * 0.5 * tm))
+    if reach is not None:
+        f *= reach * np.asarray(sensor.full_scale) / np.abs(f).max(axis=0, initial=0.0).clip(1e-300)
     offset = rng.uniform(-0.05, 0.05, size=3)
     u = sensor.voltages(f) + offset + rng.normal(0.0, sensor.noise, size=f.shape)
     volts = pd.DataFrame({"t": t, "ux": u[:, 0], "uy": u[:, 1], "uz": u[:, 2]})
@@ -242,6 +269,8 @@ def simulate(
     loads up to 120 % of full scale.  ``gross_error`` moves a calibration point.
     ``coupling`` sets every coupling function's peak to that fraction of its
     output's full scale (:func:`with_coupling`); default: the sensor's own.
+
+    A six-axis sensor: :func:`fsdecouple.simulate_six.write_six_axis`.
     """
     if layout not in LAYOUTS:
         raise InputError(f"--layout {layout!r}: expected one of {', '.join(LAYOUTS)}")

@@ -166,6 +166,9 @@ def knots(lo: float, hi: float, n: int, start: int = 0, step: int = 1) -> np.nda
 
 
 def _slope_fn(c):
+    if hasattr(c, "slope"):  # a model's Chi: the slope of what it evaluates (extrapolation.py)
+        return c.slope
+
     def slope(u):
         x = np.asarray(u, dtype=float) / c.input_scale
         return rbf_sum_slope(x, c.support_vectors, c.dual_coef, c.gamma) * (

@@ -44,7 +44,6 @@ from typing import Any
 
 import numpy as np
 
-from .axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .calibration import CalibrationSet
 from .config import Settings
 from .errors import InputError
@@ -115,12 +114,12 @@ def noise(calib: CalibrationSet, settings: Settings) -> float | None:
     """
     from .linear import fit_omega
 
-    pts = calib.points
-    forces = pts[list(FORCE_COLUMNS)].to_numpy()
+    pts, layout = calib.points, settings.layout
+    forces = pts[list(layout.loads)].to_numpy()
     loaded = (forces != 0.0).any(axis=1)
-    u_fs = np.abs(fit_omega(pts).k) * np.asarray(settings.full_scale)
-    u = pts[list(VOLTAGE_COLUMNS)].to_numpy() / u_fs
-    keys = [tuple(r) for r in np.column_stack([pts["axis"].map(AXES.index), forces])]
+    u_fs = np.abs(fit_omega(pts, layout).k) * np.asarray(settings.full_scale)
+    u = pts[list(layout.outputs)].to_numpy() / u_fs
+    keys = [tuple(r) for r in np.column_stack([pts["axis"].map(layout.labels.index), forces])]
     groups: dict[tuple, list[int]] = {}
     for i, key in enumerate(keys):
         if loaded[i]:
@@ -278,7 +277,7 @@ def tune_settings(
                        "scaling": cand.scaling, "table2": cand.table2,
                        "tolerance": cand.settings(settings).svr.tolerance,
                        "rms": {a: float(v) if finite else None
-                               for a, v in zip(AXES, rms * fs, strict=True)},
+                               for a, v in zip(settings.layout.labels, rms * fs, strict=True)},
                        "figure": float(rms.max()) if finite else None,
                        "edge": float(edges[c]) if math.isfinite(edges[c]) else None,
                        "clearly_better": c > 0 and edge_ok and clearly_better(e, errors[0])})

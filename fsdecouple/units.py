@@ -15,6 +15,11 @@ from dataclasses import dataclass
 # lbf: the avoirdupois pound-force).
 LOAD_UNITS = {"N": 1.0, "kN": 1000.0, "gf": 9.80665e-3, "kgf": 9.80665, "lbf": 4.4482216152605}
 OUTPUT_UNITS = ("V", "mV", "uV", "count", "mV/V")
+# Moments, for the components of a six-axis sensor (one N·m in N·m; display only:
+# ``apply --unit`` converts forces of one unit, never a wrench of mixed units).
+MOMENT_UNITS = {"N·m": 1.0, "Nm": 1.0, "N*m": 1.0, "N.m": 1.0, "N-m": 1.0, "N m": 1.0,
+                "N·mm": 1e-3, "Nmm": 1e-3, "kN·m": 1e3,
+                "kgf·m": 9.80665, "lbf·in": 0.1129848290276167, "lbf·ft": 1.3558179483314004}
 
 
 @dataclass(frozen=True)
@@ -23,6 +28,24 @@ class Units:
 
     load: str = "N"
     output: str = "V"
+    # one unit per component / output, when the config gives them column by column
+    # (a six-axis sensor's N and N·m); empty when one unit serves all
+    loads: tuple[str, ...] = ()
+    outputs: tuple[str, ...] = ()
+
+    def load_of(self, a: int) -> str:
+        """The unit of component a's load."""
+        return self.loads[a] if self.loads else self.load
+
+    def output_of(self, a: int) -> str:
+        """The unit of output a."""
+        return self.outputs[a] if self.outputs else self.output
+
+    def to_dict(self, loads=(), outputs=()) -> dict:
+        """The config's form: one unit, or a mapping by column name (``loads``, ``outputs``)."""
+        return {"load": dict(zip(loads, self.loads, strict=True)) if self.loads else self.load,
+                "output": dict(zip(outputs, self.outputs, strict=True)) if self.outputs
+                else self.output}
 
     def slope(self) -> str:
         """The unit of k (eq. 2): output per load."""

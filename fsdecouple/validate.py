@@ -4,7 +4,9 @@ The set is read exactly like a calibration set (sweeps, zero rows, known loads;
 each sweep zero-corrected by its own zero-load rows), decoupled by eq. (11)
 (``model``) and by omega^-1 alone (``initial``), and scored per loaded axis:
 
-* ``gamma``: the interference error of eq. (12) on that axis's sweep points;
+* ``gamma``: the interference error of eq. (12) on that axis's single-load sweep
+  points (a combined-load point, which loads several components at once, has no
+  off-axis error to measure: it is scored by the errors below only);
 * ``max_error``, ``rms_error``: over that axis's sweep points p and every
   component c, the error e(p, c) = |f_c(p) - F_c(p)| / F_c(FS) of the decoupled
   force against the known load, as a fraction of that component's full scale;
@@ -28,8 +30,8 @@ from typing import Any
 import numpy as np
 
 from . import __version__
-from .axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .config import Settings
+from .errors import InputError
 from .iotools.files import atomic_write, check_output, refuse_overwriting_input
 from .metrics import check_max_gamma, interference_error
 from .model import CouplingErrorModel
@@ -101,17 +103,24 @@ def validate(
     if model_path is not None:
         model = load_model(model_path)
     settings = settings or model.settings
-    cs = load_calibration(set_path, replace(settings, min_repetitions=1))
+    if settings.layout != model.layout:
+        raise InputError(f"the config names components {', '.join(settings.layout.loads)}, the "
+                         f"model {', '.join(model.layout.loads)}; use the calibration's config")
+    cs = load_calibration(set_path, replace(settings, min_repetitions=1), combined=True)
     points = cs.points
-    u = points[list(VOLTAGE_COLUMNS)].to_numpy(dtype=float)
-    loads = points[list(FORCE_COLUMNS)].to_numpy(dtype=float)
+    u, loads = cs.voltages.astype(float), cs.forces.astype(float)
+    single = (loads != 0.0).sum(axis=1) <= 1
     forces = {"model": model.decouple(u, rotate=False), "initial": model.initial_forces(u)}
     inside = in_calibrated_range(model, u)
     axis_of = points["axis"].to_numpy()
     fs = np.asarray(settings.full_scale, dtype=float)
+    units = settings.units.loads or None
     records = []
     warnings = [w for w in cs.warnings if not any(x in w for x in _NOT_FOR_VALIDATION)]
-    for a, axis in enumerate(AXES):
+    if not single.all():
+        warnings.append(f"{int((~single).sum())} combined-load points (several components "
+                        "loaded at once): scored by max and RMS error, not gamma")
+    for a, axis in enumerate(settings.layout.labels):
         on_axis = axis_of == axis
         outside = int((on_axis & ~inside).sum())
         if outside:
@@ -125,8 +134,10 @@ def validate(
             for method in METHODS:
                 f = forces[method][sel]
                 key = {"method": method, "axis": axis, "range": rng}
-                records.append({**key, "metric": "gamma",
-                                "value": interference_error(f, a, fs[a])})
+                if (sel & single).any():
+                    g = forces[method][sel & single]
+                    records.append({**key, "metric": "gamma",
+                                    "value": interference_error(g, a, fs if units else fs[a], units)})
                 for metric, value in force_errors(f, loads[sel], fs).items():
                     records.append({**key, "metric": metric, "value": value,
                                     "value_load_unit": value * float(fs.max())})

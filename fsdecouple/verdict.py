@@ -18,7 +18,6 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from .axes import AXES
 from .baselines import train_all
 from .calibration import CalibrationSet
 from .config import Settings
@@ -34,7 +33,7 @@ FIT_METHODS = ("svr", "linear", "auto")
 def gamma_records(rounds: list[HeldOutRound], models: dict, settings: Settings,
                   methods=VERDICT_METHODS) -> list[dict[str, Any]]:
     """gamma (eq. 12) per (round, test set, method, axis), interior and end points apart."""
-    fs = settings.full_scale
+    fs, labels, units = settings.full_scale, settings.layout.labels, settings.units.loads or None
     records = []
     for rnd in rounds:
         groups = [(label, test, "interior") for label, test in rnd.tests]
@@ -44,11 +43,12 @@ def gamma_records(rounds: list[HeldOutRound], models: dict, settings: Settings,
             axis = test.points["axis"].to_numpy()
             for m in methods:
                 f = models[(rnd.index, m)].decouple(test.voltages, rotate=False)
-                for a, name in enumerate(AXES):
+                for a, name in enumerate(labels):
                     if (axis == name).any():
+                        gamma = interference_error(f[axis == name], a, fs if units else fs[a], units)
                         records.append({"round": rnd.index, "test_set": label, "method": m,
                                         "axis": name, "points": points, "metric": "gamma",
-                                        "value": interference_error(f[axis == name], a, fs[a])})
+                                        "value": gamma})
     return records
 
 
@@ -68,7 +68,7 @@ def heldout_verdict(calib: CalibrationSet, settings: Settings, *, protocol: str 
             "worst_gamma": max((r["value"] for r in inner), default=None),
             "worst_gamma_end": max((r["value"] for r in end), default=None),
             "gamma": {a: max(r["value"] for r in inner if r["axis"] == a)
-                      for a in AXES if any(r["axis"] == a for r in inner)},
+                      for a in settings.layout.labels if any(r["axis"] == a for r in inner)},
         }
     svr, linear = heldout["svr"]["worst_gamma"], heldout["linear"]["worst_gamma"]
     better = "svr" if linear is None or (svr is not None and svr <= linear) else "linear"
@@ -142,9 +142,10 @@ def calibrate(calib: CalibrationSet, settings: Settings, *, method: str = "svr",
                                          progress=progress)
     model = fit(calib, settings, workers=workers)
     model.report.tune = record
-    outliers = gross_errors(calib.points, model.k, settings.full_scale)
+    outliers = gross_errors(calib.points, model.k, settings.full_scale, settings.layout)
     model.report.outliers = [dataclasses.asdict(o) for o in outliers]
-    model.report.warnings += [o.message(settings.load_unit) for o in outliers]
+    model.report.warnings += [o.message(settings.units.load_of(settings.layout.index(o.axis)))
+                              for o in outliers]
     found = None
     if verdict:
         try:
@@ -159,7 +160,8 @@ def calibrate(calib: CalibrationSet, settings: Settings, *, method: str = "svr",
         model.method = "linear"
         model.matrix = fit_calibration_matrix(calib.voltages, calib.forces).C
         model.report.gamma_after = interference_errors(
-            calib.points, model.decouple(calib.voltages, rotate=False), settings.full_scale)
+            calib.points, model.decouple(calib.voltages, rotate=False), settings.full_scale,
+            settings.layout, settings.units.loads or None)
     if found is not None:
         model.report.verdict = {**summary(found), "asked": method, "chosen": chosen}
         warning = verdict_warning(found, chosen)

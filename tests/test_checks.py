@@ -39,7 +39,8 @@ def test_slope_matches_finite_difference(model):
     for c in model.chi.values():
         lo, hi = c.input_range
         u = np.linspace(lo, hi, 101)
-        np.testing.assert_allclose(chi_slope(c, u), central_difference(c, u), rtol=0, atol=1e-6)
+        # the kernel sum's: at the range's ends a tangent-extrapolating chi has a kink in chi''
+        np.testing.assert_allclose(chi_slope(c, u), central_difference(c.kernel, u), rtol=0, atol=1e-6)
 
 
 def test_checks_on_simulated_sensor(model, sensor):

@@ -9,7 +9,10 @@ it applies, ``row N`` and ``column 'x'``).  Placeholders in the command:
              over it (the files listed in ``remove`` deleted, and the ``symlinks``
              (name: target) and ``dirs`` given made);
 ``{model}``  a good model file fitted on sample_data/calibration;
-``{log}``    sample_data/task_voltages.csv.
+``{log}``    sample_data/task_voltages.csv;
+``{six}``    a copy of sample_data/six_axis/calibration with the case's ``six/`` files
+             laid over it (and ``remove`` deleted), read with ``{six_config}``,
+             configs/six-axis.yaml; ``{six_model}`` a good model fitted on it.
 
 Commands that write (``output``, default true) get ``-o OUT`` appended.  The
 contract checked: exit 2, exactly one line on stderr starting ``error:``, no
@@ -27,7 +30,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 import yaml
-from conftest import SAMPLE, invoke
+from conftest import ROOT, SAMPLE, invoke
 
 BAD = Path(__file__).parent / "data" / "bad"
 CASES = sorted(p.name for p in BAD.iterdir() if (p / "case.yaml").is_file())
@@ -40,12 +43,42 @@ def good_model(tmp_path_factory):
     return path
 
 
-def prepare(name: str, tmp_path: Path, good_model: Path) -> tuple[dict, list[str]]:
+SIX_CONFIG = ROOT / "configs" / "six-axis.yaml"
+_six_models: dict = {}
+
+
+def six_model(tmp_path_factory) -> str:
+    """A six-axis model, fitted once, for the cases that use it."""
+    if not _six_models:
+        path = tmp_path_factory.mktemp("six") / "model.json"
+        invoke(["fit", SAMPLE / "six_axis" / "calibration", "-c", SIX_CONFIG, "-o", path])
+        _six_models["path"] = str(path)
+    return _six_models["path"]
+
+
+def _overlay(src: Path, case: Path, sub: str, spec: dict, dest: Path) -> str:
+    shutil.copytree(src, dest)
+    if (case / sub).is_dir():
+        for f in (case / sub).iterdir():
+            shutil.copy(f, dest / f.name)
+    for f in spec.get("remove", []):
+        (dest / f).unlink()
+    return str(dest)
+
+
+def prepare(name: str, tmp_path: Path, good_model: Path,
+            tmp_path_factory=None) -> tuple[dict, list[str]]:
     spec = yaml.safe_load((BAD / name / "case.yaml").read_text(encoding="utf-8"))
     case = tmp_path / name
     shutil.copytree(BAD / name, case)
     (case / "case.yaml").unlink()
-    values = {"case": str(case), "model": str(good_model), "log": str(SAMPLE / "task_voltages.csv")}
+    values = {"case": str(case), "model": str(good_model), "log": str(SAMPLE / "task_voltages.csv"),
+              "six_config": str(SIX_CONFIG)}
+    if any("{six}" in a for a in spec["command"]):
+        values["six"] = _overlay(SAMPLE / "six_axis" / "calibration", case, "six", spec,
+                                 tmp_path / "six")
+    if any("{six_model}" in a for a in spec["command"]):
+        values["six_model"] = six_model(tmp_path_factory)
     if any("{cal}" in a for a in spec["command"]):
         cal = tmp_path / "cal"
         shutil.copytree(SAMPLE / "calibration", cal)
@@ -69,8 +102,8 @@ def test_corpus_is_large_enough():
 
 
 @pytest.mark.parametrize("name", CASES)
-def test_bad_input(name, tmp_path, good_model):
-    spec, args = prepare(name, tmp_path, good_model)
+def test_bad_input(name, tmp_path, good_model, tmp_path_factory):
+    spec, args = prepare(name, tmp_path, good_model, tmp_path_factory)
     out_dir = tmp_path / "out"
     out_dir.mkdir()
     out = out_dir / "result.out"

@@ -72,6 +72,12 @@ def sample_model():
 
 
 @pytest.fixture(scope="module")
+def kernel_model():
+    """The sample data fitted with extrapolation: kernel (the kernel sum beyond the range)."""
+    return fit(SAMPLE / "calibration", load_config(extrapolation="kernel"))
+
+
+@pytest.fixture(scope="module")
 def rotated_model(tmp_path_factory):
     """The sample data fitted with a config that rotates into a reference frame."""
     a, b = np.radians(30.0), np.radians(10.0)
@@ -189,9 +195,11 @@ def assert_close(f_c, f_py, full_scale):
 
 
 @needs_cc
-@pytest.mark.parametrize("which", ["sample", "rotated"])
+@pytest.mark.parametrize("which", ["sample", "rotated", "kernel"])
 @pytest.mark.parametrize("opt", ["-O0", "-O2"])
 def test_double_header_matches_model_and_apply(which, opt, request, tmp_path):
+    """sample and rotated extrapolate by tangents, kernel by the kernel sum: the
+    vectors reach far beyond the calibrated range and the tables."""
     model = request.getfixturevalue(f"{which}_model")
     run, _ = build(model, tmp_path, opt=opt)
     u = vectors(model, np.random.default_rng(1))
@@ -259,7 +267,7 @@ def test_float_bound_holds_with_fused_multiply_add(sample_model, tmp_path):
 
 @needs_cc
 @pytest.mark.parametrize("precision", ["double", "float"])
-def test_selftest_catches_a_damaged_header(sample_model, precision, tmp_path):
+def test_selftest_catches_a_damaged_header(sample_model, kernel_model, precision, tmp_path):
     """A slope a little off, or one support vector moved: fsd_selftest() reports it.
 
     1e-6 relative in double (tolerance ~1e-9 of full scale), 1e-4 in float (tolerance
@@ -272,16 +280,23 @@ def test_selftest_catches_a_damaged_header(sample_model, precision, tmp_path):
     value = float(slope.rstrip("f"))
     rel = 1e-6 if precision == "double" else 1e-4
     damaged = {"slope": text.replace(slope, repr(value * (1 + rel)) + "f" * slope.endswith("f"), 1)}
-    if precision == "double":  # the vector beyond the tables is a kernel sum
-        sv = re.search(r"fsd_sv0\[\d+\] = \{\n    ([0-9.e+-]+),", text).group(1)
-        damaged["support vector"] = text.replace(sv, repr(float(sv) + 1e-3), 1)
+    if precision == "double":  # the vector beyond the tables: chi's tangent beyond the range
+        line = re.search(r"if \(u > \S+\) return ([0-9.e+-]+) \+.*", text)
+        damaged["tangent"] = text.replace(
+            line.group(0), line.group(0).replace(line.group(1), repr(float(line.group(1)) + 1e-3), 1), 1)
+        # ... or, under extrapolation: kernel, a kernel sum
+        export_header(kernel_model, header, force=True)
+        kernel = header.read_text()
+        sv = re.search(r"fsd_sv0\[\d+\] = \{\n    ([0-9.e+-]+),", kernel).group(1)
+        damaged["support vector"] = kernel.replace(sv, repr(float(sv) + 1e-3), 1)
+        damaged["intact kernel"] = kernel
     src = tmp_path / "st.c"
     src.write_text('#define FSD_IMPLEMENTATION\n#include "d.h"\nint main(void) { return fsd_selftest(); }\n')
     for what, body in {"intact": text, **damaged}.items():
         header.write_text(body)
         subprocess.run([CC, *FLAGS, "-O2", str(src), "-o", str(tmp_path / "st"), "-lm"], check=True)
         bad = subprocess.run([str(tmp_path / "st")]).returncode
-        assert (bad == 0) == (what == "intact"), what
+        assert (bad == 0) == what.startswith("intact"), what
 
 
 @needs_cc

@@ -1,4 +1,4 @@
-"""``zero: fit``: each sweep's offsets from all its points (fsdecouple/zero_fit.py)."""
+"""``zero: fit``: each sweep's offsets from all its points (fsdecouple.zero.fitted_offsets)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,8 @@ from fsdecouple.config import Settings, settings_from_dict
 from fsdecouple.errors import ConfigError
 from fsdecouple.fit import fit
 from fsdecouple.simulate import SimulatedSensor, simulate_calibration
-from fsdecouple.zero_fit import fit_offsets
+
+FIT = replace(Settings(), zero="fit")
 
 
 def _table(sensor, seed=0, reps=6):
@@ -36,15 +37,16 @@ def _noise_free_with_bad_zero_rows(delta: float):
     table = _table(sensor)
     zero = (table[["fx", "fy", "fz"]] == 0).all(axis=1)
     table.loc[zero, list(VOLTAGE_COLUMNS)] += delta
-    return sensor, from_table(table, Settings())
+    return sensor, from_table(table, Settings()), from_table(table, FIT)
 
 
 def test_prime_offsets_come_from_every_point():
     """omega through the origin (eq. 2) holds exactly, so a zero row off by delta moves its
     sweep's prime offset by delta times the zero row's leverage h_00, not by delta."""
-    sensor, calib = _noise_free_with_bad_zero_rows(delta=1e-3)
+    # (the prime output is exactly linear in the load here, so the polynomial fits it exactly)
+    sensor, calib, fitted = _noise_free_with_bad_zero_rows(delta=1e-3)
     rows = calib.points
-    fixed = fit_offsets(calib).points
+    fixed = fitted.points
     for b, axis in enumerate(AXES):
         s = rows["axis"] == axis
         truth = rows.loc[s, f"f{axis}"].to_numpy() * sensor.k[b]  # u_bb = k_bb f_b
@@ -53,17 +55,21 @@ def test_prime_offsets_come_from_every_point():
         loaded = rows.loc[s, f"f{axis}"].to_numpy() != 0
         np.testing.assert_allclose(before[loaded], -1e-3, atol=1e-12)  # rows: the bad zero row's bias
         f = rows.loc[s & (rows["repetition"] == 1), f"f{axis}"].to_numpy()
-        # every sweep has the same design and the same bad zero row: the common-slope fit is
-        # one straight-line fit, whose intercept moves by delta * (1/n + mean(f)^2 / Sxx)
-        h00 = 1.0 / f.size + f.mean() ** 2 / ((f - f.mean()) ** 2).sum()
+        # every sweep has the same design and the same bad zero row: the joint fit is one
+        # polynomial fit of degree d = min(5, levels - 2) (fitted_offsets), whose intercept
+        # moves by delta times the zero row's leverage, the hat matrix's diagonal there
+        d = min(5, np.unique(f).size - 2)
+        x = np.vander(f / np.abs(f).max(), d + 1, increasing=True)
+        hat = x @ np.linalg.solve(x.T @ x, x.T)
+        h00 = hat[np.flatnonzero(f == 0)[0], np.flatnonzero(f == 0)[0]]
         np.testing.assert_allclose(after[loaded], -1e-3 * h00, rtol=1e-9, atol=1e-15)
 
 
 def test_cross_offsets_put_chi_through_zero():
     """chi_ab(0) = 0 (eq. 4) fixes each cross-channel level; a zero row off by 1 mV no longer
     sets it alone where loads on both sides of zero pin the smooth chi there."""
-    sensor, calib = _noise_free_with_bad_zero_rows(delta=1e-3)
-    fixed = fit_offsets(calib).points
+    sensor, calib, fitted = _noise_free_with_bad_zero_rows(delta=1e-3)
+    fixed = fitted.points
     for b, axis in enumerate(AXES):
         s = (calib.points["axis"] == axis) & (calib.points[f"f{axis}"] != 0)
         f = calib.points.loc[s, f"f{axis}"].to_numpy()
@@ -81,8 +87,7 @@ def test_cross_offsets_put_chi_through_zero():
 
 
 def test_offsets_table_records_the_whole_offset_removed():
-    calib = from_table(_table(SimulatedSensor(), seed=3), Settings())
-    fixed = fit_offsets(calib)
+    fixed = from_table(_table(SimulatedSensor(), seed=3), FIT)
     p, o = fixed.points, fixed.offsets
     for _, sweep in o.iterrows():
         s = (p["repetition"] == sweep["repetition"]) & (p["axis"] == sweep["axis"])
@@ -117,11 +122,11 @@ def test_unknown_zero_mode_is_one_line(tmp_path, value):
     assert "zero: expected one of rows, fit" in r.stderr and not out.exists()
 
 
-def test_zero_fit_runs_inside_cross_validation_folds():
-    """cv fits on training repetitions only: the offsets are found per fold, from that fold."""
-    calib = from_table(_table(SimulatedSensor(), seed=1), Settings())
-    s = replace(Settings(), zero="fit")
-    whole = fit(calib, s, tables=False)
-    part = fit(calib.subset([1, 2, 3]), s, tables=False)
-    assert not np.array_equal(whole.k, part.k)
-    assert np.allclose(whole.k, part.k, rtol=1e-3)
+def test_zero_fit_moves_points_but_not_raw_outputs():
+    table = _table(SimulatedSensor(), seed=1)
+    rows, fitted = from_table(table, Settings()), from_table(table, FIT)
+    for c in VOLTAGE_COLUMNS:
+        np.testing.assert_array_equal(rows.points[f"{c}_raw"], fitted.points[f"{c}_raw"])
+        assert not np.array_equal(rows.points[c], fitted.points[c])
+    a, b = fit(rows, Settings(), tables=False), fit(fitted, FIT, tables=False)
+    assert not np.array_equal(a.k, b.k) and np.allclose(a.k, b.k, rtol=1e-3)

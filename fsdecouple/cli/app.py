@@ -115,13 +115,15 @@ def _given(*paths):
     return [p for p in paths if p is not None]
 
 
-def _parse_zero(text: str) -> tuple[float, float, float]:
+def _parse_zero(text: str, outputs=("ux", "uy", "uz")) -> tuple[float, ...]:
     try:
         values = tuple(float(v) for v in text.split(","))
     except ValueError:
         values = ()
-    if len(values) != 3 or not all(math.isfinite(v) for v in values):
-        raise InputError(f"--zero {text!r}: expected three voltages ux,uy,uz, e.g. 0.01,-0.02,0")
+    if len(values) != len(outputs) or not all(math.isfinite(v) for v in values):
+        what = "three voltages" if len(outputs) == 3 else f"{len(outputs)} outputs"
+        raise InputError(f"--zero {text!r}: expected {what} {','.join(outputs)}, e.g. "
+                         f"{','.join(['0.01', '-0.02', *['0'] * (len(outputs) - 2)])}")
     return values  # type: ignore[return-value]
 
 

@@ -46,16 +46,32 @@ def simulate(
         float | None, typer.Option(help="Peak of every coupling function, as a fraction of "
                                         "full-scale output (0 to 0.3; default: the sensor's own).")
     ] = None,
+    components: Annotated[
+        int, typer.Option(help="3: the paper's force sensor; 6: a six-axis force/torque sensor "
+                               "(fx..mz, u1..u6) with its config sensor.yaml.")
+    ] = 3,
     force: ForceOpt = False,
 ) -> None:
     """Write a simulated calibration set: the paper's (with a combined-load task log) or a lab's."""
     from ..calibration import GrossError
+    from ..errors import InputError
     from ..simulate import simulate as simulate_sensor
+    from ..simulate_six import write_six_axis
 
     with user_errors():
         ge = GrossError.parse(gross_error) if gross_error else None
-        files = simulate_sensor(out_dir, seed=seed, gross_error=ge, force=force, layout=layout,
-                                repetitions=repetitions, levels=levels, coupling=coupling)
+        if components not in (3, 6):
+            raise InputError(f"--components {components}: expected 3 or 6")
+        if components == 6 and (layout != "paper" or ge or levels is not None
+                                 or coupling is not None):
+            raise InputError("--components 6: writes its own layout; no --layout lab, "
+                             "--gross-error, --levels or --coupling")
+        if components == 6:
+            files = write_six_axis(out_dir, seed=seed, repetitions=repetitions or 6, force=force)
+        else:
+            files = simulate_sensor(out_dir, seed=seed, gross_error=ge, force=force,
+                                    layout=layout, repetitions=repetitions, levels=levels,
+                                    coupling=coupling)
     console.print(f"wrote {len(files)} files under {out_dir}")
 
 

@@ -104,7 +104,7 @@ def cv(
             doc = run_cv(
                 cs, settings, folds=parse_folds(folds) if folds is not None else None,
                 task=(task, task_forces) if task is not None else None, task_tare=task_tare,
-                gross_error=GrossError.parse(gross_error) if gross_error else None,
+                gross_error=GrossError.parse(gross_error, settings.layout) if gross_error else None,
                 max_gamma=max_gamma, workers=workers, repeats=repeats, protocol=protocol,
                 tune=tune, tune_grid=grid,
                 progress=lambda done, total: bar.update(job, completed=done, total=total),

@@ -67,6 +67,11 @@ def fit(
         str | None, typer.Option(help='The --tune grid, e.g. "gamma=1,2,4,8;C=1,10;'
                                       'epsilon=0.25,0.5,1" (epsilon: multiples of the noise).')
     ] = None,
+    extrapolation: Annotated[
+        str | None, typer.Option(help="chi beyond its calibrated range: tangent (continued "
+                                      "along its tangent at the edge; default) or kernel "
+                                      "(the kernel sum, which decays to -rho).")
+    ] = None,
     no_verdict: Annotated[
         bool, typer.Option("--no-verdict", help="Skip the held-out comparison with the "
                                                 "calibration matrix.")
@@ -85,7 +90,7 @@ def fit(
     with user_errors():
         settings = load_config(
             config, C=C, epsilon=epsilon, gamma=gamma, delta2=delta2, tolerance=tolerance,
-            scaling=scaling, refine=refine,
+            scaling=scaling, refine=refine, extrapolation=extrapolation,
         )
         check_max_gamma(max_gamma)
         if tune_grid is not None and not tune:
@@ -105,6 +110,7 @@ def fit(
     if json_out:
         print_json({"model": str(output), "method": model.method, **model.report.to_dict(),
                     "checks": [c.to_dict() for c in checks], "refine": settings.refine,
+                    "extrapolation": settings.extrapolation,
                     "refine_advice": advice, "tune": model.report.tune})
     else:
         if model.report.tune is not None:

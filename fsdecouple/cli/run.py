@@ -7,19 +7,24 @@ from typing import Annotated
 
 import typer
 from rich.progress import DownloadColumn, MofNCompleteColumn, TimeRemainingColumn
+from rich.text import Text
 
 from ..config import load_config
 from ..console import apply_lines, apply_warnings
+from ..errors import InputError
 from ..iotools.files import check_output, refuse_overwriting_input
 from ..modelfile import load_model
 from .app import (
     ConfigOpt,
     ForceOpt,
+    JsonOpt,
     _bar,
     _given,
     _parse_zero,
     app,
     console,
+    err_console,
+    print_json,
     user_errors,
     warn,
 )
@@ -29,10 +34,12 @@ from .app import (
 def apply(
     model_file: Annotated[Path, typer.Argument(help="Model file (JSON).")],
     voltages: Annotated[
-        Path, typer.Argument(help="Voltage log with ux, uy, uz: CSV, or Parquet (.parquet).")
+        list[Path], typer.Argument(help="Voltage log with ux, uy, uz: CSV, or Parquet (.parquet); "
+                                        "or several logs, globs or directories (-o OUT_DIR/).")
     ],
     output: Annotated[
-        Path, typer.Option("--output", "-o", help="Forces file to write: CSV, or Parquet (.parquet).")
+        Path, typer.Option("--output", "-o", help="Forces file to write: CSV, or Parquet (.parquet); "
+                                                  "for several logs, a directory.")
     ],
     config: ConfigOpt = None,
     tare: Annotated[
@@ -53,18 +60,36 @@ def apply(
     round_trip: Annotated[
         bool, typer.Option("--round-trip", help="CSV: write forces as round-trip exact text.")
     ] = False,
+    engine: Annotated[str, typer.Option(help="Many logs: local (threads here) or dask.")] = "local",
+    scheduler: Annotated[
+        str | None, typer.Option(help="Many logs, --engine dask: the address of a running Dask "
+                                      "scheduler; default: a LocalCluster on this machine.")
+    ] = None,
+    workers: Annotated[
+        int | None, typer.Option(help="Many logs: threads, as many logs at once (local), or the "
+                                      "LocalCluster's worker processes (dask); default: the cores.")
+    ] = None,
     force: ForceOpt = False,
+    json_out: JsonOpt = False,
 ) -> None:
-    """Decouple logged voltages into forces fx, fy, fz by eq. (11)."""
+    """Decouple logged voltages into forces fx, fy, fz (a model's components) by eq. (11)."""
     from ..apply import apply_file
+    from ..batch import is_batch
     from ..iotools.logs import is_parquet
 
+    if is_batch(voltages, output):
+        return _apply_many(model_file, voltages, output, config, tare, zero, unit, refine,
+                           round_trip, engine, scheduler, workers, force, json_out)
     with user_errors():
+        if engine != "local" or scheduler is not None or workers is not None or json_out:
+            raise InputError("--engine, --scheduler, --workers and --json are for many logs: "
+                             "give the output directory with a trailing / (-o OUT_DIR/)")
+        voltages = voltages[0]
         model = load_model(model_file)
         if refine is not None:
             model = model.refined(refine)
         settings = load_config(config) if config is not None else None
-        offsets = _parse_zero(zero) if zero is not None else None
+        offsets = _parse_zero(zero, model.layout.outputs) if zero is not None else None
         check_output(output, force=force)
         refuse_overwriting_input(output, [model_file, *_given(config)])
         # apply counts progress in bytes of a CSV log, in rows of a Parquet one
@@ -79,3 +104,31 @@ def apply(
     for line in apply_lines(summary, output):
         console.print(line, highlight=False, markup=False)  # '[mV]' is no markup
     warn(apply_warnings(summary))
+
+
+def _apply_many(model_file, inputs, output, config, tare, zero, unit, refine, round_trip, engine,
+                scheduler, workers, force, json_out) -> None:
+    from rich.progress import MofNCompleteColumn
+
+    from ..batch import apply_many
+    from ..console_fleet import apply_many_errors, apply_many_table
+
+    with user_errors():
+        settings = load_config(config) if config is not None else None
+        offsets = _parse_zero(zero) if zero is not None else None
+        with _bar(MofNCompleteColumn(), TimeRemainingColumn()) as bar:
+            task = bar.add_task("decoupling logs", total=None)
+            result = apply_many(
+                model_file, inputs, output, engine=engine, scheduler=scheduler, workers=workers,
+                settings=settings, config=config, tare=tare, zero=offsets, unit=unit, refine=refine,
+                round_trip=round_trip, force=force,
+                progress=lambda done, total: bar.update(task, completed=done, total=total))
+    doc = result.to_dict()
+    if json_out:
+        print_json(doc)
+    else:
+        console.print(apply_many_table(doc))
+    for line in apply_many_errors(doc):
+        err_console.print(Text("error: ", "red") + Text(line), soft_wrap=True)
+    if doc["failed"]:
+        raise typer.Exit(2)

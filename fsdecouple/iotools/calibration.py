@@ -11,7 +11,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..axes import FORCE_COLUMNS, VOLTAGE_COLUMNS
 from ..config import Settings
 from ..errors import InputError, excerpt, where
 from .files import CALIBRATION_LIMIT, natural_key, open_input, read_bounded, reading
@@ -119,7 +118,8 @@ def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationT
     single = len(files) == 1 and not Path(path).is_dir()
     frames, skipped, digests = [], [], []
     cols = settings.columns
-    numeric = {c: cols[c] for c in (*FORCE_COLUMNS, *VOLTAGE_COLUMNS)}
+    layout = settings.layout
+    numeric = {c: cols[c] for c in (*layout.loads, *layout.outputs)}
     for rep_index, f in enumerate(files, start=1):
         with reading(f):  # a FIFO: read once, never waited on for ever
             data = read_bounded(f, CALIBRATION_LIMIT, "a calibration file")
@@ -130,11 +130,11 @@ def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationT
                              "UTF-16, or padding from a crashed writer?)")
         digests.append((str(f), hashlib.sha256(data).hexdigest()))
         header = read_header(f, settings, data, strict=False)
-        if {"ux_raw", "uy_raw", "uz_raw"} <= set(header):
+        if {f"{c}_raw" for c in layout.outputs} <= set(header):
             # the tidy CSV of `ingest -o`: zero-corrected already, and every repetition
             raise InputError(
                 f"{where(f, HEADER_ROW)}: this is the output of 'fsdecouple ingest -o' (it has "
-                "ux_raw), not a repetition; move it out of the calibration directory"
+                f"{layout.outputs[0]}_raw), not a repetition; move it out of the calibration directory"
             )
         require_columns(header, numeric, f)
         # a single CSV without a repetition column is one repetition
@@ -169,15 +169,19 @@ def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationT
         else:
             out["repetition"] = rep_index  # a directory's file order, or the one CSV
         if cols["axis"] in header:
-            axis = raw[cols["axis"]].str.strip().str.lower()
-            bad = ~axis.isin(["x", "y", "z"])
+            # a label (x; fx for a named component) or the component's load column name
+            labels = layout.label_map()
+            axis = raw[cols["axis"]].str.strip().str.lower().map(labels)
+            bad = axis.isna()
             if bad.any():
                 i = int(np.argmax(bad.to_numpy()))
+                names = list(layout.labels)
                 raise InputError(
                     f"{where(f, int(rows[i]), cols['axis'])}: "
-                    f"{excerpt(repr(raw[cols['axis']].iloc[i]))}, expected x, y or z"
+                    f"{excerpt(repr(raw[cols['axis']].iloc[i]))}, expected "
+                    f"{', '.join(names[:-1])} or {names[-1]}"
                 )
-            out["axis"] = axis.to_numpy()
+            out["axis"] = axis.to_numpy(dtype=object)
         else:
             out["axis"] = ""
         for canonical, name in numeric.items():
@@ -188,7 +192,7 @@ def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationT
     table = pd.concat(frames, ignore_index=True)
     # training order is file order: repetition, then row (stable)
     table = table.sort_values(["repetition"], kind="stable").reset_index(drop=True)
-    table = table[["repetition", "axis", "file", "row", *FORCE_COLUMNS, *VOLTAGE_COLUMNS]]
+    table = table[["repetition", "axis", "file", "row", *layout.loads, *layout.outputs]]
     return CalibrationTable(table, skipped, tuple(digests), hidden)
 
 
@@ -198,10 +202,11 @@ def read_task_log(
 ) -> tuple[np.ndarray, np.ndarray]:
     """A voltage log and its true forces, as ``simulate`` writes them, row for row.
 
-    Returns ``(u, f)``, shape (n, 3) each, in V and N (config columns and scales).
+    Returns ``(u, f)``, shape (n, N) each, in V and N (config columns and scales).
     """
     out = []
-    for path, canon in ((Path(voltages), VOLTAGE_COLUMNS), (Path(forces), FORCE_COLUMNS)):
+    layout = settings.layout
+    for path, canon in ((Path(voltages), layout.outputs), (Path(forces), layout.loads)):
         with reading(path), open_input(path) as fh:  # read once: it may be a pipe
             data = fh.read()
         header = read_header(path, settings, data)

@@ -8,6 +8,7 @@ import errno
 import os
 import re
 import select
+import shutil
 import stat
 import sys
 import tempfile
@@ -235,6 +236,36 @@ def place(tmp: str, path: Path, *, force: bool) -> None:
         os.replace(tmp, path)
     elif not (_rename_noreplace(tmp, path) or _link_noreplace(tmp, path)):
         _placeholder_noreplace(tmp, path)
+
+
+def place_directory(tmp: str | Path, path: Path, *, force: bool) -> None:
+    """:func:`place` for a finished directory (a Parquet dataset): all its files or none.
+
+    With ``force`` a previous directory at ``path`` is moved aside, replaced, then
+    removed; without it an existing ``path`` is never replaced.
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise InputError(f"{path}: is a file, expected a directory for the dataset")
+    if not force:
+        if not _rename_noreplace(str(tmp), path):
+            if path.exists():
+                raise _appeared(path)
+            os.rename(tmp, path)
+        return
+    old = None
+    if path.exists():
+        old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=_directory(path)))
+        os.replace(path, old / path.name)
+    try:
+        os.replace(tmp, path)
+    except BaseException:
+        if old is not None:
+            os.replace(old / path.name, path)
+        raise
+    finally:
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
 
 
 def _write_error(path: Path, err: OSError) -> InputError:

@@ -297,7 +297,7 @@ class CsvParser:
             cells.append(fields + [""] * (width - len(fields)))
         cols = list(zip(*cells, strict=True))
         if chunk.truncated:  # no forces whatever it holds: the last number may be cut short
-            u = np.full((len(lines), 3), np.nan)
+            u = np.full((len(lines), len(self.names)), np.nan)
         else:
             u = np.column_stack([
                 to_numbers(cols[self.header.index(n)], self.path, n, row, self.settings.decimal,
@@ -401,7 +401,7 @@ def parquet_blocks(path: Path, names: list[str], settings: Settings, *,
                                      f"{cols[-1][inf[0]]!r}, expected a finite number")
             else:
                 raise InputError(f"{where(path, None, n)}: type {col.type}, expected numbers")
-        u = np.column_stack(cols) if cols else np.empty((0, 3))
+        u = np.column_stack(cols) if cols else np.empty((0, len(names)))
         done += len(table)
         yield Block(row, u, table=table, done=done, total=total)
         row += len(table)

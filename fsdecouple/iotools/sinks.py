@@ -16,7 +16,7 @@ from .logs import Block
 
 def _forces_table(f: np.ndarray, empty: np.ndarray) -> list[pa.Array]:
     mask = empty if empty.any() else None
-    return [pa.array(f[:, k], pa.float64(), mask=mask) for k in range(3)]
+    return [pa.array(f[:, k], pa.float64(), mask=mask) for k in range(f.shape[1])]
 
 
 def force_decimals(full_scale, budget: float = 1e-10) -> int:
@@ -44,13 +44,14 @@ class CsvSink:
 
     def __init__(self, fh, header: list[str], header_line: bytes | None,
                  decimals: int | None = None, *, sep: str = ",", decimal: str = ".",
-                 extra: tuple[str, ...] = ()):
+                 extra: tuple[str, ...] = (), columns: tuple[str, ...] = FORCE_COLUMNS):
         self.fh = fh
+        self.columns = columns
         self.header = header
         self.decimals = decimals
         self.sep, self.decimal = sep, decimal
         line = header_line if header_line is not None else sep.join(header).encode()
-        fh.write(sep.join([line.decode("utf-8", "surrogateescape"), *FORCE_COLUMNS, *extra])
+        fh.write(sep.join([line.decode("utf-8", "surrogateescape"), *columns, *extra])
                  .encode("utf-8", "surrogateescape") + b"\n")
 
     def _text(self, a: pa.Array) -> pa.Array:
@@ -87,7 +88,7 @@ class CsvSink:
             for i, fld in enumerate(table.schema):
                 if pa.types.is_floating(fld.type):
                     table = table.set_column(i, fld.name, self._text(table.column(i)))
-        for c, a in zip(FORCE_COLUMNS, text, strict=True):
+        for c, a in zip(self.columns, text, strict=True):
             table = table.append_column(c, a)
         for k, a in enumerate(extra):
             table = table.append_column(f"_extra{k}", a)
@@ -114,15 +115,17 @@ class ParquetSink:
     ``metadata``: key-value pairs added to the schema's metadata (the units).
     """
 
-    def __init__(self, fh, extra: tuple[str, ...] = (), metadata: dict[str, str] | None = None):
+    def __init__(self, fh, extra: tuple[str, ...] = (), metadata: dict[str, str] | None = None,
+                 columns: tuple[str, ...] = FORCE_COLUMNS):
         self.fh = fh
+        self.columns = columns
         self.extra = extra
         self.metadata = {k.encode(): v.encode() for k, v in (metadata or {}).items()}
         self.writer: pq.ParquetWriter | None = None
 
     def encode(self, block: Block, f: np.ndarray, empty: np.ndarray, extra: tuple = ()) -> pa.Table:
         table = block.table
-        for c, a in zip(FORCE_COLUMNS, _forces_table(f, empty), strict=True):
+        for c, a in zip(self.columns, _forces_table(f, empty), strict=True):
             table = table.append_column(c, a)
         for c, a in zip(self.extra, extra, strict=True):
             table = table.append_column(c, a)

@@ -3,7 +3,9 @@
     PYTHONPATH=. python tests/data/make_golden.py [--force]
 
 Fits ``sample_data/calibration`` with the built-in settings and writes
-``tests/data/golden/model-v<FORMAT_VERSION>.json``.  Files of older versions are
+``tests/data/golden/model-v<FORMAT_VERSION>.json``, and fits ``sample_data/six_axis``
+with ``configs/six-axis.yaml`` into ``six-axis-v<FORMAT_VERSION>.json`` (from version
+3, which reads N-component sensors).  Files of older versions are
 kept as they are, so tests/test_golden.py proves old model files still load.
 Run from the repository root: the provenance records the relative input paths,
 and ``created`` is fixed, so regenerating on another machine changes only the
@@ -33,13 +35,17 @@ def main() -> None:
     # as `fsdecouple fit` makes it: the model and its held-out verdict (format 2)
     model = calibrate(load_calibration(Path("sample_data/calibration"), settings), settings,
                       workers=1)
-    model.created = CREATED
-    out = Path("tests/data/golden") / f"model-v{FORMAT_VERSION}.json"
-    try:
-        save_model(model, out, force=args.force)
-    except FsdecoupleError as err:
-        raise SystemExit(f"error: {err}") from None
-    print(f"wrote {out}")
+    six_settings = load_config(Path("configs/six-axis.yaml"))
+    six = calibrate(load_calibration(Path("sample_data/six_axis/calibration"), six_settings),
+                    six_settings, workers=1)
+    for m, name in ((model, "model"), (six, "six-axis")):
+        m.created = CREATED
+        out = Path("tests/data/golden") / f"{name}-v{FORMAT_VERSION}.json"
+        try:
+            save_model(m, out, force=args.force)
+        except FsdecoupleError as err:
+            raise SystemExit(f"error: {err}") from None
+        print(f"wrote {out}")
 
 
 if __name__ == "__main__":

@@ -1,0 +1,162 @@
+"""Many-log apply on a real Dask cluster (issue 16): two worker processes on small data.
+
+Every output is compared with the local engine's (itself single-file ``apply``,
+test_batch.py): CSV byte for byte, Parquet as Arrow tables, every column and type.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import socket
+import threading
+import time
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+from conftest import SAMPLE, assert_one_line_error, invoke
+from test_batch import make_logs
+
+distributed = pytest.importorskip("distributed")
+
+pytestmark = pytest.mark.slow  # a cluster of worker processes
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=":0", silence_logs=50) as c:
+        yield c
+
+
+def _tables_equal(a, b):
+    ta, tb = pq.read_table(a), pq.read_table(b)
+    assert ta.schema.equals(tb.schema, check_metadata=False), (ta.schema, tb.schema)
+    assert ta.equals(tb)
+    for key in (b"fsdecouple.force_unit", b"fsdecouple.output_unit"):
+        assert ta.schema.metadata[key] == tb.schema.metadata[key]
+
+
+def _same_outputs(local, dask):
+    files = sorted(p.relative_to(local) for p in local.rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(dask) for p in dask.rglob("*") if p.is_file())
+    for rel in files:
+        if rel.suffix == ".csv":
+            assert (local / rel).read_bytes() == (dask / rel).read_bytes(), rel
+        else:
+            _tables_equal(local / rel, dask / rel)
+    return files
+
+
+def test_dask_writes_what_the_local_engine_writes(sample_model, tmp_path, cluster):
+    logs = make_logs(tmp_path)
+    args = ["apply", sample_model, logs, "--tare", 200, "--unit", "gf", "--json"]
+    local = json.loads(invoke([*args, "-o", f"{tmp_path / 'local'}/"]).stdout)
+    dask = json.loads(invoke([*args, "-o", f"{tmp_path / 'dask'}/", "--engine", "dask",
+                              "--scheduler", cluster.scheduler_address]).stdout)
+    files = _same_outputs(tmp_path / "local", tmp_path / "dask")
+    assert len(files) == 6  # two CSV logs, three dataset parts, one Parquet log
+    strip = [{k: v for k, v in f.items() if k != "output"} for f in local["files"]]
+    assert strip == [{k: v for k, v in f.items() if k != "output"} for f in dask["files"]]
+    assert dask["engine"] == "dask" and dask["failed"] == []
+    assert {f["rows"] for f in dask["files"]} == {1000, 3000}
+
+
+def test_dask_local_cluster_of_its_own_and_bad_logs(sample_model, tmp_path):
+    """Without --scheduler: a LocalCluster of --workers processes.  A bad CSV log and a
+    dataset whose part lacks a column fail alone; nothing of them is written."""
+    logs = make_logs(tmp_path)
+    text = (logs / "b" / "two.csv").read_text().splitlines()
+    text[5] = "0.004,0.01,abc,0.0"
+    (logs / "b" / "two.csv").write_text("\n".join(text) + "\n")
+    pq.write_table(pa.table({"t": [0.0], "ux": [0.1], "uy": [0.0]}), logs / "ds" / "part.3.parquet")
+    out = tmp_path / "out"
+    r = invoke(["apply", sample_model, logs, "-o", f"{out}/", "--engine", "dask", "--workers", 2,
+                "--json"], code=2)
+    doc = json.loads(r.stdout)
+    assert doc["failed"] == [str(logs / "b" / "two.csv"), str(logs / "ds")]
+    assert "two.csv, row 6, column 'uy'" in r.stderr and "part.3.parquet: columns" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 2, r.stderr  # no worker tracebacks
+    assert sorted(p.name for p in out.iterdir()) == ["a", "single.parquet"]
+    ref = tmp_path / "ref.csv"
+    invoke(["apply", sample_model, logs / "a" / "one.csv", "-o", ref])
+    assert (out / "a" / "one.csv").read_bytes() == ref.read_bytes()
+
+
+def test_unreachable_scheduler_is_one_line(sample_model, tmp_path, monkeypatch):
+    import fsdecouple.batch_dask as engine
+
+    monkeypatch.setattr(engine, "CONNECT_TIMEOUT", 2.0)
+    logs = make_logs(tmp_path)
+    with socket.socket() as s:  # a port on this machine that nothing listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    t0 = time.monotonic()
+    r = invoke(["apply", sample_model, logs, "-o", f"{tmp_path / 'out'}/", "--engine", "dask",
+                "--scheduler", f"tcp://127.0.0.1:{port}"], code=2)
+    assert time.monotonic() - t0 < 30
+    assert_one_line_error(r, f"--scheduler tcp://127.0.0.1:{port}: cannot connect")
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_worker_killed_mid_log_leaves_no_partial_output(sample_model, tmp_path, cluster):
+    """A log read from a FIFO: the test feeds it in part (output is being written), kills
+    the worker decoupling it with SIGKILL, then feeds the whole log to the task Dask runs
+    again.  The output is the whole log's, as the local engine writes it, and the killed
+    worker's partial file is gone."""
+    from fsdecouple.batch import apply_many
+
+    rows = (SAMPLE / "task_voltages.csv").read_bytes().splitlines(keepends=True)
+    body = b"".join(rows[1:]) * 150  # 450,000 rows, ~17 MB: four 4 MB blocks
+    content = rows[0] + body
+    (tmp_path / "src").mkdir()
+    regular = tmp_path / "src" / "log.csv"
+    regular.write_bytes(content)
+    fifo = tmp_path / "fifo" / "log.csv"
+    fifo.parent.mkdir()
+    os.mkfifo(fifo)
+    out = tmp_path / "out"
+    result = {}
+    run = threading.Thread(target=lambda: result.update(r=apply_many(
+        sample_model, [fifo], out, engine="dask", scheduler=cluster.scheduler_address)))
+    with distributed.Client(cluster, set_as_default=False) as client:
+        run.start()
+        fh = open(fifo, "wb")  # opens when the task opens the FIFO  # noqa: SIM115
+        try:
+            # two blocks and a half: apply writes block 1 once block 2 is read
+            fh.write(content[:10_000_000])
+            fh.flush()
+            partial = _wait_for(lambda: [p for p in out.rglob(".*.tmp") if p.stat().st_size > 0])
+            busy = [w for w, keys in client.processing().items() if keys]
+            assert len(busy) == 1, client.processing()
+            pid = client.run(os.getpid, workers=busy)[busy[0]]
+            os.kill(pid, signal.SIGKILL)  # as the OOM killer or a lost node would
+            _wait_for(lambda: busy[0] not in client.scheduler_info()["workers"])
+        finally:
+            with contextlib.suppress(BrokenPipeError):  # the killed reader is gone
+                fh.close()
+        with open(fifo, "wb") as fh:  # the task, run again on a live worker
+            fh.write(content)
+        run.join(60)
+        assert not run.is_alive()
+        client.wait_for_workers(2, timeout=60)
+    assert partial and not any(p.exists() for p in partial)
+    doc = result["r"].to_dict()
+    assert doc["failed"] == [] and doc["files"][0]["rows"] == 450_000
+    ref = tmp_path / "ref.csv"
+    invoke(["apply", sample_model, regular, "-o", ref])
+    assert (out / "log.csv").read_bytes() == ref.read_bytes()
+    assert sorted(p.name for p in out.iterdir()) == ["log.csv"]  # no staging, no temporary file
+
+
+def _wait_for(check, timeout=60.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        got = check()
+        if got:
+            return got
+        time.sleep(0.05)
+    raise AssertionError("timed out")
