@@ -50,7 +50,7 @@ MAX_SURROGATE_ERROR = PROMISE / 4
 # Up to this many rows, a call goes row by row through the plain-Python evaluator
 # (~1 us a row, bit-identical) rather than the block path (~50 us of numpy calls).
 SMALL_ROWS = 32
-BLOCK_ROWS = 1 << 15  # 32 K rows: measured fastest here; smaller blocks pay more Python per row
+BLOCK_ROWS = 1 << 15  # rows per block for N <= 3, times 3 / N above (work arrays stay in cache)
 # A refined row has settled when its last step, k_a f_a - p_a^K, is at most this
 # fraction of each full-scale output.  Under Section 2.1's assumptions it is at most
 # (N - 1) 0.05 * 5 % = 0.5 % F.S. at K = 1 (N = 3), tenfold less a step on; above 1 %
@@ -324,15 +324,14 @@ class TableDecoupler:
                 converged[bad] = sub
 
     def decouple(self, u: np.ndarray, *, rotate: bool = True, workers: int | None = None,
-                 block_rows: int = BLOCK_ROWS, covered: np.ndarray | None = None,
+                 block_rows: int | None = None, covered: np.ndarray | None = None,
                  refine: int = 0, converged: np.ndarray | None = None) -> np.ndarray:
         """Forces by eq. (11) for zero-corrected outputs ``u``, shape (n, N).
 
         ``covered``, a boolean array of n rows, is set False where a row left the
         tables (outside their intervals, or NaN, at u or at any refinement step)
-        and took the exact path.  ``refine``: K fixed-point steps (module
-        docstring); ``converged`` (n,), if given, is set False where a row did not
-        settle (its forces are NaN).
+        and took the exact path.  ``refine``: K fixed-point steps (module docstring);
+        ``converged`` (n,), if given, is set False where a row did not settle (NaN forces).
         """
         u = np.ascontiguousarray(u, dtype=float).reshape(-1, self.n)
         if covered is not None:
@@ -344,6 +343,7 @@ class TableDecoupler:
             one = self._small[refine]
             return np.array([one(*v) for v in u.tolist()], dtype=float).reshape(-1, self.n)
         out = np.empty_like(u)
+        block_rows = block_rows or BLOCK_ROWS * 3 // max(3, self.n)  # 32 K, 16 K for N = 6
         starts = range(0, u.shape[0], block_rows)
         workers = default_workers() if workers is None else workers
 
