@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
-import statistics
 import sys
 import tempfile
 import time
@@ -31,20 +30,11 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from run import ROOT, machine, write_log  # noqa: E402  (puts ROOT and docs/ on sys.path)
+from run import ROOT, machine, median_time, write_log  # noqa: E402  (puts ROOT and docs/ on sys.path)
 
 from fsdecouple import load_calibration, load_config, load_model, save_model  # noqa: E402
 from fsdecouple.batch import apply_many  # noqa: E402
 from fsdecouple.fit import fit  # noqa: E402
-
-
-def timed(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 def pyarrow_csv_copy(files, out: Path) -> None:
@@ -175,10 +165,10 @@ def main() -> int:
             for kind, inputs, files, copier, whole in (
                     ("CSV", [csv_dir], csvs, pyarrow_csv_copy, pyarrow_whole_csv_copy),
                     ("Parquet", [ds], parts, pyarrow_parquet_copy, pyarrow_whole_parquet_copy)):
-                base = timed(lambda files=files, copier=copier: copy(copier, files), repeats)
-                strict = timed(lambda files=files, whole=whole: copy(whole, files), repeats)
-                local = timed(lambda inputs=inputs: run(inputs, "local"), repeats)
-                dask = timed(lambda inputs=inputs: run(inputs, "dask", address), repeats)
+                base = median_time(lambda files=files, copier=copier: copy(copier, files), repeats)
+                strict = median_time(lambda files=files, whole=whole: copy(whole, files), repeats)
+                local = median_time(lambda inputs=inputs: run(inputs, "local"), repeats)
+                dask = median_time(lambda inputs=inputs: run(inputs, "dask", address), repeats)
                 what = "logs" if kind == "CSV" else "parts of one dataset"
                 row(f"F1. {kind}: --engine dask (2 workers) vs local, {n_logs} {what}", dask, "s",
                     local, "--engine local [s]", "<= 1.3x", dask / local <= 1.3)
@@ -195,8 +185,8 @@ def main() -> int:
             tiny.mkdir()
             for i in range(n_logs):
                 (tiny / f"t{i:03d}.csv").write_bytes(b"t,ux,uy,uz\n0,0.1,0,-0.1\n")
-            local_tiny = timed(lambda: run([tiny], "local"), repeats) / n_logs
-            dask_tiny = timed(lambda: run([tiny], "dask", address), repeats) / n_logs
+            local_tiny = median_time(lambda: run([tiny], "local"), repeats) / n_logs
+            dask_tiny = median_time(lambda: run([tiny], "dask", address), repeats) / n_logs
             row("F5. per-log overhead, dask (one-row logs)", dask_tiny * 1e3, "ms/log",
                 local_tiny * 1e3, "local engine [ms/log]", "info", True)
         finally:

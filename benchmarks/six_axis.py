@@ -28,32 +28,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from run import PYARROW_CSV_COPY, machine, median_child, median_time  # noqa: E402
+from run import apply_against_copy, machine, median_child, median_time  # noqa: E402
 
 from fsdecouple import load_calibration, load_config  # noqa: E402
 from fsdecouple.fit import chi_training_data, fit  # noqa: E402
-from fsdecouple.modelfile import save_model  # noqa: E402
 
 SIX = ROOT / "sample_data" / "six_axis"
-
-
-def write_log(path: Path, rows: int, model) -> None:
-    """A 1 kHz log ``t,u1..u6`` in the calibrated range, 7 decimals like the sample."""
-    import pyarrow as pa
-    import pyarrow.csv as pcsv
-
-    rng = np.random.default_rng(0)
-    r = model.calibrated_range
-    names = model.layout.outputs
-    with open(path, "wb") as fh:
-        fh.write(("t," + ",".join(names) + "\n").encode())
-        step = 1_000_000
-        for a in range(0, rows, step):
-            n = min(step, rows - a)
-            u = np.round(rng.uniform(r[:, 0], r[:, 1], (n, len(names))), 7)
-            t = np.round(np.arange(a, a + n) / 1000, 3)
-            table = pa.table({"t": t, **{c: u[:, k] for k, c in enumerate(names)}})
-            pcsv.write_csv(table, fh, pcsv.WriteOptions(include_header=False))
 
 
 def main() -> int:
@@ -124,16 +104,7 @@ def main() -> int:
     # --- 2. apply on a six-axis log ---------------------------------------------------------
     with tempfile.TemporaryDirectory(prefix="fsdecouple-bench6-") as tmp:
         tmp = Path(tmp)
-        mfile, log = tmp / "model.json", tmp / "log.csv"
-        save_model(model, mfile)
-        print(f"writing a {rows:,}-row six-axis CSV log", flush=True)
-        write_log(log, rows, model)
-        size = log.stat().st_size / 1e6
-        print(f"apply on {rows:,} rows ({size:.0f} MB)", flush=True)
-        base_t, base_mb = median_child([py, "-c", PYARROW_CSV_COPY, log, tmp / "copy.csv"],
-                                       repeats)
-        app_t, app_mb = median_child([py, "-m", "fsdecouple", "apply", mfile, log, "-o",
-                                      tmp / "f.csv", "--force"], repeats)
+        *_, (base_t, base_mb), (app_t, app_mb) = apply_against_copy(model, rows, repeats, tmp)
         full = rows >= 10_000_000
         goal = "<= 1.5x" if full else "info (<= 1.5x at 10 M rows)"
         row("2. fsdecouple apply, 6-axis CSV -> CSV", app_t, "s", base_t,

@@ -44,6 +44,18 @@ def to_png(fig: Figure, dpi: int = 110) -> bytes:
     return buf.getvalue()
 
 
+def _label(ax, title: str, xlabel: str, ylabel: str, *, small: bool = False,
+           title_size=None) -> None:
+    """A panel's title and axis labels; ``small`` for the many panels of an N = 6 grid."""
+    size = 9 if small else title_size
+    ax.set_title(title, **({} if size is None else {"fontsize": size}))
+    label = {"fontsize": 8} if small else {}  # matplotlib's own sizes unless small
+    ax.set_xlabel(xlabel, **label)
+    ax.set_ylabel(ylabel, **label)
+    if small:
+        ax.tick_params(labelsize=7)
+
+
 def _legend_by_label(ax):
     handles, labels = ax.get_legend_handles_labels()
     seen = {}
@@ -198,15 +210,14 @@ def chi_figure(model, points: pd.DataFrame | None = None, curves: dict | None = 
             u = np.linspace(*model.chi[name].input_range, 400)
             ax.plot(u, model.chi[name](u) * MV, label="ε-SVR", **SVR_STYLE)
         if layout.is_default:
-            ax.set_title(f"({PANEL[i]}) {_sub(CHI, name)}({_sub('u', name[1])}): "
-                         f"load on {name[1]}, error on {_sub('u', name[0])}")
-            ax.set_xlabel(f"prime output {_sub('u', name[1])} [{units.output}]")
-            ax.set_ylabel(f"coupling error {_sub('e', name)} [{small_unit}]")
+            _label(ax, f"({PANEL[i]}) {_sub(CHI, name)}({_sub('u', name[1])}): "
+                   f"load on {name[1]}, error on {_sub('u', name[0])}",
+                   f"prime output {_sub('u', name[1])} [{units.output}]",
+                   f"coupling error {_sub('e', name)} [{small_unit}]")
         else:
-            ax.set_title(f"χ {name}: load {layout.labels[b]} → {layout.outputs[a]}", fontsize=9)
-            ax.set_xlabel(f"{layout.outputs[b]} [{units.output_of(b)}]", fontsize=8)
-            ax.set_ylabel(f"e on {layout.outputs[a]} [{small_unit}]", fontsize=8)
-            ax.tick_params(labelsize=7)
+            _label(ax, f"χ {name}: load {layout.labels[b]} → {layout.outputs[a]}",
+                   f"{layout.outputs[b]} [{units.output_of(b)}]",
+                   f"e on {layout.outputs[a]} [{small_unit}]", small=True)
         ax.grid(True, color="0.88")
     handles, labels = _legend_by_label(axs[0])
     fig.legend(handles, labels, loc="outside lower center", ncol=len(labels), frameon=False)
@@ -262,14 +273,11 @@ def residual_figure(residuals: pd.DataFrame, title: str, load_unit: str = "N") -
             ax.axhline(0.0, color="0.3", lw=0.8)
             kind = "on-axis" if comp == axis else "off-axis"
             if n == 3:
-                ax.set_title(f"{axis} loaded: error in {_sub('f', comp)} ({kind})", fontsize=10)
-                ax.set_xlabel(f"applied load {_sub('F', axis)} [{load_unit}]")
-                ax.set_ylabel(f"{_sub('f', comp)} − {_sub('F', comp)} [{load_unit}]")
+                _label(ax, f"{axis} loaded: error in {_sub('f', comp)} ({kind})",
+                       f"applied load {_sub('F', axis)} [{load_unit}]",
+                       f"{_sub('f', comp)} − {_sub('F', comp)} [{load_unit}]", title_size=10)
             else:
-                ax.set_title(f"{axis} loaded: error in {comp}", fontsize=9)
-                ax.set_xlabel(f"applied {axis}", fontsize=8)
-                ax.set_ylabel(f"Δ{comp}", fontsize=8)
-                ax.tick_params(labelsize=7)
+                _label(ax, f"{axis} loaded: error in {comp}", f"applied {axis}", f"Δ{comp}", small=True)
             ax.yaxis.set_tick_params(labelleft=True)
             ax.grid(True, color="0.88")
     handles, labs = _legend_by_label(axs[0, 0])

@@ -211,7 +211,8 @@ def simulate_task(
     return volts, forces
 
 
-def _write_csv(df: pd.DataFrame, path: Path, formats: dict[str, str], group: atomic_files) -> None:
+def write_csv(df: pd.DataFrame, path: Path, formats: dict[str, str], group: atomic_files) -> None:
+    """``df`` as CSV, each column in ``formats`` printed with its %-format, into ``group``."""
     out = df.copy()
     for col, fmt in formats.items():
         out[col] = out[col].map(lambda v, fmt=fmt: fmt % v)
@@ -306,11 +307,11 @@ def simulate(
     with atomic_files(force=force) as group:
         for rep, g in table.groupby("repetition"):
             path = out / "calibration" / f"rep{rep}.csv"
-            _write_csv(g.drop(columns="repetition"), path, {**force_fmt, **volt_fmt}, group)
+            write_csv(g.drop(columns="repetition"), path, {**force_fmt, **volt_fmt}, group)
             written.append(path)
         volts, forces = simulate_task(sensor, seed=seed)
-        _write_csv(volts, out / "task_voltages.csv", {"t": "%.3f", **volt_fmt}, group)
-        _write_csv(forces, out / "task_forces.csv", {"t": "%.3f", **force_fmt}, group)
+        write_csv(volts, out / "task_voltages.csv", {"t": "%.3f", **volt_fmt}, group)
+        write_csv(forces, out / "task_forces.csv", {"t": "%.3f", **force_fmt}, group)
     written += [out / "task_voltages.csv", out / "task_forces.csv"]
     return written
 

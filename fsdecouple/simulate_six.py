@@ -19,7 +19,7 @@ import pandas as pd
 from .axes import Layout
 from .errors import InputError
 from .iotools.files import atomic_files, check_output
-from .simulate import SimulatedSensor
+from .simulate import SimulatedSensor, write_csv
 
 COMPONENTS = ("fx", "fy", "fz", "mx", "my", "mz")
 OUTPUTS = ("u1", "u2", "u3", "u4", "u5", "u6")
@@ -109,14 +109,6 @@ def simulate_task(sensor: SimulatedSensor, n: int = 3000, rate: float = 1000.0,
     return volts, loads
 
 
-def _write_csv(df: pd.DataFrame, path: Path, formats: dict[str, str], group: atomic_files) -> None:
-    out = df.copy()
-    for col, fmt in formats.items():
-        out[col] = out[col].map(lambda v, fmt=fmt: fmt % v)
-    with group.open(path) as fh:
-        out.to_csv(fh, index=False, lineterminator="\n")
-
-
 def write_six_axis(out: str | Path, *, seed: int = 0, repetitions: int = 6, force: bool = False,
                    sensor: SimulatedSensor | None = None) -> list[Path]:
     """``OUT/calibration/rep1.csv ..``, ``task_voltages.csv``, ``task_forces.csv`` and
@@ -143,10 +135,10 @@ def write_six_axis(out: str | Path, *, seed: int = 0, repetitions: int = 6, forc
     volts, loads = simulate_task(sensor, seed=seed)
     with atomic_files(force=force) as group:
         for rep, g in table.groupby("repetition"):
-            _write_csv(g.drop(columns="repetition"), out / "calibration" / f"rep{rep}.csv",
+            write_csv(g.drop(columns="repetition"), out / "calibration" / f"rep{rep}.csv",
                        {**load_fmt, **volt_fmt}, group)
-        _write_csv(volts, out / "task_voltages.csv", {"t": "%.3f", **volt_fmt}, group)
-        _write_csv(loads, out / "task_forces.csv", {"t": "%.3f", **load_fmt}, group)
+        write_csv(volts, out / "task_voltages.csv", {"t": "%.3f", **volt_fmt}, group)
+        write_csv(loads, out / "task_forces.csv", {"t": "%.3f", **load_fmt}, group)
         with group.open(out / "sensor.yaml") as fh:
             fh.write(CONFIG.format(sensor=f"sim-6axis-seed{seed}"))
     return targets

@@ -78,6 +78,15 @@ class Grid:
         return {"gamma": list(self.gamma), "C": list(self.C), "epsilon": list(self.epsilon)}
 
 
+def grid_option(tune: bool, text: str | None) -> Grid | None:
+    """``--tune-grid``'s grid, checked against ``--tune`` (fit and cv); None: the default grid."""
+    if text is None:
+        return None
+    if not tune:
+        raise InputError("--tune-grid is the grid of --tune: add --tune")
+    return parse_grid(text)
+
+
 def parse_grid(text: str) -> Grid:
     """``"gamma=2,4,8;C=1,10;epsilon=1,2"`` -> :class:`Grid`; keys left out keep the default."""
     values: dict[str, tuple[float, ...]] = {}

@@ -36,6 +36,16 @@ def make_logs(root):
     return root / "logs"
 
 
+def spoil(logs):
+    """Two bad inputs among the good: a text value in two.csv (row 6, uy), and a dataset part
+    without uz."""
+    text = (logs / "b" / "two.csv").read_text().splitlines()
+    text[5] = "0.004,0.01,abc,0.0"
+    (logs / "b" / "two.csv").write_text("\n".join(text) + "\n")
+    pq.write_table(pa.table({"t": [0.0], "ux": [0.1], "uy": [0.0]}), logs / "ds" / "part.3.parquet")
+    return logs
+
+
 def single(model, log, out, *args):
     invoke(["apply", model, log, "-o", out, *args])
     return out
@@ -80,11 +90,7 @@ def test_files_and_globs_go_under_their_common_parent(sample_model, tmp_path):
 
 
 def test_a_bad_log_is_reported_and_does_not_stop_the_others(sample_model, tmp_path):
-    logs = make_logs(tmp_path)
-    text = (logs / "b" / "two.csv").read_text().splitlines()
-    text[5] = "0.004,0.01,abc,0.0"
-    (logs / "b" / "two.csv").write_text("\n".join(text) + "\n")
-    pq.write_table(pa.table({"t": [0.0], "ux": [0.1], "uy": [0.0]}), logs / "ds" / "part.3.parquet")
+    logs = spoil(make_logs(tmp_path))
     out = tmp_path / "out"
     r = invoke(["apply", sample_model, logs, "-o", f"{out}/", "--json"], code=2)
     doc = json.loads(r.stdout)

@@ -14,11 +14,10 @@ import socket
 import threading
 import time
 
-import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 from conftest import SAMPLE, assert_one_line_error, invoke
-from test_batch import make_logs
+from test_batch import make_logs, spoil
 
 distributed = pytest.importorskip("distributed")
 
@@ -68,11 +67,7 @@ def test_dask_writes_what_the_local_engine_writes(sample_model, tmp_path, cluste
 def test_dask_local_cluster_of_its_own_and_bad_logs(sample_model, tmp_path):
     """Without --scheduler: a LocalCluster of --workers processes.  A bad CSV log and a
     dataset whose part lacks a column fail alone; nothing of them is written."""
-    logs = make_logs(tmp_path)
-    text = (logs / "b" / "two.csv").read_text().splitlines()
-    text[5] = "0.004,0.01,abc,0.0"
-    (logs / "b" / "two.csv").write_text("\n".join(text) + "\n")
-    pq.write_table(pa.table({"t": [0.0], "ux": [0.1], "uy": [0.0]}), logs / "ds" / "part.3.parquet")
+    logs = spoil(make_logs(tmp_path))
     out = tmp_path / "out"
     r = invoke(["apply", sample_model, logs, "-o", f"{out}/", "--engine", "dask", "--workers", 2,
                 "--json"], code=2)

@@ -82,9 +82,14 @@ def interactive() -> bool:
     return err_console.is_terminal and not os.environ.get("CI")
 
 
-def warn(lines) -> None:
+def say(lines, label: str = "error", style: str = "red") -> None:
+    """Each line on stderr after a coloured ``label:`` (one per failed file, sensor or gate)."""
     for line in lines:
-        err_console.print(Text("warning: ", "yellow") + Text(line), soft_wrap=True)
+        err_console.print(Text(f"{label}: ", style) + Text(line), soft_wrap=True)
+
+
+def warn(lines) -> None:
+    say(lines, "warning", "yellow")
 
 
 def print_json(doc) -> None:

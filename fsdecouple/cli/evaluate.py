@@ -81,7 +81,7 @@ def cv(
     from ..console_tune import tune_table
     from ..cv import run_cv
     from ..heldout import parse_folds
-    from ..tune import parse_grid
+    from ..tune import grid_option
 
     with user_errors():
         settings = load_config(config)
@@ -91,9 +91,7 @@ def cv(
             raise InputError("--task-tare needs --task")
         if workers is not None and workers < 1:
             raise InputError(f"--workers {workers}: needs at least 1")
-        if tune_grid is not None and not tune:
-            raise InputError("--tune-grid is the grid of --tune: add --tune")
-        grid = parse_grid(tune_grid) if tune_grid is not None else None
+        grid = grid_option(tune, tune_grid)
         if output is not None:
             check_output(output, force=force)
         cs = load_calibration(calib, settings)

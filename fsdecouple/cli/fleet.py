@@ -6,9 +6,8 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.text import Text
 
-from .app import ForceOpt, JsonOpt, _bar, app, console, err_console, print_json, user_errors
+from .app import ForceOpt, JsonOpt, _bar, app, console, print_json, say, user_errors
 
 MaxDriftOpt = Annotated[
     float | None, typer.Option("--max-drift", help="Exit 1 if any change exceeds P [%], e.g. 0.5.")
@@ -34,7 +33,7 @@ def compare(
         console.print(drift_table(doc))
     line = drift_line(doc)
     if doc["passed"] is False:
-        err_console.print(Text("gate failed: ", "red") + Text(line), soft_wrap=True)
+        say([line], "gate failed")
         raise typer.Exit(1)
     if line and not json_out:
         console.print(line)
@@ -73,10 +72,8 @@ def fit_many(
         print_json(doc)
     else:
         console.print(fleet_table(doc))
-    for line in fleet_errors(doc):
-        err_console.print(Text("error: ", "red") + Text(line), soft_wrap=True)
-    for line in fleet_gate_lines(doc):
-        err_console.print(Text("gate failed: ", "red") + Text(line), soft_wrap=True)
+    say(fleet_errors(doc))
+    say(fleet_gate_lines(doc), "gate failed")
     if doc["failed"]:
         raise typer.Exit(2)
     if doc["gate_failed"]:

@@ -11,7 +11,6 @@ from rich.text import Text
 
 from ..config import load_config
 from ..console import fit_checks_table, fit_tables
-from ..errors import InputError
 from ..iotools.files import check_output, refuse_overwriting_input
 from ..metrics import check_max_gamma
 from ..modelfile import load_model, save_model
@@ -84,7 +83,7 @@ def fit(
     from ..checks import assumption_checks
     from ..console_tune import tune_table
     from ..model import refine_advice
-    from ..tune import parse_grid
+    from ..tune import grid_option
     from ..verdict import calibrate, verdict_line
 
     with user_errors():
@@ -93,9 +92,7 @@ def fit(
             scaling=scaling, refine=refine, extrapolation=extrapolation,
         )
         check_max_gamma(max_gamma)
-        if tune_grid is not None and not tune:
-            raise InputError("--tune-grid is the grid of --tune: add --tune")
-        grid = parse_grid(tune_grid) if tune_grid is not None else None
+        grid = grid_option(tune, tune_grid)
         check_output(output, force=force)
         cs = load_calibration(calib, settings, exclude=exclude or ())
         refuse_overwriting_input(output, [*_read(cs), *_given(config)])

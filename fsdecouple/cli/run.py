@@ -7,7 +7,6 @@ from typing import Annotated
 
 import typer
 from rich.progress import DownloadColumn, MofNCompleteColumn, TimeRemainingColumn
-from rich.text import Text
 
 from ..config import load_config
 from ..console import apply_lines, apply_warnings
@@ -23,8 +22,8 @@ from .app import (
     _parse_zero,
     app,
     console,
-    err_console,
     print_json,
+    say,
     user_errors,
     warn,
 )
@@ -128,7 +127,6 @@ def _apply_many(model_file, inputs, output, config, tare, zero, unit, refine, ro
         print_json(doc)
     else:
         console.print(apply_many_table(doc))
-    for line in apply_many_errors(doc):
-        err_console.print(Text("error: ", "red") + Text(line), soft_wrap=True)
+    say(apply_many_errors(doc))
     if doc["failed"]:
         raise typer.Exit(2)
