@@ -191,14 +191,13 @@ class TableDecoupler:
                                             else np.asarray(full_scale_output, dtype=float))
         self.rotation = None if rotation is None else np.asarray(rotation, dtype=float)
         lo, inv, count = [], [], []
-        tabs: list[list[np.ndarray]] = [[] for _ in range(4)]
+        self.tab: list[list[np.ndarray]] = []  # [b][m]: (intervals, 4), c0..c3 of one interval together
         self.rows: list[list[tuple[float, ...]]] = []  # per input, for the one-vector path
         for b in range(n):
             fed = [surrogates[(a, b)] for a in _fed_order(n, b)]
             coef = [s.coefficients() * -self.inv_k[a] for a, s in zip(_fed_order(n, b), fed,
                                                                         strict=True)]
-            for j in range(4):  # (intervals, N - 1): one row fetches coefficient j of every chi
-                tabs[j].append(np.stack([c[j] for c in coef], axis=1))
+            self.tab.append([np.ascontiguousarray(c.T) for c in coef])
             lo.append(fed[0].lo)
             inv.append(fed[0].inv_step)
             count.append(fed[0].intervals)
@@ -206,12 +205,9 @@ class TableDecoupler:
         self.lo = np.array(lo)
         self.inv_step = np.array(inv)
         self.intervals = np.array(count, dtype=float)
-        self.offsets = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.intp)
-        self.tab = [np.ascontiguousarray(np.concatenate(t).T) for t in tabs]  # [j][m, interval]
         self._lo, self._inv_step, self._intervals, self._inv_k = (
             v.reshape(n, 1) for v in (self.lo, self.inv_step, self.intervals, self.inv_k)
         )
-        self._offsets = self.offsets.reshape(n, 1)
         self._k, self._step_tol = self.k.reshape(n, 1), self.step_tol.reshape(n, 1)
         self._sum = [_sum_order(n, a) for a in range(n)]
 
@@ -240,17 +236,19 @@ class TableDecoupler:
         # allocation of this size is mmap'ed and page-faulted on every block,
         # which costs more than the arithmetic.
         ws = getattr(self._local, "ws", None)
-        n, m = self.n, self.n - 1
+        n = self.n
         if ws is None or ws["t"].shape[1] < rows:
             ws = {k: np.empty((n, rows)) for k in ("ut", "t", "s", "p")}
-            ws.update({k: np.empty((m, n, rows)) for k in ("g", "c")})
+            ws["g"] = np.empty(rows)
+            ws["c"] = np.empty((rows, 4))
             ws["i"] = np.empty((n, rows), dtype=np.intp)
             self._local.ws = ws
-        return {k: v[..., :rows] for k, v in ws.items()}
+        return {k: v[:rows] if k in ("c", "g") else v[..., :rows] for k, v in ws.items()}
 
-    def _terms(self, x: np.ndarray, w: dict[str, np.ndarray]) -> np.ndarray | None:
-        """g_ab(x_b) of every table into ``w["g"]`` (N - 1, N, n), for x (N, n).
+    def _eq11(self, x: np.ndarray, w: dict[str, np.ndarray], f: np.ndarray) -> np.ndarray | None:
+        """f = u / k + sum_b g_ab(x_b), i.e. eq. (11) with every chi at x (N, n), into f (N, n).
 
+        u is ``w["ut"]``; f may be x itself (x is only read for the table index).
         Returns None when every x lies inside its table, else the (N, n) mask of
         those that do (not NaN); the others are evaluated at the table's start.
         """
@@ -264,23 +262,23 @@ class TableDecoupler:
             np.copyto(t, 0.0, where=~ok)
         np.copyto(i, t, casting="unsafe")  # truncation = floor, as t >= 0
         np.subtract(t, i, out=s)
-        i += self._offsets
-        # g[m, b]: the m-th chi fed by input b, rows contiguous, so s broadcasts over m
-        g, c = w["g"], w["c"]
-        for m in range(self.n - 1):
-            np.take(self.tab[3][m], i, out=g[m], mode="clip")
-        for j in (2, 1, 0):  # Horner
-            g *= s
-            for m in range(self.n - 1):
-                np.take(self.tab[j][m], i, out=c[m], mode="clip")
-            g += c
-        return ok
-
-    def _add_terms(self, f: np.ndarray, g: np.ndarray) -> None:
-        """f_a += g_ab in :func:`_sum_order`: f = u / k on entry, the forces of eq. (11) on exit."""
+        np.multiply(w["ut"], self._inv_k, out=f)
+        # g_ab(x_b), the m-th chi fed by input b, added to f_a as soon as it is made,
+        # in _sum_order.  One take fetches the four coefficients of a row's interval
+        # together (32 bytes, numpy's fast fixed-size copy); c and g stay in cache.
+        c, g = w["c"], w["g"]
         for a, terms in enumerate(self._sum):
             for b, m in terms:
-                f[a] += g[m, b]
+                np.take(self.tab[b][m], i[b], axis=0, out=c, mode="clip")
+                sb = s[b]
+                np.multiply(c[:, 3], sb, out=g)  # Horner
+                g += c[:, 2]
+                g *= sb
+                g += c[:, 1]
+                g *= sb
+                g += c[:, 0]
+                f[a] += g
+        return ok
 
     def _block(self, u: np.ndarray, out: np.ndarray, rotate: bool, covered, refine: int = 0,
                converged=None) -> None:
@@ -289,18 +287,18 @@ class TableDecoupler:
         # inner loop of length N, which is many times slower than one long row.
         ut, p = w["ut"], w["p"]
         np.copyto(ut, u.T)
-        ok = self._terms(ut, w)
+        x, ok = ut, None
         for _ in range(refine):
             # p^(j+1) = k (u / k + sum g(p^j)) = u - sum chi(p^j): the same sum as
             # the forces, multiplied back by k (the tables hold g = -chi / k)
-            np.multiply(ut, self._inv_k, out=p)
-            self._add_terms(p, w["g"])
+            more = self._eq11(x, w, p)
             p *= self._k
-            more = self._terms(p, w)
+            x = p
             if more is not None:
                 ok = more if ok is None else ok & more
-        ut *= self._inv_k
-        self._add_terms(ut, w["g"])
+        more = self._eq11(x, w, ut)  # the forces, in place of u
+        if more is not None:
+            ok = more if ok is None else ok & more
         bad_step = None
         if refine:
             step = np.multiply(ut, self._k, out=w["t"])  # k f = p^(K+1)
