@@ -19,7 +19,7 @@ import pandas as pd
 from .axes import Layout
 from .errors import InputError
 from .iotools.files import atomic_files, check_output
-from .simulate import SimulatedSensor, write_csv
+from .simulate import SimulatedSensor, with_coupling, write_csv
 
 COMPONENTS = ("fx", "fy", "fz", "mx", "my", "mz")
 OUTPUTS = ("u1", "u2", "u3", "u4", "u5", "u6")
@@ -110,9 +110,14 @@ def simulate_task(sensor: SimulatedSensor, n: int = 3000, rate: float = 1000.0,
 
 
 def write_six_axis(out: str | Path, *, seed: int = 0, repetitions: int = 6, force: bool = False,
-                   sensor: SimulatedSensor | None = None) -> list[Path]:
+                   sensor: SimulatedSensor | None = None, coupling: float | None = None) -> list[Path]:
     """``OUT/calibration/rep1.csv ..``, ``task_voltages.csv``, ``task_forces.csv`` and
-    ``sensor.yaml`` (the config to read them with); all files or none."""
+    ``sensor.yaml`` (the config to read them with); all files or none.
+
+    ``coupling`` sets every coupling function's peak to that fraction of its
+    output's full scale (:func:`fsdecouple.simulate.with_coupling`); default: the
+    seed's own amplitudes, 0.2-1.75 %.
+    """
     out = Path(out)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise InputError(f"--seed {seed!r}: expected a whole number >= 0")
@@ -121,6 +126,8 @@ def write_six_axis(out: str | Path, *, seed: int = 0, repetitions: int = 6, forc
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: is a file, expected a directory to write into")
     sensor = sensor or six_axis_sensor(seed)
+    if coupling is not None:
+        sensor = with_coupling(sensor, coupling)
     if sensor.layout.n != 6:
         raise InputError("write_six_axis: the sensor must have six components")
     targets = [*(out / "calibration" / f"rep{r}.csv" for r in range(1, repetitions + 1)),

@@ -481,3 +481,32 @@ def test_cv_moves_a_point_of_a_named_component(six_settings, six_calib):
         GrossError.parse("x:1:5:0.2", six_settings.layout)
     with pytest.raises(InputError, match="no component 'x'"):
         run_cv(six_calib, six_settings, gross_error=GrossError.parse("x:1:5:0.2"))
+
+
+def _peak_coupling(calibration: pd.DataFrame) -> np.ndarray:
+    """Peak |u_a - u_a(zero row)| over sweep b over output a's full-scale swing, (6, 6)."""
+    peak = np.zeros((6, 6))
+    swing = {}
+    for b, (comp, out) in enumerate(zip(COMPONENTS, OUTPUTS, strict=True)):
+        sweep = calibration[calibration["axis"] == comp]
+        swing[b] = (sweep[out].max() - sweep[out].min()) / 2  # |k_b| F_FS,b
+    for b, comp in enumerate(COMPONENTS):
+        sweep = calibration[calibration["axis"] == comp]
+        zero = sweep[sweep[comp] == 0].iloc[0]
+        for a, out in enumerate(OUTPUTS):
+            if a != b:
+                peak[a, b] = (sweep[out] - zero[out]).abs().max() / swing[a]
+    return peak
+
+
+def test_simulate_six_axis_with_coupling_sets_every_peak(tmp_path):
+    invoke(["simulate", tmp_path / "own", "--components", "6", "--repetitions", "1"])
+    invoke(["simulate", tmp_path / "strong", "--components", "6", "--repetitions", "1",
+            "--coupling", "0.05"])
+    own = _peak_coupling(pd.read_csv(tmp_path / "own" / "calibration" / "rep1.csv"))
+    strong = _peak_coupling(pd.read_csv(tmp_path / "strong" / "calibration" / "rep1.csv"))
+    off = ~np.eye(6, dtype=bool)
+    assert own[off].max() < 0.025  # the seed's own peaks: 0.2-1.75 % plus noise
+    # every pair peaks at 5 % of its output's full scale, read back from the written outputs;
+    # the 21-point grid can miss the peak between points, and the noise adds a little
+    assert strong[off].min() > 0.035 and strong[off].max() < 0.055

@@ -62,12 +62,12 @@ def simulate(
         ge = GrossError.parse(gross_error) if gross_error else None
         if components not in (3, 6):
             raise InputError(f"--components {components}: expected 3 or 6")
-        if components == 6 and (layout != "paper" or ge or levels is not None
-                                 or coupling is not None):
+        if components == 6 and (layout != "paper" or ge or levels is not None):
             raise InputError("--components 6: writes its own layout; no --layout lab, "
-                             "--gross-error, --levels or --coupling")
+                             "--gross-error or --levels")
         if components == 6:
-            files = write_six_axis(out_dir, seed=seed, repetitions=repetitions or 6, force=force)
+            files = write_six_axis(out_dir, seed=seed, repetitions=repetitions or 6, force=force,
+                                   coupling=coupling)
         else:
             files = simulate_sensor(out_dir, seed=seed, gross_error=ge, force=force,
                                     layout=layout, repetitions=repetitions, levels=levels,
