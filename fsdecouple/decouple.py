@@ -8,7 +8,8 @@ with omega_a^-1(v) = v / k_aa (eq. 13 form).  N is the number of components
 * :func:`decouple_exact` evaluates every chi as given (the SVR's kernel sum, or
   any other callable such as the RBF baseline's networks);
 * :class:`TableDecoupler` evaluates the same sum from the chi surrogates
-  (:mod:`fsdecouple.surrogate`) at memory speed, and hands rows outside the
+  (:mod:`fsdecouple.surrogate`) at memory speed, compiled
+  (:mod:`fsdecouple.table_kernel`) and on every core, and hands rows outside the
   tables (or with a NaN) to the exact path.  Eq. (11) is a sum of one-variable
   functions, ``f_a = u_a / k_a + sum_{b != a} g_ab(u_b)`` with g_ab = -chi_ab / k_a,
   and the N - 1 chi fed by input b share one grid, so one table index per input
@@ -48,9 +49,10 @@ import numpy as np
 PROMISE = 1e-9
 MAX_SURROGATE_ERROR = PROMISE / 4
 # Up to this many rows, a call goes row by row through the plain-Python evaluator
-# (~1 us a row, bit-identical) rather than the block path (~50 us of numpy calls).
+# (~1 us a row, bit-identical) rather than the compiled block path, whose numba
+# import (0.3 s, with scipy) a control loop need not pay.
 SMALL_ROWS = 32
-BLOCK_ROWS = 1 << 15  # rows per block for N <= 3, times 3 / N above (work arrays stay in cache)
+BLOCK_ROWS = 1 << 15  # rows a task of the thread pool compiles through at a time
 # A refined row has settled when its last step, k_a f_a - p_a^K, is at most this
 # fraction of each full-scale output.  Under Section 2.1's assumptions it is at most
 # (N - 1) 0.05 * 5 % = 0.5 % F.S. at K = 1 (N = 3), tenfold less a step on; above 1 %
@@ -183,7 +185,6 @@ class TableDecoupler:
         n = len(k)
         self.n = n
         self._exact = exact
-        self._local = threading.local()
         self._small: dict[int, Callable] = {}
         self.k = np.asarray(k, dtype=float)
         self.inv_k = 1.0 / self.k
@@ -191,25 +192,27 @@ class TableDecoupler:
                                             else np.asarray(full_scale_output, dtype=float))
         self.rotation = None if rotation is None else np.asarray(rotation, dtype=float)
         lo, inv, count = [], [], []
-        self.tab: list[list[np.ndarray]] = []  # [b][m]: (intervals, 4), c0..c3 of one interval together
+        coefs = []  # [b][m]: (intervals_b, 4), c0..c3 of g_ab for the m-th output fed by b
         self.rows: list[list[tuple[float, ...]]] = []  # per input, for the one-vector path
         for b in range(n):
             fed = [surrogates[(a, b)] for a in _fed_order(n, b)]
             coef = [s.coefficients() * -self.inv_k[a] for a, s in zip(_fed_order(n, b), fed,
                                                                         strict=True)]
-            self.tab.append([np.ascontiguousarray(c.T) for c in coef])
+            coefs.append([c.T for c in coef])
             lo.append(fed[0].lo)
             inv.append(fed[0].inv_step)
             count.append(fed[0].intervals)
             self.rows.append([tuple(r) for r in np.concatenate(coef).T.tolist()])
+        self.tab = np.zeros((n, n - 1, max(count), 4))  # for table_kernel.eq11_rows
+        for b, per_input in enumerate(coefs):
+            for m, c in enumerate(per_input):
+                self.tab[b, m, :len(c)] = c
         self.lo = np.array(lo)
         self.inv_step = np.array(inv)
         self.intervals = np.array(count, dtype=float)
-        self._lo, self._inv_step, self._intervals, self._inv_k = (
-            v.reshape(n, 1) for v in (self.lo, self.inv_step, self.intervals, self.inv_k)
-        )
-        self._k, self._step_tol = self.k.reshape(n, 1), self.step_tol.reshape(n, 1)
-        self._sum = [_sum_order(n, a) for a in range(n)]
+        sums = [_sum_order(n, a) for a in range(n)]
+        self.sum_b = np.array([[b for b, _ in terms] for terms in sums], dtype=np.intp).reshape(n, n - 1)
+        self.sum_m = np.array([[m for _, m in terms] for terms in sums], dtype=np.intp).reshape(n, n - 1)
 
     @classmethod
     def from_chis(cls, k, chis: Iterable, exact, rotation=None, full_scale_output=None
@@ -231,89 +234,19 @@ class TableDecoupler:
 
     # --- arrays -------------------------------------------------------------------
 
-    def _scratch(self, rows: int) -> dict[str, np.ndarray]:
-        # One set of work arrays per thread, reused across blocks: a fresh
-        # allocation of this size is mmap'ed and page-faulted on every block,
-        # which costs more than the arithmetic.
-        ws = getattr(self._local, "ws", None)
-        n = self.n
-        if ws is None or ws["t"].shape[1] < rows:
-            ws = {k: np.empty((n, rows)) for k in ("ut", "t", "s", "p")}
-            ws["g"] = np.empty(rows)
-            ws["c"] = np.empty((rows, 4))
-            ws["i"] = np.empty((n, rows), dtype=np.intp)
-            self._local.ws = ws
-        return {k: v[:rows] if k in ("c", "g") else v[..., :rows] for k, v in ws.items()}
-
-    def _eq11(self, x: np.ndarray, w: dict[str, np.ndarray], f: np.ndarray) -> np.ndarray | None:
-        """f = u / k + sum_b g_ab(x_b), i.e. eq. (11) with every chi at x (N, n), into f (N, n).
-
-        u is ``w["ut"]``; f may be x itself (x is only read for the table index).
-        Returns None when every x lies inside its table, else the (N, n) mask of
-        those that do (not NaN); the others are evaluated at the table's start.
-        """
-        t, s, i = w["t"], w["s"], w["i"]
-        np.subtract(x, self._lo, out=t)
-        t *= self._inv_step
-        ok = None
-        if not (t.min() >= 0.0 and np.all(t.max(axis=1) < self.intervals)):
-            # also a NaN: min/max propagate it and the test fails
-            ok = (t >= 0) & (t < self._intervals)
-            np.copyto(t, 0.0, where=~ok)
-        np.copyto(i, t, casting="unsafe")  # truncation = floor, as t >= 0
-        np.subtract(t, i, out=s)
-        np.multiply(w["ut"], self._inv_k, out=f)
-        # g_ab(x_b), the m-th chi fed by input b, added to f_a as soon as it is made,
-        # in _sum_order.  One take fetches the four coefficients of a row's interval
-        # together (32 bytes, numpy's fast fixed-size copy); c and g stay in cache.
-        c, g = w["c"], w["g"]
-        for a, terms in enumerate(self._sum):
-            for b, m in terms:
-                np.take(self.tab[b][m], i[b], axis=0, out=c, mode="clip")
-                sb = s[b]
-                np.multiply(c[:, 3], sb, out=g)  # Horner
-                g += c[:, 2]
-                g *= sb
-                g += c[:, 1]
-                g *= sb
-                g += c[:, 0]
-                f[a] += g
-        return ok
-
     def _block(self, u: np.ndarray, out: np.ndarray, rotate: bool, covered, refine: int = 0,
                converged=None) -> None:
-        w = self._scratch(u.shape[0])
-        # Work on (N, n) rows: numpy broadcasts an (N,) vector over (n, N) with an
-        # inner loop of length N, which is many times slower than one long row.
-        ut, p = w["ut"], w["p"]
-        np.copyto(ut, u.T)
-        x, ok = ut, None
-        for _ in range(refine):
-            # p^(j+1) = k (u / k + sum g(p^j)) = u - sum chi(p^j): the same sum as
-            # the forces, multiplied back by k (the tables hold g = -chi / k)
-            more = self._eq11(x, w, p)
-            p *= self._k
-            x = p
-            if more is not None:
-                ok = more if ok is None else ok & more
-        more = self._eq11(x, w, ut)  # the forces, in place of u
-        if more is not None:
-            ok = more if ok is None else ok & more
-        bad_step = None
-        if refine:
-            step = np.multiply(ut, self._k, out=w["t"])  # k f = p^(K+1)
-            step -= p
-            with np.errstate(invalid="ignore"):
-                bad_step = ~np.all(np.abs(step) <= self._step_tol, axis=0)
-            ut[:, bad_step] = np.nan
+        from .table_kernel import eq11_rows  # numba (and scipy) only once arrays are decoupled
+
+        inside, settled = np.empty(len(u), dtype=bool), np.empty(len(u), dtype=bool)
+        eq11_rows(u, self.lo, self.inv_step, self.intervals, self.inv_k, self.k, self.step_tol,
+                  self.tab, self.sum_b, self.sum_m, int(refine), out, inside, settled)
         if rotate and self.rotation is not None:
-            ut = self.rotation @ ut
-        for a in range(self.n):  # column by column: 3x faster than out[:] = ut.T
-            out[:, a] = ut[a]
+            out[:] = out @ self.rotation.T
         if converged is not None:
-            converged[:] = True if bad_step is None else ~bad_step
-        if ok is not None:
-            bad = ~ok.all(axis=0)
+            converged[:] = settled
+        if not inside.all():  # outside a table (at u or at a step), or NaN: the exact path
+            bad = ~inside
             sub = None if converged is None else np.ones(int(bad.sum()), dtype=bool)
             out[bad] = self._exact(u[bad], rotate, refine, sub)
             if covered is not None:
@@ -341,7 +274,7 @@ class TableDecoupler:
             one = self._small[refine]
             return np.array([one(*v) for v in u.tolist()], dtype=float).reshape(-1, self.n)
         out = np.empty_like(u)
-        block_rows = block_rows or BLOCK_ROWS * 3 // max(3, self.n)  # 32 K, 16 K for N = 6
+        block_rows = block_rows or BLOCK_ROWS
         starts = range(0, u.shape[0], block_rows)
         workers = default_workers() if workers is None else workers
 
