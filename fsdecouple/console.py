@@ -16,7 +16,6 @@ from rich.text import Text
 
 from .axes import labels_in, load_name
 from .cv_doc import gamma_index, test_name
-from .guess import KEYS as GUESS_KEYS
 from .guess import Guess
 from .guess import shown as shown_name
 from .metrics import pct
@@ -432,7 +431,7 @@ def guess_renderables(guess: Guess) -> list:
     """What ``init`` prints: a table (key, column, reason), the notes, where the config
     went.  File text (header names, paths) is shown literally, never as rich markup."""
     t = Table("key", "column", "reason", title=Text(f"Guessed from {guess.path}"))
-    for key in GUESS_KEYS:
+    for key in guess.keys:
         t.add_row(key, Text(guess.columns.get(key, "-")), Text(guess.reasons[key]))
     for key, value, why in guess.settings():
         t.add_row(key, Text(value), Text(why))

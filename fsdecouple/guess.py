@@ -22,7 +22,7 @@ import yaml
 
 from .axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from .errors import InputError
-from .iotools.files import atomic_write, check_output, reading, refuse_overwriting_input
+from .iotools.files import reading
 
 MAX_ROWS = 100_000  # enough for any calibration; bounds a wrong file's cost
 
@@ -92,6 +92,10 @@ class Guess:
     notes: list[str] = field(default_factory=list)
     rows: int = 0
     config: Path | None = None
+    keys: tuple[str, ...] = KEYS  # the columns: entries, in config order
+    components: tuple[str, ...] = ()  # a sensor with named components (guess_layout.py)
+    outputs: tuple[str, ...] = ()
+    load_units: dict[str, str] | None = None  # per component, where they differ
 
     def to_dict(self) -> dict[str, Any]:
         """The ``--json`` document."""
@@ -103,13 +107,19 @@ class Guess:
             "rows": self.rows, "reasons": dict(self.reasons), "notes": list(self.notes),
             "ignored": [i.name for i in self.ignored],
             "ignored_columns": [vars(i) for i in self.ignored],
+            **({"components": list(self.components), "outputs": list(self.outputs),
+                "load_units": self.load_units} if self.components else {}),
         }
 
     def settings(self) -> list[tuple[str, str, str]]:
         """(key, YAML flow value, reason) of each guessed setting, in config order."""
-        fs = ", ".join(f"{a}: {_num(self.full_scale[a])}" for a in AXES)
+        fs = ", ".join(f"{a}: {_num(v)}" for a, v in self.full_scale.items())
+        load = self.units["load"] if not self.load_units else \
+            "{" + ", ".join(f"{c}: {u}" for c, u in self.load_units.items()) + "}"
         values = {
-            "units": f"{{load: {self.units['load']}, output: {self.units['output']}}}",
+            **({"components": f"[{', '.join(self.components)}]",
+                "outputs": f"[{', '.join(self.outputs)}]"} if self.components else {}),
+            "units": f"{{load: {load}, output: {self.units['output']}}}",
             "full_scale": f"{{{fs}}}", "min_repetitions": str(self.min_repetitions),
             "csv": f"{{sep: {json.dumps(self.sep)}, decimal: {json.dumps(self.decimal)}}}",
             "scaling": self.scaling,
@@ -129,7 +139,7 @@ class Guess:
             "# File column for each quantity.",
             "columns:",
         ]
-        for key in KEYS:
+        for key in self.keys:
             if key in self.columns:
                 out.append(f"  {key}: {_scalar(self.columns[key])}"
                            f"   # guessed: {_comment(self.reasons[key])}")
@@ -242,14 +252,8 @@ def _sniff_sep(first_line: str) -> str:
 # --- the guess ---------------------------------------------------------------------
 
 
-def guess_config(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
-    """Guess a config for the calibration file ``path`` from its header and values.
-
-    Raises :class:`~fsdecouple.errors.InputError` when the file cannot be read or a
-    load or output column cannot be found (the message names the file, the missing
-    quantity and the header seen).
-    """
-    path = Path(path)
+def read_rows(path: Path, max_rows: int) -> tuple[list[str], list[list[str]], str, bool]:
+    """(header names, up to ``max_rows`` rows of cells, separator, whether rows were left)."""
     with reading(path), open(path, encoding="utf-8-sig", newline="") as fh:
         first = fh.readline(1 << 20)
         if not first.strip():
@@ -261,7 +265,18 @@ def guess_config(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
         raw_rows = list(itertools.islice(reader, max_rows + 1))
     truncated = len(raw_rows) > max_rows
     del raw_rows[max_rows:]
+    return names, raw_rows, sep, truncated
 
+
+def guess_config(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
+    """Guess a config for the calibration file ``path`` from its header and values.
+
+    Raises :class:`~fsdecouple.errors.InputError` when the file cannot be read or a
+    load or output column cannot be found (the message names the file, the missing
+    quantity and the header seen).
+    """
+    path = Path(path)
+    names, raw_rows, sep, truncated = read_rows(path, max_rows)
     notes: list[str] = []
     ignored: dict[int, str] = {}
     # A side table (notes, a load plan) often sits right of the data after an
@@ -392,10 +407,14 @@ def _sniff_decimal(sep: str, rows: list[list[str]], cols: list[int]) -> str:
 
 
 def _unit(kind: str, hints: dict[str, str | None], peak: float, integers: bool,
-          notes: list[str], shown: dict[str, str]) -> tuple[str, str]:
-    """The ``load`` or ``output`` unit: from header hints, else from the magnitudes."""
-    keys, table = ((FORCE_COLUMNS, _LOAD_HINTS) if kind == "load"
-                   else (VOLTAGE_COLUMNS, _OUTPUT_HINTS))
+          notes: list[str], shown: dict[str, str], keys=None) -> tuple[str, str]:
+    """The ``load`` or ``output`` unit: from header hints, else from the magnitudes.
+
+    ``keys``: the columns to look at (default: fx, fy, fz or ux, uy, uz).
+    """
+    default, table = ((FORCE_COLUMNS, _LOAD_HINTS) if kind == "load"
+                      else (VOLTAGE_COLUMNS, _OUTPUT_HINTS))
+    keys = default if keys is None else keys
     found = {k: table[h] for k in keys if (h := hints.get(k)) in table}
     if found:
         unit = next(iter(found.values()))
@@ -412,19 +431,3 @@ def _unit(kind: str, hints: dict[str, str | None], peak: float, integers: bool,
                          (("V", 20), ("mV", 20_000), ("uV", math.inf)) if peak <= top)
     notes.append(f"{kind} unit {unit} is a guess from the magnitudes (no unit in the headers)")
     return unit, f"a guess: largest |{kind}| {peak:g} {why}, no unit in the headers"
-
-
-def init_config(path: str | Path, output: str | Path, *, force: bool = False) -> Guess:
-    """Guess a config for ``path`` and write it to ``output`` (atomically).
-
-    An existing ``output`` is refused without ``force``, and always if it is ``path``.
-    Nothing is written when the guess fails.
-    """
-    output = Path(output)
-    check_output(output, force=force)
-    refuse_overwriting_input(output, [path])
-    guess = guess_config(path)
-    with atomic_write(output, force=force) as fh:
-        fh.write(guess.to_yaml())
-    guess.config = output
-    return guess

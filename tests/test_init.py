@@ -7,7 +7,7 @@ import shutil
 
 import pytest
 import yaml
-from conftest import SAMPLE, invoke
+from conftest import ROOT, SAMPLE, invoke
 
 from fsdecouple.config import settings_from_dict
 from fsdecouple.errors import InputError
@@ -197,3 +197,64 @@ def test_column_names_read_back_exactly(tmp_path):
 ])
 def test_nice_ceil(value, nice):
     assert nice_ceil(value) == nice
+
+
+# --- force/torque sensors: components and their prime outputs ----------------------
+
+
+def test_six_axis_sample_gives_its_own_layout_and_fits(tmp_path):
+    """The guess for the simulator's file is the simulator's config: same components,
+    outputs, full scales and units; and that config fits the sample."""
+    from fsdecouple import fit, load_calibration, load_config
+
+    out = tmp_path / "six.yaml"
+    doc = json.loads(invoke(["init", SAMPLE / "six_axis" / "calibration" / "rep1.csv", "-o", out,
+                             "--json"]).stdout)
+    want = yaml.safe_load((ROOT / "configs" / "six-axis.yaml").read_text())
+    assert doc["components"] == want["components"] and doc["outputs"] == want["outputs"]
+    assert doc["full_scale"] == want["full_scale"]
+    written = yaml.safe_load(out.read_text())
+    assert written["units"] == want["units"] and written["scaling"] == "none"
+    settings = load_config(out)
+    model = fit(load_calibration(SAMPLE / "six_axis" / "calibration", settings), settings)
+    assert model.layout.loads == tuple(want["components"])
+
+
+def test_prime_outputs_are_paired_by_the_data_not_the_channel_order(tmp_path):
+    """Channels wired in another order (ch0 is mz's bridge, ...), units in the headers:
+    each component gets the channel its own sweep drives."""
+    from fsdecouple.simulate_six import COMPONENTS, OUTPUTS, simulate_calibration, six_axis_sensor
+
+    table = simulate_calibration(six_axis_sensor(4), repetitions=2, seed=4)
+    wiring = [5, 2, 0, 4, 1, 3]  # channel k carries output OUTPUTS[wiring[k]]
+    headers = {"fx": "Fx [N]", "fy": "Fy [N]", "fz": "Fz [N]",
+               "mx": "Tx [N·mm]", "my": "Ty [N·mm]", "mz": "Tz [N·mm]"}
+    frame = {"Rep": table["repetition"]}
+    for c in COMPONENTS:
+        frame[headers[c]] = table[c] * (1000 if c[0] == "m" else 1)  # N·m -> N·mm
+    for k, j in enumerate(wiring):
+        frame[f"ch{k} [V]"] = table[OUTPUTS[j]]
+    frame["operator"] = "AB"
+    data = tmp_path / "ft.csv"
+    import pandas as pd
+    pd.DataFrame(frame).to_csv(data, index=False)
+    doc = json.loads(invoke(["init", data, "-o", tmp_path / "ft.yaml", "--json"]).stdout)
+    assert doc["components"] == list(COMPONENTS)
+    # component a's prime output OUTPUTS[a] sits on the channel k with wiring[k] == a
+    assert doc["outputs"] == [f"ch{wiring.index(a)}" for a in range(6)]
+    assert doc["columns"]["ch0"] == "ch0 [V]" and doc["columns"]["mx"] == "Tx [N·mm]"
+    assert doc["load_units"] == {"fx": "N", "fy": "N", "fz": "N",
+                                 "mx": "N·mm", "my": "N·mm", "mz": "N·mm"}
+    assert doc["full_scale"]["mx"] == 5000 and doc["full_scale"]["fz"] == 200
+    assert doc["min_repetitions"] == 2 and doc["columns"]["repetition"] == "Rep"
+    assert "operator" in doc["ignored"]
+
+
+def test_a_torque_header_without_one_channel_per_component_is_one_line(tmp_path):
+    data = tmp_path / "ft.csv"
+    data.write_text("Fx,Fy,Fz,Mx,My,Mz,u1,u2,u3,u4,u5\n" + "0,0,0,0,0,0,1,2,3,4,5\n")
+    out = tmp_path / "ft.yaml"
+    res = invoke(["init", data, "-o", out], code=2)
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and str(data) in lines[0] and "u1..u6" in lines[0], res.stderr
+    assert not out.exists()

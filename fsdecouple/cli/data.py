@@ -116,7 +116,7 @@ def init(
 ) -> None:
     """Start a config: guess columns, units, full scale and scaling from a calibration file."""
     from ..console import guess_renderables
-    from ..guess import init_config
+    from ..guess_layout import init_config
 
     with user_errors():
         guess = init_config(data_file, output, force=force)
