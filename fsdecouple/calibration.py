@@ -244,7 +244,8 @@ class GrossError:
             ge = cls(axis, int(rep), int(point), float(offset))
         except ValueError:
             raise InputError(
-                f"--gross-error {spec!r}: expected AXIS:REP:POINT:OFFSET, e.g. x:1:5:0.2"
+                f"--gross-error {spec!r}: expected AXIS:REP:POINT:OFFSET, AXIS one of "
+                f"{', '.join(layout.labels)}, e.g. {layout.labels[0]}:1:5:0.2"
             ) from None
         if ge.repetition < 1 or ge.point < 1 or not np.isfinite(ge.offset):
             raise InputError(f"--gross-error {spec!r}: REP and POINT count from 1")

@@ -110,13 +110,16 @@ def simulate_task(sensor: SimulatedSensor, n: int = 3000, rate: float = 1000.0,
 
 
 def write_six_axis(out: str | Path, *, seed: int = 0, repetitions: int = 6, force: bool = False,
-                   sensor: SimulatedSensor | None = None, coupling: float | None = None) -> list[Path]:
+                   sensor: SimulatedSensor | None = None, coupling: float | None = None,
+                   gross_error=None) -> list[Path]:
     """``OUT/calibration/rep1.csv ..``, ``task_voltages.csv``, ``task_forces.csv`` and
     ``sensor.yaml`` (the config to read them with); all files or none.
 
     ``coupling`` sets every coupling function's peak to that fraction of its
     output's full scale (:func:`fsdecouple.simulate.with_coupling`); default: the
-    seed's own amplitudes, 0.2-1.75 %.
+    seed's own amplitudes, 0.2-1.75 %.  ``gross_error``
+    (:class:`fsdecouple.calibration.GrossError`, its axis a component) moves one
+    calibration point, as for three axes (Section 4.4).
     """
     out = Path(out)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -137,6 +140,8 @@ def write_six_axis(out: str | Path, *, seed: int = 0, repetitions: int = 6, forc
             check_output(path, force=force)
     table = simulate_calibration(sensor, repetitions, seed)
     layout = sensor.layout
+    if gross_error is not None:
+        table = gross_error.apply(table, layout)
     volt_fmt = {c: "%.7f" for c in layout.outputs}
     load_fmt = {c: "%.6f" for c in layout.loads}
     volts, loads = simulate_task(sensor, seed=seed)

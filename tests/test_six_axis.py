@@ -510,3 +510,20 @@ def test_simulate_six_axis_with_coupling_sets_every_peak(tmp_path):
     # every pair peaks at 5 % of its output's full scale, read back from the written outputs;
     # the 21-point grid can miss the peak between points, and the noise adds a little
     assert strong[off].min() > 0.035 and strong[off].max() < 0.055
+
+
+def test_simulate_six_axis_with_a_gross_error_moves_one_prime_output(tmp_path):
+    invoke(["simulate", tmp_path / "clean", "--components", "6", "--repetitions", "2"])
+    invoke(["simulate", tmp_path / "gross", "--components", "6", "--repetitions", "2",
+            "--gross-error", "my:2:7:0.25"])
+    clean, gross = (pd.read_csv(tmp_path / d / "calibration" / "rep2.csv") for d in ("clean", "gross"))
+    diff = gross[list(OUTPUTS)].to_numpy() - clean[list(OUTPUTS)].to_numpy()
+    rows, cols = np.nonzero(diff)
+    my_rows = np.flatnonzero(clean["axis"] == "my")
+    assert rows.tolist() == [my_rows[6]] and cols.tolist() == [OUTPUTS.index("u5")]
+    assert diff[rows[0], cols[0]] == pytest.approx(0.25, abs=1e-7)
+    assert (pd.read_csv(tmp_path / "gross" / "calibration" / "rep1.csv")
+            .equals(pd.read_csv(tmp_path / "clean" / "calibration" / "rep1.csv")))
+    bad = invoke(["simulate", tmp_path / "bad", "--components", "6", "--gross-error", "x:1:5:0.2"],
+                 code=2)
+    assert "fx, fy, fz, mx, my, mz" in bad.stderr and not (tmp_path / "bad").exists()

@@ -53,21 +53,22 @@ def simulate(
     force: ForceOpt = False,
 ) -> None:
     """Write a simulated calibration set: the paper's (with a combined-load task log) or a lab's."""
+    from ..axes import DEFAULT, Layout
     from ..calibration import GrossError
     from ..errors import InputError
     from ..simulate import simulate as simulate_sensor
-    from ..simulate_six import write_six_axis
+    from ..simulate_six import COMPONENTS, OUTPUTS, write_six_axis
 
     with user_errors():
-        ge = GrossError.parse(gross_error) if gross_error else None
         if components not in (3, 6):
             raise InputError(f"--components {components}: expected 3 or 6")
-        if components == 6 and (layout != "paper" or ge or levels is not None):
-            raise InputError("--components 6: writes its own layout; no --layout lab, "
-                             "--gross-error or --levels")
+        named = Layout.named(COMPONENTS, OUTPUTS) if components == 6 else DEFAULT
+        ge = GrossError.parse(gross_error, named) if gross_error else None
+        if components == 6 and (layout != "paper" or levels is not None):
+            raise InputError("--components 6: writes its own layout; no --layout lab or --levels")
         if components == 6:
             files = write_six_axis(out_dir, seed=seed, repetitions=repetitions or 6, force=force,
-                                   coupling=coupling)
+                                   coupling=coupling, gross_error=ge)
         else:
             files = simulate_sensor(out_dir, seed=seed, gross_error=ge, force=force,
                                     layout=layout, repetitions=repetitions, levels=levels,
