@@ -21,7 +21,16 @@ import numpy as np
 from numba import njit
 
 
-@njit(nogil=True, cache=True, error_model="numpy")
+def _compiled(fn):
+    """``fn`` compiled without the GIL; cached on disk where numba finds a writable place
+    (next to this file, else the user's cache directory), else compiled once per process."""
+    try:
+        return njit(nogil=True, cache=True, error_model="numpy")(fn)
+    except RuntimeError:  # numba: "cannot cache function ...: no locator available"
+        return njit(nogil=True, error_model="numpy")(fn)
+
+
+@_compiled
 def eq11_rows(u, lo, inv_step, intervals, inv_k, k, step_tol, tab, sum_b, sum_m, refine,
               out, inside, settled):  # pragma: no cover - compiled; tested through TableDecoupler
     """Forces of eq. (11) for the rows of ``u`` (n, N) into ``out`` (n, N), before any rotation.

@@ -350,3 +350,31 @@ def test_fit_warns_when_a_surrogate_misses_its_bound(calib, settings, monkeypatc
     m = fit(calib, settings)
     assert any("chi_zx" in w and "exact kernel sum" in w for w in m.warnings)
     assert m.fast_decoupler() is None
+
+
+def test_the_kernel_compiles_where_no_cache_can_be_written(model, monkeypatch):
+    """A read-only install without a user cache directory: numba refuses ``cache=True``
+    when the module is imported; the kernel is then compiled per process, same forces."""
+    import importlib
+
+    import numba
+
+    r = model.calibrated_range
+    u = np.random.default_rng(5).uniform(r[:, 0], r[:, 1], (500, 3))
+    before = model.fast_decoupler().decouple(u, refine=2)
+    real = numba.njit
+
+    def no_locator(*args, cache=False, **kw):
+        if cache:
+            raise RuntimeError("cannot cache function 'eq11_rows': no locator available for file")
+        return real(*args, **kw)
+
+    kernel = importlib.import_module("fsdecouple.table_kernel")
+    monkeypatch.setattr(numba, "njit", no_locator)
+    try:
+        fresh = importlib.reload(kernel)
+        assert fresh.eq11_rows._cache.__class__.__name__ == "NullCache"
+        np.testing.assert_array_equal(model.fast_decoupler().decouple(u, refine=2), before)
+    finally:
+        monkeypatch.undo()
+        importlib.reload(kernel)
