@@ -63,3 +63,17 @@ def test_default_is_no_worse_than_the_reference_on_combined_loads(case):
     theirs = REF.rms(ref.decouple(u), f) / floor
     assert ours.max() <= theirs.max(), (ours, theirs)
     assert (ours <= 2.0).all(), ours
+
+
+@pytest.mark.xfail(strict=True, reason="open: with scaling: full_scale (any output unit but V) Table 2's "
+                   "libsvm tolerance, 1e-3 F.S., is 2-4x the noise and the solver stops short; "
+                   "a tolerance at the noise (3e-4 F.S.) brings it to 1.5x (README, six-axis reference)")
+def test_full_scale_scaling_keeps_six_axis_defaults_within_twice_the_floor(case):
+    """What a six-axis config with outputs in mV or counts gets (scaling: full_scale is then
+    automatic): measured 2.3x the floor on this seed, 2.6x mean (3.5x worst) over seeds 0-7,
+    against 1.8x (1.95x) in volts."""
+    sensor, table, u, f, _ = case
+    settings = replace(SETTINGS, scaling="full_scale")
+    model = fit(from_table(table, settings), settings, workers=1)
+    ratio = REF.rms(model.decouple(u, rotate=False), f) / REF.rms(sensor.solve(u), f)
+    assert (ratio <= 2.0).all(), ratio
