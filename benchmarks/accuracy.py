@@ -160,8 +160,8 @@ SIX_METHODS: dict[str, Callable] = {
     f"refine K = {REFINE}": _fitted(refine=REFINE),
     f"zero: rows + refine K = {REFINE}": _fitted(zero="rows", refine=REFINE),
     f"tune + refine K = {REFINE}": _tuned(refine=REFINE),
-    # outputs in any unit but V get scaling: full_scale, where Table 2's libsvm tolerance
-    # (1e-3 F.S.) is 2-4x the noise; and libsvm solved to about the noise (5e-4 V)
+    # outputs in any unit but V get scaling: full_scale, solved to half the noise there
+    # (noise.py); and volts solved to about the noise (5e-4 V) instead of Table 2's 1e-3
     "scaling: full_scale": _fitted(scaling="full_scale"),
     "libsvm tolerance 5e-4": _svr(tolerance=5e-4),
     "linear matrix": _linear,
