@@ -48,6 +48,7 @@ from .calibration import CalibrationSet
 from .config import Settings
 from .errors import InputError
 from .heldout import HeldOutRound, choose_protocol, level_index, rounds_for
+from .noise import noise
 from .parallel import single_threaded_libraries
 
 # The default grid, in full-scale units (see the module docstring).  The issue's
@@ -111,35 +112,6 @@ def parse_grid(text: str) -> Grid:
             raise InputError(f"--tune-grid: {key}: expected 1 to {MAX_VALUES} different values")
         values[key] = vals
     return Grid(**values)
-
-
-def noise(calib: CalibrationSet, settings: Settings) -> float | None:
-    """sigma: the scatter of repeated loads, as a fraction of full-scale output.
-
-    Points of the same sweep axis and load in different repetitions are repeats; the
-    pooled standard deviation of every output about its repeats' mean, divided by
-    the output's full-scale output |k| F_FS (k from eq. 2), is pooled over the
-    outputs (root mean square).  None without two repetitions of any loaded point.
-    """
-    from .linear import fit_omega
-
-    pts, layout = calib.points, settings.layout
-    forces = pts[list(layout.loads)].to_numpy()
-    loaded = (forces != 0.0).any(axis=1)
-    u_fs = np.abs(fit_omega(pts, layout).k) * np.asarray(settings.full_scale)
-    u = pts[list(layout.outputs)].to_numpy() / u_fs
-    keys = [tuple(r) for r in np.column_stack([pts["axis"].map(layout.labels.index), forces])]
-    groups: dict[tuple, list[int]] = {}
-    for i, key in enumerate(keys):
-        if loaded[i]:
-            groups.setdefault(key, []).append(i)
-    ss, dof = 0.0, 0
-    for idx in groups.values():
-        if len(idx) > 1:
-            g = u[idx]
-            ss += float(((g - g.mean(axis=0)) ** 2).sum())
-            dof += (len(idx) - 1) * g.shape[1]
-    return math.sqrt(ss / dof) if dof else None
 
 
 @dataclass(frozen=True)
