@@ -193,15 +193,15 @@ def run_six(seeds: int, methods=SIX_METHODS, progress=print) -> dict[str, dict[s
     return out
 
 
-def markdown(results: dict[str, dict[str, float]], seeds: int) -> str:
+def markdown(results: dict[str, dict[str, float]], seeds: int, six: bool = False) -> str:
     methods = list(next(iter(results.values())))
-    lines = ["| peak coupling | " + " | ".join(methods) + " |",
+    lines = [f"| {'sensors' if six else 'peak coupling'} | " + " | ".join(methods) + " |",
              "|---|" + "---|" * len(methods)]
     for label, row in results.items():
         lines.append(f"| {label} | " + " | ".join(f"{row[m]:.2f}×" for m in methods) + " |")
     lines.append("")
     lines.append(f"Worst axis's combined-load RMS error / the floor's, mean of {seeds} simulated "
-                 "sensors (`python benchmarks/accuracy.py --readme`).")
+                 f"sensors (`python benchmarks/accuracy.py {'--six ' if six else ''}--readme`).")
     return "\n".join(lines)
 
 
@@ -217,7 +217,7 @@ if __name__ == "__main__":
         res = run_six(args.seeds)
         print(f"({time.perf_counter() - t0:.0f} s)")
         if args.readme:
-            print(markdown(res, args.seeds).replace("| peak coupling |", "| sensors |"))
+            print(markdown(res, args.seeds, six=True))
         raise SystemExit(0)
     chosen = SCENARIOS if not args.scenarios else [
         s for s in SCENARIOS if any(s.label.startswith(p) for p in args.scenarios.split(","))]
