@@ -136,8 +136,11 @@ def _dataset_graph(spec: ApplySpec, job: Job, target):
                                             OUTPUT_UNIT_KEY: model.settings.output_unit})
     # the statuses are counted from the parts written (_count_written): a second
     # consumer of the partitions would keep them in memory and stop Dask fusing
-    # read, decouple and write into one task per part
-    return write
+    # read, decouple and write into one task per part.  That fusion is the
+    # optimizer's last step, which Client.compute skips (dask/distributed#8833):
+    # unfused, every part is four tasks whose frames wait in the workers' memory
+    # between them, 1.25x the time of the fused graph on the benchmark's 200 parts
+    return write.optimize(fuse=True)
 
 
 def _same_columns(job: Job) -> None:
@@ -159,7 +162,12 @@ def _same_columns(job: Job) -> None:
 
 
 def _count_written(directory) -> tuple[int, dict[str, int]]:
-    """Rows and status counts of a dataset written: its status column, read back."""
+    """Rows and status counts of a dataset written: its status column, read back.
+
+    A row group whose status statistics have min == max and no nulls holds that
+    one status in every row: it is counted from the footer, without reading the
+    column (most logs are all ``ok``).  Other row groups are read, dictionary-encoded.
+    """
     import pyarrow.compute as pc
     import pyarrow.parquet as pq
 
@@ -167,9 +175,22 @@ def _count_written(directory) -> tuple[int, dict[str, int]]:
 
     counts = dict.fromkeys(STATUSES, 0)
     for part in sorted(os.listdir(directory)):
-        status = pq.read_table(os.path.join(directory, part), columns=[STATUS_COLUMN])[STATUS_COLUMN]
-        for entry in pc.value_counts(status).to_pylist():
-            counts[entry["values"]] += entry["counts"]
+        pf = pq.ParquetFile(os.path.join(directory, part))
+        col = pf.schema_arrow.get_field_index(STATUS_COLUMN)
+        mixed = []
+        for g in range(pf.metadata.num_row_groups):
+            group = pf.metadata.row_group(g)
+            stats = group.column(col).statistics
+            if (stats is not None and stats.has_min_max and stats.null_count == 0
+                    and stats.min == stats.max and stats.min in counts
+                    and stats.num_values == group.num_rows):
+                counts[stats.min] += group.num_rows
+            else:
+                mixed.append(g)
+        if mixed:
+            status = pf.read_row_groups(mixed, columns=[STATUS_COLUMN])[STATUS_COLUMN]
+            for entry in pc.value_counts(status).to_pylist():
+                counts[entry["values"]] += entry["counts"]
     return sum(counts.values()), counts
 
 
