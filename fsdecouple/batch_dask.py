@@ -38,6 +38,13 @@ from .frame import frame_forces, frame_outputs
 from .units import load_factor
 
 CONNECT_TIMEOUT = 5.0  # seconds to reach a --scheduler before giving up
+# Dask's nannies start workers with MALLOC_TRIM_THRESHOLD_=65536, so that freed memory
+# goes back to the OS at once.  Setting it (to any value) also turns off glibc's dynamic
+# mmap threshold: every array over 128 KiB (a 50,000-row column is 400 KB) is then a
+# fresh mmap, page-faulted in and unmapped when freed; about 5,000 page faults a
+# dataset part against 20, and 1.4x the time of the whole run (README, "Fleet
+# benchmarks").  The workers of our own LocalCluster keep glibc's defaults.
+WORKER_CONFIG = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
 INSTALL = "pip install 'fsdecouple[dask]'"
 
 
@@ -63,10 +70,13 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
         with client:
             yield client
         return
+    import dask
+
     n = workers or os.cpu_count() or 1
-    with distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                  dashboard_address=":0", silence_logs=logging.CRITICAL) as cluster, \
-            distributed.Client(cluster, set_as_default=False) as client:
+    with dask.config.set(WORKER_CONFIG):  # read as the nannies start the workers
+        cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                           dashboard_address=":0", silence_logs=logging.CRITICAL)
+    with cluster, distributed.Client(cluster, set_as_default=False) as client:
         yield client
 
 

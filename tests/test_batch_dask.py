@@ -81,6 +81,19 @@ def test_dask_local_cluster_of_its_own_and_bad_logs(sample_model, tmp_path):
     assert (out / "a" / "one.csv").read_bytes() == ref.read_bytes()
 
 
+def test_our_local_cluster_keeps_glibcs_malloc_thresholds(monkeypatch):
+    """Dask's nannies set MALLOC_TRIM_THRESHOLD_, which turns off glibc's dynamic mmap
+    threshold (a page fault per 4 KiB of every array over 128 KiB); our workers go without."""
+    from fsdecouple.batch_dask import dask_client
+
+    # an earlier LocalCluster of this process wrote it into os.environ (the nanny does)
+    monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
+    with dask_client(workers=1) as client:
+        env = client.run(lambda: {k: os.environ.get(k) for k in ("MALLOC_TRIM_THRESHOLD_",
+                                                                 "OMP_NUM_THREADS")})
+    assert list(env.values()) == [{"MALLOC_TRIM_THRESHOLD_": None, "OMP_NUM_THREADS": "1"}]
+
+
 def test_unreachable_scheduler_is_one_line(sample_model, tmp_path, monkeypatch):
     import fsdecouple.batch_dask as engine
 
