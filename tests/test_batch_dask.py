@@ -133,7 +133,7 @@ def test_a_worker_killed_mid_log_leaves_no_partial_output(sample_model, tmp_path
         sample_model, [fifo], out, engine="dask", scheduler=cluster.scheduler_address)))
     with distributed.Client(cluster, set_as_default=False) as client:
         run.start()
-        fh = open(fifo, "wb")  # opens when the task opens the FIFO  # noqa: SIM115
+        fh = _wait_for(lambda: _open_writer(fifo))  # once the task opens the FIFO
         try:
             # two blocks and a half: apply writes block 1 once block 2 is read
             fh.write(content[:10_000_000])
@@ -143,11 +143,13 @@ def test_a_worker_killed_mid_log_leaves_no_partial_output(sample_model, tmp_path
             assert len(busy) == 1, client.processing()
             pid = client.run(os.getpid, workers=busy)[busy[0]]
             os.kill(pid, signal.SIGKILL)  # as the OOM killer or a lost node would
-            _wait_for(lambda: busy[0] not in client.scheduler_info()["workers"])
         finally:
+            # at once: the task run again must not open the FIFO while this end is open, or
+            # it reads what the killed reader left in the pipe and the log ends there
             with contextlib.suppress(BrokenPipeError):  # the killed reader is gone
                 fh.close()
-        with open(fifo, "wb") as fh:  # the task, run again on a live worker
+        _wait_for(lambda: busy[0] not in client.scheduler_info()["workers"])
+        with _wait_for(lambda: _open_writer(fifo)) as fh:  # the task, run again on a live worker
             fh.write(content)
         run.join(60)
         assert not run.is_alive()
