@@ -176,7 +176,7 @@ def _count_written(directory) -> tuple[int, dict[str, int]]:
 
     A row group whose status statistics have min == max and no nulls holds that
     one status in every row: it is counted from the footer, without reading the
-    column (most logs are all ``ok``).  Other row groups are read, dictionary-encoded.
+    column (most logs are all ``ok``).  Other row groups are read.
     """
     import pyarrow.compute as pc
     import pyarrow.parquet as pq
@@ -185,22 +185,22 @@ def _count_written(directory) -> tuple[int, dict[str, int]]:
 
     counts = dict.fromkeys(STATUSES, 0)
     for part in sorted(os.listdir(directory)):
-        pf = pq.ParquetFile(os.path.join(directory, part))
-        col = pf.schema_arrow.get_field_index(STATUS_COLUMN)
-        mixed = []
-        for g in range(pf.metadata.num_row_groups):
-            group = pf.metadata.row_group(g)
-            stats = group.column(col).statistics
-            if (stats is not None and stats.has_min_max and stats.null_count == 0
-                    and stats.min == stats.max and stats.min in counts
-                    and stats.num_values == group.num_rows):
-                counts[stats.min] += group.num_rows
-            else:
-                mixed.append(g)
-        if mixed:
-            status = pf.read_row_groups(mixed, columns=[STATUS_COLUMN])[STATUS_COLUMN]
-            for entry in pc.value_counts(status).to_pylist():
-                counts[entry["values"]] += entry["counts"]
+        with pq.ParquetFile(os.path.join(directory, part)) as pf:
+            col = pf.schema_arrow.get_field_index(STATUS_COLUMN)  # flat: the Parquet column too
+            mixed = []
+            for g in range(pf.metadata.num_row_groups):
+                group = pf.metadata.row_group(g)
+                stats = group.column(col).statistics
+                if (stats is not None and stats.has_min_max and stats.null_count == 0
+                        and stats.min == stats.max and stats.min in counts
+                        and stats.num_values == group.num_rows):
+                    counts[stats.min] += group.num_rows
+                else:
+                    mixed.append(g)
+            if mixed:
+                status = pf.read_row_groups(mixed, columns=[STATUS_COLUMN])[STATUS_COLUMN]
+                for entry in pc.value_counts(status).to_pylist():
+                    counts[entry["values"]] += entry["counts"]
     return sum(counts.values()), counts
 
 
