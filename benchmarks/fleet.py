@@ -3,6 +3,7 @@
     python benchmarks/fleet.py            # 200 logs x 50,000 rows, 100 sensors, ~10 min
     python benchmarks/fleet.py --quick    # 40 logs x 20,000 rows, 8 sensors
     python benchmarks/fleet.py --readme   # also rewrite README's fleet-benchmarks block
+    python benchmarks/fleet.py --only parquet   # rows F1-F4 of one format, while iterating
 
 Every target is a ratio against a baseline measured in the same run (medians of
 ``--repeats`` runs):
@@ -20,6 +21,7 @@ Every target is a ratio against a baseline measured in the same run (medians of
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import shutil
 import sys
@@ -34,6 +36,7 @@ from run import ROOT, machine, median_time, write_log  # noqa: E402  (puts ROOT 
 
 from fsdecouple import load_calibration, load_config, load_model, save_model  # noqa: E402
 from fsdecouple.batch import apply_many  # noqa: E402
+from fsdecouple.batch_dask import dask_client  # noqa: E402
 from fsdecouple.fit import fit  # noqa: E402
 
 
@@ -94,9 +97,13 @@ def main() -> int:
     ap.add_argument("--sensors", type=int, help="simulated sensors for fit-many (default 100, quick 8)")
     ap.add_argument("--repeats", type=int, help="runs per median (default 3)")
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--only", choices=("csv", "parquet"),
+                    help="only this format's rows F1-F4 (no F5-F7): for iterating, not for README")
     ap.add_argument("--readme", action="store_true",
                     help="write the results into README.md (between the fleet-benchmarks markers)")
     args = ap.parse_args()
+    if args.only and args.readme:
+        ap.error("--readme writes every row: drop --only")
     n_logs = args.logs or (40 if args.quick else 200)
     rows = args.rows or (20_000 if args.quick else 50_000)
     n_sensors = args.sensors or (8 if args.quick else 100)
@@ -111,7 +118,6 @@ def main() -> int:
         print(f"{target}: {value:.4g} {unit} vs {base:.4g} ({base_name}) = {ratio:.3g}  "
               f"[{goal}] {'PASS' if ok else 'FAIL'}", flush=True)
 
-    import distributed
     import pyarrow.parquet as pq
 
     with tempfile.TemporaryDirectory(prefix="fsd-fleet-") as tmp_name:
@@ -150,11 +156,11 @@ def main() -> int:
             fn(files, out)
 
         t0 = time.perf_counter()
-        cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                           dashboard_address=":0", silence_logs=50)
-        client = distributed.Client(cluster)
+        # the LocalCluster --engine dask starts without --scheduler (its workers' settings)
+        stack = contextlib.ExitStack()
+        client = stack.enter_context(dask_client(workers=2))
         client.wait_for_workers(2)
-        address = cluster.scheduler_address
+        address = client.scheduler.address
         warm = tmp / "warm"
         warm.mkdir()
         for i in range(4):  # the workers import fsdecouple, pandas and load the model once
@@ -165,6 +171,8 @@ def main() -> int:
             for kind, inputs, files, copier, whole in (
                     ("CSV", [csv_dir], csvs, pyarrow_csv_copy, pyarrow_whole_csv_copy),
                     ("Parquet", [ds], parts, pyarrow_parquet_copy, pyarrow_whole_parquet_copy)):
+                if args.only not in (None, kind.lower()):
+                    continue
                 base = median_time(lambda files=files, copier=copier: copy(copier, files), repeats)
                 strict = median_time(lambda files=files, whole=whole: copy(whole, files), repeats)
                 local = median_time(lambda inputs=inputs: run(inputs, "local"), repeats)
@@ -181,35 +189,36 @@ def main() -> int:
                     "pyarrow read_csv/read_table + write, on its threads [s]", "info", True)
                 row(f"F4. {kind}: dask throughput per worker", total / dask / 2 / 1e6, "M rows/s",
                     total / local / 1e6, "local engine, 2 cores [M rows/s]", "info", True)
-            tiny = tmp / "tiny"
-            tiny.mkdir()
-            for i in range(n_logs):
-                (tiny / f"t{i:03d}.csv").write_bytes(b"t,ux,uy,uz\n0,0.1,0,-0.1\n")
-            local_tiny = median_time(lambda: run([tiny], "local"), repeats) / n_logs
-            dask_tiny = median_time(lambda: run([tiny], "dask", address), repeats) / n_logs
-            row("F5. per-log overhead, dask (one-row logs)", dask_tiny * 1e3, "ms/log",
-                local_tiny * 1e3, "local engine [ms/log]", "info", True)
+            if args.only is None:  # F5: the per-log overhead
+                tiny = tmp / "tiny"
+                tiny.mkdir()
+                for i in range(n_logs):
+                    (tiny / f"t{i:03d}.csv").write_bytes(b"t,ux,uy,uz\n0,0.1,0,-0.1\n")
+                local_tiny = median_time(lambda: run([tiny], "local"), repeats) / n_logs
+                dask_tiny = median_time(lambda: run([tiny], "dask", address), repeats) / n_logs
+                row("F5. per-log overhead, dask (one-row logs)", dask_tiny * 1e3, "ms/log",
+                    local_tiny * 1e3, "local engine [ms/log]", "info", True)
         finally:
-            client.close()
-            cluster.close()
-        row("F6. LocalCluster(2 processes) start-up, workers' imports", startup, "s", dask,
-            "one dask run, Parquet [s]", "info (paid once per cluster, not in F1)", True)
+            stack.close()
+        if args.only is None:
+            row("F6. LocalCluster(2 processes) start-up, workers' imports", startup, "s", dask,
+                "one dask run, Parquet [s]", "info (paid once per cluster, not in F1)", True)
 
-        from fsdecouple.fleet import fit_many, fit_sensor, sensor_dirs
+            from fsdecouple.fleet import fit_many, fit_sensor, sensor_dirs
 
-        sensors = make_sensors(tmp / "sensors", n_sensors)
-        seq_out, par_out = tmp / "models-seq", tmp / "models-par"
-        seq_out.mkdir()
-        t0 = time.perf_counter()
-        for d in sensor_dirs(sensors):
-            assert fit_sensor(d, seq_out, workers=1).error is None
-        seq = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        fleet = fit_many(sensors, par_out)
-        par = time.perf_counter() - t0
-        assert not fleet.failed
-        row(f"F7. fit-many, {n_sensors} simulated sensors", par, "s", seq,
-            "sequential loop of fit_sensor [s]", f"speed-up {seq / par:.2f}x (info)", True)
+            sensors = make_sensors(tmp / "sensors", n_sensors)
+            seq_out, par_out = tmp / "models-seq", tmp / "models-par"
+            seq_out.mkdir()
+            t0 = time.perf_counter()
+            for d in sensor_dirs(sensors):
+                assert fit_sensor(d, seq_out, workers=1).error is None
+            seq = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            fleet = fit_many(sensors, par_out)
+            par = time.perf_counter() - t0
+            assert not fleet.failed
+            row(f"F7. fit-many, {n_sensors} simulated sensors", par, "s", seq,
+                "sequential loop of fit_sensor [s]", f"speed-up {seq / par:.2f}x (info)", True)
 
     table = "\n".join([
         "| target | measured (median) | baseline (median) | ratio | goal | |",

@@ -7,6 +7,7 @@ test_batch.py): CSV byte for byte, Parquet as Arrow tables, every column and typ
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
 import signal
@@ -81,6 +82,19 @@ def test_dask_local_cluster_of_its_own_and_bad_logs(sample_model, tmp_path):
     assert (out / "a" / "one.csv").read_bytes() == ref.read_bytes()
 
 
+def test_our_local_cluster_keeps_glibcs_malloc_thresholds(monkeypatch):
+    """Dask's nannies set MALLOC_TRIM_THRESHOLD_, which turns off glibc's dynamic mmap
+    threshold (a page fault per 4 KiB of every array over 128 KiB); our workers go without."""
+    from fsdecouple.batch_dask import dask_client
+
+    # an earlier LocalCluster of this process wrote it into os.environ (the nanny does)
+    monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
+    with dask_client(workers=1) as client:
+        env = client.run(lambda: {k: os.environ.get(k) for k in ("MALLOC_TRIM_THRESHOLD_",
+                                                                 "OMP_NUM_THREADS")})
+    assert list(env.values()) == [{"MALLOC_TRIM_THRESHOLD_": None, "OMP_NUM_THREADS": "1"}]
+
+
 def test_unreachable_scheduler_is_one_line(sample_model, tmp_path, monkeypatch):
     import fsdecouple.batch_dask as engine
 
@@ -119,7 +133,7 @@ def test_a_worker_killed_mid_log_leaves_no_partial_output(sample_model, tmp_path
         sample_model, [fifo], out, engine="dask", scheduler=cluster.scheduler_address)))
     with distributed.Client(cluster, set_as_default=False) as client:
         run.start()
-        fh = open(fifo, "wb")  # opens when the task opens the FIFO  # noqa: SIM115
+        fh = _wait_for(lambda: _open_writer(fifo))  # once the task opens the FIFO
         try:
             # two blocks and a half: apply writes block 1 once block 2 is read
             fh.write(content[:10_000_000])
@@ -129,11 +143,13 @@ def test_a_worker_killed_mid_log_leaves_no_partial_output(sample_model, tmp_path
             assert len(busy) == 1, client.processing()
             pid = client.run(os.getpid, workers=busy)[busy[0]]
             os.kill(pid, signal.SIGKILL)  # as the OOM killer or a lost node would
-            _wait_for(lambda: busy[0] not in client.scheduler_info()["workers"])
         finally:
+            # at once: the task run again must not open the FIFO while this end is open, or
+            # it reads what the killed reader left in the pipe and the log ends there
             with contextlib.suppress(BrokenPipeError):  # the killed reader is gone
                 fh.close()
-        with open(fifo, "wb") as fh:  # the task, run again on a live worker
+        _wait_for(lambda: busy[0] not in client.scheduler_info()["workers"])
+        with _wait_for(lambda: _open_writer(fifo)) as fh:  # the task, run again on a live worker
             fh.write(content)
         run.join(60)
         assert not run.is_alive()
@@ -155,3 +171,67 @@ def _wait_for(check, timeout=60.0):
             return got
         time.sleep(0.05)
     raise AssertionError("timed out")
+
+
+def test_a_worker_killed_on_every_try_fails_the_log_alone(sample_model, tmp_path):
+    """With no retry allowed (allowed-failures 0), the one death of the worker decoupling a
+    log is its last: the log is reported failed in one line, its partial output is gone,
+    and the other log of the run is written."""
+    import dask
+
+    from fsdecouple.batch import apply_many
+
+    rows = (SAMPLE / "task_voltages.csv").read_bytes().splitlines(keepends=True)
+    content = rows[0] + b"".join(rows[1:]) * 150  # ~17 MB: four 4 MB blocks
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    fifo = logs / "dies.csv"
+    os.mkfifo(fifo)
+    (logs / "good.csv").write_bytes(b"".join(rows[:1001]))
+    out = tmp_path / "out"
+    result = {}
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}), \
+            distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                     dashboard_address=":0", silence_logs=50) as cluster, \
+            distributed.Client(cluster, set_as_default=False) as client:
+        run = threading.Thread(target=lambda: result.update(r=apply_many(
+            sample_model, [fifo, logs / "good.csv"], out, engine="dask",
+            scheduler=cluster.scheduler_address)))
+        run.start()
+        fh = _wait_for(lambda: _open_writer(fifo))  # once the task opens the FIFO
+        try:
+            fh.write(content[:10_000_000])  # apply writes block 1 once block 2 is read
+            fh.flush()
+            partial = _wait_for(lambda: [p for p in out.rglob(".*.tmp") if p.stat().st_size > 0])
+            _wait_for(lambda: (out / "good.csv").exists())  # the other log is done
+            busy = [w for w, keys in client.processing().items() if keys]
+            assert len(busy) == 1, client.processing()
+            pid = client.run(os.getpid, workers=busy)[busy[0]]
+            os.kill(pid, signal.SIGKILL)
+            run.join(60)
+        finally:
+            with contextlib.suppress(BrokenPipeError):
+                fh.close()
+        assert not run.is_alive()
+    doc = result["r"].to_dict()
+    assert doc["failed"] == [str(fifo)]
+    error = next(f["error"] for f in doc["files"] if f["input"] == str(fifo))
+    assert "dies.csv: Dask workers died while decoupling it" in error and "nothing written" in error
+    assert "\n" not in error
+    assert partial and not any(p.exists() for p in partial)
+    assert sorted(p.name for p in out.iterdir()) == ["good.csv"]  # no staging, nothing partial
+    ref = tmp_path / "ref.csv"
+    invoke(["apply", sample_model, logs / "good.csv", "-o", ref])
+    assert (out / "good.csv").read_bytes() == ref.read_bytes()
+
+
+def _open_writer(fifo):
+    """The FIFO's writing end once a reader has it open, else None (never blocks)."""
+    try:
+        fd = os.open(fifo, os.O_WRONLY | os.O_NONBLOCK)
+    except OSError as err:
+        if err.errno == errno.ENXIO:  # no reader yet
+            return None
+        raise
+    os.set_blocking(fd, True)
+    return os.fdopen(fd, "wb")
