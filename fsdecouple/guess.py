@@ -341,7 +341,7 @@ def guess_config(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
         reps.add(cells.get("repetition", ""))
         for key in REQUIRED if any(cells.values()) else ():
             number = cells[key].replace(decimal, ".")
-            if not _NUMBER.fullmatch(number):
+            if not _NUMBER.fullmatch(number) or not math.isfinite(float(number)):  # 1e400: inf
                 skipped[key] += 1
                 continue
             values[key].append(float(number))

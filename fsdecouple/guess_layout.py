@@ -13,12 +13,15 @@ component (forces and moments differ).  Every guess comes with its reason.
 
 from __future__ import annotations
 
+import math
 import re
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from .config import load_config
+from .errors import ConfigError, InputError, printable
 from .guess import (
     _AXIS,
     _INTEGER,
@@ -68,19 +71,41 @@ def init_config(path: str | Path, output: str | Path, *, force: bool = False) ->
     check_output(output, force=force)
     refuse_overwriting_input(output, [path])
     guess = guess_layout(path)
+    text = guess.to_yaml()
+    _check_loads(text, path)
     with atomic_write(output, force=force) as fh:
-        fh.write(guess.to_yaml())
+        fh.write(text)
     guess.config = output
     return guess
+
+
+def _check_loads(text: str, data: str | Path) -> None:
+    """Refuse a guessed config that ``load_config`` would refuse (a full scale of 1e300,
+    two channels with one key): better one line now than a config that cannot be read."""
+    with tempfile.TemporaryDirectory(prefix="fsdecouple-init-") as tmp:
+        trial = Path(tmp) / "guessed.yaml"
+        trial.write_text(text, encoding="utf-8")
+        try:
+            load_config(trial)
+        except ConfigError as err:
+            reason = str(err).removeprefix(f"{printable(trial)}")
+            raise InputError(f"{_comment(str(data))}: the guessed config would not load"
+                             f"{reason}; check the data, or write the config by hand") from None
 
 
 def guess_layout(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
     """:func:`guess_components` when the header names a moment, else the 3-axis guess."""
     path = Path(path)
     names, rows, sep, truncated = read_rows(path, max_rows)
-    if any(_component(n) and _component(n)[0] == "m" for n in names):
+    if not any((_component(n) or " ")[0] == "m" for n in names):
+        return guess_config(path, max_rows=max_rows)
+    try:
         return guess_components(path, names, rows, sep, truncated)
-    return guess_config(path, max_rows=max_rows)
+    except InputError as err:  # a 3-axis file with moment columns beside it reads as before
+        try:
+            return guess_config(path, max_rows=max_rows)
+        except InputError:
+            raise err from None
 
 
 def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: str,
@@ -109,7 +134,10 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
         if i not in loads.values() and i not in special and (m := _NUMBERED.fullmatch(parsed[i])):
             families.setdefault(m.group(1), []).append((int(m.group(2)), i))
     fits = [sorted(f) for f in families.values() if len(f) == len(components)]
-    if len(components) < 2 or len(fits) != 1:
+    if len(components) < 2:
+        raise InputError(f"{where}: the header names {len(components)} load component "
+                         f"({', '.join(components)}); a coupling model needs at least 2; header: {header}")
+    if len(fits) != 1:
         raise InputError(
             f"{where}: a force/torque header needs one numbered output channel per load "
             f"component ({len(components)}: {', '.join(components)}), e.g. u1..u{len(components)} "
@@ -122,8 +150,15 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
         raise InputError(f"{where}: no row holds a number in every load and output column")
     f, u = table[:, :len(components)], table[:, len(components):]
     notes: list[str] = [f"read the first {len(rows):,} data rows only"] if truncated else []
+    if (left := sum(any(c.strip() for c in row) for row in rows) - len(table)) > 0:
+        notes.append(f"{left} rows without a finite number in every load and output column "
+                     "were left out")
     prime, why = _pair(f, u, components, [names[i] for i in channels], notes)
     outputs = tuple(parsed[channels[j]] for j in prime)
+    if len({o.lower() for o in outputs}) < len(outputs):
+        same = ", ".join(shown(names[i]) for i in channels)
+        raise InputError(f"{where}: output channels {same} do not have one name each once units "
+                         "and separators are dropped; rename them, or write the config by hand")
     columns = {**{k: names[i] for i, k in special.items()},
                **{c: names[loads[c]] for c in components},
                **{o: names[channels[j]] for o, j in zip(outputs, prime, strict=True)}}
@@ -184,7 +219,9 @@ def _numbers(rows: list[list[str]], cols: list[int], decimal: str) -> np.ndarray
     for row in rows:
         cells = [row[i].strip().replace(decimal, ".") if i < len(row) else "" for i in cols]
         if all(_NUMBER.fullmatch(c) for c in cells):
-            out.append([float(c) for c in cells])
+            values = [float(c) for c in cells]
+            if all(math.isfinite(v) for v in values):  # 1e400 matches, but is no reading
+                out.append(values)
     return np.array(out, dtype=float).reshape(-1, len(cols))
 
 

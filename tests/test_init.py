@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import shutil
 
 import pytest
@@ -258,3 +259,38 @@ def test_a_torque_header_without_one_channel_per_component_is_one_line(tmp_path)
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and str(data) in lines[0] and "u1..u6" in lines[0], res.stderr
     assert not out.exists()
+
+
+def test_a_three_axis_file_with_moment_columns_still_reads_as_three_axes(tmp_path):
+    data = tmp_path / "three.csv"
+    shutil.copy(SAMPLE / "calibration" / "rep1.csv", data)
+    lines = data.read_text().splitlines()
+    data.write_text("\n".join([lines[0] + ",mx,my,mz", *(ln + ",0,0,0" for ln in lines[1:])]) + "\n")
+    doc = json.loads(invoke(["init", data, "-o", tmp_path / "s.yaml", "--json"]).stdout)
+    assert "components" not in doc and doc["columns"]["ux"] == "ux"
+    assert {"mx", "my", "mz"} <= set(doc["ignored"])
+
+
+@pytest.mark.parametrize("edit, match", [
+    (lambda h, rows: (h, [rows[0].replace("-100.000000", "1e300", 1), *rows[1:]]),
+     "full_scale: fx: 1e\\+300 is outside"),
+    (lambda h, rows: (h.replace("u2", "u_1"), rows), "do not have one name each"),
+])
+def test_a_guess_that_would_not_load_is_one_line_and_writes_nothing(tmp_path, edit, match):
+    header, *rows = (SAMPLE / "six_axis" / "calibration" / "rep1.csv").read_text().splitlines()
+    header, rows = edit(header, rows)
+    data, out = tmp_path / "ft.csv", tmp_path / "ft.yaml"
+    data.write_text("\n".join([header, *rows]) + "\n")
+    res = invoke(["init", data, "-o", out], code=2)
+    assert len(res.stderr.strip().splitlines()) == 1 and re.search(match, res.stderr), res.stderr
+    assert not out.exists() and list(tmp_path.iterdir()) == [data]
+
+
+def test_an_infinite_reading_is_skipped_not_a_traceback(tmp_path):
+    """1e400 matches a number's pattern but reads as inf: left out, never a crash."""
+    for src, bad in ((SAMPLE / "calibration" / "rep1.csv", "x,1e400,0,0,1,0,0"),
+                     (SAMPLE / "six_axis" / "calibration" / "rep1.csv", "fx,1e400,0,0,0,0,0,1,2,3,4,5,6")):
+        data = tmp_path / f"{src.parent.parent.name}.csv"
+        data.write_text(src.read_text() + bad + "\n")
+        doc = json.loads(invoke(["init", data, "-o", tmp_path / f"{data.stem}.yaml", "--json"]).stdout)
+        assert max(doc["full_scale"].values()) == 200, doc["full_scale"]
