@@ -527,3 +527,16 @@ def test_simulate_six_axis_with_a_gross_error_moves_one_prime_output(tmp_path):
     bad = invoke(["simulate", tmp_path / "bad", "--components", "6", "--gross-error", "x:1:5:0.2"],
                  code=2)
     assert "fx, fy, fz, mx, my, mz" in bad.stderr and not (tmp_path / "bad").exists()
+
+
+def test_validate_shows_mixed_unit_errors_in_full_scale_only(tmp_path):
+    """Forces and moments have no one unit: the table keeps % F.S. and drops the
+    absolute columns a 3-axis model shows in its load unit."""
+    model = tmp_path / "m.json"
+    invoke(["fit", SIX / "calibration", "-c", CONFIG, "-o", model])
+    shown = invoke(["validate", model, SIX / "calibration", "-c", CONFIG]).stdout
+    assert "max % F.S." in shown and "N / N·m]" not in shown
+    assert "no one unit, so the errors are in % F.S. only" in shown.replace("\n", " ")
+    three = tmp_path / "m3.json"
+    invoke(["fit", SAMPLE / "calibration", "-o", three])
+    assert "max [N]" in invoke(["validate", three, SAMPLE / "calibration"]).stdout
