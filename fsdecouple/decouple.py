@@ -264,6 +264,8 @@ class TableDecoupler:
         and took the exact path.  ``refine``: K fixed-point steps (module docstring);
         ``converged`` (n,), if given, is set False where a row did not settle (NaN forces).
         """
+        if int(refine) != refine or refine < 0:  # the CLI and config refuse these first
+            raise ValueError(f"refine: K = {refine!r}; expected a whole number >= 0")
         u = np.ascontiguousarray(u, dtype=float).reshape(-1, self.n)
         if covered is not None:
             covered[:] = True

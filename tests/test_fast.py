@@ -378,3 +378,10 @@ def test_the_kernel_compiles_where_no_cache_can_be_written(model, monkeypatch):
     finally:
         monkeypatch.undo()
         importlib.reload(kernel)
+
+
+@pytest.mark.parametrize("k", [-1, 1.5])
+def test_the_table_decoupler_refuses_a_negative_or_fractional_k(model, k):
+    """The compiled loop would return zeros for K < 0: refused at the door instead."""
+    with pytest.raises(ValueError, match="whole number >= 0"):
+        model.fast_decoupler().decouple(np.zeros((100, 3)), refine=k)
