@@ -140,6 +140,23 @@ def _bar(*columns) -> Progress:
     )
 
 
+@contextlib.contextmanager
+def progress_bar(label: str, *columns):
+    """:func:`_bar` with one task of unknown length; yields the ``progress(done, total)``
+    callback that the library's long calls take."""
+    with _bar(*columns) as bar:
+        task = bar.add_task(label, total=None)
+        yield lambda done, total: bar.update(task, completed=done, total=total)
+
+
+def show(doc: dict, table, json_out: bool) -> None:
+    """A summary document: as JSON on stdout with ``--json``, else ``table(doc)``."""
+    if json_out:
+        print_json(doc)
+    else:
+        console.print(table(doc))
+
+
 def _terminate(signum, frame) -> None:
     # SIGTERM (kill, CI timeouts) unwinds like Ctrl-C, so temporary files are removed
     raise SystemExit(128 + signum)

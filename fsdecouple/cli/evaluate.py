@@ -18,12 +18,12 @@ from .app import (
     ConfigOpt,
     ForceOpt,
     JsonOpt,
-    _bar,
     _given,
     _read,
     app,
     console,
     err_console,
+    progress_bar,
     user_errors,
     warn,
 )
@@ -97,15 +97,14 @@ def cv(
         cs = load_calibration(calib, settings)
         if output is not None:
             refuse_overwriting_input(output, [*_read(cs), *_given(config, task, task_forces)])
-        with _bar(MofNCompleteColumn()) as bar:
-            job = bar.add_task("training", total=None)
+        with progress_bar("training", MofNCompleteColumn()) as progress:
             doc = run_cv(
                 cs, settings, folds=parse_folds(folds) if folds is not None else None,
                 task=(task, task_forces) if task is not None else None, task_tare=task_tare,
                 gross_error=GrossError.parse(gross_error, settings.layout) if gross_error else None,
                 max_gamma=max_gamma, workers=workers, repeats=repeats, protocol=protocol,
                 tune=tune, tune_grid=grid,
-                progress=lambda done, total: bar.update(job, completed=done, total=total),
+                progress=progress,
             )
         text = json.dumps(doc, indent=1, sort_keys=True, allow_nan=False)
         if output is not None:

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from .app import ForceOpt, JsonOpt, _bar, app, console, print_json, say, user_errors
+from .app import ForceOpt, JsonOpt, app, console, print_json, progress_bar, say, show, user_errors
 
 MaxDriftOpt = Annotated[
     float | None, typer.Option("--max-drift", help="Exit 1 if any change exceeds P [%], e.g. 0.5.")
@@ -62,16 +62,11 @@ def fit_many(
     from ..console_fleet import fleet_errors, fleet_gate_lines, fleet_table
     from ..fleet import fit_many as fit_all
 
-    with user_errors(), _bar(MofNCompleteColumn()) as bar:
-        task = bar.add_task("fitting", total=None)
+    with user_errors(), progress_bar("fitting", MofNCompleteColumn()) as progress:
         result = fit_all(sensors_dir, output, method=method, max_gamma=max_gamma, baseline=baseline,
-                         max_drift=max_drift, force=force, workers=workers,
-                         progress=lambda done, total: bar.update(task, completed=done, total=total))
+                         max_drift=max_drift, force=force, workers=workers, progress=progress)
     doc = result.to_dict()
-    if json_out:
-        print_json(doc)
-    else:
-        console.print(fleet_table(doc))
+    show(doc, fleet_table, json_out)
     say(fleet_errors(doc))
     say(fleet_gate_lines(doc), "gate failed")
     if doc["failed"]:

@@ -18,13 +18,13 @@ from .app import (
     ConfigOpt,
     ForceOpt,
     JsonOpt,
-    _bar,
     _given,
     _read,
     app,
     console,
     err_console,
     print_json,
+    progress_bar,
     user_errors,
     warn,
 )
@@ -96,11 +96,9 @@ def fit(
         check_output(output, force=force)
         cs = load_calibration(calib, settings, exclude=exclude or ())
         refuse_overwriting_input(output, [*_read(cs), *_given(config)])
-        with _bar(MofNCompleteColumn()) as bar:
-            job = bar.add_task("tuning", total=None)
+        with progress_bar("tuning", MofNCompleteColumn()) as progress:
             model = calibrate(cs, settings, method=method, verdict=not no_verdict, tune=tune,
-                              tune_grid=grid, progress=lambda done, total: bar.update(
-                                  job, completed=done, total=total))
+                              tune_grid=grid, progress=progress)
         checks = assumption_checks(model)
         advice = refine_advice(checks, model.n_components)
         save_model(model, output, force=force)

@@ -17,13 +17,13 @@ from .app import (
     ConfigOpt,
     ForceOpt,
     JsonOpt,
-    _bar,
     _given,
     _parse_zero,
     app,
     console,
-    print_json,
+    progress_bar,
     say,
+    show,
     user_errors,
     warn,
 )
@@ -93,12 +93,10 @@ def apply(
         refuse_overwriting_input(output, [model_file, *_given(config)])
         # apply counts progress in bytes of a CSV log, in rows of a Parquet one
         done = MofNCompleteColumn() if is_parquet(voltages) else DownloadColumn()
-        with _bar(done, TimeRemainingColumn()) as bar:
-            task = bar.add_task("decoupling", total=None)
+        with progress_bar("decoupling", done, TimeRemainingColumn()) as progress:
             summary = apply_file(
                 model, voltages, output, settings=settings, tare=tare, zero=offsets,
-                unit=unit, force=force, round_trip=round_trip,
-                progress=lambda done, total: bar.update(task, completed=done, total=total),
+                unit=unit, force=force, round_trip=round_trip, progress=progress,
             )
     for line in apply_lines(summary, output):
         console.print(line, highlight=False, markup=False)  # '[mV]' is no markup
@@ -115,18 +113,13 @@ def _apply_many(model_file, inputs, output, config, tare, zero, unit, refine, ro
     with user_errors():
         settings = load_config(config) if config is not None else None
         offsets = _parse_zero(zero) if zero is not None else None
-        with _bar(MofNCompleteColumn(), TimeRemainingColumn()) as bar:
-            task = bar.add_task("decoupling logs", total=None)
+        with progress_bar("decoupling logs", MofNCompleteColumn(), TimeRemainingColumn()) as progress:
             result = apply_many(
                 model_file, inputs, output, engine=engine, scheduler=scheduler, workers=workers,
                 settings=settings, config=config, tare=tare, zero=offsets, unit=unit, refine=refine,
-                round_trip=round_trip, force=force,
-                progress=lambda done, total: bar.update(task, completed=done, total=total))
+                round_trip=round_trip, force=force, progress=progress)
     doc = result.to_dict()
-    if json_out:
-        print_json(doc)
-    else:
-        console.print(apply_many_table(doc))
+    show(doc, apply_many_table, json_out)
     say(apply_many_errors(doc))
     if doc["failed"]:
         raise typer.Exit(2)
