@@ -18,7 +18,7 @@ import os
 import queue
 import threading
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -171,6 +171,24 @@ def check_options(model: CouplingErrorModel, settings: Settings | None, tare, ze
     return settings, unit
 
 
+def read_tare(blocks: Iterable[Block], scale: np.ndarray, tare: int,
+              source) -> tuple[np.ndarray, list[Block]]:
+    """``--tare``: the zero of a log's first ``tare`` rows, and the blocks read for it.
+
+    ``blocks`` are read only as far as the tare rows reach (the rest stay unread);
+    ``scale`` is the config's per-output ``scale:``.
+    """
+    head, kept, n = [], [], 0
+    for block in blocks:
+        kept.append(block)
+        head.append(block.u[:tare - n] * scale)
+        n += len(head[-1])
+        if n >= tare:
+            break
+    rows = np.concatenate(head) if head else np.empty((0, len(scale)))
+    return tare_offsets(rows, tare, source=source), kept
+
+
 @dataclass(frozen=True)
 class RowRules:
     """What decides a row's status besides its values: extrapolation and saturation bounds."""
@@ -249,21 +267,12 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
                                                      want_table=is_parquet(out))
     summary = ApplySummary(force_unit=unit, output_unit=model.settings.output_unit,
                            outputs=layout.outputs, offsets=np.zeros(layout.n))
-    to_unit = 1.0 if unit == model.settings.load_unit else load_factor(model.settings.load_unit, unit)
+    to_unit = load_factor(model.settings.load_unit, unit)
     sat_lo, sat_hi = _limit_bounds(settings, model)
     if tare is not None:
         # the tare rows are read once: their blocks are kept and decoupled first
-        head, kept, n = [], [], 0
-        for job in jobs:
-            block = job()
-            kept.append(lambda block=block: block)
-            head.append(block.u[:tare - n] * scale)
-            n += len(head[-1])
-            if n >= tare:
-                break
-        summary.offsets = tare_offsets(np.concatenate(head) if head else np.empty((0, layout.n)), tare,
-                                       source=path)
-        jobs = itertools.chain(kept, jobs)
+        summary.offsets, kept = read_tare((job() for job in jobs), scale, tare, path)
+        jobs = itertools.chain((lambda block=block: block for block in kept), jobs)
     elif zero is not None:
         summary.offsets = np.asarray(zero, dtype=float)
     rows = RowRules(*model.extrapolation_limits().T, sat_lo, sat_hi)

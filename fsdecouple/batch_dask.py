@@ -31,10 +31,10 @@ from collections.abc import Callable
 import numpy as np
 
 from .apply import FORCE_UNIT_KEY, OUTPUT_UNIT_KEY, STATUS_COLUMN, STATUS_NAMES, check_options
-from .axes import FORCE_COLUMNS
 from .batch_jobs import ApplySpec, Job, apply_job, dataset_zero
 from .errors import FsdecoupleError, InputError, excerpt, printable
 from .frame import frame_forces, frame_outputs
+from .iotools.sinks import force_arrays
 from .units import load_factor
 
 CONNECT_TIMEOUT = 5.0  # seconds to reach a --scheduler before giving up
@@ -131,7 +131,7 @@ def _dataset_graph(spec: ApplySpec, job: Job, target):
     except InputError as err:
         raise InputError(f"{printable(job.input)}: {err}") from None
     meta = frame._meta.copy()
-    for c in FORCE_COLUMNS:
+    for c in model.layout.loads:
         meta[c] = pd.Series([], dtype=pd.ArrowDtype(pa.float64()))
     meta[STATUS_COLUMN] = pd.Series([], dtype=pd.ArrowDtype(pa.string()))
     factor = load_factor(model.settings.load_unit, unit)
@@ -215,12 +215,12 @@ def decouple_partition(df, spec: ApplySpec, zero, factor: float = 1.0):
     import pyarrow as pa
     import pyarrow.compute as pc
 
-    f, code = frame_forces(spec.model(), df, zero=zero, settings=spec.settings)
+    model = spec.model()
+    f, code = frame_forces(model, df, zero=zero, settings=spec.settings)
     if factor != 1.0:
         f = f * factor
     empty = np.isnan(f[:, 0])  # the rows without forces have none at all
-    mask = empty if empty.any() else None
-    cols = {c: pd.arrays.ArrowExtensionArray(pa.array(f[:, a], pa.float64(), mask=mask))
-            for a, c in enumerate(FORCE_COLUMNS)}
+    cols = {c: pd.arrays.ArrowExtensionArray(a)
+            for c, a in zip(model.layout.loads, force_arrays(f, empty), strict=True)}
     cols[STATUS_COLUMN] = pd.arrays.ArrowExtensionArray(pc.take(STATUS_NAMES, pa.array(code)))
     return df.assign(**cols)

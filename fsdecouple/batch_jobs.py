@@ -17,7 +17,6 @@ from pathlib import Path
 
 import numpy as np
 
-from .axes import VOLTAGE_COLUMNS
 from .config import Settings
 
 
@@ -91,23 +90,16 @@ def apply_job(spec: ApplySpec, job: Job, target: str | Path, zero=None) -> tuple
 
 def dataset_zero(spec: ApplySpec, job: Job):
     """The zero removed from a dataset: ``--zero``, or the mean of its first ``--tare`` rows."""
-    from .apply import check_options
+    from .apply import check_options, read_tare
     from .iotools.logs import parquet_blocks
-    from .zero import tare_offsets
 
     if spec.tare is None:
         return spec.zero
-    settings, _ = check_options(spec.model(), spec.settings, spec.tare, None, spec.unit)
-    names = [settings.columns[c] for c in VOLTAGE_COLUMNS]
-    scale = np.array([settings.scale[c] for c in VOLTAGE_COLUMNS])
-    head, n = [], 0
-    for part in job.parts:  # as apply reads a log's tare rows: the same doubles
-        for block in parquet_blocks(part, names, settings, chunk_rows=spec.tare):
-            head.append(block.u[:spec.tare - n] * scale)
-            n += len(head[-1])
-            if n >= spec.tare:
-                break
-        if n >= spec.tare:
-            break
-    return tuple(tare_offsets(np.concatenate(head) if head else np.empty((0, 3)), spec.tare,
-                              source=job.input))
+    model = spec.model()
+    settings, _ = check_options(model, spec.settings, spec.tare, None, spec.unit)
+    outputs = model.layout.outputs
+    names = [settings.columns[c] for c in outputs]
+    scale = np.array([settings.scale[c] for c in outputs])
+    blocks = (block for part in job.parts  # as apply reads a log's tare rows: the same doubles
+              for block in parquet_blocks(part, names, settings, chunk_rows=spec.tare))
+    return tuple(read_tare(blocks, scale, spec.tare, job.input)[0])

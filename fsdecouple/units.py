@@ -57,8 +57,9 @@ class Units:
 
 
 def load_factor(from_unit: str, to_unit: str) -> float:
-    """Multiply loads in ``from_unit`` by this to get them in ``to_unit``."""
-    return LOAD_UNITS[from_unit] / LOAD_UNITS[to_unit]
+    """Multiply loads in ``from_unit`` by this to get them in ``to_unit`` (1 for the same unit,
+    also a mixed one such as ``N / N·m``, which has no factor to another)."""
+    return 1.0 if from_unit == to_unit else LOAD_UNITS[from_unit] / LOAD_UNITS[to_unit]
 
 
 def output_display(unit: str) -> tuple[float, str]:

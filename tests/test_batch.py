@@ -14,7 +14,7 @@ import sys
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from conftest import SAMPLE, assert_one_line_error, invoke
+from conftest import ROOT, SAMPLE, assert_one_line_error, invoke
 
 LOG = SAMPLE / "task_voltages.csv"
 
@@ -153,3 +153,42 @@ def test_engine_dask_without_dask_says_what_to_install(sample_model, tmp_path, m
                code=2)
     assert_one_line_error(r, "pip install 'fsdecouple[dask]'")
     assert not (tmp_path / "out").exists()
+
+
+
+
+def make_six_axis_logs(root):
+    """six/log.csv (the six-axis sample log), six/ds/ (it in three Parquet parts) and
+    six/whole.parquet (it in one file): the same rows three ways."""
+    import pandas as pd
+
+    log = SAMPLE / "six_axis" / "task_voltages.csv"
+    (root / "six" / "ds").mkdir(parents=True)
+    shutil.copy(log, root / "six" / "log.csv")
+    table = pa.Table.from_pandas(pd.read_csv(log), preserve_index=False)
+    for i, (a, b) in enumerate(((0, 150), (150, 1200), (1200, table.num_rows))):
+        pq.write_table(table.slice(a, b - a), root / "six" / "ds" / f"part.{i}.parquet")
+    pq.write_table(table, root / "whole.parquet")
+    return root / "six"
+
+
+SIX_MODEL = ROOT / "tests" / "data" / "golden" / "six-axis-v3.json"  # forces in N, moments in N·m
+
+
+@pytest.mark.parametrize("how", [["--tare", 200], ["--zero", "0.01,-0.02,0,0.003,0,-0.001"]])
+def test_six_axis_logs_and_datasets_get_all_six_components(tmp_path, how):
+    """A six-axis model on many logs: every component written, and a dataset's tare read
+    across its parts (the first part is shorter than the tare) as one log's would be."""
+    model = SIX_MODEL
+    logs = make_six_axis_logs(tmp_path)
+    doc = json.loads(invoke(["apply", model, logs, "-o", f"{tmp_path / 'out'}/", *how,
+                             "--json"]).stdout)
+    assert [f["error"] for f in doc["files"]] == [None, None]
+    whole = single(model, tmp_path / "whole.parquet", tmp_path / "whole-out.parquet", *how)
+    want = pq.read_table(whole)
+    got = pq.read_table(tmp_path / "out" / "ds")
+    assert got.column_names == want.column_names
+    assert {"fx", "fy", "fz", "mx", "my", "mz", "status"} <= set(got.column_names)
+    assert got.equals(want.cast(got.schema))
+    csv = single(model, logs / "log.csv", tmp_path / "log-out.csv", *how)
+    assert (tmp_path / "out" / "log.csv").read_bytes() == csv.read_bytes()

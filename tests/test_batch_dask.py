@@ -18,7 +18,7 @@ import time
 import pyarrow.parquet as pq
 import pytest
 from conftest import SAMPLE, assert_one_line_error, invoke
-from test_batch import make_logs, spoil
+from test_batch import SIX_MODEL, make_logs, make_six_axis_logs, spoil
 
 distributed = pytest.importorskip("distributed")
 
@@ -63,6 +63,17 @@ def test_dask_writes_what_the_local_engine_writes(sample_model, tmp_path, cluste
     assert strip == [{k: v for k, v in f.items() if k != "output"} for f in dask["files"]]
     assert dask["engine"] == "dask" and dask["failed"] == []
     assert {f["rows"] for f in dask["files"]} == {1000, 3000}
+
+
+def test_dask_writes_every_component_of_a_six_axis_model(tmp_path, cluster):
+    """Forces and moments (mixed units), a dataset tared across its parts: as the local engine."""
+    logs = make_six_axis_logs(tmp_path)
+    args = ["apply", SIX_MODEL, logs, "--tare", 200]
+    invoke([*args, "-o", f"{tmp_path / 'local'}/"])
+    invoke([*args, "-o", f"{tmp_path / 'dask'}/", "--engine", "dask",
+            "--scheduler", cluster.scheduler_address])
+    _same_outputs(tmp_path / "local", tmp_path / "dask")
+    assert {"mx", "my", "mz"} <= set(pq.read_table(tmp_path / "dask" / "ds").column_names)
 
 
 def test_dask_local_cluster_of_its_own_and_bad_logs(sample_model, tmp_path):

@@ -120,16 +120,17 @@ def _given(*paths):
     return [p for p in paths if p is not None]
 
 
-def _parse_zero(text: str, outputs=("ux", "uy", "uz")) -> tuple[float, ...]:
+def _parse_zero(text: str) -> tuple[float, ...]:
+    """``--zero``'s comma-separated finite outputs; their count is checked against the model
+    (:func:`fsdecouple.apply.check_options`), which knows its outputs."""
     try:
         values = tuple(float(v) for v in text.split(","))
     except ValueError:
         values = ()
-    if len(values) != len(outputs) or not all(math.isfinite(v) for v in values):
-        what = "three voltages" if len(outputs) == 3 else f"{len(outputs)} outputs"
-        raise InputError(f"--zero {text!r}: expected {what} {','.join(outputs)}, e.g. "
-                         f"{','.join(['0.01', '-0.02', *['0'] * (len(outputs) - 2)])}")
-    return values  # type: ignore[return-value]
+    if not values or not all(math.isfinite(v) for v in values):
+        raise InputError(f"--zero {text!r}: expected the zero of each output, comma-separated "
+                         "finite numbers, e.g. 0.01,-0.02,0")
+    return values
 
 
 def _bar(*columns) -> Progress:

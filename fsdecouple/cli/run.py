@@ -88,7 +88,7 @@ def apply(
         if refine is not None:
             model = model.refined(refine)
         settings = load_config(config) if config is not None else None
-        offsets = _parse_zero(zero, model.layout.outputs) if zero is not None else None
+        offsets = _parse_zero(zero) if zero is not None else None
         check_output(output, force=force)
         refuse_overwriting_input(output, [model_file, *_given(config)])
         # apply counts progress in bytes of a CSV log, in rows of a Parquet one

@@ -14,7 +14,8 @@ from ..axes import FORCE_COLUMNS
 from .logs import Block
 
 
-def _forces_table(f: np.ndarray, empty: np.ndarray) -> list[pa.Array]:
+def force_arrays(f: np.ndarray, empty: np.ndarray) -> list[pa.Array]:
+    """Forces (n, N) as Arrow doubles, one array a column, null where ``empty``."""
     mask = empty if empty.any() else None
     return [pa.array(f[:, k], pa.float64(), mask=mask) for k in range(f.shape[1])]
 
@@ -71,7 +72,7 @@ class CsvSink:
             with np.errstate(over="ignore", invalid="ignore"):
                 rounded = np.round(f, self.decimals)
             f = np.where(np.isfinite(rounded) | ~np.isfinite(f), rounded, f)
-        text = [self._text(a) for a in _forces_table(f, empty)]
+        text = [self._text(a) for a in force_arrays(f, empty)]
         if block.lines is not None:
             parts = [a.cast(pa.binary()) for a in (*text, *extra)]
             out = pc.binary_join_element_wise(
@@ -125,7 +126,7 @@ class ParquetSink:
 
     def encode(self, block: Block, f: np.ndarray, empty: np.ndarray, extra: tuple = ()) -> pa.Table:
         table = block.table
-        for c, a in zip(self.columns, _forces_table(f, empty), strict=True):
+        for c, a in zip(self.columns, force_arrays(f, empty), strict=True):
             table = table.append_column(c, a)
         for c, a in zip(self.extra, extra, strict=True):
             table = table.append_column(c, a)
