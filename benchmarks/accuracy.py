@@ -1,7 +1,7 @@
 """Combined-load accuracy against the floor, on simulated sensors (issue 12).
 
     python benchmarks/accuracy.py              # every scenario, five seeds each
-    python benchmarks/accuracy.py --readme     # the same, printed as the README's table
+    python benchmarks/accuracy.py --readme     # the same, written into README's table
     python benchmarks/accuracy.py --seeds 2 --scenarios 5%
 
 Each scenario simulates sensors with :mod:`fsdecouple.simulate` (six repetitions on
@@ -205,10 +205,22 @@ def markdown(results: dict[str, dict[str, float]], seeds: int, six: bool = False
     return "\n".join(lines)
 
 
+def write_block(name: str, table: str) -> None:
+    """Print ``table`` and put it in README's ``name`` block (docs/readme_blocks.py)."""
+    import sys
+
+    sys.path.insert(0, str(ROOT / "docs"))
+    from readme_blocks import replace_block
+
+    print(table)
+    replace_block(name, table)
+    print(f"README.md: {name} block rewritten")
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=5)
-    ap.add_argument("--readme", action="store_true", help="print the README's markdown table")
+    ap.add_argument("--readme", action="store_true", help="write the README's markdown table")
     ap.add_argument("--scenarios", help="comma-separated labels (prefixes) to run")
     ap.add_argument("--six", action="store_true", help="the six-axis sensors instead")
     args = ap.parse_args()
@@ -217,7 +229,7 @@ if __name__ == "__main__":
         res = run_six(args.seeds)
         print(f"({time.perf_counter() - t0:.0f} s)")
         if args.readme:
-            print(markdown(res, args.seeds, six=True))
+            write_block("accuracy-six", markdown(res, args.seeds, six=True))
         raise SystemExit(0)
     chosen = SCENARIOS if not args.scenarios else [
         s for s in SCENARIOS if any(s.label.startswith(p) for p in args.scenarios.split(","))]
@@ -225,4 +237,4 @@ if __name__ == "__main__":
     res = run(chosen, args.seeds)
     print(f"({time.perf_counter() - t0:.0f} s)")
     if args.readme:
-        print(markdown(res, args.seeds))
+        write_block("accuracy", markdown(res, args.seeds))

@@ -2,6 +2,7 @@
 
     python benchmarks/refine.py            # K = 3 vs K = 0, 1 M in-range vectors, 7 repeats
     python benchmarks/refine.py --sweep    # recommended K vs measured, simulated sensors
+    python benchmarks/refine.py --readme   # the cost run, written into README's block
 
 The ratio is of medians measured in the same run (other jobs on a shared machine
 slow both alike).  K steps and the forces are K + 1 evaluations of every chi, each
@@ -26,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from run import median_child, write_log  # noqa: E402
+from run import machine, median_child, write_log  # noqa: E402
 
 from fsdecouple import load_config
 from fsdecouple.calibration import from_table
@@ -43,7 +44,9 @@ def sensor_model(factor: float, settings):
     return sensor, fit(from_table(simulate_calibration(sensor, seed=3), settings), settings)
 
 
-def cost(rows: int, repeats: int, k: int) -> None:
+def cost(rows: int, repeats: int, k: int) -> str:
+    """Both comparisons, printed and returned as the README's lines."""
+    started = machine()
     _, model = sensor_model(1.0, load_config())
     r = model.calibrated_range
     u = np.random.default_rng(0).uniform(r[:, 0], r[:, 1], (rows, 3))
@@ -55,8 +58,9 @@ def cost(rows: int, repeats: int, k: int) -> None:
             model.decouple(u, refine=kk)
             times[kk].append(time.perf_counter() - t0)
     base, refined = (statistics.median(times[kk]) for kk in (0, k))
-    print(f"{rows} vectors, median of {repeats}: K = 0 {base:.4f} s, K = {k} {refined:.4f} s, "
-          f"ratio {refined / base:.2f}")
+    memory = (f"in memory, {rows:,} vectors through the tables, median of {repeats}: K = 0 "
+              f"{base:.4f} s, K = {k} {refined:.4f} s, ratio **{refined / base:.2f}**")
+    print(memory)
     with tempfile.TemporaryDirectory(prefix="fsdecouple-bench-refine-") as tmp:
         tmp = Path(tmp)
         mfile, log = tmp / "model.json", tmp / "log.csv"
@@ -64,8 +68,10 @@ def cost(rows: int, repeats: int, k: int) -> None:
         write_log(log, rows, model)
         args = [sys.executable, "-m", "fsdecouple", "apply", mfile, log, "-o", tmp / "f.csv", "--force"]
         walls = {kk: median_child([*args, "--refine", str(kk)], 3)[0] for kk in (0, k)}
-    print(f"fsdecouple apply, {rows}-row CSV, median of 3: K = 0 {walls[0]:.2f} s, K = {k} "
-          f"{walls[k]:.2f} s, ratio {walls[k] / walls[0]:.2f}")
+    applied = (f"`fsdecouple apply`, {rows:,}-row CSV, median of 3: K = 0 {walls[0]:.2f} s, "
+               f"K = {k} {walls[k]:.2f} s, ratio **{walls[k] / walls[0]:.2f}**")
+    print(applied)
+    return f"Measured by `benchmarks/refine.py`: {started}.\n\n* {memory}\n* {applied}"
 
 
 def sweep() -> None:
@@ -93,5 +99,15 @@ if __name__ == "__main__":
     ap.add_argument("--rows", type=int, default=1_000_000)
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("-k", type=int, default=3)
+    ap.add_argument("--readme", action="store_true",
+                    help="also rewrite README's refine-benchmarks block (the default cost run)")
     args = ap.parse_args()
-    sweep() if args.sweep else cost(args.rows, args.repeats, args.k)
+    if args.sweep:
+        sweep()
+    else:
+        text = cost(args.rows, args.repeats, args.k)
+        if args.readme:
+            from readme_blocks import replace_block
+
+            replace_block("refine-benchmarks", text)
+            print("README.md: refine-benchmarks block rewritten")

@@ -115,6 +115,17 @@ def median_child(args, repeats):
     return statistics.median(w for w, _ in runs), max(m for _, m in runs)
 
 
+def markdown_table(rows) -> str:
+    """The README's table of benchmark rows (target, measured, unit, baseline, baseline name,
+    ratio, goal, ok), as every benchmark script prints and writes it."""
+    return "\n".join([
+        "| target | measured (median) | baseline (median) | ratio | goal | |",
+        "|---|---|---|---|---|---|",
+        *(f"| {t} | {v:.4g} {u} | {b:.4g} ({bn}) | {r:.3g} | {g} | {'PASS' if ok else 'FAIL'} |"
+          for t, v, u, b, bn, r, g, ok in rows),
+    ])
+
+
 def machine() -> str:
     cpu = "unknown CPU"
     try:
@@ -438,13 +449,8 @@ def main() -> int:
             "<= 1e-10 V; second <= 1e-9 V (ratio: second / 1e-9 V)",
             d_fmt <= 1e-10 and d_exact <= 1e-9)
 
-    table = "\n".join([
-        "| target | measured (median) | baseline (median) | ratio | goal | |",
-        "|---|---|---|---|---|---|",
-        *(f"| {r_['target']} | {r_['measured']:.4g} {r_['unit']} | {r_['baseline']:.4g} "
-          f"({r_['baseline_name']}) | {r_['ratio']:.3g} | {r_['goal']} | "
-          f"{'PASS' if r_['ok'] else 'FAIL'} |" for r_ in results),
-    ])
+    table = markdown_table([(r_["target"], r_["measured"], r_["unit"], r_["baseline"],
+                             r_["baseline_name"], r_["ratio"], r_["goal"], r_["ok"]) for r_ in results])
     after = ", ".join(f"{v:.2f}" for v in os.getloadavg())
     print(f"\n{table}\n\n{started}; after: {after}; log {rows:,} rows; {repeats} repeats")
     if args.readme:

@@ -3,6 +3,7 @@ the same run, the ratio and pass/fail.
 
     python benchmarks/six_axis.py            # full: 10 M-row log
     python benchmarks/six_axis.py --quick    # 1 M-row log, fewer repeats
+    python benchmarks/six_axis.py --readme   # full, and rewrite README's six-axis block
 
 1. in-memory decoupling of an (n, 6) array through the tables: >= 10 M vectors/s
    and >= 1000x libsvm's batch svm_predict for the 30 chi;
@@ -28,7 +29,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from run import apply_against_copy, machine, median_child, median_time  # noqa: E402
+from run import apply_against_copy, machine, markdown_table, median_child, median_time  # noqa: E402
 
 from fsdecouple import load_calibration, load_config  # noqa: E402
 from fsdecouple.fit import chi_training_data, fit  # noqa: E402
@@ -41,7 +42,11 @@ def main() -> int:
     ap.add_argument("--rows", type=int, help="rows of the apply log (default 10 M, quick 1 M)")
     ap.add_argument("--repeats", type=int, help="runs per median (default 5, quick 3)")
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--readme", action="store_true",
+                    help="also rewrite README's six-axis-benchmarks block (a full run)")
     args = ap.parse_args()
+    if args.readme and (args.quick or args.rows):
+        ap.error("--readme writes the full run: drop --quick and --rows")
     rows = args.rows or (1_000_000 if args.quick else 10_000_000)
     repeats = args.repeats or (3 if args.quick else 5)
     started = machine()
@@ -112,13 +117,16 @@ def main() -> int:
         row("2b. apply peak memory", app_mb, "MB", base_mb, "read + write peak [MB]",
             app_mb / base_mb, "< 500 MB", app_mb < 500)
 
-    print("\n| target | measured (median) | baseline (median) | ratio | goal | |")
-    print("|---|---|---|---|---|---|")
-    for name, value, unit, base, base_name, ratio, goal, ok in results:
-        print(f"| {name} | {value:.4g} {unit} | {base:.4g} ({base_name}) | {ratio:.3g} | {goal} | "
-              f"{'PASS' if ok else 'FAIL'} |")
+    table = markdown_table(results)
     after = ", ".join(f"{v:.2f}" for v in os.getloadavg())
-    print(f"\n{started}; after: {after}; log {rows:,} rows; {repeats} repeats")
+    head = (f"Measured by `benchmarks/six_axis.py` ({rows:,}-row log; {repeats} repeats): {started}; "
+            f"after: {after}.")
+    print(f"\n{head}\n\n{table}")
+    if args.readme:
+        from readme_blocks import replace_block
+
+        replace_block("six-axis-benchmarks", f"{head}\n\n{table}")
+        print("README.md: six-axis-benchmarks block rewritten")
     return 0 if all(r_[-1] for r_ in results) else 1
 
 
