@@ -59,11 +59,11 @@ def _load(path: str, refine: int | None):
     return model if refine is None else model.refined(refine)
 
 
-def apply_job(spec: ApplySpec, job: Job, target: str | Path, zero=None) -> tuple[int, dict[str, int]]:
+def apply_job(spec: ApplySpec, job: Job, target: str | Path) -> tuple[int, dict[str, int]]:
     """Decouple one input into ``target`` (a file, or a directory for a dataset).
 
-    A dataset's parts are decoupled ``spec.threads`` at a time with the dataset's zero (``zero``,
-    else :func:`dataset_zero`), each into ``target/<part name>``.
+    A dataset's parts are decoupled ``spec.threads`` at a time with the dataset's zero
+    (:func:`dataset_zero`), each into ``target/<part name>``.
     Returns the rows and status counts.
     """
     from .apply import STATUSES, apply_file
@@ -74,8 +74,7 @@ def apply_job(spec: ApplySpec, job: Job, target: str | Path, zero=None) -> tuple
     if not job.dataset:
         s = apply_file(model, job.input, target, tare=spec.tare, zero=spec.zero, **kw)
         return s.rows, s.status_counts
-    if zero is None:
-        zero = dataset_zero(spec, job)
+    zero = dataset_zero(spec, job)
     target.mkdir()
     rows, counts = 0, dict.fromkeys(STATUSES, 0)
     # parts at once rather than blocks at once: a part is often one block

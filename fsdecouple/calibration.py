@@ -253,6 +253,9 @@ class GrossError:
 
     def apply(self, table: pd.DataFrame, layout: Layout = DEFAULT) -> pd.DataFrame:
         """A copy of ``table`` with this point's prime voltage moved by ``offset``."""
+        if self.axis not in layout.labels:
+            raise InputError(f"--gross-error: no component '{self.axis}' (the sensor has "
+                             f"{', '.join(layout.labels)})")
         idx = np.flatnonzero(
             (table["repetition"] == self.repetition).to_numpy()
             & (table["axis"] == self.axis).to_numpy()

@@ -211,9 +211,6 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
         task_data = (u_task, f_task)
     gross_calib = None
     if gross_error is not None:
-        if gross_error.axis not in calib.layout.labels:
-            raise InputError(f"--gross-error: no component '{gross_error.axis}' (the sensor has "
-                             f"{', '.join(calib.layout.labels)})")
         if gross_error.repetition not in reps:
             raise InputError(
                 f"--gross-error: repetition {gross_error.repetition} is not in the calibration "

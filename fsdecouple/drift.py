@@ -72,7 +72,7 @@ def compare(old: CouplingErrorModel | str | Path, new: CouplingErrorModel | str 
     old, new = models
     _check_comparable(old, new, docs[0]["model"] or "old model", docs[1]["model"] or "new model")
 
-    axes = _axes(old)
+    axes = old.layout.labels
     fso = old.full_scale_output
     fs = np.asarray(old.settings.full_scale, dtype=float)
     slope = 100.0 * (new.k - old.k) / old.k
@@ -120,10 +120,6 @@ def _output(model: CouplingErrorModel, b: int) -> str:
     return f"u_{model.layout.labels[b]}" if model.layout.is_default else model.layout.outputs[b]
 
 
-def _axes(model: CouplingErrorModel) -> list[str]:
-    return list(model.layout.labels)
-
-
 def _figures(components):
     for a, c in components.items():
         yield f"{a}: slope change", c["slope_change_pct"]
@@ -143,8 +139,8 @@ def _range(r) -> str:
 
 def _check_comparable(old: CouplingErrorModel, new: CouplingErrorModel, a: str, b: str) -> None:
     if old.n_components != new.n_components or sorted(old.chi) != sorted(new.chi):
-        raise InputError(f"{b}: has {new.n_components} components ({', '.join(_axes(new))}), "
-                         f"{a} has {old.n_components} ({', '.join(_axes(old))}); "
+        raise InputError(f"{b}: has {new.n_components} components ({', '.join(new.layout.labels)}), "
+                         f"{a} has {old.n_components} ({', '.join(old.layout.labels)}); "
                          "compare two calibrations of one sensor")
     if old.settings.units != new.settings.units:
         raise InputError(f"{b}: is in {new.settings.units.load} and {new.settings.units.output}, "
@@ -158,7 +154,7 @@ def _output_grid(old: CouplingErrorModel, new: CouplingErrorModel) -> np.ndarray
     lo, hi = np.maximum(r_old[:, 0], r_new[:, 0]), np.minimum(r_old[:, 1], r_new[:, 1])
     bad = np.flatnonzero(~(lo <= hi))
     if bad.size:
-        a = _axes(old)[bad[0]]
+        a = old.layout.labels[bad[0]]
         raise InputError(f"component {a}: the two calibrations share no range of "
                          f"{_output(old, bad[0])} "
                          f"(old {_range(r_old[bad[0]])}, new {_range(r_new[bad[0]])})")

@@ -141,7 +141,7 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
                 f"omega_{axis}: R^2 = {omega.r2[a]:.5f} is below {settings.min_r2} "
                 "(assumption 1 of Section 2.1: prime force and voltage are linear)"
             )
-    settings = solved_to_the_noise(calib, settings)  # N components, full_scale (noise.py)
+    settings = solved_to_the_noise(calib, settings, omega.k)  # N components, full_scale
     # Kernel scaling: "full_scale" divides inputs and targets by each axis's
     # full-scale output |k| F_FS [V], so Table 2's gamma suits mV or ADC counts too.
     if settings.scaling == "full_scale":

@@ -141,7 +141,7 @@ def fit_sensor(sensor_dir: str | Path, models_dir: str | Path, *, method: str = 
         return result
     verdict = model.report.verdict
     result.model = str(out)
-    result.k = {name: float(k) for name, k in zip(_axes(model), model.k, strict=True)}
+    result.k = {name: float(k) for name, k in zip(model.layout.labels, model.k, strict=True)}
     result.units = {"load": settings.units.load, "output": settings.units.output}
     result.method = model.method
     result.warnings = model.warnings
@@ -227,5 +227,3 @@ def fit_many(sensors_dir: str | Path, models_dir: str | Path, *, method: str = "
                        max_gamma, max_drift, None if baseline is None else str(baseline))
 
 
-def _axes(model) -> list[str]:
-    return list(model.layout.labels)

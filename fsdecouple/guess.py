@@ -276,7 +276,12 @@ def guess_config(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
     quantity and the header seen).
     """
     path = Path(path)
-    names, raw_rows, sep, truncated = read_rows(path, max_rows)
+    return guess_rows(path, *read_rows(path, max_rows))
+
+
+def guess_rows(path: Path, names: list[str], raw_rows: list[list[str]], sep: str,
+               truncated: bool) -> Guess:
+    """:func:`guess_config` of a file already read by :func:`read_rows`."""
     notes: list[str] = []
     ignored: dict[int, str] = {}
     # A side table (notes, a load plan) often sits right of the data after an
@@ -348,7 +353,7 @@ def guess_config(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
             integers &= key in FORCE_COLUMNS or bool(_INTEGER.fullmatch(number))
     reps.discard("")
     if truncated:
-        notes.append(f"read the first {max_rows:,} data rows only")
+        notes.append(f"read the first {len(raw_rows):,} data rows only")
     for key in REQUIRED:
         if not values[key]:
             raise InputError(

@@ -35,7 +35,7 @@ from .guess import (
     _parse_name,
     _sniff_decimal,
     _unit,
-    guess_config,
+    guess_rows,
     nice_ceil,
     read_rows,
     shown,
@@ -98,12 +98,12 @@ def guess_layout(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
     path = Path(path)
     names, rows, sep, truncated = read_rows(path, max_rows)
     if not any((_component(n) or " ")[0] == "m" for n in names):
-        return guess_config(path, max_rows=max_rows)
+        return guess_rows(path, names, rows, sep, truncated)
     try:
         return guess_components(path, names, rows, sep, truncated)
     except InputError as err:  # a 3-axis file with moment columns beside it reads as before
         try:
-            return guess_config(path, max_rows=max_rows)
+            return guess_rows(path, names, rows, sep, truncated)
         except InputError:
             raise err from None
 

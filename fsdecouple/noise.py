@@ -27,20 +27,22 @@ NOISE_FRACTION = 0.5  # of sigma: at 1.4 sigma the chi were no better than at 1e
 MIN_TOLERANCE = 1e-5  # [F.S.], as tune.TUNE_TOLERANCE
 
 
-def noise(calib: CalibrationSet, settings: Settings) -> float | None:
+def noise(calib: CalibrationSet, settings: Settings, k: np.ndarray | None = None) -> float | None:
     """sigma: the scatter of repeated loads, as a fraction of full-scale output.
 
     Points of the same sweep axis and load in different repetitions are repeats; the
     pooled standard deviation of every output about its repeats' mean, divided by
     the output's full-scale output |k| F_FS (k from eq. 2), is pooled over the
     outputs (root mean square).  None without two repetitions of any loaded point.
+    ``k``: the slopes if already fitted (eq. 2), else fitted here.
     """
     from .linear import fit_omega
 
     pts, layout = calib.points, settings.layout
+    k = fit_omega(pts, layout).k if k is None else k
     forces = pts[list(layout.loads)].to_numpy()
     loaded = (forces != 0.0).any(axis=1)
-    u_fs = np.abs(fit_omega(pts, layout).k) * np.asarray(settings.full_scale)
+    u_fs = np.abs(k) * np.asarray(settings.full_scale)
     u = pts[list(layout.outputs)].to_numpy() / u_fs
     keys = [tuple(r) for r in np.column_stack([pts["axis"].map(layout.labels.index), forces])]
     groups: dict[tuple, list[int]] = {}
@@ -56,7 +58,8 @@ def noise(calib: CalibrationSet, settings: Settings) -> float | None:
     return math.sqrt(ss / dof) if dof else None
 
 
-def solved_to_the_noise(calib: CalibrationSet, settings: Settings) -> Settings:
+def solved_to_the_noise(calib: CalibrationSet, settings: Settings,
+                        k: np.ndarray | None = None) -> Settings:
     """``settings`` with libsvm's tolerance at most NOISE_FRACTION sigma [F.S.].
 
     Only for a sensor with ``components:`` fitted with ``scaling: full_scale``; three
@@ -65,7 +68,7 @@ def solved_to_the_noise(calib: CalibrationSet, settings: Settings) -> Settings:
     """
     if settings.components is None or settings.scaling != "full_scale":
         return settings
-    sigma = noise(calib, settings)
+    sigma = noise(calib, settings, k)
     if sigma is None or not math.isfinite(sigma):
         return settings
     tol = max(MIN_TOLERANCE, min(settings.svr.tolerance, NOISE_FRACTION * sigma))
