@@ -32,7 +32,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from run import ROOT, machine, markdown_table, median_time, write_log  # noqa: E402  (puts ROOT and docs/ on sys.path)
+from run import ROOT, machine, median_time, publish, write_log  # noqa: E402  (puts ROOT and docs/ on sys.path)
 
 from fsdecouple import load_calibration, load_config, load_model, save_model  # noqa: E402
 from fsdecouple.batch import apply_many  # noqa: E402
@@ -220,17 +220,9 @@ def main() -> int:
             row(f"F7. fit-many, {n_sensors} simulated sensors", par, "s", seq,
                 "sequential loop of fit_sensor [s]", f"speed-up {seq / par:.2f}x (info)", True)
 
-    table = markdown_table(results)
-    after = ", ".join(f"{v:.2f}" for v in os.getloadavg())
-    head = (f"Measured by `benchmarks/fleet.py` ({n_logs} logs x {rows:,} rows, {mb:.0f} MB of CSV; "
-            f"{n_sensors} sensors; {repeats} repeats): {started}; after: {after}.")
-    print(f"\n{head}\n\n{table}")
-    if args.readme:
-        from readme_blocks import replace_block
-
-        replace_block("fleet-benchmarks", f"{head}\n\n{table}")
-        print("README.md: fleet-benchmarks block rewritten")
-    return 0 if all(r[-1] for r in results) else 1
+    return publish("fleet-benchmarks", f"Measured by `benchmarks/fleet.py` ({n_logs} logs x {rows:,} "
+                   f"rows, {mb:.0f} MB of CSV; {n_sensors} sensors; {repeats} repeats): {started}",
+                   results, args.readme)
 
 
 if __name__ == "__main__":

@@ -126,6 +126,20 @@ def markdown_table(rows) -> str:
     ])
 
 
+def publish(block: str, head: str, rows, readme: bool) -> int:
+    """Print ``head`` (what was measured), the machine's load now and the rows' table; with
+    ``readme``, write them into README's ``block``.  Returns 0 if every row passed, else 1."""
+    after = ", ".join(f"{v:.2f}" for v in os.getloadavg())
+    text = f"{head}; after: {after}.\n\n{markdown_table(rows)}"
+    print(f"\n{text}")
+    if readme:
+        from readme_blocks import replace_block
+
+        replace_block(block, text)
+        print(f"README.md: {block} block rewritten")
+    return 0 if all(r[-1] for r in rows) else 1
+
+
 def machine() -> str:
     cpu = "unknown CPU"
     try:

@@ -19,7 +19,6 @@ Helpers (timing, child processes, peak memory) are benchmarks/run.py's.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import tempfile
 from pathlib import Path
@@ -29,7 +28,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from run import apply_against_copy, machine, markdown_table, median_child, median_time  # noqa: E402
+from run import apply_against_copy, machine, median_child, median_time, publish  # noqa: E402
 
 from fsdecouple import load_calibration, load_config  # noqa: E402
 from fsdecouple.fit import chi_training_data, fit  # noqa: E402
@@ -117,17 +116,8 @@ def main() -> int:
         row("2b. apply peak memory", app_mb, "MB", base_mb, "read + write peak [MB]",
             app_mb / base_mb, "< 500 MB", app_mb < 500)
 
-    table = markdown_table(results)
-    after = ", ".join(f"{v:.2f}" for v in os.getloadavg())
-    head = (f"Measured by `benchmarks/six_axis.py` ({rows:,}-row log; {repeats} repeats): {started}; "
-            f"after: {after}.")
-    print(f"\n{head}\n\n{table}")
-    if args.readme:
-        from readme_blocks import replace_block
-
-        replace_block("six-axis-benchmarks", f"{head}\n\n{table}")
-        print("README.md: six-axis-benchmarks block rewritten")
-    return 0 if all(r_[-1] for r_ in results) else 1
+    return publish("six-axis-benchmarks", f"Measured by `benchmarks/six_axis.py` ({rows:,}-row log; "
+                   f"{repeats} repeats): {started}", results, args.readme)
 
 
 if __name__ == "__main__":
