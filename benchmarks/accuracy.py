@@ -4,7 +4,7 @@
     python benchmarks/accuracy.py --readme     # the same, written into README's table
     python benchmarks/accuracy.py --seeds 2 --scenarios 5%
 
-Each scenario simulates sensors with :mod:`fsdecouple.simulate` (six repetitions on
+Each scenario simulates sensors with :mod:`fsdecouple.sim.simulate` (six repetitions on
 the paper's grid) and a combined-load log of 3000 rows (tared by its first 200
 unloaded rows, as ``apply --tare 200`` does).  The **floor** is the error left when
 the simulator's true coupling functions are known and eq. (1) is solved exactly
@@ -27,11 +27,11 @@ from pathlib import Path
 import numpy as np
 
 from fsdecouple import load_config
-from fsdecouple.calibration import from_table
-from fsdecouple.fit import fit
-from fsdecouple.linear import fit_calibration_matrix
-from fsdecouple.simulate import SimulatedSensor, simulate_calibration, simulate_task, with_coupling
-from fsdecouple.tune import tune_settings
+from fsdecouple.data.calibration import from_table
+from fsdecouple.evaluation.tune import tune_settings
+from fsdecouple.fitting.fit import fit
+from fsdecouple.fitting.linear import fit_calibration_matrix
+from fsdecouple.sim.simulate import SimulatedSensor, simulate_calibration, simulate_task, with_coupling
 
 ROOT = Path(__file__).resolve().parent.parent
 TARE_ROWS = 200

@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from fsdecouple import fit  # noqa: E402
-from fsdecouple.export import export_header  # noqa: E402
+from fsdecouple.export.header import export_header  # noqa: E402
 
 HARNESS = r"""
 #define _POSIX_C_SOURCE 199309L  /* clock_gettime under -std=c99 */

@@ -35,9 +35,9 @@ sys.path.insert(0, str(HERE))
 from run import ROOT, machine, median_time, publish, write_log  # noqa: E402  (puts ROOT and docs/ on sys.path)
 
 from fsdecouple import load_calibration, load_config, load_model, save_model  # noqa: E402
-from fsdecouple.batch import apply_many  # noqa: E402
-from fsdecouple.batch_dask import dask_client  # noqa: E402
-from fsdecouple.fit import fit  # noqa: E402
+from fsdecouple.fitting.fit import fit  # noqa: E402
+from fsdecouple.logs.dask_engine import dask_client  # noqa: E402
+from fsdecouple.logs.many import apply_many  # noqa: E402
 
 
 def pyarrow_csv_copy(files, out: Path) -> None:
@@ -78,7 +78,7 @@ def pyarrow_whole_parquet_copy(files, out: Path) -> None:
 
 
 def make_sensors(root: Path, n: int) -> Path:
-    from fsdecouple.simulate import simulate
+    from fsdecouple.sim.simulate import simulate
 
     for i in range(n):
         d = root / f"s{i:03d}"
@@ -204,7 +204,7 @@ def main() -> int:
             row("F6. LocalCluster(2 processes) start-up, workers' imports", startup, "s", dask,
                 "one dask run, Parquet [s]", "info (paid once per cluster, not in F1)", True)
 
-            from fsdecouple.fleet import fit_many, fit_sensor, sensor_dirs
+            from fsdecouple.fleet.sensors import fit_many, fit_sensor, sensor_dirs
 
             sensors = make_sensors(tmp / "sensors", n_sensors)
             seq_out, par_out = tmp / "models-seq", tmp / "models-par"

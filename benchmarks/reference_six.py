@@ -15,7 +15,7 @@ fsdecouple's fitting (only libsvm): Sections 2-4 for N components,
    of Section 2.2 with delta^2 = 1, i.e. libsvm's gamma = 1 / (2 delta^2) = 0.5;
 4. eq. (11): f_a = [u_a - sum_b chi_ab(u_b)] / k_a.
 
-For each simulated sensor (fsdecouple.simulate_six, as ``simulate --components 6``)
+For each simulated sensor (fsdecouple.sim.six_axis, as ``simulate --components 6``)
 it prints every component's combined-load RMS error over the floor (the true
 coupling, eq. (1) solved exactly) and over the least-squares matrix's, for the
 reference, fsdecouple's defaults (``zero: fit``) and fsdecouple with ``zero: rows``
@@ -83,8 +83,8 @@ def rms(f: np.ndarray, truth: np.ndarray) -> np.ndarray:
 
 def main() -> int:
     from fsdecouple import load_config
-    from fsdecouple.calibration import from_table
-    from fsdecouple.fit import fit
+    from fsdecouple.data.calibration import from_table
+    from fsdecouple.fitting.fit import fit
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default="0-7", help="a range, e.g. 0-7")

@@ -31,8 +31,8 @@ sys.path.insert(0, str(ROOT / "docs"))
 
 from fsdecouple import load_calibration, load_config  # noqa: E402
 from fsdecouple.axes import CHI_NAMES, VOLTAGE_COLUMNS  # noqa: E402
-from fsdecouple.fit import chi_training_data, fit  # noqa: E402
-from fsdecouple.modelfile import model_to_dict, save_model  # noqa: E402
+from fsdecouple.core.modelfile import model_to_dict, save_model  # noqa: E402
+from fsdecouple.fitting.fit import chi_training_data, fit  # noqa: E402
 from fsdecouple.units import Units  # noqa: E402
 
 PYARROW_CSV_COPY = """
@@ -211,7 +211,7 @@ def main() -> int:
     started = machine()
     print(f"machine: {started}\n", flush=True)
 
-    from fsdecouple.svr import train
+    from fsdecouple.fitting.svr import train
 
     settings = load_config()
     calib = load_calibration(ROOT / "sample_data" / "calibration", settings)
@@ -247,7 +247,7 @@ def main() -> int:
     # 300 repetitions take over 4 min here (libsvm training grows faster than the
     # points), too long for this run: 6 and 60 show the growth
     print("fit (simulated sets of 6 and 60 repetitions)")
-    from fsdecouple.simulate import simulate
+    from fsdecouple.sim.simulate import simulate
 
     fit_t = {}
     with tempfile.TemporaryDirectory() as tmp:

@@ -31,7 +31,7 @@ sys.path.insert(0, str(ROOT))
 from run import apply_against_copy, machine, median_child, median_time, publish  # noqa: E402
 
 from fsdecouple import load_calibration, load_config  # noqa: E402
-from fsdecouple.fit import chi_training_data, fit  # noqa: E402
+from fsdecouple.fitting.fit import chi_training_data, fit  # noqa: E402
 
 SIX = ROOT / "sample_data" / "six_axis"
 
@@ -75,7 +75,7 @@ def main() -> int:
     print("in-memory decoupling, n = 1e6, six components")
     from libsvm import svmutil
 
-    from fsdecouple.svr import train
+    from fsdecouple.fitting.svr import train
 
     model = fit(calib, settings)
     n = 1_000_000

@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import fsdecouple
-from fsdecouple.report import build_report
+from fsdecouple.reporting.report import build_report
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -17,28 +17,30 @@ __version__ = "0.1.0"
 # The public names load on first use (PEP 562): ``fsdecouple apply`` and a
 # control loop that loads a model need numpy and pyarrow, not pandas or libsvm.
 _PUBLIC = {
-    "CalibrationSet": "calibration",
-    "load_calibration": "calibration",
-    "ingest_summary": "calibration",
+    "CalibrationSet": "data.calibration",
+    "load_calibration": "data.calibration",
+    "ingest_summary": "data.calibration",
     "Settings": "config",
     "load_config": "config",
     "FsdecoupleError": "errors",
-    "CouplingErrorModel": "model",
-    "FitReport": "model",
-    "load_model": "modelfile",
-    "save_model": "modelfile",
-    "apply_file": "apply",
-    "decouple_frame": "frame",
-    "run_cv": "cv",
-    "load_cv_results": "cv_doc",
-    "build_report": "report",
-    "validate": "validate",
+    "CouplingErrorModel": "core.model",
+    "FitReport": "core.model",
+    "load_model": "core.modelfile",
+    "save_model": "core.modelfile",
+    "apply_file": "logs.apply",
+    "decouple_frame": "logs.frame",
+    "run_cv": "evaluation.cv",
+    "load_cv_results": "evaluation.cv_results",
+    "build_report": "reporting.report",
+    "validate": "evaluation.validate",
 }
 __all__ = sorted([*_PUBLIC, "fit"])  # noqa: F822
 
-# Bound now, not on first use: the submodule of the same name would otherwise take
-# the attribute when anything imports it.  It needs numpy only until it is called.
-from .fit import fit as fit  # noqa: E402
+# Old module paths (fsdecouple.fit, fsdecouple.apply, ...) still import: _moved.py.
+from . import _moved  # noqa: E402, F401
+
+# Bound now, not on first use.  It needs numpy only until it is called.
+from .fitting.fit import fit as fit  # noqa: E402
 
 
 def __getattr__(name: str):

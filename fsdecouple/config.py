@@ -17,17 +17,15 @@ from typing import Any
 
 from .axes import CANONICAL_COLUMNS, CHI_SEPARATOR, DEFAULT, FORCE_COLUMNS, VOLTAGE_COLUMNS, Layout
 from .errors import ConfigError, printable
-from .extrapolation import DEFAULT as DEFAULT_EXTRAPOLATION
-from .extrapolation import check_extrapolation
 from .units import LOAD_UNITS, MOMENT_UNITS, OUTPUT_UNITS, Units
 from .wrench import Frame, parse_frame, parse_rotation
 from .yamlfile import SafeUniqueLoader, read_yaml  # noqa: F401 (the loader, for tests)
 
 SCALINGS = ("none", "full_scale")
 ZERO_MODES = ("rows", "fit")  # how sweeps are zeroed: Section 3, or zero.fitted_offsets
-# Second-order refinement steps (decouple.py): each gains about a decimal digit
-# under Section 2.1's slopes, so beyond this many a K is a typo, not a setting.
-MAX_REFINE = 100
+# chi beyond its range (core/extrapolation.py): tangent for new fits, kernel for older files
+EXTRAPOLATIONS = DEFAULT_EXTRAPOLATION, LEGACY_EXTRAPOLATION = ("tangent", "kernel")
+MAX_REFINE = 100  # refinement steps (core/decouple.py): each gains about a digit
 
 
 @dataclass(frozen=True)
@@ -74,8 +72,7 @@ class Settings:
     rotation: tuple[tuple[float, float, float], ...] | None = None
     min_r2: float = 0.99
     refine: int = 0  # fixed-point steps on the prime outputs before eq. (11) (decouple.py)
-    # chi beyond its calibrated range (extrapolation.py); model files without it: kernel
-    extrapolation: str = DEFAULT_EXTRAPOLATION
+    extrapolation: str = DEFAULT_EXTRAPOLATION  # model files without it: kernel
     units: Units = Units()
     # the sensor's components and their prime outputs (axes.Layout); None: x, y, z
     components: tuple[str, ...] | None = None
@@ -130,11 +127,9 @@ class Settings:
 
 
 _TOP_KEYS = {
-    "limits",
-    "refine", "extrapolation",
-    "sensor", "full_scale", "min_repetitions", "columns", "scale", "csv", "svr",
-    "scaling", "rotation", "checks", "units", "components", "outputs", "zero",
-    "frame",
+    "limits", "refine", "extrapolation", "sensor", "full_scale", "min_repetitions", "columns",
+    "scale", "csv", "svr", "scaling", "rotation", "checks", "units", "components", "outputs",
+    "zero", "frame",
 }
 _SVR_KEYS = {"C", "epsilon", "gamma", "delta2", "tolerance"}
 
@@ -169,9 +164,17 @@ def check_refine(value: Any, where: str = "refine") -> int:
 
 def check_zero(value: Any, where: str = "zero") -> str:
     """How sweeps are zeroed: ``rows`` (Section 3) or ``fit`` (all points, zero.fitted_offsets)."""
-    if value not in ZERO_MODES:
-        raise ConfigError(f"{where}: expected one of {', '.join(ZERO_MODES)}, found {value!r}")
+    return check_choice(value, where, ZERO_MODES)
+
+
+def check_choice(value: Any, where: str = "extrapolation", modes=EXTRAPOLATIONS) -> str:
+    """One of ``modes``: by default the extrapolation mode (core/extrapolation.py)."""
+    if not isinstance(value, str) or value not in modes:
+        raise ConfigError(f"{where}: expected one of {', '.join(modes)}, found {value!r}")
     return value
+
+
+check_extrapolation = check_choice
 
 
 def _mapping(value: Any, where: str) -> dict:

@@ -16,7 +16,7 @@ through P.  Both are linear, so the transform is the 6 x 6 matrix
     T = [[R, 0], [[r]_x R, R]]
 
 applied to ``(fx, fy, fz, mx, my, mz)`` by the same code path as the 3 x 3 rotation
-(:mod:`fsdecouple.decouple`).  The components must be forces then moments, x, y, z.
+(:mod:`fsdecouple.core.decouple`).  The components must be forces then moments, x, y, z.
 """
 
 from __future__ import annotations

@@ -6,8 +6,8 @@ import pytest
 from typer.testing import CliRunner
 
 from fsdecouple import load_calibration, load_config
-from fsdecouple.fit import fit
-from fsdecouple.simulate import SimulatedSensor, simulate
+from fsdecouple.fitting.fit import fit
+from fsdecouple.sim.simulate import SimulatedSensor, simulate
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLE = ROOT / "sample_data"

@@ -1,4 +1,5 @@
-"""The package's shape: no import cycles, no oversized modules, typer only in the CLI."""
+"""The package's shape: stages as subpackages importing downward only, no import cycles,
+no oversized modules, typer only in the CLI, and tests/ mirroring the package."""
 
 from __future__ import annotations
 
@@ -20,15 +21,12 @@ def _module_name(path: Path) -> str:
 
 
 def _imports(path: Path) -> set[str]:
-    """Package modules imported anywhere in the file (function-level imports too, but not
-    the ones under ``if TYPE_CHECKING:``, which never run)."""
+    """Package modules imported anywhere in the file: function-level imports too, and the
+    ones under ``if TYPE_CHECKING:``, so that no circle hides there either."""
     name = _module_name(path)
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     out = set()
     tree = ast.parse(path.read_text())
-    for node in ast.walk(tree):  # imports for type checkers only are not run
-        if isinstance(node, ast.If) and getattr(node.test, "id", "") == "TYPE_CHECKING":
-            node.body = []
     for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom):
             base = node.module or ""
@@ -70,3 +68,70 @@ def test_modules_stay_small_and_only_the_cli_imports_typer():
         assert len(text.splitlines()) <= MAX_LINES, f"{path.name}: split it (one idea per module)"
         if path.parent.name != "cli":
             assert "import typer" not in text, path.name
+
+
+# The floors, lowest first: the base modules at the top of the package, then core, then
+# the stages data -> fitting -> evaluation, then the five stages that only use those,
+# then the CLI.  A module may import its own floor and the floors below it; the five
+# top stages do not import each other.  fsdecouple/__init__.py and __main__.py are the
+# package's front door and may import anything.
+FLOORS = {"core": 1, "data": 2, "fitting": 3, "evaluation": 4,
+          "reporting": 5, "logs": 5, "fleet": 5, "export": 5, "sim": 5, "cli": 6}
+STAGES = sorted(FLOORS)
+
+
+def _stage(module: str) -> str:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 and parts[1] in FLOORS else "base"
+
+
+def test_stages_import_downward_only():
+    modules = {_module_name(p): p for p in PACKAGE.rglob("*.py")}
+    wrong = []
+    for m, p in sorted(modules.items()):
+        if m in ("fsdecouple", "fsdecouple.__main__", "fsdecouple._moved"):
+            continue
+        a = _stage(m)
+        for i in sorted(_imports(p)):
+            if i == "fsdecouple" or i.startswith("fsdecouple.__"):
+                continue  # __version__
+            b = _stage(i)
+            up = FLOORS.get(b, 0) > FLOORS.get(a, 0)
+            sideways = a != b and FLOORS.get(a) == FLOORS.get(b) == 5
+            if up or sideways:
+                wrong.append(f"{m} -> {i}")
+    assert not wrong, wrong
+
+
+def test_stages_are_subpackages_with_a_docstring_and_the_top_stays_small():
+    top = sorted(p.name for p in PACKAGE.glob("*.py"))
+    assert len(top) <= 12, top
+    for stage in STAGES:
+        init = PACKAGE / stage / "__init__.py"
+        doc = ast.get_docstring(ast.parse(init.read_text()))
+        assert doc, f"{stage}/__init__.py: say what the stage does"
+        if stage not in ("cli", "core"):
+            assert "May import" in doc, f"{stage}/__init__.py: say what the stage may import"
+    folders = {p.parent.name for p in PACKAGE.rglob("__init__.py")} - {"fsdecouple"}
+    assert folders == set(STAGES), folders
+
+
+def test_tests_mirror_the_package():
+    tests = Path(__file__).parent
+    for stage in STAGES:
+        assert list((tests / stage).glob("test_*.py")), f"tests/{stage}/ holds no tests"
+    assert not (tests / "data" / "golden").exists()  # test data live in tests/fixtures/
+
+
+def test_old_module_paths_still_import():
+    import importlib
+
+    from fsdecouple._moved import MOVED
+
+    for old, new in MOVED.items():
+        assert importlib.import_module(f"fsdecouple.{old}") is importlib.import_module(f"fsdecouple.{new}")
+    assert callable(fsdecouple.fit) and callable(fsdecouple.validate)  # not the old modules
+    from fsdecouple.export import export_header  # old modules, now packages
+    from fsdecouple.fleet import fit_many
+
+    assert callable(export_header) and callable(fit_many)

@@ -122,7 +122,7 @@ def _given(*paths):
 
 def _parse_zero(text: str) -> tuple[float, ...]:
     """``--zero``'s comma-separated finite outputs; their count is checked against the model
-    (:func:`fsdecouple.apply.check_options`), which knows its outputs."""
+    (:func:`fsdecouple.logs.apply.check_options`), which knows its outputs."""
     try:
         values = tuple(float(v) for v in text.split(","))
     except ValueError:

@@ -8,8 +8,8 @@ from typing import Annotated
 import typer
 
 from ..config import load_config
-from ..console import ingest_tables
-from ..iotools.files import atomic_write, check_output, refuse_overwriting_input
+from ..files import atomic_write, check_output, refuse_overwriting_input
+from ..reporting.tables import ingest_tables
 from .app import (
     ConfigOpt,
     ForceOpt,
@@ -54,10 +54,10 @@ def simulate(
 ) -> None:
     """Write a simulated calibration set: the paper's (with a combined-load task log) or a lab's."""
     from ..axes import DEFAULT, Layout
-    from ..calibration import GrossError
+    from ..data.calibration import GrossError
     from ..errors import InputError
-    from ..simulate import simulate as simulate_sensor
-    from ..simulate_six import COMPONENTS, OUTPUTS, write_six_axis
+    from ..sim.simulate import simulate as simulate_sensor
+    from ..sim.six_axis import COMPONENTS, OUTPUTS, write_six_axis
 
     with user_errors():
         if components not in (3, 6):
@@ -87,7 +87,7 @@ def ingest(
     json_out: JsonOpt = False,
 ) -> None:
     """Validate and zero-correct a calibration set, and summarise it."""
-    from ..calibration import ingest_summary, load_calibration
+    from ..data.calibration import ingest_summary, load_calibration
 
     with user_errors():
         settings = load_config(config)
@@ -116,8 +116,8 @@ def init(
     json_out: JsonOpt = False,
 ) -> None:
     """Start a config: guess columns, units, full scale and scaling from a calibration file."""
-    from ..console import guess_renderables
-    from ..guess_layout import init_config
+    from ..data.init_config import init_config
+    from ..reporting.tables import guess_renderables
 
     with user_errors():
         guess = init_config(data_file, output, force=force)

@@ -11,9 +11,9 @@ import typer
 from rich.progress import MofNCompleteColumn
 
 from ..config import load_config
+from ..core.modelfile import load_model
 from ..errors import InputError
-from ..iotools.files import atomic_files, atomic_write, check_output, refuse_overwriting_input
-from ..modelfile import load_model
+from ..files import atomic_files, atomic_write, check_output, refuse_overwriting_input
 from .app import (
     ConfigOpt,
     ForceOpt,
@@ -76,12 +76,12 @@ def cv(
     json_out: JsonOpt = False,
 ) -> None:
     """Cross-validate the model against the baselines of Section 4 (Tables 1, 3, 4, 5)."""
-    from ..calibration import GrossError, load_calibration
-    from ..console import cv_renderables
-    from ..console_tune import tune_table
-    from ..cv import run_cv
-    from ..heldout import parse_folds
-    from ..tune import grid_option
+    from ..data.calibration import GrossError, load_calibration
+    from ..evaluation.cv import run_cv
+    from ..evaluation.heldout import parse_folds
+    from ..evaluation.tune import grid_option
+    from ..reporting.tables import cv_renderables
+    from ..reporting.tune_table import tune_table
 
     with user_errors():
         settings = load_config(config)
@@ -138,8 +138,8 @@ def validate(
     force: ForceOpt = False, json_out: JsonOpt = False,
 ) -> None:
     """Score a model on an independent single-axis set: gamma and force errors, per axis."""
-    from ..console import validation_renderables
-    from ..validate import validate as validate_set
+    from ..evaluation.validate import validate as validate_set
+    from ..reporting.tables import validation_renderables
 
     with user_errors():
         doc = validate_set(model_file, set_path, load_config(config) if config else None,
@@ -169,9 +169,9 @@ def report(
     force: ForceOpt = False,
 ) -> None:
     """Write a self-contained HTML calibration report (figures, gamma tables, checks)."""
-    from ..calibration import load_calibration
-    from ..cv_doc import load_cv_results
-    from ..report import build_report
+    from ..data.calibration import load_calibration
+    from ..evaluation.cv_results import load_cv_results
+    from ..reporting.report import build_report
 
     with user_errors():
         model = load_model(model_file)

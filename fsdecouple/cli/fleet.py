@@ -22,8 +22,8 @@ def compare(
     json_out: JsonOpt = False,
 ) -> None:
     """Drift between two calibrations of one sensor: slopes, chi and forces, in % F.S."""
-    from ..console_fleet import drift_line, drift_table
-    from ..drift import compare as compare_models
+    from ..fleet.drift import compare as compare_models
+    from ..reporting.fleet_tables import drift_line, drift_table
 
     with user_errors():
         doc = compare_models(old_model, new_model, max_drift=max_drift)
@@ -59,8 +59,8 @@ def fit_many(
     """Fit every sensor of a directory in parallel; one model file each, one summary."""
     from rich.progress import MofNCompleteColumn
 
-    from ..console_fleet import fleet_errors, fleet_gate_lines, fleet_table
-    from ..fleet import fit_many as fit_all
+    from ..fleet.sensors import fit_many as fit_all
+    from ..reporting.fleet_tables import fleet_errors, fleet_gate_lines, fleet_table
 
     with user_errors(), progress_bar("fitting", MofNCompleteColumn()) as progress:
         result = fit_all(sensors_dir, output, method=method, max_gamma=max_gamma, baseline=baseline,

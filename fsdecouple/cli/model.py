@@ -10,10 +10,10 @@ from rich.progress import MofNCompleteColumn
 from rich.text import Text
 
 from ..config import load_config
-from ..console import fit_checks_table, fit_tables
-from ..iotools.files import check_output, refuse_overwriting_input
-from ..metrics import check_max_gamma
-from ..modelfile import load_model, save_model
+from ..core.metrics import check_max_gamma
+from ..core.modelfile import load_model, save_model
+from ..files import check_output, refuse_overwriting_input
+from ..reporting.tables import fit_checks_table, fit_tables
 from .app import (
     ConfigOpt,
     ForceOpt,
@@ -79,12 +79,12 @@ def fit(
     json_out: JsonOpt = False,
 ) -> None:
     """Fit the coupling error model, judge it on held-out points, write one JSON model file."""
-    from ..calibration import load_calibration
-    from ..checks import assumption_checks
-    from ..console_tune import tune_table
-    from ..model import refine_advice
-    from ..tune import grid_option
-    from ..verdict import calibrate, verdict_line
+    from ..core.model import refine_advice
+    from ..data.calibration import load_calibration
+    from ..evaluation.checks import assumption_checks
+    from ..evaluation.tune import grid_option
+    from ..evaluation.verdict import calibrate, verdict_line
+    from ..reporting.tune_table import tune_table
 
     with user_errors():
         settings = load_config(
@@ -168,7 +168,7 @@ def export(
     json_out: JsonOpt = False,
 ) -> None:
     """Export the model as one dependency-free C99 header (eq. 11 for embedded use)."""
-    from ..export import export_header
+    from ..export.header import export_header
 
     with user_errors():
         model = load_model(model_file)

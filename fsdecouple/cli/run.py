@@ -9,10 +9,10 @@ import typer
 from rich.progress import DownloadColumn, MofNCompleteColumn, TimeRemainingColumn
 
 from ..config import load_config
-from ..console import apply_lines, apply_warnings
+from ..core.modelfile import load_model
 from ..errors import InputError
-from ..iotools.files import check_output, refuse_overwriting_input
-from ..modelfile import load_model
+from ..files import check_output, refuse_overwriting_input
+from ..reporting.tables import apply_lines, apply_warnings
 from .app import (
     ConfigOpt,
     ForceOpt,
@@ -72,9 +72,9 @@ def apply(
     json_out: JsonOpt = False,
 ) -> None:
     """Decouple logged voltages into forces fx, fy, fz (a model's components) by eq. (11)."""
-    from ..apply import apply_file
-    from ..batch import is_batch
-    from ..iotools.logs import is_parquet
+    from ..logs.apply import apply_file
+    from ..logs.many import is_batch
+    from ..logs.reader import is_parquet
 
     if is_batch(voltages, output):
         return _apply_many(model_file, voltages, output, config, tare, zero, unit, refine,
@@ -107,8 +107,8 @@ def _apply_many(model_file, inputs, output, config, tare, zero, unit, refine, ro
                 scheduler, workers, force, json_out) -> None:
     from rich.progress import MofNCompleteColumn
 
-    from ..batch import apply_many
-    from ..console_fleet import apply_many_errors, apply_many_table
+    from ..logs.many import apply_many
+    from ..reporting.fleet_tables import apply_many_errors, apply_many_table
 
     with user_errors():
         settings = load_config(config) if config is not None else None

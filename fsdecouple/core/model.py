@@ -1,0 +1,415 @@
+"""The coupling error model of Section 2: N omega slopes and N(N - 1) chi SVRs.
+
+A fitted :class:`CouplingErrorModel` turns zero-corrected outputs into forces by
+eq. (11) (:mod:`fsdecouple.core.decouple`).  It is established by
+:func:`fsdecouple.fitting.fit.fit` and stored by :mod:`fsdecouple.core.modelfile`; evaluating
+it needs numpy only.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field, fields, replace
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+
+from ..axes import Layout, NamedChi, chi_labels
+from ..config import Settings, check_refine
+from .decouple import TableDecoupler, decouple_exact, initial_forces
+from .decouple import coupling_errors as _coupling_errors
+from .extrapolation import Edges, continue_slopes, continue_values, edges
+from .kernel import rbf_sum, rbf_sum_slope
+from .surrogate import ChiSurrogate
+
+# The recommended K (recommend_refine): the largest eq. (6) estimate E2 [fraction
+# of F.S.] is brought below REFINE_TARGET, about the noise floor of a calibration
+# (0.5 mV on ~1.3 V full-scale outputs for the simulated sensor = 0.04 %).
+REFINE_TARGET = 5e-4
+
+
+def recommend_refine(second_order: float, slope: float, n: int = 3) -> int | None:
+    """The K to recommend for a model, from its eq. (6) estimate and its slopes.
+
+    ``second_order``: the largest eq. (6) estimate E2 = max|chi_ab'| * coupling
+    fraction of input b [fraction of F.S.]; ``slope``: the largest max|chi'|.
+    0 when E2 is already at most REFINE_TARGET; None when (N - 1) max|chi'| >= 1,
+    where the iteration is not known to contract.  Otherwise the smallest K >= 1
+    with E2 * max|chi'|^K <= REFINE_TARGET.  The factor per step is taken as
+    max|chi'|, not the contraction bound (N - 1) max|chi'|: on simulated sensors
+    (benchmarks/refine.py --sweep, coupling 1x to 8x the sample's, max|chi'|
+    0.05 to 0.44) the combined-load error fell at about that rate: the K needed
+    to bring it within the 0.04 % F.S. noise of the fit's own error floor was
+    1, 1, 2, 3, 4, 4, and this rule gives 1, 2, 2, 3, 5, 7 (never too few; a
+    step costs about one table evaluation), where the bound's factor asks 1 to 41.
+    """
+    if not np.isfinite(second_order) or second_order <= REFINE_TARGET:
+        return 0
+    if not (np.isfinite(slope) and (n - 1) * slope < 1.0):
+        return None
+    if slope <= 0.0:
+        return 1
+    return max(1, int(np.ceil(np.log(REFINE_TARGET / second_order) / np.log(slope))))
+
+
+def refine_advice(checks: Iterable, n: int) -> dict:
+    """The eq. (6) figure ``fit`` prints, from the Section 2.1 checks (checks.py).
+
+    ``second_order``: the largest eq. (6) estimate [fraction of F.S.] and its
+    ``chi``; ``slope``: the largest max|chi'|; ``recommended``: K by
+    :func:`recommend_refine` (0: eq. (11) is within the noise; None: no K is
+    known to converge).
+    """
+    checks = list(checks)
+    worst = max((c for c in checks if c.name == "second_order"), key=lambda c: c.value)
+    slope = max(c.value for c in checks if c.name == "slope")
+    return {"second_order": worst.value, "chi": worst.subject, "slope": slope,
+            "target": REFINE_TARGET, "recommended": recommend_refine(worst.value, slope, n)}
+
+
+@dataclass(frozen=True)
+class Chi(NamedChi):
+    """A corrected coupling function chi_ab (eq. 4) fitted by epsilon-SVR.
+
+    ``chi(u) = output_scale * (sum_i dual_coef_i exp(-gamma (u/input_scale - sv_i)^2) - rho)``
+
+    inside ``input_range``; beyond it, with ``extrapolation = "tangent"``, the
+    tangent at the nearer edge (:mod:`fsdecouple.core.extrapolation`).  The model sets
+    ``extrapolation`` from its settings; it is not part of the chi's own record.
+    """
+
+    name: str
+    gamma: float
+    support_vectors: np.ndarray
+    dual_coef: np.ndarray
+    rho: float
+    input_scale: float = 1.0
+    output_scale: float = 1.0
+    input_range: tuple[float, float] = (-np.inf, np.inf)  # prime voltages trained on [V]
+    n_points: int = 0
+    surrogate: ChiSurrogate | None = None  # fast, verified stand-in (surrogate.py)
+    extrapolation: str = "kernel"  # beyond input_range: "kernel" sum or "tangent"
+    pair: tuple[int, int] | None = None  # (output a, input b); None: read from an "xy" name
+
+    def kernel(self, u: np.ndarray) -> np.ndarray:
+        """The kernel sum [V] at prime voltage(s) ``u`` [V] (eq. 10), also beyond the range."""
+        x = np.asarray(u, dtype=float) / self.input_scale
+        return self.output_scale * rbf_sum(
+            x, self.support_vectors, self.dual_coef, self.gamma, -self.rho
+        )
+
+    def kernel_slope(self, u: np.ndarray) -> np.ndarray:
+        """d/du of :meth:`kernel` [V/V], analytically."""
+        x = np.asarray(u, dtype=float) / self.input_scale
+        return rbf_sum_slope(x, self.support_vectors, self.dual_coef, self.gamma) * (
+            self.output_scale / self.input_scale)
+
+    @cached_property
+    def edges(self) -> Edges | None:
+        """The tangents at the ends of ``input_range``; None for ``kernel`` extrapolation."""
+        if self.extrapolation != "tangent":
+            return None
+        return edges(*self.input_range, self.kernel, self.kernel_slope)
+
+    def __call__(self, u: np.ndarray) -> np.ndarray:
+        """Coupling error element [V] at prime voltage(s) ``u`` [V], exact.
+
+        The kernel sum (continued by its tangents beyond ``input_range`` under
+        ``tangent`` extrapolation), never the surrogate: this is the reference
+        the surrogate is checked against.
+        """
+        out = self.kernel(u)
+        e = self.edges
+        return out if e is None else continue_values(u, out, e)
+
+    def slope(self, u: np.ndarray) -> np.ndarray:
+        """d chi / du [V/V] of :meth:`__call__` (the surrogate tables' knot slopes)."""
+        out = self.kernel_slope(u)
+        e = self.edges
+        return out if e is None else continue_slopes(u, out, e)
+
+    def to_dict(self) -> dict[str, Any]:
+        out, inp = chi_labels(self.name)
+        d = {
+            "output_axis": out,
+            "input_axis": inp,
+            "kernel": "rbf",
+            "gamma": self.gamma,
+            "support_vectors": self.support_vectors.tolist(),
+            "dual_coef": self.dual_coef.tolist(),
+            "rho": self.rho,
+            "input_scale": self.input_scale,
+            "output_scale": self.output_scale,
+            "input_range": list(self.input_range),
+            "n_points": self.n_points,
+        }
+        if self.surrogate is not None:
+            d["surrogate"] = self.surrogate.to_dict()
+        return d
+
+    @classmethod
+    def from_dict(cls, name: str, d: dict[str, Any], pair: tuple[int, int] | None = None) -> Chi:
+        sv = np.asarray(d["support_vectors"], dtype=float)
+        coef = np.asarray(d["dual_coef"], dtype=float)
+        if sv.ndim != 1 or sv.shape != coef.shape:
+            raise ValueError("support_vectors and dual_coef differ in length")
+        lo, hi = (float(v) for v in d["input_range"])
+        surrogate = ChiSurrogate.from_dict(d["surrogate"]) if "surrogate" in d else None
+        chi = cls(
+            name, float(d["gamma"]), sv, coef, float(d["rho"]), float(d["input_scale"]),
+            float(d["output_scale"]), (lo, hi), int(d["n_points"]), surrogate, pair=pair,
+        )
+        if not (np.isfinite(chi.gamma) and chi.gamma > 0):
+            raise ValueError(f"gamma = {chi.gamma!r}, expected a positive number")
+        if not (np.isfinite(sv).all() and np.isfinite(coef).all() and np.isfinite(chi.rho)):
+            raise ValueError("support vectors, dual coefficients and rho must be finite")
+        for key in ("input_scale", "output_scale"):
+            scale = getattr(chi, key)
+            if not (np.isfinite(scale) and scale > 0):  # fit writes positive scales only
+                raise ValueError(f"{key} {scale!r}, expected a finite positive number")
+        if not lo <= hi:
+            raise ValueError(f"input_range [{lo!r}, {hi!r}] is inverted, expected lo <= hi")
+        return chi
+
+
+RANGE_MARGIN = 0.01  # of the calibrated span: see CouplingErrorModel.extrapolation_limits
+# A force beyond this many times the largest full-scale load is no measurement (a
+# voltage of 1e300, a slope of 1e300 in a model file): apply gives it the status
+# not_finite, as it does an overflow, and the C export its NOT_FINITE bit.
+FORCE_LIMIT = 1e6
+
+
+@dataclass
+class FitReport:
+    """What the fit measured, as ``fit`` prints it and the model file stores it.
+
+    Per-axis mappings are keyed by axis name; fractions are of full scale.
+    """
+
+    r2: dict[str, float]
+    n_points: dict[str, int]
+    gamma_before: dict[str, float]  # eq. (12), initial forces omega^-1(u)
+    gamma_after: dict[str, float]  # eq. (12), decoupled by eq. (11)
+    n_support_vectors: dict[str, int] = field(default_factory=dict)
+    surrogate_max_error: dict[str, float] | None = None
+    repetitions: list[int] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    verdict: dict[str, Any] | None = None  # held-out comparison (fsdecouple.evaluation.verdict)
+    outliers: list[dict[str, Any]] | None = None  # possible gross errors (fsdecouple.fitting.outliers)
+    tune: dict[str, Any] | None = None  # fit --tune's grid and choice (evaluation.tune); None: untuned
+
+    def to_dict(self) -> dict[str, Any]:
+        d = {f.name: getattr(self, f.name) for f in fields(self)}
+        for key in ("surrogate_max_error", "verdict", "outliers", "tune"):
+            if d[key] is None:  # files from before these figures
+                del d[key]
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> FitReport:
+        known = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in d.items() if k in known})
+
+
+@dataclass
+class CouplingErrorModel:
+    """A fitted coupling error model (Figure 1): omega slopes and N(N - 1) chi.
+
+    Attributes
+    ----------
+    settings : Settings
+        The settings it was fitted with.
+    k : ndarray, shape (N,)
+        k_aa of eq. (2) [V/N].
+    chi : dict of str to Chi
+        The corrected coupling functions, keyed ``"xy" ... "zy"`` (eq. 11 order).
+    report : FitReport
+        Fit figures: R^2 per axis, support vectors, gamma before/after, warnings.
+    method : str
+        What :meth:`decouple` uses: ``svr``, eq. (11) with the chi (the paper's
+        method), or ``linear``, the least-squares calibration matrix ``f = C u``
+        (``fit --method linear|auto``; omega and chi are kept as the diagnostics of
+        the sensor's coupling).
+    matrix : ndarray, shape (N, N), optional
+        The calibration matrix C [load unit / output unit] of a ``linear`` model.
+    provenance : dict
+        Input files and digests, library versions.
+    created : str
+        UTC creation time (ISO 8601).
+    """
+
+    settings: Settings
+    k: np.ndarray
+    chi: dict[str, Chi]
+    report: FitReport | None = None
+    provenance: dict[str, Any] = field(default_factory=dict)
+    created: str = ""
+    method: str = "svr"
+    matrix: np.ndarray | None = None
+    _tables: Any = field(default=None, init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        # each chi evaluates itself: it takes the model's extrapolation mode
+        mode = getattr(self.settings, "extrapolation", "kernel")
+        self.chi = {name: c if getattr(c, "extrapolation", mode) == mode else replace(c, extrapolation=mode)
+                    for name, c in self.chi.items()}
+
+    def __getstate__(self) -> dict:
+        # the table evaluator holds thread-local scratch space: rebuilt where the
+        # model lands (a Dask or Spark worker), never pickled
+        return {**self.__dict__, "_tables": None}
+
+    @property
+    def n_components(self) -> int:
+        return len(self.k)
+
+    @property
+    def layout(self) -> Layout:
+        """The components' labels, load and output columns (axes.py)."""
+        return self.settings.layout
+
+    @property
+    def warnings(self) -> list[str]:
+        return list(self.report.warnings) if self.report is not None else []
+
+    @property
+    def full_scale_output(self) -> np.ndarray:
+        """|k_a| F_FS,a per output, in the data's output unit: tolerances are fractions of it."""
+        return np.abs(self.k) * np.asarray(self.settings.full_scale, dtype=float)
+
+    @property
+    def rotation(self) -> np.ndarray | None:
+        """The transform after eq. (11): the config's rotation (N x N), or a frame's 6 x 6."""
+        if self.settings.frame is not None:
+            return self.settings.frame.matrix()
+        r = self.settings.rotation
+        return None if r is None else np.asarray(r, dtype=float)
+
+    @property
+    def calibrated_range(self) -> np.ndarray:
+        """Prime-output range of the calibration per component, shape (N, 2) [V]."""
+        r = np.empty((self.n_components, 2))
+        for b in range(self.n_components):
+            ranges = [c.input_range for c in self.chi.values() if c.input_axis == b]
+            r[b] = (min(lo for lo, _ in ranges), max(hi for _, hi in ranges))
+        return r
+
+    def extrapolation_limits(self) -> np.ndarray:
+        """The calibrated range widened by RANGE_MARGIN of its span, shape (N, 2).
+
+        An output beyond it is extrapolation (``apply``'s status ``extrapolated``,
+        ``validate``'s range, the C header's bits): noise around an end of the
+        range (a component at rest at its 0 end) is not.
+        """
+        r = self.calibrated_range
+        margin = RANGE_MARGIN * (r[:, 1] - r[:, 0])
+        return np.column_stack([r[:, 0] - margin, r[:, 1] + margin])
+
+    def coupling_errors(self, u: np.ndarray) -> np.ndarray:
+        """Measured coupling errors e_a = sum_b chi_ab(u_b) [V] (eq. 1 with eq. 4 at u_(t))."""
+        return _coupling_errors(np.asarray(u, dtype=float).reshape(-1, self.n_components),
+                                self.chi.values())
+
+    def _exact(self, u: np.ndarray, rotate: bool, refine: int = 0,
+               converged: np.ndarray | None = None) -> np.ndarray:
+        return decouple_exact(u, self.k, self.chi.values(), self.rotation if rotate else None,
+                              refine=refine, full_scale_output=self.full_scale_output,
+                              converged=converged)
+
+    def _refine(self, refine: int | None) -> int:
+        return self.settings.refine if refine is None else check_refine(refine, "refine")
+
+    def refined(self, refine: int) -> CouplingErrorModel:
+        """This model with ``settings.refine = refine`` (``apply --refine K``); tables shared."""
+        settings = replace(self.settings, refine=check_refine(refine, "--refine"))
+        model = replace(self, settings=settings)
+        model._tables = self._tables
+        return model
+
+    def decouple(
+        self, u: np.ndarray, *, rotate: bool = True, exact: bool = False, workers: int | None = None,
+        refine: int | None = None, converged: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Forces [N] from zero-corrected outputs [V] by eq. (11).
+
+        f_a = omega_a^-1[u_a - sum_{b != a} chi_ab(u_b)]; then, if the config gives
+        one and ``rotate``, the rotation from the sensor frame to the reference
+        frame (end of Section 2.3).  With ``refine`` K > 0 the chi are evaluated
+        at estimates of the prime outputs instead of u (second-order refinement,
+        :mod:`fsdecouple.core.decouple`).
+
+        Parameters
+        ----------
+        u : array_like, shape (n, N) or (N,)
+            Outputs u_x, u_y, u_z [V], zero-corrected.
+        exact : bool
+            Evaluate every chi by its kernel sum.  By default the chi surrogates
+            stored in the model are used inside their intervals (each within its
+            recorded ``max_error`` of the kernel sum) and the kernel sum outside
+            them; models without usable surrogates are always exact.
+        workers : int, optional
+            Threads for the table path; default: the number of cores.
+        refine : int, optional
+            K fixed-point steps on the prime outputs; default ``settings.refine``
+            (0: eq. (11) as the paper writes it).
+        converged : ndarray of bool, shape (n,), optional
+            Set False for rows whose refinement did not settle (last step above
+            ``REFINE_TOLERANCE`` of full-scale output, or not finite): their
+            forces are NaN.  All True for K = 0 and for linear models.
+        """
+        u_arr = np.asarray(u, dtype=float)
+        flat = u_arr.reshape(-1, self.n_components)
+        refine = self._refine(refine)
+        tables = None if exact else self.fast_decoupler()
+        if self.method == "linear":
+            f = flat @ self.matrix.T
+            if rotate and self.rotation is not None:
+                f = f @ self.rotation.T
+            if converged is not None:
+                converged[:] = True
+        elif tables is not None:
+            f = tables.decouple(flat, rotate=rotate, workers=workers, refine=refine,
+                                converged=converged)
+        else:
+            f = self._exact(flat, rotate, refine, converged)
+        return f.reshape(u_arr.shape)
+
+    def fast_decoupler(self) -> TableDecoupler | None:
+        """The table path of :mod:`fsdecouple.core.decouple`, or None without usable surrogates."""
+        if self.method == "linear":
+            return None
+        if self._tables is None:
+            self._tables = TableDecoupler.from_chis(
+                self.k, self.chi.values(), self._exact, self.rotation,
+                self.full_scale_output) or False
+        return self._tables or None
+
+    def decoupler(self, refine: int | None = None):
+        """A plain-Python function ``(ux, uy, uz) -> (fx, fy, fz)`` for control loops.
+
+        About a microsecond per call: no numpy, no allocation beyond the result
+        tuple.  Same tables and arithmetic as :meth:`decouple` (equal to it within
+        1e-12 N); exact kernel sum for inputs outside the tables and for NaN.
+        ``refine`` as for :meth:`decouple`; a vector that does not settle gives NaN.
+
+        >>> f = model.decoupler()
+        >>> fx, fy, fz = f(0.5, 0.01, -0.2)
+        """
+        refine = self._refine(refine)
+        tables = self.fast_decoupler()
+        if tables is not None:
+            return tables.one(refine=refine)
+
+        def exact_one(*u: float) -> tuple[float, ...]:
+            return tuple(self.decouple(list(u), exact=True, refine=refine).tolist())
+
+        return exact_one
+
+    def decouple_one(self, *u: float) -> tuple[float, ...]:
+        """Forces [N] for one output vector [V]; see :meth:`decoupler` for loops."""
+        return self.decoupler()(*u)
+
+    def initial_forces(self, u: np.ndarray) -> np.ndarray:
+        """Forces with no coupling correction, f = omega^-1(u) per axis (eq. 13 form)."""
+        return initial_forces(u, self.k)

@@ -1,0 +1,301 @@
+"""The model file: one JSON document, versioned apart from the package, with a digest.
+
+Like skops, the file carries ``format`` and a ``format_version`` of its own and
+refuses files from a newer format; a SHA-256 over its canonical content catches
+hand edits and corrupted transfers.  Written sorted, without NaN, atomically.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import __version__
+from ..config import LEGACY_EXTRAPOLATION, settings_from_dict
+from ..errors import ModelFileError, excerpt
+from ..files import MODEL_LIMIT, atomic_write, read_bounded
+from .decouple import MAX_SURROGATE_ERROR, usable
+from .model import Chi, CouplingErrorModel, FitReport
+from .surrogate import spot_check
+
+FORMAT = "fsdecouple.model"
+FORMAT_VERSION = 3
+# Version 2 adds: ``method`` (svr | linear) and ``matrix`` for linear models,
+# ``settings.units``, and ``report.verdict``.  Version 1 files read as svr models
+# in newtons and volts.  Version 3 adds ``settings.components`` and ``outputs``
+# (an N-component sensor, axes.Layout; chi keyed "fx:fy"), per-column units and
+# ``settings.frame``; a 3-axis model reads and writes as before otherwise.
+METHODS = ("svr", "linear")
+
+
+def model_to_dict(model: CouplingErrorModel) -> dict[str, Any]:
+    """The model file's document, ``integrity`` digest included."""
+    doc = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "fsdecouple_version": __version__,
+        "created": model.created,
+        "sensor": model.settings.sensor,
+        "settings": model.settings.to_dict(),
+        "omega": {
+            axis: {"k": float(model.k[a]), "inverse": float(1.0 / model.k[a]),
+                   "r2": model.report.r2.get(axis) if model.report else None}
+            for a, axis in enumerate(model.layout.labels)
+        },
+        "chi": {name: c.to_dict() for name, c in model.chi.items()},
+        "method": model.method,
+        "provenance": model.provenance,
+        "report": model.report.to_dict() if model.report else {},
+    }
+    if model.matrix is not None:
+        doc["matrix"] = [[float(v) for v in row] for row in model.matrix]
+    doc["integrity"] = {"algorithm": "sha256", "digest": content_digest(doc)}
+    return doc
+
+
+def save_model(model: CouplingErrorModel, path: str | Path, *, force: bool = True) -> None:
+    """Write the model file atomically (sorted keys, no NaN)."""
+    text = json.dumps(model_to_dict(model), indent=1, sort_keys=True, allow_nan=False)
+    with atomic_write(path, force=force) as fh:
+        fh.write(text + "\n")
+
+
+def content_digest(doc: dict[str, Any]) -> str:
+    """SHA-256 of the canonical JSON of everything but ``integrity`` and ``created``.
+
+    Leaving out the creation time makes refits of the same data byte-identical
+    in everything but that one field.
+    """
+    body = {k: v for k, v in doc.items() if k not in ("integrity", "created")}
+    canonical = json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(canonical.encode("utf-8")).hexdigest()
+
+
+def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise ModelFileError(f"{source}: not an fsdecouple model file (format is not '{FORMAT}')")
+    version = doc.get("format_version")
+    if not isinstance(version, int) or isinstance(version, bool):
+        raise ModelFileError(
+            f"{source}: format_version is missing or not a whole number ({version!r})"
+        )
+    if version < 1:
+        raise ModelFileError(f"{source}: format_version {version} is unknown (versions start at 1)")
+    if version > FORMAT_VERSION:
+        raise ModelFileError(
+            f"{source}: format_version {version} was written by a newer fsdecouple "
+            f"({doc.get('fsdecouple_version', '?')}); this one reads up to {FORMAT_VERSION}"
+        )
+    integrity = doc.get("integrity")
+    digest = integrity.get("digest") if isinstance(integrity, dict) else None
+    if not isinstance(digest, str):
+        raise ModelFileError(
+            f"{source}: has no integrity digest, so it cannot be trusted (written by hand "
+            "or by another tool?); refit the model"
+        )
+    try:
+        expected = content_digest(doc)
+    except (TypeError, ValueError) as err:  # NaN, inf or non-JSON values in a dict
+        raise ModelFileError(f"{source}: malformed model file ({err})") from None
+    if digest != expected:
+        raise ModelFileError(
+            f"{source}: integrity check failed: the content does not match its SHA-256 "
+            "digest (edited by hand or corrupted); refit the model"
+        )
+    try:
+        settings = settings_from_dict(_settings_yaml_form(doc["settings"]), f"{source}: settings")
+        layout = settings.layout
+        if version < 3 and not layout.is_default:
+            raise ModelFileError(f"{source}: malformed model file (components in a version "
+                                 f"{version} file)")
+        k = np.array([float(doc["omega"][a]["k"]) for a in layout.labels])
+        chi = {}
+        for name, pair in zip(layout.chi_names, layout.pairs, strict=True):
+            if name not in doc["chi"]:
+                raise ModelFileError(f"{source}: malformed model file (chi '{name}' is missing)")
+            try:
+                chi[name] = Chi.from_dict(name, doc["chi"][name],
+                                          None if layout.is_default else pair)
+            except (KeyError, TypeError, ValueError) as err:
+                raise ModelFileError(
+                    f"{source}: malformed model file (chi '{name}': {err})"
+                ) from None
+    except (KeyError, TypeError, ValueError) as err:
+        raise ModelFileError(f"{source}: malformed model file ({type(err).__name__}: {err})") from None
+    labels = settings.layout.labels
+    bad = [a for a, v in zip(labels, k, strict=True) if not (np.isfinite(v) and v != 0.0)]
+    if bad:
+        raise ModelFileError(
+            f"{source}: omega {bad[0]}: slope k = {float(k[labels.index(bad[0])])!r}, expected a finite "
+            "non-zero number"
+        )
+    report = doc.get("report")
+    _check_report(report, source, labels)
+    method, matrix = _method(doc, len(k), source)
+    model = CouplingErrorModel(
+        settings, k, chi, FitReport.from_dict(report), doc.get("provenance", {}),
+        doc.get("created", ""), method, matrix,
+    )
+    _check_slopes(model, source)
+    _check_tables(model, source)
+    return model
+
+
+# A slope's full-scale output |k_b| F_FS,b and the prime-voltage span the chi were
+# trained on (input_range) come from the same sweeps: within a factor of ~10 in any
+# fitted model.  Beyond this factor either way the slope cannot be the fit's.
+SLOPE_SPAN_FACTOR = 1e6
+
+
+def _check_slopes(model: CouplingErrorModel, source: str) -> None:
+    """Each slope k agrees with the voltage span the model was calibrated on.
+
+    A digest-valid file with k = 1e300 would otherwise decouple every force to 0.
+    """
+    fs_out, unit = model.full_scale_output, model.settings.output_unit
+    for b, axis in enumerate(model.layout.labels):
+        lo, hi = model.calibrated_range[b]
+        span = hi - lo
+        if not span > 0:
+            continue  # nothing to compare with
+        ratio = fs_out[b] / span
+        if not (1 / SLOPE_SPAN_FACTOR <= ratio <= SLOPE_SPAN_FACTOR):
+            raise ModelFileError(
+                f"{source}: omega {axis}: slope k = {float(model.k[b])!r} puts full scale at "
+                f"{fs_out[b]:.3g} {unit}, but the calibration spanned {span:.3g} {unit}; "
+                "the slope is not the fit's (edited?), refit the model"
+            )
+
+
+def _check_tables(model: CouplingErrorModel, source: str) -> None:
+    """Each table the fast path would use agrees with its own kernel sum (spot checks).
+
+    The digest proves the file is as written, not that its tables are right: a
+    table that disagrees beyond the gate the fast path trusts
+    (:func:`fsdecouple.core.decouple.usable`) is refused, never applied silently.
+    """
+    fs_out = model.full_scale_output
+    for c in model.chi.values():
+        gate = MAX_SURROGATE_ERROR * fs_out[c.output_axis]
+        if not usable(c.surrogate, fs_out[c.output_axis]):
+            continue  # the fast path leaves it to the exact kernel sum anyway
+        err, x = spot_check(c, c.surrogate)
+        if not err <= gate:
+            raise ModelFileError(
+                f"{source}: chi '{c.name}': its surrogate table differs from its own kernel "
+                f"sum by {err:.3g} at u = {x:.6g} (the fast path trusts {gate:.3g}); "
+                "the model is inconsistent, refit it"
+            )
+
+
+def _method(doc: dict[str, Any], n: int, source: str) -> tuple[str, np.ndarray | None]:
+    """The decoupling method and, for ``linear``, its N x N finite calibration matrix."""
+    method = doc.get("method", "svr")
+    if method not in METHODS:
+        raise ModelFileError(f"{source}: malformed model file (method {method!r}, expected "
+                             f"{' or '.join(METHODS)})")
+    if method == "svr":
+        return method, None
+    try:
+        matrix = np.array(doc["matrix"], dtype=float)
+    except (KeyError, TypeError, ValueError):
+        matrix = None
+    if matrix is None or matrix.shape != (n, n) or not np.isfinite(matrix).all():
+        raise ModelFileError(f"{source}: malformed model file (a linear model needs a finite "
+                             f"{n}x{n} matrix)")
+    return method, matrix
+
+
+def _check_report(report: Any, source: str, labels) -> None:
+    """The fit figures ``show`` prints: per-axis numbers and a list of warnings."""
+    def number(v):
+        return isinstance(v, int | float) and not isinstance(v, bool)
+
+    if not isinstance(report, dict):
+        raise ModelFileError(f"{source}: malformed model file (report is not a mapping)")
+    for key in ("r2", "n_points", "gamma_before", "gamma_after"):
+        table = report.get(key)
+        if not (isinstance(table, dict) and all(number(table.get(a)) for a in labels)):
+            raise ModelFileError(
+                f"{source}: malformed model file (report: {key} needs a number per axis)"
+            )
+    warnings = report.get("warnings", [])
+    if not (isinstance(warnings, list) and all(isinstance(w, str) for w in warnings)):
+        raise ModelFileError(f"{source}: malformed model file (report: warnings is not a list of text)")
+
+
+def _settings_yaml_form(d: dict[str, Any]) -> dict[str, Any]:
+    """Settings.to_dict() output back into the YAML config's shape."""
+    d = dict(d)
+    d.setdefault("extrapolation", LEGACY_EXTRAPOLATION)  # files from before the option
+    svr = dict(d.pop("svr"))
+    return {**d, "svr": svr}
+
+
+class _NonFinite(ValueError):
+    pass
+
+
+class _DuplicateKey(ValueError):
+    pass
+
+
+def _unique_keys(pairs):
+    # the digest covers the parsed document, so a second, shadowed key would
+    # pass it while showing a reader a value the model does not use
+    doc = dict(pairs)
+    if len(doc) != len(pairs):
+        seen = set()
+        raise _DuplicateKey(next(k for k, _ in pairs if k in seen or seen.add(k)))
+    return doc
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not np.isfinite(value):  # 1e999 parses to inf
+        raise _NonFinite(text)
+    return value
+
+
+def _refuse_constant(name: str):
+    # json accepts NaN/Infinity, which the writer never produces (allow_nan=False)
+    raise _NonFinite(name)
+
+
+def load_model(path: str | Path) -> CouplingErrorModel:
+    """Read and verify a model file."""
+    path = Path(path)
+    try:
+        # a BOM from a Windows editor is not content
+        text = read_bounded(path, MODEL_LIMIT, "a model file", ModelFileError).decode("utf-8-sig")
+    except FileNotFoundError:
+        raise ModelFileError(f"{path}: model file not found") from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise ModelFileError(f"{path}: cannot read model file ({err})") from None
+    try:
+        doc = json.loads(
+            text, parse_constant=_refuse_constant, parse_float=_finite_float,
+            object_pairs_hook=_unique_keys,
+        )
+    except json.JSONDecodeError as err:
+        raise ModelFileError(
+            f"{path}, row {err.lineno}, column {err.colno}: not valid JSON (truncated?)"
+        ) from None
+    except _DuplicateKey as err:
+        raise ModelFileError(
+            f"{path}: key '{excerpt(err.args[0])}' appears twice in one object (edited by hand?); "
+            "json would keep the last one silently"
+        ) from None
+    except _NonFinite as err:
+        raise ModelFileError(
+            f"{path}: holds {excerpt(repr(err.args[0]))}; NaN and infinity are not allowed in a model file"
+        ) from None
+    except RecursionError:
+        raise ModelFileError(f"{path}: not a model file (JSON too deeply nested)") from None
+    except ValueError as err:  # e.g. an integer of more than 4300 digits
+        raise ModelFileError(f"{path}: not a model file ({excerpt(err)})") from None
+    return model_from_dict(doc, str(path))

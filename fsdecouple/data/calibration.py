@@ -1,0 +1,300 @@
+"""A zero-corrected calibration set: the data every fit and cross-validation uses."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from ..axes import DEFAULT, Layout
+from ..config import Settings
+from ..errors import InputError
+from .calibration_csv import read_calibration_table
+from .zero import assign_sweeps, zero_correct
+
+
+@dataclass(frozen=True)
+class CalibrationSet:
+    """Zero-corrected single-axis calibration points of several repetitions.
+
+    Attributes
+    ----------
+    points : DataFrame
+        One row per calibration point in file order (repetition, then row), with
+        ``repetition, axis, file, row, fx, fy, fz`` [N], ``ux, uy, uz`` [V]
+        (zero-corrected) and ``ux_raw, uy_raw, uz_raw`` [V].
+    offsets : DataFrame
+        Zero offsets removed, one row per (repetition, axis) sweep [V].
+    files : tuple of (str, str)
+        Each input file and its SHA-256.
+    skipped : tuple of str
+        Rows left out, with the reason.
+    excluded : tuple of str
+        Points dropped by ``--exclude`` (also in ``skipped``; recorded in the model's
+        provenance).
+    warnings : tuple of str
+        Things a technician should look at; the data are still usable.
+    layout : Layout
+        The sensor's components (axes.py): sweep labels, load and output columns.
+    """
+
+    points: pd.DataFrame
+    offsets: pd.DataFrame
+    files: tuple[tuple[str, str], ...] = ()
+    skipped: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = field(default=())
+    excluded: tuple[str, ...] = ()
+    layout: Layout = DEFAULT
+
+    @property
+    def source(self) -> str:
+        """The calibration file, or the directory of the files, for messages."""
+        return _source(self.files)
+
+    @property
+    def repetitions(self) -> list[int]:
+        return sorted(int(r) for r in self.points["repetition"].unique())
+
+    def subset(self, repetitions) -> CalibrationSet:
+        """The same set restricted to some repetitions (for cross-validation)."""
+        reps = set(int(r) for r in repetitions)
+        unknown = reps - set(self.repetitions)
+        if unknown:
+            raise InputError(
+                f"repetition {sorted(unknown)[0]} is not in the calibration set "
+                f"(it has {', '.join(map(str, self.repetitions))})"
+            )
+        keep = self.points["repetition"].isin(reps)
+        return replace(
+            self, points=self.points[keep].reset_index(drop=True),
+            offsets=self.offsets[self.offsets["repetition"].isin(reps)].reset_index(drop=True),
+        )
+
+    def select(self, mask) -> CalibrationSet:
+        """The points where ``mask`` is true (a held-out round's training or test points).
+
+        Zero correction stays as it was done on the whole set: a held-out zero row
+        still zeroed its sweep.
+        """
+        return replace(self, points=self.points[np.asarray(mask, dtype=bool)].reset_index(drop=True))
+
+    def sweep(self, axis: str) -> pd.DataFrame:
+        """All points whose loaded axis is ``axis``, in file order."""
+        return self.points[self.points["axis"] == axis]
+
+    @property
+    def forces(self) -> np.ndarray:
+        return self.points[list(self.layout.loads)].to_numpy()
+
+    @property
+    def voltages(self) -> np.ndarray:
+        return self.points[list(self.layout.outputs)].to_numpy()
+
+    def load_grid(self, axis: str) -> dict[int, np.ndarray]:
+        """Sorted distinct loads [N] of each repetition's ``axis`` sweep."""
+        s = self.sweep(axis)
+        reps = s["repetition"].to_numpy()
+        loads = s[self.layout.loads[self.layout.index(axis)]].to_numpy()
+        if not reps.size:
+            return {}
+        # one sort for all repetitions: a groupby loop costs a pandas frame per repetition
+        order = np.lexsort((loads, reps))
+        reps, loads = reps[order], loads[order]
+        new = np.ones(reps.size, dtype=bool)
+        new[1:] = (reps[1:] != reps[:-1]) | (loads[1:] != loads[:-1])
+        reps, loads = reps[new], loads[new]
+        cuts = np.flatnonzero(reps[1:] != reps[:-1]) + 1
+        return {int(r[0]): g for r, g in zip(np.split(reps, cuts), np.split(loads, cuts),
+                                             strict=True)}
+
+
+def _source(files) -> str:
+    if not files:
+        return "calibration set"
+    if len(files) == 1:
+        return str(files[0][0])
+    return str(Path(files[0][0]).parent)
+
+
+def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
+               combined: bool = False) -> CalibrationSet:
+    """Validate a long table (as :func:`read_calibration_table` returns) and zero-correct it.
+
+    ``combined``: rows loading several components are kept (``validate``), not refused.
+    """
+    layout = settings.layout
+    table = assign_sweeps(table, layout, combined)
+    reps = sorted(table["repetition"].unique())
+    if len(reps) < settings.min_repetitions:
+        raise InputError(
+            f"{_source(files)}: {len(reps)} "
+            f"repetition{'s' if len(reps) != 1 else ''}, the config requires at least "
+            f"{settings.min_repetitions} (min_repetitions)"
+            + (f"; a single CSV without a '{settings.columns['repetition']}' column is one "
+               "repetition" if len(files) == 1 and len(reps) == 1 else "")
+        )
+    # one grouping, not a scan of the table per repetition (quadratic in thousands)
+    pairs = table[["repetition", "axis"]].drop_duplicates()
+    n_axes = pairs.groupby("repetition", sort=True).size()
+    for rep in n_axes.index[n_axes.to_numpy() < layout.n][:1]:
+        have = set(pairs.loc[pairs["repetition"] == rep, "axis"])
+        missing = [a for a in layout.labels if a not in have]
+        if missing:
+            first = table.loc[table["repetition"] == rep].iloc[0]
+            every = "all three axes" if layout.is_default else f"all {layout.n} components"
+            raise InputError(
+                f"{first['file']}: repetition {rep} has no {' or '.join(missing)} sweep; "
+                f"every repetition must calibrate {every}"
+            )
+    points, offsets = zero_correct(table, layout, settings.zero_method)
+    warnings = []
+    cs = CalibrationSet(points, offsets, tuple(files), tuple(skipped), layout=layout)
+    for axis in layout.labels:
+        grids = cs.load_grid(axis)
+        ref_rep, ref = next(iter(grids.items()))
+        for rep, g in grids.items():
+            if g.shape != ref.shape or not np.allclose(g, ref, rtol=0, atol=1e-9):
+                warnings.append(
+                    f"the {axis} sweep of repetition {rep} uses a different load grid than "
+                    f"repetition {ref_rep}; gamma compares repetitions at different loads"
+                )
+                break
+    for a, axis in enumerate(layout.labels):
+        # loads far from the full scale usually mean other units (kN, kgf) or a
+        # wrong full_scale, and gamma (eq. 12) is a fraction of the full scale
+        peak = float(np.abs(cs.sweep(axis)[layout.loads[a]]).max())
+        fs, unit = settings.full_scale[a], settings.units.load_of(a)
+        if peak > 1.05 * fs or peak < 0.2 * fs:
+            warnings.append(
+                f"the {axis} loads reach {peak:g} {unit}, the full scale is {fs:g} "
+                f"{unit}: check the units (units: and scale: in the config) and "
+                "full_scale"
+            )
+    seen: dict[str, str] = {}
+    for name, digest in files:
+        if digest in seen:
+            warnings.append(f"{name} is byte for byte the same file as {seen[digest]}; "
+                            "a repetition copied twice counts twice")
+        seen.setdefault(digest, name)
+    return CalibrationSet(points, offsets, tuple(files), tuple(skipped), tuple(warnings),
+                          layout=layout)
+
+
+def load_calibration(path: str | Path, settings: Settings, exclude=(),
+                     combined: bool = False) -> CalibrationSet:
+    """Read, validate and zero-correct a calibration set (a directory or one CSV).
+
+    ``exclude``: ``FILE:ROW`` points to drop before zero correction (``fit --exclude``);
+    FILE is a file of the set by path or by name, ROW its spreadsheet row.
+    """
+    read = read_calibration_table(path, settings)
+    table, dropped = _exclude(read.table, exclude)
+    cs = from_table(table, settings, read.files, [*read.skipped, *dropped], combined)
+    hidden = tuple(f"{f}: hidden file, not read as a repetition" for f in read.hidden)
+    cs = replace(cs, excluded=tuple(dropped))
+    return replace(cs, warnings=hidden + cs.warnings) if hidden else cs
+
+
+def _exclude(table: pd.DataFrame, specs) -> tuple[pd.DataFrame, list[str]]:
+    """Drop the ``FILE:ROW`` points named; each must be a point of the set."""
+    drop = np.zeros(len(table), dtype=bool)
+    dropped = []
+    files = table["file"].to_numpy()
+    names = np.array([Path(f).name for f in files])
+    for spec in specs:
+        name, sep, row = str(spec).rpartition(":")
+        if not sep or not name or not row.strip().isdigit():
+            raise InputError(f"--exclude {spec!r}: expected FILE:ROW, e.g. rep3.csv:17")
+        row = int(row)
+        in_file = (files == name) | (names == Path(name).name) if "/" not in name else files == name
+        hit = np.flatnonzero(in_file & (table["row"].to_numpy() == row))
+        if hit.size == 0:
+            known = "a file of the set" if not in_file.any() else f"a calibration point of {name}"
+            raise InputError(f"--exclude {spec!r}: row {row} of {name} is not {known}")
+        drop[hit] = True
+        dropped.append(f"{files[hit[0]]}, row {row}: excluded (--exclude)")
+    return table[~drop].reset_index(drop=True), dropped
+
+
+@dataclass(frozen=True)
+class GrossError:
+    """One calibration point moved away from its place (Section 4.4).
+
+    ``offset`` [V] is added to the prime voltage of point ``point`` (1-based, file
+    order) of the ``axis`` sweep of repetition ``repetition``.
+    """
+
+    axis: str
+    repetition: int
+    point: int
+    offset: float
+
+    @classmethod
+    def parse(cls, spec: str, layout: Layout = DEFAULT) -> GrossError:
+        """``AXIS:REP:POINT:OFFSET``; AXIS a label of ``layout`` (x; or a component, fx)."""
+        parts = spec.split(":")
+        try:
+            axis, rep, point, offset = parts
+            axis = layout.label_map().get(axis.strip().lower(), "")
+            if not axis:
+                raise ValueError
+            ge = cls(axis, int(rep), int(point), float(offset))
+        except ValueError:
+            raise InputError(
+                f"--gross-error {spec!r}: expected AXIS:REP:POINT:OFFSET, AXIS one of "
+                f"{', '.join(layout.labels)}, e.g. {layout.labels[0]}:1:5:0.2"
+            ) from None
+        if ge.repetition < 1 or ge.point < 1 or not np.isfinite(ge.offset):
+            raise InputError(f"--gross-error {spec!r}: REP and POINT count from 1")
+        return ge
+
+    def apply(self, table: pd.DataFrame, layout: Layout = DEFAULT) -> pd.DataFrame:
+        """A copy of ``table`` with this point's prime voltage moved by ``offset``."""
+        if self.axis not in layout.labels:
+            raise InputError(f"--gross-error: no component '{self.axis}' (the sensor has "
+                             f"{', '.join(layout.labels)})")
+        idx = np.flatnonzero(
+            (table["repetition"] == self.repetition).to_numpy()
+            & (table["axis"] == self.axis).to_numpy()
+        )
+        if self.point > idx.size:
+            raise InputError(
+                f"--gross-error: the {self.axis} sweep of repetition {self.repetition} has "
+                f"{idx.size} points, no point {self.point}"
+            )
+        out = table.copy()
+        col = out.columns.get_loc(layout.outputs[layout.index(self.axis)])
+        out.iloc[idx[self.point - 1], col] += self.offset
+        return out
+
+
+def ingest_summary(calib, settings) -> dict[str, Any]:
+    """Everything ``ingest`` reports, as plain data (also the ``--json`` document)."""
+    axes = {}
+    for a, axis in enumerate(calib.layout.labels):
+        s = calib.sweep(axis)
+        grid = np.unique(s[calib.layout.loads[a]].to_numpy())
+        axes[axis] = {
+            "points": int(len(s)),
+            "points_per_repetition": {
+                int(r): int(n) for r, n in s.groupby("repetition").size().items()
+            },
+            "load_min": float(grid.min()),
+            "load_max": float(grid.max()),
+            "load_levels": int(grid.size),
+            "full_scale": settings.full_scale[a],
+        }
+    return {
+        "sensor": settings.sensor,
+        "units": {"load": settings.load_unit, "output": settings.output_unit},
+        "files": [{"path": p, "sha256": h} for p, h in calib.files],
+        "repetitions": calib.repetitions,
+        "axes": axes,
+        "offsets": calib.offsets.to_dict(orient="records"),
+        **({"zero": "fit"} if settings.zero_method == "fit" else {}),
+        "skipped": list(calib.skipped),
+        "warnings": list(calib.warnings),
+    }

@@ -1,0 +1,228 @@
+"""Calibration files: the CSVs of a calibration set and task logs with true forces."""
+
+from __future__ import annotations
+
+import hashlib
+import io
+from dataclasses import dataclass
+from decimal import Decimal, InvalidOperation
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..config import Settings
+from ..errors import InputError, excerpt, where
+from ..files import CALIBRATION_LIMIT, natural_key, open_input, read_bounded, reading
+from .csv_text import HEADER_ROW, read_csv_text, read_header, require_columns, to_numbers
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+
+def list_calibration(path: str | Path) -> tuple[list[Path], list[Path]]:
+    """The CSV files of a calibration set, and the hidden CSVs it skips, from one listing.
+
+    A directory's files are sorted naturally (``rep2`` before ``rep10``); hidden
+    ones (macOS ``._rep1.csv``, editor backups) are returned apart.  A file is a
+    set of its own.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: calibration data not found")
+    if not path.is_dir():
+        return [path], []
+    entries = [p for p in path.iterdir() if p.suffix.lower() == ".csv"]
+    for p in sorted(entries, key=lambda p: natural_key(p.name)):
+        if not p.name.startswith(".") and not p.is_file():
+            # a repetition that cannot be read is never skipped without a word
+            what = ("a symbolic link to a missing file" if p.is_symlink() and not p.exists()
+                    else "a directory" if p.is_dir() else "not a regular file (a device or pipe?)")
+            raise InputError(f"{p}: named like a repetition file but is {what}; "
+                             "restore the file or move it out of the calibration directory")
+    files = sorted((p for p in entries if not p.name.startswith(".")),
+                   key=lambda p: natural_key(p.name))
+    if not files:
+        raise InputError(f"{path}: directory holds no .csv files")
+    return files, sorted(p for p in entries if p.name.startswith("."))
+
+
+# Repetition labels are whole numbers 1 .. 2**53, read exactly from their text: a
+# label through a float would merge 2**53 and 2**53 + 1, and 1e20 would wrap.
+MAX_REPETITION = 2**53
+
+
+def _repetition_labels(cells, path: Path, column: str, rows, decimal: str) -> np.ndarray:
+    """Repetition numbers as exact integers, or name the first cell that is not one."""
+    text = np.asarray([str(c).strip().replace(decimal, ".") for c in cells], dtype=object)
+    uniq, inverse = np.unique(text, return_inverse=True)  # a few labels, many rows
+    values, bad = np.zeros(len(uniq), dtype=np.int64), np.zeros(len(uniq), dtype=bool)
+    for j, t in enumerate(uniq):
+        try:
+            value = Decimal(t)
+        except InvalidOperation:
+            bad[j] = True
+            continue
+        if not value.is_finite() or value != value.to_integral_value() \
+                or not 1 <= value <= MAX_REPETITION:
+            bad[j] = True
+        else:
+            values[j] = int(value)
+    if bad.any():
+        i = int(np.argmax(bad[inverse]))
+        big = _too_big(text[i])
+        raise InputError(
+            f"{where(path, int(rows[i]), column)}: {excerpt(str(cells.iloc[i]).strip())!r} is "
+            f"not a repetition number (1, 2, ...{', at most 2**53' if big else ''})"
+        )
+    return values[inverse]
+
+
+def _too_big(text: str) -> bool:
+    try:
+        value = Decimal(text)
+    except InvalidOperation:
+        return False
+    return value.is_finite() and value > MAX_REPETITION
+
+
+def calibration_files(path: str | Path) -> list[Path]:
+    """The CSV files of a calibration set: a directory (sorted naturally) or one file."""
+    return list_calibration(path)[0]
+
+
+@dataclass(frozen=True)
+class CalibrationTable:
+    """A calibration set as read: one long table in file order, and what was seen on the way.
+
+    ``table`` has columns ``repetition, axis, file, row, fx..uz`` with forces in N
+    and voltages in V after the config's ``scale``; ``axis`` is empty when the
+    files have no axis column.
+    """
+
+    table: pd.DataFrame
+    skipped: list[str]
+    files: tuple[tuple[str, str], ...]  # (path, SHA-256) of every file read
+    hidden: list[Path]
+
+
+def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationTable:
+    """Read a calibration set into one long table in file order.
+
+    The directory is listed once and each file read once (its digest, header
+    and cells all come from the same bytes).
+    """
+    import pandas as pd
+
+    files, hidden = list_calibration(path)
+    single = len(files) == 1 and not Path(path).is_dir()
+    frames, skipped, digests = [], [], []
+    cols = settings.columns
+    layout = settings.layout
+    numeric = {c: cols[c] for c in (*layout.loads, *layout.outputs)}
+    for rep_index, f in enumerate(files, start=1):
+        with reading(f):  # a FIFO: read once, never waited on for ever
+            data = read_bounded(f, CALIBRATION_LIMIT, "a calibration file")
+        nul = data.find(b"\x00")
+        if nul >= 0:  # NUL padding (a crashed logger, a pre-allocated file): not text
+            row = data.count(b"\n", 0, nul) + 1
+            raise InputError(f"{where(f, row)}: a NUL byte: not a UTF-8 text file (binary, "
+                             "UTF-16, or padding from a crashed writer?)")
+        digests.append((str(f), hashlib.sha256(data).hexdigest()))
+        header = read_header(f, settings, data, strict=False)
+        if {f"{c}_raw" for c in layout.outputs} <= set(header):
+            # the tidy CSV of `ingest -o`: zero-corrected already, and every repetition
+            raise InputError(
+                f"{where(f, HEADER_ROW)}: this is the output of 'fsdecouple ingest -o' (it has "
+                f"{layout.outputs[0]}_raw), not a repetition; move it out of the calibration directory"
+            )
+        require_columns(header, numeric, f)
+        # a single CSV without a repetition column is one repetition
+        numbered = single and cols["repetition"] in header
+        mapped = {name: name for name in numeric.values()}
+        mapped.update({cols[c]: cols[c] for c in ("axis", "repetition")
+                       if cols[c] in header and (c != "repetition" or numbered)})
+        require_columns(header, mapped, f)
+        # Columns the config does not map are ignored: they may have no name, a
+        # duplicated one, or hold a side table.  Positional names keep pandas from
+        # renaming any of them (every field is still read, so a row with more
+        # fields than the header is still refused).
+        raw = read_csv_text(io.BytesIO(data), settings, path=f, header=0,
+                            names=[str(i) for i in range(len(header))])
+        raw = raw[[str(header.index(n)) for n in mapped]]
+        raw.columns = list(mapped)
+        if raw.empty:
+            raise InputError(f"{f}: header only, no data rows")
+        rows = np.arange(len(raw)) + HEADER_ROW + 1
+        used = list(mapped)
+        blank = np.logical_and.reduce([raw[c].str.strip().eq("").to_numpy() for c in used])
+        for r in rows[blank]:
+            skipped.append(f"{f}, row {r}: skipped, no value in any mapped column (a blank row, "
+                           "or a side table running past the data)")
+        raw, rows = raw[~blank], rows[~blank]
+        if raw.empty:
+            raise InputError(f"{f}: header only, no data rows")
+        out = pd.DataFrame({"file": str(f), "row": rows})
+        if numbered:
+            out["repetition"] = _repetition_labels(raw[cols["repetition"]], f,
+                                                   cols["repetition"], rows, settings.decimal)
+        else:
+            out["repetition"] = rep_index  # a directory's file order, or the one CSV
+        if cols["axis"] in header:
+            # a label (x; fx for a named component) or the component's load column name
+            labels = layout.label_map()
+            axis = raw[cols["axis"]].str.strip().str.lower().map(labels)
+            bad = axis.isna()
+            if bad.any():
+                i = int(np.argmax(bad.to_numpy()))
+                names = list(layout.labels)
+                raise InputError(
+                    f"{where(f, int(rows[i]), cols['axis'])}: "
+                    f"{excerpt(repr(raw[cols['axis']].iloc[i]))}, expected "
+                    f"{', '.join(names[:-1])} or {names[-1]}"
+                )
+            out["axis"] = axis.to_numpy(dtype=object)
+        else:
+            out["axis"] = ""
+        for canonical, name in numeric.items():
+            values = to_numbers(raw[name], f, name, rows, settings.decimal)
+            # check each cell before scaling so the message quotes the file's value
+            out[canonical] = values * settings.scale[canonical]
+        frames.append(out)
+    table = pd.concat(frames, ignore_index=True)
+    # training order is file order: repetition, then row (stable)
+    table = table.sort_values(["repetition"], kind="stable").reset_index(drop=True)
+    table = table[["repetition", "axis", "file", "row", *layout.loads, *layout.outputs]]
+    return CalibrationTable(table, skipped, tuple(digests), hidden)
+
+
+
+def read_task_log(
+    voltages: str | Path, forces: str | Path, settings: Settings
+) -> tuple[np.ndarray, np.ndarray]:
+    """A voltage log and its true forces, as ``simulate`` writes them, row for row.
+
+    Returns ``(u, f)``, shape (n, N) each, in V and N (config columns and scales).
+    """
+    out = []
+    layout = settings.layout
+    for path, canon in ((Path(voltages), layout.outputs), (Path(forces), layout.loads)):
+        with reading(path), open_input(path) as fh:  # read once: it may be a pipe
+            data = fh.read()
+        header = read_header(path, settings, data)
+        names = {c: settings.columns[c] for c in canon}
+        require_columns(header, names, path)
+        raw = read_csv_text(io.BytesIO(data), settings, path=path)
+        if raw.empty:
+            raise InputError(f"{path}: header only, no data rows")
+        out.append(np.column_stack([
+            to_numbers(raw[n], path, n, HEADER_ROW + 1, settings.decimal) * settings.scale[c]
+            for c, n in names.items()
+        ]))
+    u, f = out
+    if len(u) != len(f):
+        raise InputError(
+            f"{forces}: {len(f)} rows, but {voltages} has {len(u)}; the true forces must "
+            "match the voltage log row for row"
+        )
+    return u, f

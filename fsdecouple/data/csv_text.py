@@ -1,0 +1,237 @@
+"""Text tables: the header row, pandas reads that never guess, numbers from cells.
+
+Every reader turns a problem into an :class:`~fsdecouple.errors.InputError` that
+names the file, the row (header = row 1, as a spreadsheet counts) and the column.
+"""
+
+from __future__ import annotations
+
+import csv
+import difflib
+import io
+import os
+import re
+import warnings
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..config import Settings
+from ..errors import InputError, excerpt, where
+from ..files import reading
+
+if TYPE_CHECKING:  # pandas loads on first use: apply and show never need it
+    import pandas as pd
+
+HEADER_ROW = 1  # data row i (0-based) is spreadsheet row i + 2
+
+MAX_HEADER_CHARS = 1 << 20
+
+
+def read_header(path: Path, settings: Settings, data: bytes | None = None, *,
+                strict: bool = True, more: bool | None = None) -> list[str]:
+    """The header row as written (names stripped), refusing empty files.
+
+    ``data``: the file's bytes when the caller has read them already (a file is
+    read once per command).  ``strict``: refuse duplicated and empty names too
+    (a log passes every column through); otherwise only the columns the config
+    maps must be unique (:func:`require_columns`), and the rest, a side table
+    or columns without a name, are ignored.  ``more``: whether anything follows
+    ``data`` in the file (then ``data`` is the first line only: the header must be
+    UTF-8, the rows after it are not decoded here).
+    """
+    with reading(path):
+        if data is None:
+            with open(path, encoding="utf-8-sig", newline="") as fh:
+                first = fh.readline(MAX_HEADER_CHARS)  # any line end: \n, \r\n or \r
+                more = bool(fh.read(1))
+                size = os.fstat(fh.fileno()).st_size
+        else:
+            fh = io.TextIOWrapper(io.BytesIO(data), encoding="utf-8-sig", newline="")
+            first = fh.readline(MAX_HEADER_CHARS)
+            size = len(data) + bool(more)
+            more = bool(fh.read(1)) or bool(more)
+    if first.endswith("\r") and not first.endswith("\r\n"):
+        raise InputError(
+            f"{where(path, HEADER_ROW)}: lines end with a carriage return only (old Mac line "
+            "ends); convert them to \\n or \\r\\n"
+        )
+    if more and not first.endswith("\n"):
+        raise InputError(f"{where(path, HEADER_ROW)}: no line end in {MAX_HEADER_CHARS:,} "
+                         "characters; not a CSV file?")
+    if not first.strip():
+        if size > len(first.encode("utf-8")):
+            raise InputError(f"{where(path, HEADER_ROW)}: blank, expected the header row")
+        raise InputError(f"{path}: file is empty (no header row)")
+    names = [n.strip() for n in next(csv.reader([first], delimiter=settings.sep))]
+    seen: set[str] = set()
+    for i, n in enumerate(names if strict else ()):
+        if n in seen:
+            raise InputError(f"{where(path, HEADER_ROW, n)}: duplicated column name")
+        seen.add(n)
+        if not n:
+            raise InputError(f"{where(path, HEADER_ROW)}: column {i + 1} has no name")
+    if settings.sep != ";" and any(";" in n for n in names):
+        raise InputError(
+            f"{where(path, HEADER_ROW)}: looks like a ';'-separated CSV; set "
+            "csv: {sep: ';', decimal: ','} in the config to read it"
+        )
+    return names
+
+
+def _strict(read):
+    # only around pandas' own work, not across a generator's yields
+    import pandas as pd
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", pd.errors.ParserWarning)
+        return read()
+
+
+def csv_chunks(source, path: Path, settings: Settings, **kw):
+    """``pandas.read_csv`` of strings that never guesses, as an iterator of frames.
+
+    Blank lines are kept (row numbers stay true) and the first column is never
+    taken as an index: pandas does that silently when the first data row has one
+    field more than the header, which is how ``1,5`` in a comma file looks.
+    """
+    import pandas as pd
+
+    try:
+        reader = _strict(lambda: pd.read_csv(
+            source, sep=settings.sep, dtype=str, keep_default_na=False, na_filter=False,
+            skip_blank_lines=False, encoding="utf-8-sig", index_col=False, **kw,
+        ))
+        if isinstance(reader, pd.DataFrame):
+            yield reader
+            return
+        with reader:
+            while (chunk := _strict(lambda: next(reader, None))) is not None:
+                yield chunk
+    except pd.errors.EmptyDataError:
+        raise InputError(f"{path}: file is empty (no header row)") from None
+    except pd.errors.ParserWarning:
+        raise InputError(
+            f"{where(path, HEADER_ROW + 1)}: more fields than the header's "
+            f"(a decimal comma in a '{settings.sep}'-separated file?)"
+        ) from None
+    except pd.errors.ParserError as err:
+        raise InputError(f"{path}: {parser_message(err)}") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a UTF-8 text file") from None
+
+
+def read_csv_text(source, settings: Settings, *, path: Path | None = None, **kw) -> pd.DataFrame:
+    """Read a whole CSV (a path, or a buffer read from ``path``) as strings.
+
+    Blank lines are kept so that row numbers stay true.
+    """
+    path = Path(source) if path is None else path
+    df = next(csv_chunks(source, path, settings, skipinitialspace=True, **kw))
+    df.columns = [str(c).strip() for c in df.columns]
+    return df
+
+
+def parser_message(err: Exception) -> str:
+    text = str(err)
+    m = re.search(r"Expected (\d+) fields in line (\d+), saw (\d+)", text)
+    if m:
+        return (
+            f"row {m.group(2)}: {m.group(3)} fields, expected {m.group(1)} as in the header "
+            "(a decimal comma, or a separator inside a value?)"
+        )
+    m = re.search(r"EOF inside string starting at row (\d+)", text)
+    if m:  # pandas counts lines from 0 here
+        return f"row {int(m.group(1)) + 1}: a quote (\") opens a value that never closes"
+    return f"cannot parse CSV ({text.strip().splitlines()[-1]})"
+
+
+# Cells of a log that mean "no sample" (a missing voltage, not an error): these
+# spellings in any case, with or without a sign (pyarrow reads "NAN" and "-nan"
+# as NaN, so the line-by-line reader must agree).  MISSING_CELLS are the exact
+# spellings pyarrow is told are null.
+MISSING_WORDS = frozenset({"", "nan", "na", "n/a", "null"})
+MISSING_CELLS = ("", "nan", "NaN", "NA", "N/A", "null")
+
+
+def to_numbers(
+    values, path: Path, column: str, rows, decimal: str = ".", *, allow_missing: bool = False
+) -> np.ndarray:
+    """Convert a column of strings to finite floats, or name the first bad cell.
+
+    ``rows``: the spreadsheet row of each value, or (an int) of the first value
+    when the rows are consecutive.  ``allow_missing``: empty cells and the words
+    of :data:`MISSING_WORDS` become NaN (a log's missing samples) instead of an
+    error (a calibration point must have every number).  Infinities are errors.
+    """
+    import pandas as pd
+
+    values = pd.Series(values, dtype=object) if not isinstance(values, pd.Series) else values
+    text = values.astype(str).str.strip()
+    if decimal != ".":
+        text = text.str.replace(decimal, ".", regex=False)
+    nums = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
+    bad = ~np.isfinite(nums)
+    if allow_missing and bad.any():
+        missing = text.str.lower().str.lstrip("+-").isin(MISSING_WORDS).to_numpy()
+        bad &= ~(np.isnan(nums) & missing)
+    if bad.any():
+        i = int(np.argmax(bad))
+        row = int(rows[i]) if np.ndim(rows) else int(rows) + i
+        cell = str(values.iloc[i]).strip()
+        what = "is empty" if cell == "" else f"is {excerpt(repr(cell))}"
+        raise InputError(f"{where(path, row, column)}: {what}, expected a finite number")
+    return nums
+
+
+
+def require_utf8(body: bytes, path: Path, first_row: int, header: list[str], sep: str,
+                 why: str) -> None:
+    """Refuse ``body`` (whole lines, the first at spreadsheet row ``first_row``) unless it
+    is UTF-8, naming the row and column of the first byte that is not.
+
+    The rule for a log's bytes (README, "Errors and exit codes"): the header must be
+    UTF-8; data lines are bytes, passed through to CSV unchanged and never decoded,
+    and must be UTF-8 only where they become text (Parquet output: ``why``).  Every
+    block is checked the same way, whatever its row.
+    """
+    try:
+        body.decode("utf-8")
+    except UnicodeDecodeError as err:
+        start = body.rfind(b"\n", 0, err.start) + 1
+        end = body.find(b"\n", err.start)
+        line = body[start:len(body) if end < 0 else end].removesuffix(b"\r")
+        text = line.decode("utf-8", "surrogateescape")
+        try:
+            fields = next(csv.reader([text], delimiter=sep)) if text else []
+        except csv.Error:
+            fields = []
+        bad = [j for j, f in enumerate(fields) if any("\udc80" <= c <= "\udcff" for c in f)]
+        column = header[bad[0]] if bad and bad[0] < len(header) else None
+        cell = fields[bad[0]] if bad else text
+        shown = cell.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+        row = first_row + body.count(b"\n", 0, err.start)
+        raise InputError(
+            f"{where(path, row, column)}: "
+            f"'{excerpt(shown)}' is not UTF-8 text; {why}"
+        ) from None
+
+
+def require_columns(header: list[str], wanted: dict[str, str], path: Path) -> None:
+    """Every column the config maps is in the header, once."""
+    for canonical, name in wanted.items():
+        if header.count(name) > 1:
+            raise InputError(f"{where(path, HEADER_ROW, name)}: appears {header.count(name)} times "
+                             "in the header; the config maps it, so it must be unique")
+        if name not in header:
+            hint = f" (config maps '{canonical}' to it)" if name != canonical else ""
+            lower = {h.lower(): h for h in header}
+            close = [lower[m] for m in difflib.get_close_matches(name.lower(), list(lower), n=1)]
+            mean = f" (did you mean '{close[0]}'? map it under columns: in the config)" if close else ""
+            unnamed = [i + 1 for i, h in enumerate(header) if not h]
+            blank = f"; column {unnamed[0]} has no name" if unnamed and not close else ""
+            raise InputError(
+                f"{where(path, HEADER_ROW)}: missing column '{name}'{hint}{mean}; "
+                f"found {', '.join(h or '(no name)' for h in header) or 'no columns'}{blank}"
+            )

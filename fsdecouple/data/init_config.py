@@ -1,0 +1,275 @@
+"""``fsdecouple init`` for any sensor: three axes (:mod:`fsdecouple.data.columns`) or N components.
+
+A header that names a moment (``Mx``, ``Tz [N·mm]``, ``torque_y`` ...) is a
+force/torque sensor.  Its load columns become ``components`` (fx, fy, fz, mx,
+my, mz: those present, in that order), one family of numbered channels
+(``u1 .. u6``, ``ch0 .. ch5``, ``sg1 ..``) the outputs, and each component's
+prime output (eq. 1: the output its own load drives, u_aa) is the channel that
+component's single-load rows move most, relative to the channel's whole span:
+about 1 for the prime output, the coupling fraction for the others.  Units,
+full scales and scaling are guessed as for three axes, the load unit per
+component (forces and moments differ).  Every guess comes with its reason.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ..config import load_config
+from ..errors import ConfigError, InputError, printable
+from ..files import atomic_write, check_output, refuse_overwriting_input
+from ..units import MOMENT_UNITS
+from .columns import (
+    _AXIS,
+    _INTEGER,
+    _LOAD_HINTS,
+    _NUMBER,
+    _REPETITION,
+    MAX_ROWS,
+    Guess,
+    Ignored,
+    _comment,
+    _parse_name,
+    _sniff_decimal,
+    _unit,
+    guess_rows,
+    nice_ceil,
+    read_rows,
+    shown,
+)
+
+COMPONENTS = ("fx", "fy", "fz", "mx", "my", "mz")
+_LOAD = re.compile(r"(?:f|force|load)([xyz])|([xyz])(?:force|load)")
+_MOMENT = re.compile(r"(?:m|t|moment|torque)([xyz])|([xyz])(?:moment|torque)")
+_NUMBERED = re.compile(r"([a-zµμ]+)(\d+)")
+_MOMENT_HINTS = {u.lower(): u for u in MOMENT_UNITS}
+_BRACKETS = re.compile(r"[\[(]([^\])]*)[\])]")
+
+
+def _component(header: str) -> str | None:
+    """fx .. mz when ``header`` names a force or moment component, else None."""
+    name, _ = _parse_name(header)
+    if m := _MOMENT.fullmatch(name):
+        return "m" + (m.group(1) or m.group(2))
+    if m := _LOAD.fullmatch(name):
+        return "f" + (m.group(1) or m.group(2))
+    return None
+
+
+def init_config(path: str | Path, output: str | Path, *, force: bool = False) -> Guess:
+    """Guess a config for ``path`` (three axes, or components) and write it to ``output``.
+
+    An existing ``output`` is refused without ``force``, and always if it is ``path``.
+    Nothing is written when the guess fails.
+    """
+    output = Path(output)
+    check_output(output, force=force)
+    refuse_overwriting_input(output, [path])
+    guess = guess_layout(path)
+    text = guess.to_yaml()
+    _check_loads(text, path)
+    with atomic_write(output, force=force) as fh:
+        fh.write(text)
+    guess.config = output
+    return guess
+
+
+def _check_loads(text: str, data: str | Path) -> None:
+    """Refuse a guessed config that ``load_config`` would refuse (a full scale of 1e300,
+    two channels with one key): better one line now than a config that cannot be read."""
+    with tempfile.TemporaryDirectory(prefix="fsdecouple-init-") as tmp:
+        trial = Path(tmp) / "guessed.yaml"
+        trial.write_text(text, encoding="utf-8")
+        try:
+            load_config(trial)
+        except ConfigError as err:
+            reason = str(err).removeprefix(f"{printable(trial)}")
+            raise InputError(f"{_comment(str(data))}: the guessed config would not load"
+                             f"{reason}; check the data, or write the config by hand") from None
+
+
+def guess_layout(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
+    """:func:`guess_components` when the header names a moment, else the 3-axis guess."""
+    path = Path(path)
+    names, rows, sep, truncated = read_rows(path, max_rows)
+    if not any((_component(n) or " ")[0] == "m" for n in names):
+        return guess_rows(path, names, rows, sep, truncated)
+    try:
+        return guess_components(path, names, rows, sep, truncated)
+    except InputError as err:  # a 3-axis file with moment columns beside it reads as before
+        try:
+            return guess_rows(path, names, rows, sep, truncated)
+        except InputError:
+            raise err from None
+
+
+def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: str,
+                     truncated: bool) -> Guess:
+    """The config of a force/torque file: components, their prime outputs, units, full scales."""
+    where = _comment(str(path))
+    header = _comment(", ".join(shown(n) for n in names))
+    count = {n: names.count(n) for n in names}
+    ignored = {i: ("no header name" if not n else f"header name repeated ({count[n]} columns)")
+               for i, n in enumerate(names) if not n or count[n] > 1}
+    usable = [i for i in range(len(names)) if i not in ignored]
+    loads: dict[str, int] = {}
+    for i in usable:
+        key = _component(names[i])
+        if key and key not in loads:
+            loads[key] = i
+    components = tuple(c for c in COMPONENTS if c in loads)
+    parsed = {i: _parse_name(names[i])[0] for i in usable}
+    special: dict[int, str] = {}  # the first axis and repetition column
+    for i in usable:
+        key = "axis" if parsed[i] in _AXIS else "repetition" if parsed[i] in _REPETITION else None
+        if key and key not in special.values():
+            special[i] = key
+    families: dict[str, list[tuple[int, int]]] = {}
+    for i in usable:
+        if i not in loads.values() and i not in special and (m := _NUMBERED.fullmatch(parsed[i])):
+            families.setdefault(m.group(1), []).append((int(m.group(2)), i))
+    fits = [sorted(f) for f in families.values() if len(f) == len(components)]
+    if len(components) < 2:
+        raise InputError(f"{where}: the header names {len(components)} load component "
+                         f"({', '.join(components)}); a coupling model needs at least 2; header: {header}")
+    if len(fits) != 1:
+        raise InputError(
+            f"{where}: a force/torque header needs one numbered output channel per load "
+            f"component ({len(components)}: {', '.join(components)}), e.g. u1..u{len(components)} "
+            f"or ch0..ch{len(components) - 1}; found {len(fits)} such families; header: {header}")
+    channels = [i for _, i in fits[0]]
+    mapped = [loads[c] for c in components] + channels
+    decimal = _sniff_decimal(sep, rows, mapped)
+    table = _numbers(rows, mapped, decimal)
+    if len(table) == 0:
+        raise InputError(f"{where}: no row holds a number in every load and output column")
+    f, u = table[:, :len(components)], table[:, len(components):]
+    notes: list[str] = [f"read the first {len(rows):,} data rows only"] if truncated else []
+    if (left := sum(any(c.strip() for c in row) for row in rows) - len(table)) > 0:
+        notes.append(f"{left} rows without a finite number in every load and output column "
+                     "were left out")
+    prime, why = _pair(f, u, components, [names[i] for i in channels], notes)
+    outputs = tuple(parsed[channels[j]] for j in prime)
+    if len({o.lower() for o in outputs}) < len(outputs):
+        same = ", ".join(shown(names[i]) for i in channels)
+        raise InputError(f"{where}: output channels {same} do not have one name each once units "
+                         "and separators are dropped; rename them, or write the config by hand")
+    columns = {**{k: names[i] for i, k in special.items()},
+               **{c: names[loads[c]] for c in components},
+               **{o: names[channels[j]] for o, j in zip(outputs, prime, strict=True)}}
+    reasons = {k: f"{shown(names[i])}: header names the {k}" for i, k in special.items()}
+    reasons.update({c: f"{shown(names[loads[c]])}: header names the "
+                    f"{'moment about' if c[0] == 'm' else 'force along'} {c[1]} ({c})"
+                    for c in components})
+    reasons.update({o: f"{shown(columns[o])}: {why[c]}" for c, o in zip(components, outputs, strict=True)})
+    for key in ("axis", "repetition"):
+        reasons.setdefault(key, f"no {key} column: " + (
+            "sweeps are inferred from consecutive rows" if key == "axis" else "one repetition"))
+    reasons["components"] = "load columns found in the header, forces then moments"
+    reasons["outputs"] = "the prime output of each component, in the same order"
+    load_units = _load_units(names, loads, components, f, notes)
+    integers = all(_INTEGER.fullmatch(row[i].strip()) for row in rows[:1000] for i in channels
+                   if i < len(row) and _NUMBER.fullmatch(row[i].strip()))
+    peak_out = float(np.abs(u).max())
+    hints = {f"c{j}": _parse_name(names[i])[1] for j, i in enumerate(channels)}
+    out_unit, out_why = _unit("output", hints, peak_out, integers, notes,
+                              {f"c{j}": shown(names[i]) for j, i in enumerate(channels)}, keys=list(hints))
+    mixed = len(set(load_units.values())) > 1
+    reasons["units"] = (f"load {', '.join(f'{c} {v}' for c, v in load_units.items())}: header hints, "
+                        f"else N and N·m; output {out_unit}: {out_why}")
+    peaks = np.abs(f).max(axis=0)
+    full_scale = {c: nice_ceil(p) if p else 1.0 for c, p in zip(components, peaks, strict=True)}
+    notes += [f"full_scale {c}: no load on {c} in the data; 1 is a placeholder"
+              for c, p in zip(components, peaks, strict=True) if not p]
+    reasons["full_scale"] = ("largest |load| per component (" + ", ".join(
+        f"{c} {p:g} {load_units[c]}" for c, p in zip(components, peaks, strict=True))
+        + ") rounded up to 1, 2, 2.5 or 5 x 10^k")
+    reps = {row[i].strip() for row in rows for i in special if special[i] == "repetition"
+            and i < len(row) and row[i].strip()}
+    reasons["min_repetitions"] = (f"{len(reps)} distinct values in {shown(columns['repetition'])}"
+                                  if "repetition" in columns else
+                                  "no repetition column: one repetition in this file")
+    in_volts = out_unit in ("V", "mV/V") and 0.1 <= peak_out <= 10
+    reasons["scaling"] = (f"outputs peak at {peak_out:g} {out_unit}, of order 1 as Table 2's gamma "
+                          "assumes" if in_volts else f"outputs peak at {peak_out:g} {out_unit}, not "
+                          "volts of order 1 as Table 2's gamma assumes: divide by each full-scale output")
+    reasons["csv"] = (f"{'the default' if sep == ',' else 'detected'}: \"{sep}\"-separated"
+                      f"{', decimal comma' if decimal == ',' else ''}")
+    for i in set(usable) - set(mapped) - set(special):
+        ignored[i] = "not a load component or an output channel"
+    return Guess(
+        path=path, columns=columns,
+        units={"load": next(iter(load_units.values())) if not mixed else "mixed", "output": out_unit},
+        full_scale=full_scale, min_repetitions=max(1, len(reps)),
+        scaling="none" if in_volts else "full_scale", sep=sep, decimal=decimal, reasons=reasons,
+        ignored=[Ignored(i + 1, names[i], r) for i, r in sorted(ignored.items())], notes=notes,
+        rows=len(table), keys=("repetition", "axis", *components, *outputs),
+        components=components, outputs=outputs, load_units=load_units if mixed else None,
+    )
+
+
+def _numbers(rows: list[list[str]], cols: list[int], decimal: str) -> np.ndarray:
+    """The rows whose every column in ``cols`` holds a number, as floats (rows, len(cols))."""
+    out = []
+    for row in rows:
+        cells = [row[i].strip().replace(decimal, ".") if i < len(row) else "" for i in cols]
+        if all(_NUMBER.fullmatch(c) for c in cells):
+            values = [float(c) for c in cells]
+            if all(math.isfinite(v) for v in values):  # 1e400 matches, but is no reading
+                out.append(values)
+    return np.array(out, dtype=float).reshape(-1, len(cols))
+
+
+def _pair(f: np.ndarray, u: np.ndarray, components: tuple[str, ...], channels: list[str],
+          notes: list[str]) -> tuple[list[int], dict[str, str]]:
+    """Each component's prime output: the channel its single-load rows move most.
+
+    Score: a channel's range over the component's rows (and the unloaded ones),
+    divided by its range over the whole file.  Returns the channel index per
+    component and the reason; channels in order, with a note, when the scores do
+    not name one channel per component.
+    """
+    span = np.ptp(u, axis=0)
+    span[span == 0] = np.inf
+    loaded = f != 0
+    score = np.zeros((len(components), u.shape[1]))
+    for a in range(len(components)):
+        rows = loaded[:, a] & (loaded.sum(axis=1) == 1) | ~loaded.any(axis=1)
+        if loaded[rows, a].any():
+            score[a] = np.ptp(u[rows], axis=0) / span
+    best = [int(np.argmax(s)) for s in score]
+    combined = int((loaded.sum(axis=1) > 1).sum())
+    if combined:
+        notes.append(f"{combined} rows load more than one component: fit refuses combined-load "
+                     "sweeps (validate and cv --task take them)")
+    if len(set(best)) == len(best) and all(score[a, j] > 0 for a, j in enumerate(best)):
+        return best, {c: f"prime output of {c}: {c} alone moves it over {100 * score[a, best[a]]:.3g} % "
+                      f"of its span (the next channel {100 * np.sort(score[a])[-2]:.2g} %)"
+                      for a, c in enumerate(components)}
+    notes.append("the single-load rows do not pair each component with its own channel; "
+                 f"took the channels in order ({', '.join(channels)}): check outputs:")
+    return list(range(len(components))), {c: f"channel {k + 1} in order, for {c}"
+                                          for k, c in enumerate(components)}
+
+
+def _load_units(names: list[str], loads: dict[str, int], components: tuple[str, ...],
+                f: np.ndarray, notes: list[str]) -> dict[str, str]:
+    """Each component's unit: the header's hint, else N for forces and N·m for moments."""
+    units = {}
+    for c in components:
+        hints = [h.strip().lower() for h in _BRACKETS.findall(names[loads[c]])]
+        table = _MOMENT_HINTS if c[0] == "m" else _LOAD_HINTS
+        units[c] = next((table[h] for h in hints if h in table), None)
+    missing = [c for c in components if units[c] is None]
+    for c in missing:
+        units[c] = "N·m" if c[0] == "m" else "N"
+    if missing:
+        notes.append(f"no unit in the headers of {', '.join(missing)}: took N for forces and N·m "
+                     "for moments")
+    return units
+

@@ -1,0 +1,207 @@
+"""Sweeps and zero correction.
+
+A *sweep* is one (repetition, loaded axis) series of a single-axis calibration
+(Section 3).  Each sweep's voltages are zero-corrected by subtracting the mean
+voltages of its zero-load rows; task data are zeroed by a tare or by given offsets.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..axes import DEFAULT, Layout
+from ..errors import InputError, where
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+
+def loaded_axes(forces: np.ndarray) -> np.ndarray:
+    """Index of the single non-zero force per row, -1 for a zero-load row.
+
+    Raises nothing: rows with more than one non-zero force get -2.
+    """
+    nonzero = forces != 0.0
+    count = nonzero.sum(axis=1)
+    idx = np.where(count == 1, np.argmax(nonzero, axis=1), -1)
+    return np.where(count > 1, -2, idx)
+
+
+def assign_sweeps(table: pd.DataFrame, layout: Layout = DEFAULT,
+                  combined: bool = False) -> pd.DataFrame:
+    """Check that each row loads one axis at most and give every row its sweep axis.
+
+    With an ``axis`` column, a row's load must lie on that axis.  Without one, the
+    sweeps are inferred from consecutive rows: a zero-load row joins the sweep it
+    leads (the next loaded row of the same repetition), and trailing zero-load rows
+    join the sweep before them.  A row loading two components at once (a
+    combined load: a force at a lever arm is Fy and Mx together) is refused here,
+    for fitting.  With ``combined`` (``validate``) such rows are kept: they belong
+    to their labelled sweep, or without labels to the sweep they continue (a
+    first row to its largest load).
+    """
+    table = table.copy()
+    loads, labels = layout.loads, layout.labels
+    forces = table[list(loads)].to_numpy()
+    loaded = loaded_axes(forces)
+    two = np.flatnonzero(loaded == -2)
+    if combined and two.size:
+        loaded = loaded.copy()
+        loaded[two] = np.argmax(np.abs(forces[two]), axis=1)  # overridden by a label below
+        two = two[:0]
+    if two.size:
+        i = int(two[0])
+        cols = [c for c, v in zip(loads, forces[i], strict=True) if v != 0]
+        sweep = f" (the {table['axis'].iat[i]} sweep)" if table["axis"].iat[i] else ""
+        raise InputError(
+            f"{where(table['file'].iat[i], int(table['row'].iat[i]), cols[1])}: "
+            f"row loads {' and '.join(cols)} at once{sweep}; a calibration row loads one axis "
+            "(a combined-load sweep cannot be fitted; validate and cv --task accept it)"
+        )
+    if (table["axis"] != "").all():
+        labelled = table["axis"].map({a: k for k, a in enumerate(labels)}).to_numpy()
+        single = (forces != 0.0).sum(axis=1) == 1  # a combined row may load its label and more
+        wrong = np.flatnonzero(single & (loaded != labelled))
+        if wrong.size:
+            i = int(wrong[0])
+            col = loads[loaded[i]]
+            raise InputError(
+                f"{where(table['file'].iat[i], int(table['row'].iat[i]), col)}: "
+                f"row loads {col} but its axis is '{table['axis'].iat[i]}'"
+            )
+        return table
+    axis = np.empty(len(table), dtype=object)
+    for _, idx in table.groupby("repetition", sort=False).indices.items():
+        pending: list[int] = []
+        last = -1
+        for i in idx:
+            if loaded[i] < 0:
+                pending.append(i)
+                continue
+            last = loaded[i]
+            for j in pending:
+                axis[j] = labels[last]
+            pending = []
+            axis[i] = labels[last]
+        if last < 0:
+            i = int(idx[0])
+            raise InputError(
+                f"{where(table['file'].iat[i])}: repetition {table['repetition'].iat[i]} "
+                "has only zero-load rows, so no sweep can be told apart"
+            )
+        for j in pending:
+            axis[j] = labels[last]
+    table["axis"] = axis
+    return table
+
+
+def zero_correct(table: pd.DataFrame, layout: Layout = DEFAULT,
+                 method: str = "rows") -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Subtract each sweep's zero offsets (Section 3: "zero-corrected").
+
+    ``method="rows"``: the mean outputs of the sweep's zero-load rows.
+    ``method="fit"``: offsets estimated from all points (:func:`fitted_offsets`).
+    Returns the corrected points (raw voltages kept as ``ux_raw`` ...) and the
+    offsets removed, one row per (repetition, axis) sweep.
+    """
+    import pandas as pd
+
+    outputs = layout.outputs
+    points = table.copy()
+    for c in outputs:
+        points[f"{c}_raw"] = points[c]
+    zero = (points[list(layout.loads)] == 0.0).all(axis=1).to_numpy()
+    # one pass over all sweeps: a write per sweep would copy the columns each time,
+    # which made a set of thousands of repetitions quadratic
+    grouped = points.groupby(["repetition", "axis"], sort=True)
+    sweep = grouped.ngroup().to_numpy()
+    keys = list(grouped.groups)  # (repetition, axis), sorted as ngroup numbers them
+    n_all = np.bincount(sweep, minlength=len(keys))
+    n_zero = np.bincount(sweep[zero], minlength=len(keys))
+    bad = np.flatnonzero((n_zero == 0) | (n_zero == n_all))
+    if bad.size:
+        g = int(bad[0])
+        first = points.iloc[int(np.argmax(sweep == g))]
+        rep, axis = keys[g]
+        what = f"{where(first['file'])}: the {axis} sweep of repetition {rep} (from row {first['row']})"
+        if n_zero[g] == 0:
+            raise InputError(f"{what} has no zero-load row ({' = '.join(layout.loads)} = 0), so it "
+                             "cannot be zero-corrected")
+        raise InputError(f"{what} has only zero-load rows; a sweep needs loaded points")
+    # each sweep's zero rows in file order, side by side: the mean of a contiguous
+    # run is the same pairwise sum, divided by the count, as pandas' mean of them
+    rows = np.flatnonzero(zero)[np.argsort(sweep[zero], kind="stable")]
+    starts = np.concatenate(([0], np.cumsum(n_zero)[:-1]))
+    u = points[list(outputs)].to_numpy(dtype=float)
+    mean = np.empty((len(keys), len(outputs)))
+    for k in range(len(outputs)):
+        col = np.ascontiguousarray(u[rows, k])
+        for g, (s, n) in enumerate(zip(starts, n_zero, strict=True)):
+            mean[g, k] = col[s:s + n].sum() / n
+    if method == "fit":
+        mean = fitted_offsets(points, sweep, keys, layout, mean)
+    for k, c in enumerate(outputs):
+        points[c] = u[:, k] - mean[sweep, k]
+    offsets = pd.DataFrame({
+        "repetition": [rep for rep, _ in keys], "axis": [axis for _, axis in keys],
+        "n_zero": n_zero.astype(int),
+        **{c: mean[:, k] for k, c in enumerate(outputs)},
+    })
+    return points, offsets
+
+
+MAX_DEGREE = 5  # of the shared polynomial in fitted_offsets
+
+
+def fitted_offsets(points: pd.DataFrame, sweep: np.ndarray, keys: list, layout: Layout,
+                   rows_mean: np.ndarray) -> np.ndarray:
+    """Each sweep's output offsets from all its points, jointly over the repetitions.
+
+    One zero-load row per sweep leaves its noise in every point of the sweep, and
+    every chi_ab inherits the mean of those shifts over the repetitions (about
+    sigma / sqrt(reps)); an output sums N - 1 of them (eq. 11).  Here, for every
+    loaded component b and output a, the raw outputs of all b sweeps are fitted
+    by least squares as ``u_a = c_rep + sum_{p=1..d} beta_p s^p`` with
+    s = f_b / max|f_b|: one offset per sweep and one shape, which is 0 at zero
+    load (chi(0) = 0, omega through the origin) and polynomial of degree
+    d = min(5, levels - 2).  Each offset then rests on all the sweep's points,
+    not its zero rows alone.  Components with too few load levels keep
+    ``rows_mean``, the zero rows' mean.
+    """
+    out = rows_mean.copy()
+    axis_of_key = np.array([axis for _, axis in keys], dtype=object)
+    labels = points["axis"].to_numpy()
+    u = points[list(layout.outputs)].to_numpy(dtype=float)
+    for b, label in enumerate(layout.labels):
+        idx = np.flatnonzero(labels == label)
+        f = points[layout.loads[b]].to_numpy(dtype=float)[idx]
+        degree = min(MAX_DEGREE, np.unique(f).size - 2)
+        peak = np.abs(f).max(initial=0.0)
+        if degree < 1 or not peak > 0:
+            continue
+        groups = np.flatnonzero(axis_of_key == label)  # this component's sweeps
+        col = np.searchsorted(groups, sweep[idx])
+        s = f / peak
+        design = np.column_stack([np.eye(groups.size)[col], *(s ** p for p in range(1, degree + 1))])
+        coef, *_ = np.linalg.lstsq(design, u[idx], rcond=None)
+        out[groups] = coef[:groups.size]
+    return out
+
+
+def tare_offsets(u: np.ndarray, n: int, source=None) -> np.ndarray:
+    """Mean of the first ``n`` voltage rows, the zero of a task log [V]."""
+    src = f"{source}: " if source is not None else ""
+    if n < 1:
+        raise InputError(f"--tare: needs at least 1 row, got {n}")
+    if len(u) < n:
+        raise InputError(f"{src}--tare {n}: the log has only {len(u)} rows")
+    head = u[:n]
+    if not np.isfinite(head).all():
+        bad = int(np.argmax(~np.isfinite(head).all(axis=1))) + 2
+        raise InputError(
+            f"{src}--tare {n}: the first {n} rows contain missing values (row {bad}); "
+            "the zero needs complete rows"
+        )
+    return head.mean(axis=0)

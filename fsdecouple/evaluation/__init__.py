@@ -1,0 +1,9 @@
+"""Judging a model on points it was not trained on.
+
+Held-out protocols (repetitions, load levels), cross-validation against the
+baselines (Section 4, Tables 3-5), the verdict against the calibration matrix,
+tuning the SVR settings by held-out error, ``validate`` on an independent set
+and the assumption checks.
+
+May import: the base modules, ``core``, ``data`` and ``fitting``.
+"""

@@ -1,0 +1,181 @@
+"""Validation of a fitted model on an independent single-axis set (``fsdecouple validate``).
+
+The set is read exactly like a calibration set (sweeps, zero rows, known loads;
+each sweep zero-corrected by its own zero-load rows), decoupled by eq. (11)
+(``model``) and by omega^-1 alone (``initial``), and scored per loaded axis:
+
+* ``gamma``: the interference error of eq. (12) on that axis's single-load sweep
+  points (a combined-load point, which loads several components at once, has no
+  off-axis error to measure: it is scored by the errors below only);
+* ``max_error``, ``rms_error``: over that axis's sweep points p and every
+  component c, the error e(p, c) = |f_c(p) - F_c(p)| / F_c(FS) of the decoupled
+  force against the known load, as a fraction of that component's full scale;
+  the largest e, and the root of the mean of e^2.  ``value_load_unit`` is the
+  same fraction on the largest full scale of the components,
+  ``value * max_c F_c(FS)``, so it bounds every component's absolute error.
+
+Each figure is given apart for the points whose prime outputs all lie in the
+model's calibrated range (widened as ``apply`` widens it, by
+:data:`fsdecouple.core.model.RANGE_MARGIN` of the span) and for the others, which the
+model extrapolates.  Zero-load rows are points at 0 load, as in :mod:`metrics`.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import __version__
+from ..config import Settings
+from ..core.metrics import check_max_gamma, interference_error
+from ..core.model import CouplingErrorModel
+from ..core.modelfile import content_digest, load_model, model_to_dict
+from ..errors import InputError
+from ..files import atomic_write, check_output, refuse_overwriting_input
+
+FORMAT = "fsdecouple.validation"
+FORMAT_VERSION = 1
+METHODS = ("model", "initial")
+METRICS = ("gamma", "max_error", "rms_error")
+RANGES = ("calibrated", "extrapolated")
+# calibration warnings that do not apply to a validation set, which may use other
+# loads than the calibration and go beyond its full scale on purpose
+_NOT_FOR_VALIDATION = ("uses a different load grid than repetition", "loads reach")
+
+
+def in_calibrated_range(model: CouplingErrorModel, u: np.ndarray) -> np.ndarray:
+    """Rows whose outputs all lie in the calibrated range, widened as ``apply`` widens it."""
+    lo, hi = model.extrapolation_limits().T
+    return ((u >= lo) & (u <= hi)).all(axis=1)
+
+
+def force_errors(forces: np.ndarray, loads: np.ndarray, full_scale) -> dict[str, float]:
+    """Max and RMS of |f_c - F_c| / F_c(FS) over every point and component."""
+    e = np.abs(np.asarray(forces) - np.asarray(loads)) / np.asarray(full_scale, dtype=float)
+    return {"max_error": float(e.max()), "rms_error": float(np.sqrt(np.mean(e * e)))}
+
+
+def validate(
+    model: CouplingErrorModel | str | Path,
+    set_path: str | Path,
+    settings: Settings | None = None,
+    *,
+    max_gamma: float | None = None,
+    output: str | Path | None = None,
+    force: bool = False,
+    inputs=(),
+) -> dict[str, Any]:
+    """Score ``model`` on the independent single-axis set ``set_path``.
+
+    Parameters
+    ----------
+    model : CouplingErrorModel or path
+        The fitted model, or its model file.
+    set_path : path
+        The validation set, a directory or CSV in calibration format.  It may hold
+        fewer repetitions than ``min_repetitions`` and use other loads than the
+        calibration; a row loading two components at once is refused.
+    settings : Settings, optional
+        Columns, scales, full scale and units of the set; default: the model's.
+    max_gamma : float, optional
+        Gate: the model's worst gamma on calibrated points must not exceed this
+        fraction (extrapolated points do not gate).
+    output : path, optional
+        Also write the document there, atomically; never over an input file
+        (the model, the set's files, ``inputs``) and only with ``force`` over
+        another existing file.
+
+    Returns
+    -------
+    dict
+        The validation document (README: "Validation on an independent set").
+    """
+    from ..data.calibration import load_calibration
+
+    check_max_gamma(max_gamma)
+    if output is not None:
+        check_output(output, force=force)
+    model_path = Path(model) if isinstance(model, str | Path) else None
+    if model_path is not None:
+        model = load_model(model_path)
+    settings = settings or model.settings
+    if settings.layout != model.layout:
+        raise InputError(f"the config names components {', '.join(settings.layout.loads)}, the "
+                         f"model {', '.join(model.layout.loads)}; use the calibration's config")
+    cs = load_calibration(set_path, replace(settings, min_repetitions=1), combined=True)
+    points = cs.points
+    u, loads = cs.voltages.astype(float), cs.forces.astype(float)
+    single = (loads != 0.0).sum(axis=1) <= 1
+    forces = {"model": model.decouple(u, rotate=False), "initial": model.initial_forces(u)}
+    inside = in_calibrated_range(model, u)
+    axis_of = points["axis"].to_numpy()
+    fs = np.asarray(settings.full_scale, dtype=float)
+    units = settings.units.loads or None
+    records = []
+    warnings = [w for w in cs.warnings if not any(x in w for x in _NOT_FOR_VALIDATION)]
+    if not single.all():
+        warnings.append(f"{int((~single).sum())} combined-load points (several components "
+                        "loaded at once): scored by max and RMS error, not gamma")
+    for a, axis in enumerate(settings.layout.labels):
+        on_axis = axis_of == axis
+        outside = int((on_axis & ~inside).sum())
+        if outside:
+            warnings.append(
+                f"{outside} of {int(on_axis.sum())} {axis}-sweep points have an output outside "
+                "the calibrated range; reported apart as 'extrapolated'"
+            )
+        for rng, sel in (("calibrated", on_axis & inside), ("extrapolated", on_axis & ~inside)):
+            if not sel.any():
+                continue
+            for method in METHODS:
+                f = forces[method][sel]
+                key = {"method": method, "axis": axis, "range": rng}
+                if (sel & single).any():
+                    g = forces[method][sel & single]
+                    records.append({**key, "metric": "gamma",
+                                    "value": interference_error(g, a, fs if units else fs[a], units)})
+                for metric, value in force_errors(f, loads[sel], fs).items():
+                    records.append({**key, "metric": metric, "value": value,
+                                    "value_load_unit": value * float(fs.max())})
+    records.sort(key=lambda r: (r["axis"], METHODS.index(r["method"]),
+                                RANGES.index(r["range"]), METRICS.index(r["metric"])))
+    doc = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "fsdecouple_version": __version__,
+        "model": None if model_path is None else str(model_path),
+        "model_digest": content_digest(model_to_dict(model)),
+        "set": {"path": str(set_path), "files": [{"path": p, "sha256": h} for p, h in cs.files],
+                "points": len(points)},
+        "units": {"load": getattr(settings, "load_unit", "N"),
+                  "output": getattr(settings, "output_unit", "V")},
+        "records": records,
+        "gate": _gate(records, max_gamma),
+        "warnings": warnings,
+    }
+    if output is not None:
+        used = [*([model_path] if model_path is not None else []), *(p for p, _ in cs.files), *inputs]
+        refuse_overwriting_input(output, used)
+        with atomic_write(output, force=force) as fh:
+            fh.write(dumps(doc) + "\n")
+    return doc
+
+
+def _gate(records, max_gamma: float | None) -> dict[str, Any] | None:
+    """The --max-gamma gate: the model's worst gamma over calibrated points."""
+    if max_gamma is None:
+        return None
+    gammas = [r["value"] for r in records
+              if (r["method"], r["metric"], r["range"]) == ("model", "gamma", "calibrated")]
+    worst = max(gammas) if gammas else None
+    # no calibrated point at all is nothing to pass on
+    return {"max_gamma": max_gamma, "worst": worst, "passed": worst is not None and worst <= max_gamma}
+
+
+def dumps(doc: dict[str, Any]) -> str:
+    """The document as written by ``-o`` and printed by ``--json``."""
+    return json.dumps(doc, indent=1, sort_keys=True, allow_nan=False)

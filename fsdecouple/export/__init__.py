@@ -1,0 +1,20 @@
+"""The C header: a model as one dependency-free C99 file for controllers.
+
+``plan`` holds what the header holds, ``header`` decides and checks every number
+of it (``export_header``), ``tables`` builds coarser chi tables to an error bound,
+``c_source`` writes the C text.
+
+May import: the base modules, ``core``, ``data``, ``fitting`` and ``evaluation``;
+no other top stage (``reporting``, ``logs``, ``fleet``, ``sim``).
+The old module ``fsdecouple.export``'s names (``export_header``, ``plan_export``, ...)
+still import from here.
+"""
+
+
+def __getattr__(name: str):
+    import importlib
+
+    try:
+        return getattr(importlib.import_module(f"{__name__}.header"), name)
+    except AttributeError:
+        raise AttributeError(f"module 'fsdecouple.export' has no attribute {name!r}") from None

@@ -1,0 +1,111 @@
+"""What the C header holds: the plan that ``export/header.py`` decides and checks and
+``export/c_source.py`` writes out, and what an export returns."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..core.model import RANGE_MARGIN
+
+
+@dataclass
+class ChiPlan:
+    """One chi_ab as the header holds it: kernel sum, and table (4, n) or None."""
+
+    out: int
+    inp: int
+    gamma: float
+    sv: np.ndarray
+    coef: np.ndarray
+    rho: float
+    in_scale: float
+    out_scale: float
+    exact: Any  # the model's Chi: exact kernel sum [V] of prime voltages [V]
+    lo: float = 0.0
+    hi: float = 0.0
+    table: np.ndarray | None = None  # power-basis coefficients c0..c3 per interval
+    table_error: float = 0.0  # measured max |table - kernel sum| [V]
+
+    @property
+    def inv_step(self) -> float:
+        return self.table.shape[1] / (self.hi - self.lo)  # as ChiSurrogate.inv_step
+
+
+@dataclass
+class ExportPlan:
+    """Everything the header holds; see :func:`export_header`."""
+
+    prefix: str
+    precision: str
+    n: int
+    k: np.ndarray
+    chis: list[ChiPlan]
+    rotation: np.ndarray | None
+    full_scale: np.ndarray
+    calibrated_range: np.ndarray
+    range_limits: np.ndarray  # apply's extrapolation thresholds, (n, 2)
+    limits: list  # (lo, hi) or (None, None) per channel: saturation
+    refine: int
+    digest: str
+    format_version: int
+    sensor: str
+    load_unit: str = "N"
+    output_unit: str = "V"
+    version: str = ""
+    range_margin: float = RANGE_MARGIN
+    table_max_error: float = 0.0  # max |df| / full scale from the tables
+    float_max_error: float = 0.0
+    range_limits_f: np.ndarray | None = None
+    limits_f: list = field(default_factory=list)
+    selftest_u: np.ndarray | None = None
+    selftest_f: np.ndarray | None = None
+    selftest_tol: np.ndarray | None = None
+    selftest_status: list = field(default_factory=list)
+    selftest_note: str = ""
+    model: Any = None  # the model exported: the reference of every check
+
+    @property
+    def table_bytes(self) -> int:
+        size = 4 if self.precision == "float" else 8
+        return sum(c.table.size * size for c in self.chis if c.table is not None)
+
+    @property
+    def kernel_bytes(self) -> int:
+        return sum(16 * c.sv.size for c in self.chis)
+
+
+@dataclass
+class ExportResult:
+    """What ``export_header`` wrote and what it promises."""
+
+    path: Path
+    precision: str
+    prefix: str
+    n_components: int
+    intervals: dict[str, int | None]
+    table_bytes: int
+    kernel_bytes: int
+    table_max_error: float  # fraction of full-scale load
+    float_max_error: float | None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"path": str(self.path), "precision": self.precision, "prefix": self.prefix,
+                "n_components": self.n_components, "intervals": self.intervals,
+                "table_bytes": self.table_bytes, "kernel_bytes": self.kernel_bytes,
+                "table_max_error": self.table_max_error, "float_max_error": self.float_max_error}
+
+    def summary_lines(self) -> list[str]:
+        counts = [v for v in self.intervals.values() if v is not None]
+        tables = (f"{len(counts)} tables of {min(counts)}-{max(counts)} intervals"
+                  if counts else "no tables (kernel sums only)")
+        lines = [f"wrote {self.path}: {self.n_components} components, {self.precision}, {tables}",
+                 f"table bytes {self.table_bytes}, support-vector bytes {self.kernel_bytes}",
+                 f"table error <= {self.table_max_error:.3g} of full-scale load"]
+        if self.float_max_error is not None:
+            lines.append(f"float error <= {self.float_max_error:.3g} of full-scale load "
+                         f"({self.prefix.upper()}FLOAT_MAX_ERROR in the header)")
+        return lines

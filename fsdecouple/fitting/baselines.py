@@ -1,0 +1,101 @@
+"""The five decoupling methods of Section 4, and training many of them in parallel.
+
+Every fitted method has ``decouple(u, rotate=False)`` -> forces [N]:
+
+* ``initial``: no coupling correction, ``f = omega^-1(u)`` per axis (Table 1, eq. 13);
+* ``linear``: the industrial calibration matrix, ``f = C u`` by least squares (Section 1);
+* ``rbf-mimo``: the standard MIMO RBF network of Section 4.1 (:mod:`fsdecouple.fitting.rbf`);
+* ``rbf-siso``: the coupling error model with six 1-D RBF networks (Figure 7, red);
+* ``svr``: the coupling error model with six epsilon-SVRs (Table 2, Table 3).
+"""
+
+from __future__ import annotations
+
+import time
+from concurrent.futures import ThreadPoolExecutor, as_completed
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import Settings
+from ..core.decouple import initial_forces
+from ..data.calibration import CalibrationSet
+from .fit import chi_training_data, fit
+from .linear import fit_calibration_matrix, fit_omega
+from .rbf import SPREAD, fit_mimo, fit_siso
+from .threads import single_threaded_libraries
+
+METHODS = ("initial", "linear", "rbf-mimo", "rbf-siso", "svr")
+
+
+@dataclass(frozen=True)
+class InitialMethod:
+    """No coupling correction: ``f_a = u_a / k_aa`` (the "initial data" of Table 1)."""
+
+    k: np.ndarray
+
+    def decouple(self, u: np.ndarray, *, rotate: bool = False) -> np.ndarray:
+        del rotate
+        return initial_forces(u, self.k)
+
+
+def input_scale(train: CalibrationSet, settings: Settings) -> np.ndarray | None:
+    """RBF input units: volts as they are, or full-scale outputs as the SVRs see them."""
+    if settings.scaling != "full_scale":
+        return None
+    return np.abs(fit_omega(train.points, train.layout).k) * np.asarray(settings.full_scale)
+
+
+def establish(method: str, train: CalibrationSet, settings: Settings, *, workers: int = 1,
+              tables: bool = True):
+    """Fit one method on a training set; the result has ``decouple(u, rotate=False)``.
+
+    ``tables``: build the svr model's fast-path tables (not needed to score it).
+    """
+    if method == "initial":
+        return InitialMethod(fit_omega(train.points, train.layout).k)
+    if method == "linear":
+        return fit_calibration_matrix(train.voltages, train.forces)
+    if method == "rbf-mimo":
+        return fit_mimo(train.voltages, train.forces, spread=SPREAD,
+                        input_scale=input_scale(train, settings))
+    if method == "rbf-siso":
+        data = {name: chi_training_data(train, name) for name in train.layout.chi_names}
+        return fit_siso(fit_omega(train.points, train.layout).k, data, spread=SPREAD,
+                        input_scale=input_scale(train, settings), layout=train.layout)
+    if method == "svr":
+        return fit(train, settings, workers=workers, tables=tables)
+    raise ValueError(f"unknown method {method!r}")
+
+
+def train_all(jobs, settings, workers, progress, *, tables: bool = True) -> tuple[dict, float]:
+    """Fit every (key, method, train) job on a thread pool; (models, wall seconds).
+
+    libsvm and LAPACK release the GIL, so threads train in parallel; each model
+    depends only on its own job, so the results equal sequential training.
+    """
+    with single_threaded_libraries():
+        return _train_all(jobs, settings, workers, progress, tables)
+
+
+def _train_all(jobs, settings, workers, progress, tables) -> tuple[dict, float]:
+    models = {}
+    t0 = time.perf_counter()
+    if workers <= 1:
+        for i, (key, method, train) in enumerate(jobs, start=1):
+            models[key] = establish(method, train, settings, workers=1, tables=tables)
+            if progress:
+                progress(i, len(jobs))
+    else:
+        # the SVR jobs are the long ones: start them first
+        order = sorted(jobs, key=lambda j: j[1] != "svr")
+        with ThreadPoolExecutor(workers) as pool:
+            # one thread per model: a fit's own pool on top would only oversubscribe
+            futures = {pool.submit(establish, m, tr, settings, workers=1, tables=tables): key
+                       for key, m, tr in order}
+            for i, fut in enumerate(as_completed(futures), start=1):
+                models[futures[fut]] = fut.result()
+                if progress:
+                    progress(i, len(jobs))
+    return models, time.perf_counter() - t0
+

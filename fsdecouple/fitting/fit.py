@@ -1,0 +1,230 @@
+"""Establish the coupling error model from a calibration set (Section 2.3, steps 1-4).
+
+Step 2 fits the omega slopes (eq. 2, :mod:`fsdecouple.fitting.linear`); step 3 fits each
+corrected coupling function chi_ab (eq. 4) by its own epsilon-SVR on the b sweeps
+(:mod:`fsdecouple.fitting.svr`, Table 2); the chi tables of the fast path are built after
+the fit (:mod:`fsdecouple.core.surrogate`).  The result carries a :class:`FitReport`.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import platform
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
+from datetime import UTC, datetime
+from importlib import metadata
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..config import Settings
+from ..core.decouple import MAX_SURROGATE_ERROR, usable
+from ..core.extrapolation import table_interval as tangent_interval
+from ..core.metrics import interference_errors
+from ..core.model import Chi, CouplingErrorModel, FitReport
+from ..core.surrogate import TOLERANCE, build_pair, table_interval
+from ..errors import InputError
+from .linear import fit_omega
+from .noise import solved_to_the_noise
+from .threads import single_threaded_libraries
+
+if TYPE_CHECKING:
+    from ..data.calibration import CalibrationSet
+
+# Kernel input span, in kernel widths delta, outside which Table 2's gamma is a
+# poor match for the data's units (volts of order 1 give a span of about 3).
+KERNEL_SPAN_RANGE = (0.1, 30.0)
+
+
+def _library_versions() -> dict[str, str]:
+    return dict(_installed_versions())  # a copy: each model owns its provenance
+
+
+@functools.cache
+def _installed_versions() -> dict[str, str]:
+    # reading package metadata costs ~5 ms; cv fits dozens of models
+    out = {"python": platform.python_version()}
+    for dist in ("numpy", "scipy", "pandas", "libsvm-official"):
+        try:
+            out[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            out[dist] = "not installed"
+    return out
+
+
+def chi_training_data(calib: CalibrationSet, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(prime voltage, coupling error element) of chi_ab from the b sweeps, file order.
+
+    Section 2.1: in the b-direction calibration data u_b = u_bb and u_a = e_ab.
+    """
+    layout = calib.layout
+    a, b = layout.pair(name)
+    s = calib.sweep(layout.labels[b])
+    return (
+        s[layout.outputs[b]].to_numpy(dtype=float),
+        s[layout.outputs[a]].to_numpy(dtype=float),
+    )
+
+
+def fit(
+    calib: CalibrationSet | str | Path,
+    settings: Settings | None = None,
+    *,
+    workers: int | None = None,
+    tables: bool = True,
+) -> CouplingErrorModel:
+    """Establish the coupling error model (Section 2.3, steps 1-4).
+
+    Parameters
+    ----------
+    calib : CalibrationSet or path
+        Zero-corrected calibration set, or a path to read one from.
+    settings : Settings, optional
+        Defaults to the paper's sensor and Table 2.
+    workers : int, optional
+        Threads training the N(N - 1) SVRs (libsvm releases the GIL); default: the
+        number of cores.  The result does not depend on it.
+    tables : bool
+        Build the chi tables of the fast path.  A model fitted only to be scored
+        on held-out points (the verdict, cv) decouples exactly without them.
+    """
+    # fitting needs pandas (calibration) and libsvm; loading and applying a model do not
+    from ..data.calibration import CalibrationSet, load_calibration
+    from .svr import fit_svr  # the only libsvm user
+
+    settings = settings or Settings()
+    if not isinstance(calib, CalibrationSet):
+        calib = load_calibration(calib, settings)
+    with single_threaded_libraries():
+        return _establish(calib, settings, workers, fit_svr, tables)
+
+
+def _omega_failure(calib: CalibrationSet, a: int) -> str:
+    """Why omega_a has no finite non-zero slope: values too large, or a flat sweep.
+
+    k = sum(f u) / sum(f^2) (eq. 2): sums that overflow a double give an infinite,
+    NaN or zero k too, and that is not a voltage that does not change.
+    """
+    layout = calib.layout
+    axis = layout.labels[a]
+    s = calib.sweep(axis)
+    f = s[layout.loads[a]].to_numpy(dtype=float)
+    u = s[layout.outputs[a]].to_numpy(dtype=float)
+    with np.errstate(over="ignore", invalid="ignore"):
+        sums = (float(f @ f), float(f @ u))
+    if not np.isfinite(sums).all():
+        big = max(float(np.abs(f).max(initial=0.0)), float(np.abs(u).max(initial=0.0)))
+        return (f"{calib.source}: the {axis} sweeps' values are too large (up to {big:.3g}): "
+                f"the sums of eq. (2) overflow a double, so omega_{axis} cannot be fitted; "
+                "check the units and scale: of the data")
+    return (f"{calib.source}: the {axis} sweeps' prime voltage {layout.outputs[a]} does not "
+            f"change with {layout.loads[a]}; cannot fit omega_{axis} (eq. 2)")
+
+
+def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
+               fit_svr, with_tables: bool) -> CouplingErrorModel:
+    layout = settings.layout
+    if calib.layout != layout:
+        raise InputError(f"{calib.source}: read for components {', '.join(calib.layout.loads)}, "
+                         f"but the settings name {', '.join(layout.loads)}")
+    labels, pairs = layout.labels, dict(zip(layout.chi_names, layout.pairs, strict=True))
+    omega = fit_omega(calib.points, layout)
+    warnings = list(calib.warnings)
+    for a, axis in enumerate(labels):
+        if not np.isfinite(omega.k[a]) or omega.k[a] == 0.0:
+            raise InputError(_omega_failure(calib, a))
+        if not omega.r2[a] >= settings.min_r2:
+            warnings.append(
+                f"omega_{axis}: R^2 = {omega.r2[a]:.5f} is below {settings.min_r2} "
+                "(assumption 1 of Section 2.1: prime force and voltage are linear)"
+            )
+    settings = solved_to_the_noise(calib, settings, omega.k)  # N components, full_scale
+    # Kernel scaling: "full_scale" divides inputs and targets by each axis's
+    # full-scale output |k| F_FS [V], so Table 2's gamma suits mV or ADC counts too.
+    if settings.scaling == "full_scale":
+        scale = np.abs(omega.k) * np.asarray(settings.full_scale)
+    else:
+        scale = np.ones(layout.n)
+    jobs = []
+    for name, (o, i) in pairs.items():
+        x, y = chi_training_data(calib, name)
+        jobs.append((name, x, y, float(scale[i]), float(scale[o])))
+    for a, axis in enumerate(labels):
+        x = calib.sweep(axis)[layout.outputs[a]].to_numpy() / scale[a]
+        span = (x.max() - x.min()) * np.sqrt(2.0 * settings.svr.gamma)
+        lo, hi = KERNEL_SPAN_RANGE
+        if not lo <= span <= hi:
+            warnings.append(
+                f"chi inputs from {layout.outputs[a]} span {span:.3g} kernel widths (expected "
+                f"{lo:g} to {hi:g} for delta^2 = {settings.svr.delta2:g}); the voltages may "
+                "be in mV or ADC counts: set 'scaling: full_scale' in the config"
+            )
+
+    def one(job):
+        name, x, y, in_scale, out_scale = job
+        s = fit_svr(x / in_scale, y / out_scale, settings.svr)
+        return Chi(
+            name, s.gamma, s.support_vectors, s.dual_coef, s.rho, in_scale, out_scale,
+            (float(x.min()), float(x.max())), int(x.size), extrapolation=settings.extrapolation,
+            pair=None if layout.is_default else pairs[name],
+        )
+
+    u_fs = np.abs(omega.k) * np.asarray(settings.full_scale)
+
+    def tables(axis: str) -> list[Chi]:
+        # the chi fed by one input axis share one grid (one index per input value);
+        # the tolerance is a fraction of the full-scale output of the chi's output
+        pair = [c for c in chis if labels[c.input_axis] == axis]
+        # tangent tables have knots at the range's ends (extrapolation.table_interval)
+        interval = tangent_interval if settings.extrapolation == "tangent" else table_interval
+        lo, hi = interval(min(c.input_range[0] for c in pair), max(c.input_range[1] for c in pair))
+        tolerance = TOLERANCE * min(u_fs[c.output_axis] for c in pair)
+        return [replace(c, surrogate=s)
+                for c, s in zip(pair, build_pair(pair, lo, hi, tolerance), strict=True)]
+
+    n_workers = workers or min(len(jobs), os.cpu_count() or 1)
+    if n_workers > 1:
+        with ThreadPoolExecutor(n_workers) as pool:
+            chis = list(pool.map(one, jobs))
+            done = [c for pair in pool.map(tables, labels) for c in pair] if with_tables else chis
+    else:
+        chis = [one(j) for j in jobs]
+        done = [c for axis in labels for c in tables(axis)] if with_tables else chis
+    by_name = {c.name: c for c in done}
+    for c in done if with_tables else ():
+        if not usable(c.surrogate, u_fs[c.output_axis]):
+            warnings.append(
+                f"chi_{c.name}: its surrogate table reaches only "
+                f"{c.surrogate.max_error / u_fs[c.output_axis]:.2g} of the full-scale output of "
+                f"the kernel sum (needs <= {MAX_SURROGATE_ERROR:g}); this model decouples by the "
+                "exact kernel sum, about 100x slower"
+            )
+    model = CouplingErrorModel(settings, omega.k, {name: by_name[name] for name in pairs})
+    u = calib.voltages
+    units = settings.units.loads or None
+    before = interference_errors(calib.points, model.initial_forces(u), settings.full_scale,
+                                 layout, units)
+    after = interference_errors(calib.points, model.decouple(u, rotate=False, exact=True),
+                                settings.full_scale, layout, units)
+    model.report = FitReport(
+        r2=dict(zip(labels, map(float, omega.r2), strict=True)),
+        n_points=dict(zip(labels, map(int, omega.n), strict=True)),
+        n_support_vectors={c.name: int(c.support_vectors.size) for c in chis},
+        surrogate_max_error={n: c.surrogate.max_error for n, c in model.chi.items()}
+        if with_tables else None,
+        gamma_before=before,
+        gamma_after=after,
+        repetitions=calib.repetitions,
+        warnings=warnings,
+    )
+    model.provenance = {
+        "files": [{"path": p, "sha256": h} for p, h in calib.files],
+        "libraries": _library_versions(),
+    }
+    if calib.excluded:
+        model.provenance["excluded"] = list(calib.excluded)
+    model.created = datetime.now(UTC).replace(microsecond=0).isoformat()
+    return model

@@ -1,0 +1,73 @@
+"""The one module that imports libsvm: fit an epsilon-SVR, return plain arrays.
+
+A fitted SVR is eq. (10), ``f(x) = sum_i (a_i - a_i*) k(x_i, x) + b``; libsvm
+stores the dual coefficients ``a_i - a_i*`` as ``sv_coef`` and ``rho = -b``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from libsvm import svmutil
+
+from ..config import SVRSettings
+from ..errors import FsdecoupleError
+from .threads import single_threaded_libraries
+
+
+@dataclass(frozen=True)
+class SVRFit:
+    """One fitted epsilon-SVR with a single input, as plain arrays.
+
+    Attributes
+    ----------
+    support_vectors : ndarray, shape (n_sv,)
+        The support vectors x_i (in the scaled input units the SVR saw).
+    dual_coef : ndarray, shape (n_sv,)
+        a_i - a_i* of eq. (10).
+    rho : float
+        -b of eq. (10).
+    gamma : float
+        RBF kernel parameter, k(x, x') = exp(-gamma (x - x')^2).
+    """
+
+    support_vectors: np.ndarray
+    dual_coef: np.ndarray
+    rho: float
+    gamma: float
+
+
+def train(x: np.ndarray, y: np.ndarray, params: SVRSettings):
+    """Train libsvm's epsilon-SVR (``-s 3 -t 2``) on points in the given order.
+
+    Returns libsvm's own model object (for tests that compare predictions).
+    """
+    x = np.ascontiguousarray(x, dtype=float).reshape(-1, 1)
+    y = np.ascontiguousarray(y, dtype=float).ravel()
+    if x.shape[0] != y.size or y.size < 2:
+        raise FsdecoupleError(f"an SVR needs at least 2 points, got {y.size}")
+    with single_threaded_libraries():
+        return svmutil.svm_train(y, x, params.libsvm_options())
+
+
+def extract(model, gamma: float) -> SVRFit:
+    """Densify libsvm's sparse support vectors (1-based keys, zeros dropped)."""
+    n = model.get_nr_sv()
+    sv = np.array([row.get(1, 0.0) for row in model.get_SV()], dtype=float)
+    coef = np.array([c[0] for c in model.get_sv_coef()], dtype=float)
+    assert sv.size == coef.size == n
+    return SVRFit(sv, coef, float(model.rho[0]), float(gamma))
+
+
+def fit_svr(x: np.ndarray, y: np.ndarray, params: SVRSettings) -> SVRFit:
+    """Fit one corrected coupling function chi by epsilon-SVR (Section 2.2, Table 2)."""
+    return extract(train(x, y, params), params.gamma)
+
+
+def predict(model, x: np.ndarray) -> np.ndarray:
+    """libsvm's own prediction, for checking the numpy evaluator."""
+    x = np.ascontiguousarray(x, dtype=float).reshape(-1, 1)
+    with single_threaded_libraries():
+        values, _, _ = svmutil.svm_predict(np.zeros(x.shape[0]), x, model, "-q")
+    return np.asarray(values, dtype=float)

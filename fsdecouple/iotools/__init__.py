@@ -1,1 +1,0 @@
-"""File formats: calibration sets, voltage logs, atomic output."""

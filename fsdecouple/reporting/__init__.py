@@ -1,0 +1,5 @@
+"""What a person reads: the HTML report, its figures and the terminal tables.
+
+May import: the base modules, ``core``, ``data``, ``fitting`` and ``evaluation``;
+no other top stage (``logs``, ``fleet``, ``export``, ``sim``).
+"""

@@ -1,0 +1,103 @@
+"""The tables of the fleet commands: ``compare`` (drift) and ``fit-many``.
+
+Apart from :mod:`fsdecouple.reporting.tables` to keep each module one screenful of ideas;
+like it, built from documents, with no computation beyond picking numbers.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from rich.table import Table
+from rich.text import Text
+
+from ..core.metrics import pct
+
+FAILED = "bold red"
+
+
+def _signed(v: float) -> str:
+    return f"{v:+.3f} %"
+
+
+def drift_table(doc: dict[str, Any]) -> Table:
+    """Per component: slope change, chi differences, force difference [%]."""
+    gate = doc["max_drift"]
+    old, new = doc["old"], doc["new"]
+    t = Table(title=f"Drift of {new['model'] or 'the new model'} against {old['model'] or 'the old model'}"
+                    f" (chi: % of full-scale output; force: % of full-scale load)")
+    for col in ("component", "slope change (eq. 2)", "chi, largest difference (eq. 4)",
+                "force, largest difference (eq. 11)"):
+        t.add_column(col, justify="right")
+
+    def cell(v: float, text: str) -> Text:
+        return Text(text, style=FAILED if gate is not None and abs(v) > gate else "")
+
+    for a, c in doc["components"].items():
+        chi = Text(", ").join(cell(v, f"{name} {v:.3f} %") for name, v in c["chi_max_pct"].items())
+        t.add_row(a, cell(c["slope_change_pct"], _signed(c["slope_change_pct"])), chi,
+                  cell(c["force_max_pct"], f"{c['force_max_pct']:.3f} %"))
+    return t
+
+
+def drift_line(doc: dict[str, Any]) -> str | None:
+    """The gate's verdict, or None without ``--max-drift``."""
+    if doc["passed"] is None:
+        return None
+    if doc["passed"]:
+        return f"no change exceeds --max-drift {doc['max_drift']:g} %"
+    return f"drift exceeds --max-drift {doc['max_drift']:g} %: {'; '.join(doc['exceeded'])}"
+
+
+def fleet_table(doc: dict[str, Any]) -> Table:
+    """One row per sensor: slopes, held-out worst gamma, verdict, warnings, drift, result."""
+    t = Table(title=f"fit-many {doc['sensors_dir']} -> {doc['models_dir']}")
+    for col in ("sensor", "k (eq. 2)", "held-out worst gamma", "better on held-out",
+                "warnings", "largest drift", "result"):
+        t.add_column(col, justify="left" if col in ("sensor", "result") else "right")
+    for s in doc["sensors"]:
+        if s["error"] is not None:
+            t.add_row(s["sensor"], "", "", "", "", "", Text("error (see below)", FAILED))
+            continue
+        k = ", ".join(f"{v:.6g}" for v in s["k"].values()) + f" {s['units']['output']}/{s['units']['load']}"
+        drift = "" if s["drift"] is None else f"{_largest(s['drift']):.3f} %"
+        result = Text("gate failed", FAILED) if s["gate"] else Text("ok")
+        t.add_row(s["sensor"], k, f"{pct(s['worst_gamma'], 3)} ({s['method']})", s["better"] or "–",
+                  str(len(s["warnings"])), drift, result)
+    return t
+
+
+def fleet_errors(doc: dict[str, Any]) -> list[str]:
+    """One line per sensor that could not be fitted."""
+    return [f"{s['sensor']}: {s['error']}" for s in doc["sensors"] if s["error"] is not None]
+
+
+def fleet_gate_lines(doc: dict[str, Any]) -> list[str]:
+    """One line per sensor that fails --max-gamma or --max-drift, naming it."""
+    return [f"{s['sensor']}: {'; '.join(s['gate'])}" for s in doc["sensors"]
+            if s["error"] is None and s["gate"]]
+
+
+def _largest(drift: dict[str, Any]) -> float:
+    return max(max(abs(c["slope_change_pct"]), abs(c["force_max_pct"]), *c["chi_max_pct"].values())
+               for c in drift["components"].values())
+
+
+def apply_many_table(doc: dict[str, Any]) -> Table:
+    """One row per input log: its output, rows, status counts (those that occur), result."""
+    t = Table(title=f"apply ({doc['engine']}) -> {doc['output_dir']}, forces in {doc['force_unit']}")
+    for col in ("input", "output", "rows", "statuses", "result"):
+        t.add_column(col, justify="right" if col == "rows" else "left")
+    for f in doc["files"]:
+        if f["error"] is not None:
+            t.add_row(f["input"], "", "", "", Text("error (see below)", FAILED))
+            continue
+        counts = ", ".join(f"{k} {v:,}" for k, v in f["status_counts"].items() if v)
+        t.add_row(f["input"], f["output"], f"{f['rows']:,}", counts, Text("ok"))
+    return t
+
+
+def apply_many_errors(doc: dict[str, Any]) -> list[str]:
+    """One line per input that failed; nothing was written for it."""
+    return [f"{f['input']}: {f['error']}" if not f["error"].startswith(f["input"]) else f["error"]
+            for f in doc["files"] if f["error"] is not None]

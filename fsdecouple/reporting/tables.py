@@ -1,0 +1,445 @@
+"""Every rich table and console line the commands print (sqlfluff's ``formatters.py``).
+
+Built from result objects and documents; no computation here beyond picking
+numbers out of them.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from typing import Any
+
+import numpy as np
+from rich import box
+from rich.table import Table
+from rich.text import Text
+
+from ..axes import labels_in, load_name
+from ..core.metrics import pct
+from ..data.columns import Guess
+from ..data.columns import shown as shown_name
+from ..evaluation.cv_results import gamma_index, test_name
+from ..units import Units, output_display
+
+# --- ingest, fit, show, apply ------------------------------------------------------
+
+def _units(settings_or_doc) -> Units:
+    u = getattr(settings_or_doc, "units", None)
+    if isinstance(u, Units):
+        return u
+    if not isinstance(settings_or_doc, dict):
+        return Units()
+    u = settings_or_doc.get("units", {})
+    return Units(**{k: (" / ".join(dict.fromkeys(v.values())) if isinstance(v, dict) else v)
+                    for k, v in u.items()})
+
+
+def ingest_tables(summary: dict[str, Any]) -> list:
+    units = _units(summary)
+    t = Table(title=f"Calibration set: {summary['sensor']}, "
+                    f"{len(summary['repetitions'])} repetitions")
+    t.add_column("axis")
+    t.add_column("points", justify="right")
+    t.add_column("per repetition", justify="right")
+    t.add_column(f"load grid [{units.load}]", justify="right")
+    t.add_column("levels", justify="right")
+    t.add_column(f"F.S. [{units.load}]", justify="right")
+    for axis, d in summary["axes"].items():
+        per = sorted(set(d["points_per_repetition"].values()))
+        t.add_row(axis, str(d["points"]), "/".join(map(str, per)),
+                  f"{d['load_min']:g} .. {d['load_max']:g}", str(d["load_levels"]),
+                  f"{d['full_scale']:g}")
+    factor, shown = output_display(units.output)
+    how = ("fitted to all of each sweep's points, zero: fit" if summary.get("zero") == "fit"
+           else "mean of each sweep's zero-load rows")
+    o = Table(title=f"Zero offsets removed [{shown}] ({how})")
+    outputs = [c for c in (summary["offsets"] or [{}])[0] if c not in ("repetition", "axis",
+                                                                        "n_zero")]
+    for col in ("repetition", "axis", "zero rows", *outputs):
+        o.add_column(col, justify="right")
+    for r in summary["offsets"]:
+        o.add_row(str(r["repetition"]), r["axis"], str(r["n_zero"]),
+                  *(f"{factor * r[c]:+.3f}" for c in outputs))
+    out = [t, o]
+    skipped = summary["skipped"]
+    out.append(Text(f"rows skipped: {len(skipped)}" + "".join(f"\n  {s}" for s in skipped)))
+    return out
+
+
+def fit_tables(model) -> list:
+    rep = model.report
+    units = model.settings.units
+    volts = units == Units()  # the paper's figures keep their paper-like format
+    t = Table(title=f"Non-coupling functions omega (eq. 2), sensor {model.settings.sensor}")
+    mixed = bool(units.loads)  # forces and moments: each row says its load unit
+    slope, inverse_slope = ((f"{units.output}/load", f"load/{units.output}") if mixed
+                            else (units.slope(), units.inverse_slope()))
+    for col in ("axis", f"k [{slope}]", f"1/k [{inverse_slope}] (eq. 13)", "R^2", "points"):
+        t.add_column(col, justify="right")
+    layout = model.layout
+    for a, axis in enumerate(layout.labels):
+        r2 = rep.r2[axis]
+        r2_text = Text(f"{r2:.6f}", style="" if r2 >= model.settings.min_r2 else "bold red")
+        inverse = f"{1.0 / model.k[a]:.5f}" if volts else f"{1.0 / model.k[a]:.6g}"
+        t.add_row(f"{axis} [{units.load_of(a)}]" if mixed else axis, f"{model.k[a]:.6g}", inverse,
+                  r2_text, str(rep.n_points[axis]))
+    s = model.settings.svr
+    c = Table(title=f"Corrected coupling functions chi (eq. 4): eps-SVR, gamma={s.gamma:g} "
+                    f"C={s.C:g} eps={s.epsilon:g} tol={s.tolerance:g}",
+              caption=f"beyond the input range: {model.settings.extrapolation} (extrapolation); "
+                      f"zero offsets: {model.settings.zero_method}; refinement steps K = "
+                      f"{model.settings.refine}")
+    for col in ("chi", "input", "support vectors", f"input range [{units.output}]"):
+        c.add_column(col, justify="right")
+    span = "{:+.4f} .. {:+.4f}" if volts else "{:+.6g} .. {:+.6g}"
+    for name, chi in model.chi.items():
+        c.add_row(f"chi_{name}", layout.outputs[chi.input_axis],
+                  f"{chi.support_vectors.size} / {chi.n_points}",
+                  span.format(*chi.input_range))
+    g = Table(title="Interference error gamma (eq. 12) on the calibration data, % F.S.")
+    for col in ("loaded axis", "before (omega^-1 only)", "after (eq. 11)"):
+        g.add_column(col, justify="right")
+    for axis in layout.labels:
+        before, after = rep.gamma_before.get(axis), rep.gamma_after.get(axis)
+        style = "bold red" if after is not None and before is not None and after > before else ""
+        g.add_row(axis, pct(before), Text(pct(after), style=style))
+    return [t, c, g]
+
+
+def apply_lines(summary, out) -> list[str]:
+    counts = ", ".join(f"{n} {name}" for name, n in summary.status_counts.items() if n)
+    lines = [f"decoupled {summary.rows} rows into {out} (forces in {summary.force_unit}; "
+             f"status: {counts})"]
+    if np.any(summary.offsets):
+        lines.append(f"zero removed [{summary.output_unit}]: " + ", ".join(
+            f"{c}={v:+.6f}" for c, v in zip(summary.outputs, summary.offsets, strict=True)))
+    return lines
+
+
+def apply_warnings(summary) -> list[str]:
+    w = []
+    if summary.missing_rows:
+        rows = ", ".join(map(str, summary.first_missing))
+        more = ", ..." if summary.missing_rows > len(summary.first_missing) else ""
+        w.append(f"{summary.missing_rows} rows have a missing voltage; kept with empty "
+                 f"forces and status 'missing' (rows {rows}{more})")
+    if summary.truncated_rows:
+        w.append(f"row {summary.rows + 1}, the last, does not end with a newline (the writer was "
+                 "cut off?); kept with empty forces and status 'truncated'")
+    if summary.not_finite_rows:
+        w.append(f"{summary.not_finite_rows} rows have forces that overflow or pass 1e6 x "
+                 "full scale (voltages far too large, or a broken model); kept with empty "
+                 "forces and status 'not_finite'")
+    if summary.saturated_rows:
+        w.append(f"{summary.saturated_rows} rows have an output at or beyond its limit "
+                 "(limits:), so the channel may have clipped; their forces are written "
+                 "but flagged (status 'saturated')")
+    if summary.out_of_range_rows:
+        w.append(f"{summary.out_of_range_rows} rows have a voltage more than 1 % of the span "
+                 "outside the calibrated range; their forces are extrapolated (status "
+                 "'extrapolated')")
+    if summary.status_counts.get("not_converged"):
+        w.append(f"{summary.status_counts['not_converged']} rows did not settle in the "
+                 "second-order refinement (refine: K); kept with empty forces and status "
+                 "'not_converged'")
+    return w
+
+
+# --- cv -----------------------------------------------------------------------------
+
+WORSE = "bold red"  # Table 1 sets cells worse than the initial data in bold
+
+
+def _num(fraction: float) -> str:
+    return f"{100.0 * fraction:.2f}"
+
+
+def gamma_table(doc: dict[str, Any], records=None, title=None, clean=None) -> Table:
+    """Tables 1 and 3 side by side: rows round x test set, a column group per method.
+
+    A cell worse than the initial data of the same round, test set and axis is
+    bold red, as Table 1 sets them in bold.  With ``clean`` records (Table 5), a
+    cell that differs from its clean value carries a ``*``.
+    """
+    idx = gamma_index(doc["records"] if records is None else records)
+    ref = gamma_index(clean) if clean is not None else None
+    levels = doc.get("protocol") == "levels"
+    held = "load levels (interior points)" if levels else "repetitions"
+    t = Table(title=title or f"Interference error gamma (eq. 12) on held-out {held}, % F.S. "
+                             "(! and bold red: worse than initial)", box=box.SIMPLE_HEAD,
+              pad_edge=False, padding=(0, 0, 0, 1))
+    t.add_column("round", no_wrap=True)
+    t.add_column("test (level)" if levels else "test (rep)", no_wrap=True)
+    cell_width = 5 if ref is not None else 4
+    axes = labels_in(doc["records"] if records is None else records)
+    for m in doc["methods"]:
+        for a in axes:
+            # the method names its column group once, over its first gamma column
+            t.add_column(f"{m if a == axes[0] else ''}\nγ{a}", justify="right", no_wrap=True,
+                         min_width=max(len(m), cell_width) if a == axes[0] else cell_width)
+    for r, fold in enumerate(doc["folds"], start=1):
+        for i, rep in enumerate(fold):
+            cells = []
+            for m in doc["methods"]:
+                for a in axes:
+                    v = idx.get((r, rep, m, a))
+                    if v is None:  # no held-out point of this axis in the round
+                        cells.append(Text("-"))
+                        continue
+                    worse = m != "initial" and v > idx[(r, rep, "initial", a)]
+                    mark = "*" if ref is not None and ref.get((r, rep, m, a)) != v else ""
+                    # "!" keeps the paper's bold visible in plain-text CI logs
+                    cells.append(Text(_num(v) + mark + ("!" if worse else ""),
+                                      style=WORSE if worse else ""))
+            name = test_name(i)
+            t.add_row(str(r) if i == 0 else "", f"{name} ({rep})", *cells)
+        if r < len(doc["folds"]):
+            t.add_section()
+    return t
+
+
+def summary_lines(doc: dict[str, Any]) -> list[str]:
+    worst = defaultdict(float)
+    worse = defaultdict(int)
+    base = gamma_index(doc["records"])
+    for rec in doc["records"]:
+        m = rec["method"]
+        worst[m] = max(worst[m], rec["value"])
+        if m != "initial" and rec["value"] > base[(rec["round"], rec["test_set"], "initial",
+                                                   rec["axis"])]:
+            worse[m] += 1
+    n = len([r for r in doc["records"] if r["method"] == "initial"])
+    lines = [f"{m:9s} worst gamma {_num(worst[m]):>6s} % F.S."
+             + ("" if m == "initial" else f", {worse[m]} of {n} cells worse than initial")
+             for m in doc["methods"]]
+    if doc.get("protocol") == "levels":
+        lines.insert(0, "protocol: levels (round k holds out the k-th loaded point of every sweep; "
+                        "points beyond the loads left in their sweep are end points, scored apart)")
+        end = defaultdict(float)
+        for rec in doc.get("end_records", []):
+            end[rec["method"]] = max(end[rec["method"]], rec["value"])
+        lines += [f"{m:9s} worst gamma {_num(end[m]):>6s} % F.S. on end points (extrapolation)"
+                  for m in doc["methods"] if m in end]
+    else:
+        lines.insert(0, "protocol: repetitions (each round holds out whole repetitions, Section 4.1)")
+    return lines
+
+
+def task_table(doc: dict[str, Any]) -> Table:
+    """Combined-load errors per method: worst round's max and RMS error, % F.S."""
+    task = doc["task"]
+    tare = f", tare {task['tare']} rows" if task["tare"] else ", no tare"
+    t = Table(title=f"Combined loads: {task['voltages']} ({task['rows']} rows{tare}) against "
+                    "true forces; error % F.S., worst round (!: over 10x the best method's)")
+    t.add_column("method")
+    axes = labels_in(task["records"])
+    for metric in ("max", "RMS"):
+        for a in axes:
+            t.add_column(f"{metric if a == axes[0] else ''}\n|Δ{load_name(a)}|", justify="right")
+    worst: dict[tuple, float] = defaultdict(float)
+    for rec in task["records"]:
+        key = (rec["method"], rec["metric"], rec["axis"])
+        worst[key] = max(worst[key], rec["value"])
+    best = min(worst[(m, "max_error", a)] for m in doc["methods"] for a in axes)
+    for m in doc["methods"]:
+        cells = []
+        for metric in ("max_error", "rms_error"):
+            for a in axes:
+                v = worst[(m, metric, a)]
+                # an error above 10x the best method's is an explosion worth seeing
+                explodes = v > 10 * max(best, 1e-12)
+                cells.append(Text(_num(v) + ("!" if explodes else ""),
+                                  style=WORSE if explodes else ""))
+        t.add_row(m, *cells)
+    return t
+
+
+def mimo_note(doc: dict[str, Any]) -> str | None:
+    """Say why the black-box network's combined-load error can be huge (it is the paper's point)."""
+    recs = [r for r in doc["task"]["records"] if r["metric"] == "max_error"]
+    mimo = max((r["value"] for r in recs if r["method"] == "rbf-mimo"), default=None)
+    svr = max((r["value"] for r in recs if r["method"] == "svr"), default=None)
+    if mimo is None or svr is None or mimo <= 10 * max(svr, 1e-12):
+        return None
+    return (f"rbf-mimo: {_num(mimo)} % F.S. on combined loads. The black-box network learned "
+            "only the single-axis calibration points and extrapolates freely off them; the "
+            "coupling error model needs no combined-load data (the paper's point, Section 4).")
+
+
+def gross_tables(doc: dict[str, Any]) -> list[Table]:
+    """Table 5 (svr with and without the moved point) and eq. (13) vs eq. (14)."""
+    g = doc["gross_error"]
+    s = g["spec"]
+    t = gamma_table(
+        doc, g["records"], clean=doc["records"],
+        title=f"Table 5: gamma % F.S. with point {s['point']} of the {s['axis']} sweep of "
+              f"repetition {s['repetition']} moved by {s['offset']:+g} V in the training data "
+              "(*: changed from the clean run)")
+    side = Table(title="svr: Table 3 (clean) beside Table 5 (moved point), % F.S.",
+                 box=box.SIMPLE_HEAD, pad_edge=False)
+    side.add_column("round")
+    side.add_column("test (rep)")
+    axes = labels_in(doc["records"])
+    for label in ("clean", "moved"):
+        for a in axes:
+            side.add_column(f"{label if a == axes[0] else ''}\nγ{a}", justify="right")
+    side.add_column("largest\nchange", justify="right")
+    clean, moved = gamma_index(doc["records"]), gamma_index(g["records"])
+    for r in g["rounds_affected"]:
+        for i, rep in enumerate(doc["folds"][r - 1]):
+            c = [clean[(r, rep, "svr", a)] for a in axes]
+            m = [moved[(r, rep, "svr", a)] for a in axes]
+            change = max(abs(x - y) for x, y in zip(c, m, strict=True))
+            side.add_row(str(r) if i == 0 else "",
+                         f"{test_name(i)} ({rep})",
+                         *(_num(v) for v in c + m), _num(change))
+    o = Table(title="omega^-1 [N/V]: clean (eq. 13) vs with the gross error (eq. 14)")
+    for col in ("round", "axis", "clean", "gross", "change"):
+        o.add_column(col, justify="right")
+    for rec in g["omega"]:
+        if rec["k_clean"] == rec["k_gross"]:
+            continue
+        o.add_row(str(rec["round"]), rec["axis"], f"{rec['inverse_clean']:.3f}",
+                  f"{rec['inverse_gross']:.3f}",
+                  f"{100 * (rec['inverse_gross'] / rec['inverse_clean'] - 1):+.2f} %")
+    return [t, side, o]
+
+
+def fit_checks_table(checks) -> Table:
+    """Section 2.1 assumption checks of a fitted model (the ones the report shows)."""
+    return checks_table({"checks": [{**c.to_dict(), "round": 1} for c in checks]},
+                        title="Assumption checks (Section 2.1) of the model", column="value")
+
+
+def checks_table(doc: dict[str, Any], title: str = "Assumption checks (Section 2.1) of each "
+                 "round's svr model", column: str = "round {r}") -> Table:
+    """Section 2.1 assumption checks of each round's svr model."""
+    rounds = sorted({c["round"] for c in doc["checks"]})
+    t = Table(title=title)
+    t.add_column("check")
+    t.add_column("subject")
+    t.add_column("limit", justify="right")
+    for r in rounds:
+        t.add_column(column.format(r=r), justify="right")
+    t.add_column("status")
+    rows: dict[tuple, dict] = {}
+    for c in doc["checks"]:
+        rows.setdefault((c["name"], c["subject"], c["limit"]), {})[c["round"]] = c
+    fmt = {"linearity": "{:.5f}", "coupling": "{:.2%}", "slope": "{:.4f}",
+           "second_order": "{:.3%}"}
+    for (name, subject, limit), by_round in rows.items():
+        f = fmt.get(name, "{:.4g}")
+        sign = ">=" if name == "linearity" else "<="
+        status = "pass" if all(c["status"] == "pass" for c in by_round.values()) else "warning"
+        t.add_row(name, subject, f"{sign} {f.format(limit)}",
+                  *(f.format(by_round[r]["value"]) if r in by_round else "-" for r in rounds),
+                  Text(status, style="" if status == "pass" else "yellow"))
+    return t
+
+
+def timing_table(doc: dict[str, Any]) -> Table:
+    tm = doc["timing"]
+    v = {(r["method"], r["metric"]): r["value"] for r in tm["records"]}
+    t = Table(title=f"Timing (Table 4): medians over rounds and {tm['repeats']} sequential pass(es)")
+    for col in ("method", "establishment [ms]", "decoupling one vector [µs]"):
+        t.add_column(col, justify="right")
+    for m in doc["methods"]:
+        t.add_row(m, f"{1e3 * v[(m, 'establish_seconds')]:.1f}",
+                  f"{1e6 * v[(m, 'decouple_seconds_per_vector')]:.1f}")
+    return t
+
+
+def parallel_line(doc: dict[str, Any]) -> str:
+    p = doc["timing"]["parallel"]
+    return (f"training: {p['wall_seconds']:.2f} s on {p['workers']} threads, "
+            f"about {p['sequential_seconds']:.2f} s sequential (estimated from Table 4's "
+            f"sample; speed-up {p['speedup']:.2f}x)")
+
+
+def cv_renderables(doc: dict[str, Any]) -> list:
+    """Everything ``fsdecouple cv`` prints, in order."""
+    out: list = [gamma_table(doc), Text("\n".join(summary_lines(doc)))]
+    if doc["task"] is not None:
+        out.append(task_table(doc))
+        note = mimo_note(doc)
+        if note:
+            out.append(Text(note))
+    if doc["gross_error"] is not None:
+        out += gross_tables(doc)
+    out += [checks_table(doc), timing_table(doc), Text(parallel_line(doc))]
+    if doc["gate"] is not None:
+        g = doc["gate"]
+        out.append(Text(f"gate: worst svr gamma {_num(g['worst'])} % F.S. "
+                        f"{'<=' if g['passed'] else '>'} --max-gamma {_num(g['max_gamma'])} % "
+                        f"-> {'passed' if g['passed'] else 'FAILED'}",
+                        style="" if g["passed"] else "bold red"))
+    return out
+
+
+# --- validate -----------------------------------------------------------------------
+
+def validation_renderables(doc: dict[str, Any], output=None, *, as_json: bool = False) -> list:
+    """Everything ``fsdecouple validate`` prints, as (to_stderr, renderable) pairs.
+
+    Text from files (paths, unit names, warnings) is always a :class:`Text`, so
+    rich never reads it as markup.
+    """
+    from ..evaluation.validate import METHODS, RANGES, dumps
+
+    out: list = []
+    if as_json:
+        out.append((False, Text(dumps(doc))))
+    unit = doc["units"]["load"]
+    mixed = " / " in unit  # forces and moments: an error over every component has no one unit
+    by = {(r["range"], r["axis"], r["method"], r["metric"]): r for r in doc["records"]}
+    for rng in RANGES if not as_json else ():
+        axes = [a for a in labels_in(doc["records"]) if any((rng, a, m, "gamma") in by
+                                                          for m in METHODS)]
+        if not axes:
+            continue
+        t = Table(title=Text(f"{rng} points of {doc['set']['path']}, model {doc['model']}: "
+                             f"% F.S.{'' if mixed else f' and {unit}'}"))
+        absolute = () if mixed else (f"max [{unit}]", f"RMS [{unit}]")
+        for col in ("axis", "method", "γ % F.S.", "max % F.S.", "RMS % F.S.", *absolute):
+            t.add_column(Text(col), justify="right")
+        for a in axes:
+            for m in METHODS:
+                rec = [by[(rng, a, m, metric)] for metric in ("gamma", "max_error", "rms_error")]
+                t.add_row(a, m, *(_num(r["value"]) for r in rec),
+                          *(() if mixed else (f"{r['value_load_unit']:.4g}" for r in rec[1:])))
+        out.append((False, t))
+    if not as_json:
+        in_unit = (f"components in {unit} have no one unit, so the errors are in % F.S. only"
+                   if mixed else f"in {unit}: the same fraction of the largest full scale")
+        out.append((False, Text(
+            "gamma: eq. (12) on each loaded axis's points; max, RMS: |f_c - F_c| / F_c(FS) over "
+            f"those points and every component c; {in_unit}. calibrated: every output within "
+            "the calibrated range +/- 1 % of its span.")))
+    g = doc["gate"]
+    if g is not None:
+        worst = "no calibrated point" if g["worst"] is None else f"{_num(g['worst'])} % F.S."
+        line = Text(f"gate: worst model gamma on calibrated points {worst}, --max-gamma "
+                    f"{_num(g['max_gamma'])} % -> {'passed' if g['passed'] else 'FAILED'}",
+                    style="" if g["passed"] else "bold red")
+        out.append((as_json or not g["passed"], line))
+    if output is not None and not as_json:
+        out.append((False, Text(f"validation document written to {output}")))
+    out += [(True, Text("warning: ", style="yellow") + Text(w)) for w in doc["warnings"]]
+    return out
+
+
+# --- init -----------------------------------------------------------------------------
+
+def guess_renderables(guess: Guess) -> list:
+    """What ``init`` prints: a table (key, column, reason), the notes, where the config
+    went.  File text (header names, paths) is shown literally, never as rich markup."""
+    t = Table("key", "column", "reason", title=Text(f"Guessed from {guess.path}"))
+    for key in guess.keys:
+        t.add_row(key, Text(guess.columns.get(key, "-")), Text(guess.reasons[key]))
+    for key, value, why in guess.settings():
+        t.add_row(key, Text(value), Text(why))
+    for i in guess.ignored:
+        t.add_row("(ignored)", Text(f"{i.column}: {shown_name(i.name)}"), Text(i.reason))
+    notes = [Text.assemble(("note:", "yellow"), f" {n}") for n in guess.notes]
+    done = f"config written to {guess.config}; check every guessed value before fitting"
+    return [t, *notes, Text(done)]

@@ -1,0 +1,247 @@
+"""The command line, end to end, through CliRunner."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+from conftest import SAMPLE, invoke
+
+
+def test_fit_apply_round_trip(tmp_path, sim_dir):
+    model = tmp_path / "model.json"
+    r = invoke(["fit", sim_dir / "calibration", "-o", model])
+    assert "Interference error gamma" in r.stdout and model.exists()
+    doc = json.loads(model.read_text())
+    assert doc["format"] == "fsdecouple.model" and len(doc["chi"]) == 6
+    assert all(len(f["sha256"]) == 64 for f in doc["provenance"]["files"])
+    out = tmp_path / "forces.csv"
+    invoke(["apply", model, sim_dir / "task_voltages.csv", "-o", out, "--tare", "200"])
+    forces = pd.read_csv(out)
+    log = pd.read_csv(sim_dir / "task_voltages.csv", dtype=str)
+    assert list(forces.columns) == [*log.columns, "fx", "fy", "fz", "status"]
+    assert set(forces["status"]) <= {"ok", "extrapolated"}
+    # input columns pass through as text, unchanged and in order
+    pd.testing.assert_frame_equal(pd.read_csv(out, dtype=str)[list(log.columns)], log)
+    truth = pd.read_csv(sim_dir / "task_forces.csv")
+    err = np.abs(forces[["fx", "fy", "fz"]].to_numpy() - truth[["fx", "fy", "fz"]].to_numpy())
+    assert err.max() < 0.75  # 0.5 % of 150 N, see test_task_forces_close_to_truth
+
+
+def test_sample_data_is_the_simulator_output(tmp_path):
+    """sample_data/ is exactly what `fsdecouple simulate sample_data` writes.
+
+    (sample_data/loadcell/, written by `simulate --layout lab`, is compared in
+    tests/test_simulate_lab.py.)
+    """
+    invoke(["simulate", tmp_path])
+    for f in sorted(SAMPLE.rglob("*.csv")):
+        rel = f.relative_to(SAMPLE)
+        if rel.parts[0] not in ("loadcell", "six_axis"):  # six_axis: tests/test_six_axis.py
+            assert (tmp_path / rel).read_bytes() == f.read_bytes(), rel
+
+
+def test_ingest_summary_and_tidy_output(tmp_path):
+    tidy = tmp_path / "tidy.csv"
+    r = invoke(["ingest", SAMPLE / "calibration", "-o", tidy, "--json"])
+    doc = json.loads(r.stdout)
+    assert doc["repetitions"] == [1, 2, 3, 4, 5, 6]
+    assert doc["axes"]["x"]["points"] == 126 and doc["axes"]["z"]["load_min"] == -150
+    points = pd.read_csv(tidy)
+    # zero-corrected: every sweep's zero-load rows now average 0
+    zero = points[(points[["fx", "fy", "fz"]] == 0).all(axis=1)]
+    assert np.abs(zero.groupby(["repetition", "axis"])[["ux", "uy", "uz"]].mean()).max().max() < 1e-12
+
+
+def test_single_csv_with_repetition_column_gives_same_model(tmp_path, sim_dir):
+    frames = []
+    for rep in range(1, 7):
+        df = pd.read_csv(sim_dir / "calibration" / f"rep{rep}.csv", dtype=str)
+        df.insert(0, "repetition", str(rep))
+        frames.append(df)
+    single = tmp_path / "all.csv"
+    pd.concat(frames).to_csv(single, index=False)
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    invoke(["fit", single, "-o", a])
+    invoke(["fit", sim_dir / "calibration", "-o", b])
+    da, db = json.loads(a.read_text()), json.loads(b.read_text())
+    assert da["chi"] == db["chi"] and da["omega"] == db["omega"]
+
+
+def test_axis_column_is_optional(tmp_path, sim_dir):
+    """Without `axis`, sweeps are inferred from consecutive rows: same model."""
+    d = tmp_path / "noaxis"
+    d.mkdir()
+    for f in (sim_dir / "calibration").glob("*.csv"):
+        pd.read_csv(f, dtype=str).drop(columns="axis").to_csv(d / f.name, index=False)
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    invoke(["fit", d, "-o", a])
+    invoke(["fit", sim_dir / "calibration", "-o", b])
+    assert json.loads(a.read_text())["chi"] == json.loads(b.read_text())["chi"]
+
+
+def test_max_gamma_gate(tmp_path):
+    invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "a.json", "--max-gamma", "0.5"])
+    r = invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "b.json", "--max-gamma", "1e-6"],
+               code=1)
+    assert "gate failed" in r.stderr
+
+
+def test_show_and_flags_override(tmp_path):
+    m = tmp_path / "m.json"
+    invoke(["fit", SAMPLE / "calibration", "-o", m, "--C", "10", "--delta2", "2"])
+    svr = json.loads(m.read_text())["settings"]["svr"]
+    assert svr["C"] == 10 and svr["gamma"] == 0.25
+    assert "chi_zy" in invoke(["show", m]).stdout
+
+
+def test_rotation_from_config(tmp_path):
+    cfg = tmp_path / "rot.yaml"
+    cfg.write_text("rotation: [[0, -1, 0], [1, 0, 0], [0, 0, 1]]\n")
+    plain, rotated = tmp_path / "p.json", tmp_path / "r.json"
+    invoke(["fit", SAMPLE / "calibration", "-o", plain])
+    invoke(["fit", SAMPLE / "calibration", "-o", rotated, "-c", cfg])
+    from fsdecouple import load_model
+    u = np.array([[0.3, -0.2, -0.5]])
+    f = load_model(plain).decouple(u)[0]
+    np.testing.assert_allclose(load_model(rotated).decouple(u)[0], [-f[1], f[0], f[2]], rtol=1e-12)
+
+
+def test_zero_option_equals_tare(tmp_path, sim_dir):
+    m = tmp_path / "m.json"
+    invoke(["fit", sim_dir / "calibration", "-o", m])
+    log = pd.read_csv(sim_dir / "task_voltages.csv")
+    offs = log[["ux", "uy", "uz"]].iloc[:50].mean().to_numpy()
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    invoke(["apply", m, sim_dir / "task_voltages.csv", "-o", a, "--tare", "50"])
+    invoke(["apply", m, sim_dir / "task_voltages.csv", "-o", b,
+            "--zero", ",".join(repr(float(v)) for v in offs)])
+    np.testing.assert_allclose(pd.read_csv(a)[["fx", "fy", "fz"]], pd.read_csv(b)[["fx", "fy", "fz"]],
+                               atol=1e-9)
+
+
+def test_apply_keeps_rows_with_missing_values(tmp_path, sim_dir):
+    m = tmp_path / "m.json"
+    invoke(["fit", sim_dir / "calibration", "-o", m])
+    log = tmp_path / "log.csv"
+    log.write_text("t,ux,uy,uz\n0,0.1,0.0,-0.1\n1,,0.0,-0.1\n2,0.2,0.1,-0.2\n")
+    out = tmp_path / "f.csv"
+    r = invoke(["apply", m, log, "-o", out])
+    assert "1 rows have a missing voltage" in r.stderr and "rows 3" in r.stderr
+    f = pd.read_csv(out)
+    assert len(f) == 3 and f["fx"].isna().tolist() == [False, True, False]
+    assert f["status"].tolist() == ["ok", "missing", "ok"]
+
+
+def test_apply_chunks_give_same_result(tmp_path, model, sim_dir):
+    from fsdecouple.logs.apply import apply_file
+
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    apply_file(model, sim_dir / "task_voltages.csv", a, tare=200)
+    apply_file(model, sim_dir / "task_voltages.csv", b, tare=200, chunk_rows=7)
+    assert a.read_bytes() == b.read_bytes()
+
+
+def test_python_module_entry_point():
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-m", "fsdecouple", "--help"], capture_output=True, text=True)
+    assert r.returncode == 0 and "apply" in r.stdout
+
+
+def test_apply_counts_rows_outside_calibrated_range(tmp_path, model):
+    from fsdecouple.logs.apply import apply_file
+
+    lo, hi = model.calibrated_range.T
+    span = hi - lo
+    rows = [
+        (0.5 * (lo[0] + hi[0]), 0.0, -0.5),  # inside
+        (hi[0] + 0.005 * span[0], 0.0, -0.5),  # within the 1 % margin: not counted
+        (hi[0] + 0.05 * span[0], 0.0, -0.5),  # 5 % beyond: counted
+        (0.0, lo[1] - 0.5, -0.5),  # far below on y: counted
+    ]
+    log = tmp_path / "log.csv"
+    log.write_text("ux,uy,uz\n" + "".join(f"{float(a)!r},{float(b)!r},{float(c)!r}\n" for a, b, c in rows))
+    summary = apply_file(model, log, tmp_path / "f.csv")
+    assert summary.out_of_range_rows == 2 and summary.rows == 4
+
+
+def test_outputs_get_the_usual_file_mode(tmp_path):
+    """Atomic writes go through mkstemp (mode 0600); the result must not stay private."""
+    import os
+
+    old = os.umask(0o022)
+    try:
+        out = tmp_path / "m.json"
+        invoke(["fit", SAMPLE / "calibration", "-o", out])
+    finally:
+        os.umask(old)
+    assert out.stat().st_mode & 0o777 == 0o644
+
+
+def _on_a_terminal(args, env):
+    """Run ``python -m fsdecouple ARGS`` with a pseudo-terminal as stdout and stderr."""
+    import os
+    import pty
+    import subprocess
+    import sys
+
+    master, slave = pty.openpty()
+    proc = subprocess.Popen([sys.executable, "-m", "fsdecouple", *map(str, args)],
+                            stdin=slave, stdout=slave, stderr=slave, env=env)
+    os.close(slave)
+    chunks = []
+    while True:
+        try:
+            data = os.read(master, 1 << 16)
+        except OSError:  # EIO: the child closed the terminal
+            break
+        if not data:
+            break
+        chunks.append(data)
+    os.close(master)
+    assert proc.wait(timeout=60) == 0, b"".join(chunks).decode(errors="replace")
+    return b"".join(chunks).decode(errors="replace")
+
+
+@pytest.mark.slow  # runs the CLI under a pseudo-terminal, several times
+def test_progress_bars_show_on_a_terminal_and_never_in_ci(tmp_path, sample_model):
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k != "CI"}
+    env.update(TERM="xterm-256color", COLUMNS="100")
+    cal = SAMPLE / "calibration"
+    log = SAMPLE / "task_voltages.csv"
+    apply_args = ["apply", sample_model, log, "-o", tmp_path / "f.csv", "--force"]
+    cv_args = ["cv", cal, "-o", tmp_path / "cv.json", "--force"]
+    hide_cursor = "\x1b[?25l"  # rich hides the cursor while a live bar is drawn
+    for args, label in ((apply_args, "decoupling"), (cv_args, "training")):
+        out = _on_a_terminal(args, env)
+        assert hide_cursor in out and label in out, out
+    env["CI"] = "true"
+    assert "decoupling" not in (out := _on_a_terminal(apply_args, env)) and hide_cursor not in out
+    assert hide_cursor not in _on_a_terminal(cv_args, env)
+
+
+def test_usage_errors_are_one_line_and_exit_2(sample_model):
+    """A missing argument, a bad option value or an unknown command: bad input like any other."""
+    import subprocess
+    import sys
+
+    log = SAMPLE / "task_voltages.csv"
+    cases = {
+        "Missing argument 'voltages'": ["apply", sample_model],
+        "Invalid value for '--tare'": ["apply", sample_model, log, "-o", "x.csv", "--tare", "abc"],
+        "Did you mean 'apply'?": ["aply"],
+        "No such option: --bogus": ["cv", SAMPLE / "calibration", "--bogus"],
+    }
+    for expected, args in cases.items():
+        r = subprocess.run([sys.executable, "-m", "fsdecouple", *map(str, args)],
+                           capture_output=True, text=True)
+        lines = r.stderr.splitlines()
+        assert r.returncode == 2 and len(lines) == 1, r.stderr
+        assert lines[0].startswith("error: ") and expected in lines[0] and "--help" in lines[0]
+        assert "Traceback" not in r.stderr and r.stdout == ""

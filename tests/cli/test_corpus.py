@@ -1,0 +1,135 @@
+"""The malformed-input corpus: every case under tests/fixtures/bad/ is one directory.
+
+``case.yaml`` says what is wrong (``about``), the ``command`` to run and the
+substrings the one-line error must contain (``expect``: the file name and, where
+it applies, ``row N`` and ``column 'x'``).  Placeholders in the command:
+
+``{case}``   a copy of the case directory;
+``{cal}``    a copy of sample_data/calibration with the case's ``cal/`` files laid
+             over it (the files listed in ``remove`` deleted, and the ``symlinks``
+             (name: target) and ``dirs`` given made);
+``{model}``  a good model file fitted on sample_data/calibration;
+``{log}``    sample_data/task_voltages.csv;
+``{six}``    a copy of sample_data/six_axis/calibration with the case's ``six/`` files
+             laid over it (and ``remove`` deleted), read with ``{six_config}``,
+             configs/six-axis.yaml; ``{six_model}`` a good model fitted on it.
+
+Commands that write (``output``, default true) get ``-o OUT`` appended.  The
+contract checked: exit 2, exactly one line on stderr starting ``error:``, no
+traceback, and OUT neither created nor, when it existed and ``--force`` was
+given, changed; no temporary file left.  A case with ``exit: 0`` is accepted
+input that must warn (``warn`` substrings); for ``apply`` it may give the number
+of output ``rows`` and the ``last_status``.  Add a case by adding a directory.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pandas as pd
+import pytest
+import yaml
+from conftest import ROOT, SAMPLE, invoke
+
+BAD = Path(__file__).parents[1] / "fixtures" / "bad"
+CASES = sorted(p.name for p in BAD.iterdir() if (p / "case.yaml").is_file())
+
+
+@pytest.fixture(scope="module")
+def good_model(tmp_path_factory):
+    path = tmp_path_factory.mktemp("model") / "model.json"
+    invoke(["fit", SAMPLE / "calibration", "-o", path])
+    return path
+
+
+SIX_CONFIG = ROOT / "configs" / "six-axis.yaml"
+_six_models: dict = {}
+
+
+def six_model(tmp_path_factory) -> str:
+    """A six-axis model, fitted once, for the cases that use it."""
+    if not _six_models:
+        path = tmp_path_factory.mktemp("six") / "model.json"
+        invoke(["fit", SAMPLE / "six_axis" / "calibration", "-c", SIX_CONFIG, "-o", path])
+        _six_models["path"] = str(path)
+    return _six_models["path"]
+
+
+def _overlay(src: Path, case: Path, sub: str, spec: dict, dest: Path) -> str:
+    shutil.copytree(src, dest)
+    if (case / sub).is_dir():
+        for f in (case / sub).iterdir():
+            shutil.copy(f, dest / f.name)
+    for f in spec.get("remove", []):
+        (dest / f).unlink()
+    return str(dest)
+
+
+def prepare(name: str, tmp_path: Path, good_model: Path,
+            tmp_path_factory=None) -> tuple[dict, list[str]]:
+    spec = yaml.safe_load((BAD / name / "case.yaml").read_text(encoding="utf-8"))
+    case = tmp_path / name
+    shutil.copytree(BAD / name, case)
+    (case / "case.yaml").unlink()
+    values = {"case": str(case), "model": str(good_model), "log": str(SAMPLE / "task_voltages.csv"),
+              "six_config": str(SIX_CONFIG)}
+    if any("{six}" in a for a in spec["command"]):
+        values["six"] = _overlay(SAMPLE / "six_axis" / "calibration", case, "six", spec,
+                                 tmp_path / "six")
+    if any("{six_model}" in a for a in spec["command"]):
+        values["six_model"] = six_model(tmp_path_factory)
+    if any("{cal}" in a for a in spec["command"]):
+        cal = tmp_path / "cal"
+        shutil.copytree(SAMPLE / "calibration", cal)
+        if (case / "cal").is_dir():
+            for f in (case / "cal").iterdir():
+                shutil.copy(f, cal / f.name)
+        for f in spec.get("remove", []):
+            (cal / f).unlink()
+        # what git cannot carry: a dangling symbolic link, an empty directory
+        for f, target in spec.get("symlinks", {}).items():
+            (cal / f).symlink_to(target)
+        for f in spec.get("dirs", []):
+            (cal / f).mkdir()
+        values["cal"] = str(cal)
+    return spec, [a.format(**values) for a in spec["command"]]
+
+
+def test_corpus_is_large_enough():
+    refused = [c for c in CASES if yaml.safe_load((BAD / c / "case.yaml").read_text()).get("exit", 2) == 2]
+    assert len(refused) >= 40
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_bad_input(name, tmp_path, good_model, tmp_path_factory):
+    spec, args = prepare(name, tmp_path, good_model, tmp_path_factory)
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    out = out_dir / "result.out"
+    writes = spec.get("output", True)
+    full = [*args, "-o", out] if writes else args
+    if spec.get("exit", 2) == 0:
+        r = invoke(full)
+        for needle in spec.get("warn", []):
+            assert needle in r.stderr, (needle, r.stderr)
+        assert "Traceback" not in r.stderr + r.stdout
+        if "rows" in spec:  # apply: every input row out, in order, with its status
+            # pass-through bytes need not be UTF-8 (README: the encoding rule); latin-1 reads any
+            f = pd.read_csv(out, dtype=str, keep_default_na=False, encoding="latin-1")
+            assert len(f) == spec["rows"]
+            assert f["status"].iat[-1] == spec["last_status"]
+        return
+    r = invoke(full, code=2)
+    msg = r.stderr.strip()
+    assert msg.startswith("error:") and len(msg.splitlines()) == 1, msg
+    assert "Traceback" not in r.stderr + r.stdout
+    for needle in spec["expect"]:
+        assert needle in msg, f"{needle!r} not in: {msg}"
+    assert list(out_dir.iterdir()) == []
+    if writes:
+        # an existing output is left byte for byte as it was, even with --force
+        out.write_bytes(b"previous result\n")
+        invoke([*full, "--force"], code=2)
+        assert out.read_bytes() == b"previous result\n"
+        assert [p.name for p in out_dir.iterdir()] == ["result.out"]

@@ -1,0 +1,101 @@
+"""All outputs of a command appear together or not at all; unwritable places are one line."""
+
+from __future__ import annotations
+
+import errno
+
+import pytest
+from conftest import SAMPLE, assert_one_line_error, invoke
+
+from fsdecouple import files
+from fsdecouple.sim import simulate as simulate_module
+
+
+def test_simulate_failing_late_leaves_nothing(tmp_path, monkeypatch):
+    """The repetition files are written, then the task fails: none of them, nor the dirs, stay."""
+    def fail(*a, **k):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(simulate_module, "simulate_task", fail)
+    out = tmp_path / "new" / "sim"
+    assert_one_line_error(invoke(["simulate", out], code=2), "No space left")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("layout", ["paper", "lab"])
+def test_simulate_output_appearing_meanwhile_takes_back_all(tmp_path, monkeypatch, layout):
+    real = files.place
+    last = "task_forces.csv" if layout == "paper" else "validation.csv"
+
+    def racing(tmp, path, *, force):
+        if path.name == last:
+            path.write_text("theirs\n")
+        return real(tmp, path, force=force)
+
+    monkeypatch.setattr(files, "place", racing)
+    assert_one_line_error(invoke(["simulate", tmp_path / "sim", "--layout", layout], code=2),
+              last, "appeared while writing")
+    left = sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*"))
+    assert left == ["sim", f"sim/{last}"], left
+
+
+def test_simulate_under_a_regular_file(tmp_path):
+    (tmp_path / "afile").write_text("x")
+    assert_one_line_error(invoke(["simulate", tmp_path / "afile" / "sub"], code=2), "afile")
+    assert [p.name for p in tmp_path.iterdir()] == ["afile"]
+
+
+def test_simulate_into_a_dir_holding_a_file_named_calibration(tmp_path):
+    (tmp_path / "calibration").write_text("x")
+    assert_one_line_error(invoke(["simulate", tmp_path], code=2), "calibration", "not a directory")
+    assert [p.name for p in tmp_path.iterdir()] == ["calibration"]
+
+
+def test_simulate_negative_seed():
+    assert_one_line_error(invoke(["simulate", "never", "--seed", "-1"], code=2), "--seed -1")
+
+
+@pytest.fixture(scope="module")
+def model(tmp_path_factory):
+    path = tmp_path_factory.mktemp("m") / "model.json"
+    invoke(["fit", SAMPLE / "calibration", "-o", path])
+    return path
+
+
+def test_report_png_failure_creates_no_directory(tmp_path, model):
+    cv = tmp_path / "cv.json"
+    cv.write_text("{truncated")
+    assert_one_line_error(invoke(["report", model, "--cv", cv, "-o", tmp_path / "r.html",
+                      "--png", tmp_path / "figs" / "sub"], code=2), "cv.json")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cv.json"]
+
+
+def test_report_png_that_looks_like_a_file(tmp_path, model):
+    assert_one_line_error(invoke(["report", model, "-o", tmp_path / "r.html", "--png", tmp_path / "r2.html"],
+                     code=2), "r2.html", "looks like a file name")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow  # renders the report figures
+def test_report_and_pngs_together(tmp_path, model):
+    invoke(["report", model, "-o", tmp_path / "r.html", "--png", tmp_path / "figs"])
+    assert (tmp_path / "r.html").is_file() and len(list((tmp_path / "figs").glob("*.png"))) >= 2
+
+
+def test_read_only_directory_at_mkstemp(tmp_path, monkeypatch):
+    """EROFS when the temporary file is created: one line, nothing written."""
+    def erofs(*a, **k):
+        raise OSError(errno.EROFS, "Read-only file system")
+
+    monkeypatch.setattr(files.tempfile, "mkstemp", erofs)
+    assert_one_line_error(invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "m.json"], code=2),
+              "m.json", "Read-only file system")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_read_only_directory_refused_before_work(tmp_path, monkeypatch):
+    real = files.os.access
+    monkeypatch.setattr(files.os, "access",
+                        lambda p, mode, **k: p != tmp_path and real(p, mode, **k))
+    assert_one_line_error(invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "m.json"], code=2),
+              "m.json", "read-only filesystem or no permission")

@@ -1,0 +1,527 @@
+"""`fsdecouple export`: the generated C header, compiled and run against the Python model.
+
+Each header is compiled with ``cc -std=c99 -Wall -Wextra -Werror -pedantic`` and
+linked into a small harness that reads voltage vectors from a binary file and
+writes forces and status words back.  The references are ``model.decouple``
+(forces) and ``apply_file`` (statuses), so nothing here restates the C.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import re
+import shutil
+import subprocess
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from conftest import ROOT, SAMPLE, invoke
+
+from fsdecouple import fit, load_config, load_model
+from fsdecouple.core.model import CouplingErrorModel
+from fsdecouple.core.modelfile import model_to_dict
+from fsdecouple.errors import ConfigError, FsdecoupleError
+from fsdecouple.export.header import emulate_float, export_header, plan_export
+from fsdecouple.export.tables import hermite, resample
+from fsdecouple.logs.apply import apply_file
+from fsdecouple.units import Units
+
+pytestmark = pytest.mark.slow  # compiles C headers and runs 1e5 vectors through them
+
+CC = shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
+needs_cc = pytest.mark.skipif(CC is None, reason="no C compiler (cc, gcc or clang) on PATH")
+FLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
+GOLDEN = ROOT / "tests" / "fixtures" / "golden"
+INPUT_NOT_FINITE, NOT_FINITE, OUTSIDE_TABLE, SATURATED = 1 << 17, 1 << 18, 1 << 16, 1 << 19
+# The double header's promise, as the fast path's: |df_a| <= 1e-9 FS_a, i.e. 1e-9 of
+# the full-scale output |k_a| FS_a [V] in voltage terms.  Far outside the range the
+# forces themselves grow, and (u - e) * (1/k) and u/k + ... round differently by
+# ~1e-16 |f|: 1e-12 |f| covers that without hiding anything the first term catches.
+REL_FS, REL_F = 1e-9, 1e-12
+
+HARNESS = r"""
+#define {P}IMPLEMENTATION
+#include "{header}"
+#include <stdio.h>
+int main(int argc, char **argv)
+{{
+    {real} u[{P}N_COMPONENTS], f[{P}N_COMPONENTS];
+    uint32_t s;
+    FILE *in, *out;
+    if (argc != 3 || {p}selftest() != 0) return 3;
+    in = fopen(argv[1], "rb");
+    out = fopen(argv[2], "wb");
+    if (!in || !out) return 4;
+    while (fread(u, sizeof u, 1, in) == 1) {{
+        s = {fn}(u, f);
+        fwrite(f, sizeof f, 1, out);
+        fwrite(&s, sizeof s, 1, out);
+    }}
+    fclose(in);
+    return fclose(out) != 0;
+}}
+"""
+
+
+@pytest.fixture(scope="module")
+def sample_model():
+    """The model of the committed sample data (fitted once; it has surrogate tables)."""
+    return fit(SAMPLE / "calibration")
+
+
+@pytest.fixture(scope="module")
+def kernel_model():
+    """The sample data fitted with extrapolation: kernel (the kernel sum beyond the range)."""
+    return fit(SAMPLE / "calibration", load_config(extrapolation="kernel"))
+
+
+@pytest.fixture(scope="module")
+def rotated_model(tmp_path_factory):
+    """The sample data fitted with a config that rotates into a reference frame."""
+    a, b = np.radians(30.0), np.radians(10.0)
+    rz = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+    rx = np.array([[1, 0, 0], [0, np.cos(b), -np.sin(b)], [0, np.sin(b), np.cos(b)]])
+    r = rz @ rx
+    cfg = tmp_path_factory.mktemp("cfg") / "rot.yaml"
+    cfg.write_text("rotation:\n" + "".join(f"  - [{', '.join(map(repr, row))}]\n" for row in r.tolist()))
+    settings = load_config(cfg)
+    assert settings.rotation is not None
+    return fit(SAMPLE / "calibration", settings)
+
+
+class _Settings:
+    """Settings with attributes a later model may have (refine, units, limits)."""
+
+    def __init__(self, base, **extra):
+        self._base, self._extra = base, extra
+
+    def __getattr__(self, name):
+        return self._extra[name] if name in self._extra else getattr(self._base, name)
+
+
+def build(model, tmp_path, *, opt="-O2", name="decoupler.h", **kw):
+    """Export ``model``, compile it into the harness; return (run, header text)."""
+    header = tmp_path / name
+    result = export_header(model, header, force=True, **kw)
+    p = kw.get("prefix", "fsd_")
+    real = "float" if result.precision == "float" else "double"
+    fn = f"{p}decouple_f" if real == "float" else f"{p}decouple"
+    src = tmp_path / f"harness_{name}.c"
+    src.write_text(HARNESS.format(P=p.upper(), p=p, header=name, real=real, fn=fn))
+    exe = tmp_path / f"harness_{name}{opt}"
+    subprocess.run([CC, *FLAGS, opt, str(src), "-o", str(exe), "-lm"], check=True,
+                   capture_output=True, text=True)
+    n = result.n_components
+    rec = np.dtype([("f", "<f8" if real == "double" else "<f4", n), ("s", "<u4")])
+
+    def run(u: np.ndarray):
+        (tmp_path / "in.bin").write_bytes(np.ascontiguousarray(u, dtype=rec["f"].base).tobytes())
+        proc = subprocess.run([str(exe), str(tmp_path / "in.bin"), str(tmp_path / "out.bin")],
+                              capture_output=True)
+        assert proc.returncode == 0, f"harness exit {proc.returncode} (3: selftest failed)"
+        out = np.fromfile(tmp_path / "out.bin", dtype=rec)
+        return out["f"].astype(float), out["s"]
+
+    return run, header.read_text()
+
+
+def vectors(model, rng, n_random=65_000):
+    """>= 1e5 test vectors: inside and around the range, the thresholds, off the tables."""
+    cal = np.asarray(model.calibrated_range)
+    lo, hi = cal.T
+    span = hi - lo
+    n = lo.size
+    rows = [lo + span * rng.random((n_random, n)),  # calibrated range
+            lo - 0.3 * span + 1.6 * span * rng.random((25_000, n)),  # margin and table ends
+            lo - 2.0 * span + 5.0 * span * rng.random((10_000, n))]  # mostly off the tables
+    edges = []
+    for c in model.chi.values():
+        b = c.input_axis
+        m = 0.01 * span[b]  # apply's margin: the extrapolation thresholds
+        pts = [lo[b] - m, hi[b] + m, lo[b], hi[b]]
+        if c.surrogate is not None:
+            pts += [c.surrogate.lo, c.surrogate.hi]
+        for x in pts:
+            for y in (np.nextafter(x, -np.inf), x, np.nextafter(x, np.inf)):
+                base = lo + span * rng.random((40, n))
+                base[:, b] = y
+                edges.append(base)
+    rows.append(np.concatenate(edges))
+    special = lo + span * rng.random((300, n))
+    special[:100, 0] = np.nan
+    special[100:200, n - 1] = 1e307  # eq. (11) overflows: u / k > max double
+    special[200:, :] = np.nan
+    rows.append(special)
+    u = np.concatenate(rows)
+    assert len(u) >= n_random + 35_000  # >= 1e5 with the default
+    return u
+
+
+def apply_statuses(model, u, tmp_path):
+    """What `fsdecouple apply` says of each row (NaN written as an empty cell)."""
+    log = tmp_path / "log.csv"
+    lines = ["ux,uy,uz"] + [",".join("" if np.isnan(v) else repr(float(v)) for v in row) for row in u]
+    log.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "forces.parquet"
+    apply_file(model, log, out, force=True)
+    return np.array(pq.read_table(out).column("status").to_pylist())
+
+
+def as_apply(status: np.ndarray, u: np.ndarray, n: int) -> np.ndarray:
+    """The header's status word in apply's words (documented in the header comment)."""
+    out = np.full(status.shape, "ok", dtype=object)
+    out[(status & ((1 << n) - 1)) != 0] = "extrapolated"
+    out[(status & NOT_FINITE) != 0] = "not_finite"
+    out[np.isnan(u).any(axis=1)] = "missing"  # apply: a NaN voltage is a missing one
+    return out
+
+
+def decouple(model, u, **kw):
+    """model.decouple, quiet about the rows that overflow on purpose (one thread:
+    numpy's error state is per thread, as apply does it)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return model.decouple(u, workers=1, **kw)
+
+
+def assert_close(f_c, f_py, full_scale):
+    ok = np.isfinite(f_py).all(axis=1)
+    assert np.array_equal(np.isfinite(f_c).all(axis=1), ok)
+    err = np.abs(f_c[ok] - f_py[ok])
+    limit = REL_FS * np.asarray(full_scale) + REL_F * np.abs(f_py[ok])
+    worst = np.max(err / limit)
+    assert worst <= 1.0, f"worst |df| is {worst:.3g} x the allowance"
+
+
+@needs_cc
+@pytest.mark.parametrize("which", ["sample", "rotated", "kernel"])
+@pytest.mark.parametrize("opt", ["-O0", "-O2"])
+def test_double_header_matches_model_and_apply(which, opt, request, tmp_path):
+    """sample and rotated extrapolate by tangents, kernel by the kernel sum: the
+    vectors reach far beyond the calibrated range and the tables."""
+    model = request.getfixturevalue(f"{which}_model")
+    run, _ = build(model, tmp_path, opt=opt)
+    u = vectors(model, np.random.default_rng(1))
+    f_c, status = run(u)
+    assert_close(f_c, decouple(model, u), model.settings.full_scale)
+    assert (as_apply(status, u, 3) == apply_statuses(model, u, tmp_path)).all()
+    # the status bits the apply statuses do not show, against the definitions
+    assert np.array_equal((status & INPUT_NOT_FINITE) != 0, ~np.isfinite(u).all(axis=1))
+    covered = np.ones(len(u), bool)
+    with np.errstate(over="ignore"):
+        for c in model.chi.values():
+            covered &= c.surrogate.covers(u[:, c.input_axis])
+    assert np.array_equal((status & OUTSIDE_TABLE) == 0, covered)
+    assert (status & SATURATED == 0).all()
+
+
+@needs_cc
+@pytest.mark.parametrize("which", ["sample", "rotated"])
+def test_float_header_within_its_bound(which, request, tmp_path):
+    model = request.getfixturevalue(f"{which}_model")
+    run, text = build(model, tmp_path, precision="float")
+    bound = float(re.search(r"#define FSD_FLOAT_MAX_ERROR (\S+)", text).group(1))
+    assert 0 < bound < 1e-5  # float: ~1e-7 of full scale from rounding u / k alone
+    rng = np.random.default_rng(2)
+    lo, hi = np.asarray(model.calibrated_range).T
+    u32 = (lo + (hi - lo) * rng.random((100_000, 3))).astype(np.float32)
+    f_c, status = run(u32)
+    u = u32.astype(float)
+    err = np.abs(f_c - model.decouple(u)) / np.asarray(model.settings.full_scale)
+    assert err.max() <= bound
+    # the emulation the bound comes from is the C: equal but for a rare last-bit difference
+    emu = emulate_float(plan_export(model, precision="float"), u32).astype(float)
+    assert np.mean(emu == f_c) > 0.99 and np.max(np.abs(emu - f_c) / np.abs(f_c).clip(1)) < 1e-6
+    # statuses on the whole vector set, float inputs: the float thresholds are exact
+    w = vectors(model, rng, 20_000)
+    w[np.abs(w) > 1e30] = 1e30  # the overflow rows: float overflows at ~3e38 / |1/k| already
+    w = w.astype(np.float32)
+    _, status = run(w)
+    assert (as_apply(status, w.astype(float), 3) == apply_statuses(model, w.astype(float), tmp_path)).all()
+
+
+@needs_cc
+def test_float_bound_holds_with_fused_multiply_add(sample_model, tmp_path):
+    """The 2x safety factor of FSD_FLOAT_MAX_ERROR covers a compiler contracting the
+    Horner steps into FMAs (the emulation rounds each product separately)."""
+    header = tmp_path / "f.h"
+    result = export_header(sample_model, header, precision="float")
+    src = tmp_path / "fma.c"
+    src.write_text(HARNESS.format(P="FSD_", p="fsd_", header="f.h", real="float", fn="fsd_decouple_f"))
+    flags = ["-O3", "-march=native", "-ffp-contract=fast"]
+    built = subprocess.run([CC, "-std=c99", *flags, str(src), "-o", str(tmp_path / "fma"), "-lm"],
+                           capture_output=True)
+    if built.returncode != 0:
+        pytest.skip(f"{CC} does not take {' '.join(flags)}")
+    lo, hi = np.asarray(sample_model.calibrated_range).T
+    u32 = (lo + (hi - lo) * np.random.default_rng(6).random((100_000, 3))).astype(np.float32)
+    (tmp_path / "in.bin").write_bytes(u32.tobytes())
+    subprocess.run([str(tmp_path / "fma"), str(tmp_path / "in.bin"), str(tmp_path / "out.bin")],
+                   check=True)
+    rec = np.dtype([("f", "<f4", 3), ("s", "<u4")])
+    f = np.fromfile(tmp_path / "out.bin", dtype=rec)["f"].astype(float)
+    err = np.abs(f - sample_model.decouple(u32.astype(float))) / np.asarray(sample_model.settings.full_scale)
+    assert err.max() <= result.float_max_error
+
+
+@needs_cc
+@pytest.mark.parametrize("precision", ["double", "float"])
+def test_selftest_catches_a_damaged_header(sample_model, kernel_model, precision, tmp_path):
+    """A slope a little off, or one support vector moved: fsd_selftest() reports it.
+
+    1e-6 relative in double (tolerance ~1e-9 of full scale), 1e-4 in float (tolerance
+    FSD_FLOAT_MAX_ERROR, ~3e-7 of full scale, below 1e-4 of the vectors' forces).
+    """
+    header = tmp_path / "d.h"
+    export_header(sample_model, header, precision=precision)
+    text = header.read_text()
+    slope = re.search(r"\) \* ([0-9.e+-]+f?);", text).group(1)  # 1 / k_00 in eq. (11)
+    value = float(slope.rstrip("f"))
+    rel = 1e-6 if precision == "double" else 1e-4
+    damaged = {"slope": text.replace(slope, repr(value * (1 + rel)) + "f" * slope.endswith("f"), 1)}
+    if precision == "double":  # the vector beyond the tables: chi's tangent beyond the range
+        line = re.search(r"if \(u > \S+\) return ([0-9.e+-]+) \+.*", text)
+        damaged["tangent"] = text.replace(
+            line.group(0), line.group(0).replace(line.group(1), repr(float(line.group(1)) + 1e-3), 1), 1)
+        # ... or, under extrapolation: kernel, a kernel sum
+        export_header(kernel_model, header, force=True)
+        kernel = header.read_text()
+        sv = re.search(r"fsd_sv0\[\d+\] = \{\n    ([0-9.e+-]+),", kernel).group(1)
+        damaged["support vector"] = kernel.replace(sv, repr(float(sv) + 1e-3), 1)
+        damaged["intact kernel"] = kernel
+    src = tmp_path / "st.c"
+    src.write_text('#define FSD_IMPLEMENTATION\n#include "d.h"\nint main(void) { return fsd_selftest(); }\n')
+    for what, body in {"intact": text, **damaged}.items():
+        header.write_text(body)
+        subprocess.run([CC, *FLAGS, "-O2", str(src), "-o", str(tmp_path / "st"), "-lm"], check=True)
+        bad = subprocess.run([str(tmp_path / "st")]).returncode
+        assert (bad == 0) == what.startswith("intact"), what
+
+
+@needs_cc
+def test_kernel_sums_only_without_surrogates(tmp_path):
+    model = load_model(GOLDEN / "model-v1-without-surrogates.json")
+    run, text = build(model, tmp_path)
+    assert "#define FSD_TABLE_BYTES 0" in text
+    u = vectors(model, np.random.default_rng(3), 5_000)[::5]
+    f_c, status = run(u)
+    assert_close(f_c, decouple(model, u), model.settings.full_scale)
+    assert (status & OUTSIDE_TABLE == 0).all()  # no tables: never "outside" one
+    # --max-error builds tables from the kernel sums even where the model has none
+    run, text = build(model, tmp_path, name="coarse.h", max_error=1e-5)
+    assert "#define FSD_TABLE_BYTES 0" not in text
+    f_c, status = run(u)
+    ok = np.isfinite(u).all(axis=1) & (np.abs(u) < 1e6).all(axis=1)
+    err = np.abs(f_c[ok] - decouple(model, u[ok])) / np.asarray(model.settings.full_scale)
+    assert err.max() <= 1e-5 and (status[ok] & OUTSIDE_TABLE == 0).any()
+
+
+class _Chi:
+    """A chi of the sample model re-wired to other axes (for an N-axis test model)."""
+
+    def __init__(self, base, out: int, inp: int):
+        self._base, self.output_axis, self.input_axis = base, out, inp
+
+    def __getattr__(self, name):
+        return getattr(self._base, name)
+
+    def __call__(self, u):
+        return self._base(u)
+
+
+class _NAxisModel:
+    """An N-axis model from the sample's chi: channel b >= 3 reuses channel b % 3's
+    voltages and chi.  Its decouple() is eq. (11) written out here with kernel sums."""
+
+    def __init__(self, model, n: int):
+        src = lambda b: next(c for c in model.chi.values() if c.input_axis == b % 3)  # noqa: E731
+        self.chi = {f"c{a}{b}": _Chi(src(b), a, b) for a in range(n) for b in range(n) if a != b}
+        self.k = np.array([model.k[b % 3] * (1 + 0.1 * (b // 3)) for b in range(n)])
+        fs = tuple(model.settings.full_scale[b % 3] for b in range(n))
+        self.settings = _Settings(model.settings, full_scale=fs, rotation=None)
+        self.calibrated_range = np.asarray(model.calibrated_range)[[b % 3 for b in range(n)]]
+        self._doc = model_to_dict(model)
+        self.method = "svr"
+
+    extrapolation_limits = CouplingErrorModel.extrapolation_limits  # from calibrated_range
+
+    def decouple(self, u, *, rotate=True, exact=False, workers=None):
+        u = np.asarray(u, dtype=float)
+        f = u.copy()
+        for c in self.chi.values():
+            f[:, c.output_axis] -= c(u[:, c.input_axis])
+        return f / self.k
+
+
+@needs_cc
+@pytest.mark.parametrize("n", [2, 4])
+def test_any_number_of_axes(sample_model, n, tmp_path, monkeypatch):
+    import fsdecouple.export as export_module
+
+    model = _NAxisModel(sample_model, n)
+    # the model file of a stand-in: the sample's document (digest, format_version)
+    monkeypatch.setattr(export_module, "model_to_dict", lambda m: m._doc)
+    run, text = build(model, tmp_path)
+    assert f"#define FSD_N_COMPONENTS {n}" in text and f"#define FSD_N_CHI {n * (n - 1)}" in text
+    lo, hi = model.calibrated_range.T
+    u = lo - 0.1 * (hi - lo) + 1.2 * (hi - lo) * np.random.default_rng(7).random((20_000, n))
+    f_c, status = run(u)
+    assert_close(f_c, model.decouple(u), model.settings.full_scale)
+    margin = 0.01 * (hi - lo)  # apply's RANGE_MARGIN
+    outside = (u < lo - margin) | (u > hi + margin)
+    bits = (status[:, None] >> np.arange(n)) & 1
+    assert np.array_equal(bits == 1, outside) and outside.any(axis=0).all()
+
+
+@needs_cc
+def test_max_error_picks_coarse_tables_within_it(sample_model, tmp_path):
+    full, _ = build(sample_model, tmp_path, name="full.h")
+    e = 1e-5
+    run, text = build(sample_model, tmp_path, max_error=e)
+    coarse = int(re.search(r"#define FSD_TABLE_BYTES (\d+)", text).group(1))
+    assert coarse < 49152 / 8  # 6 tables of 256 intervals x 4 doubles is 49152 bytes
+    lo, hi = np.asarray(sample_model.calibrated_range).T
+    u = lo - 0.3 * (hi - lo) + 1.6 * (hi - lo) * np.random.default_rng(4).random((100_000, 3))
+    f_c, _ = run(u)
+    err = np.abs(f_c - sample_model.decouple(u, exact=True)) / np.asarray(sample_model.settings.full_scale)
+    assert e / 20 < err.max() <= e  # coarse: uses much of the allowance, keeps it
+    plan = plan_export(sample_model, max_error=e)
+    for cp in plan.chis:  # the coarsest: one interval fewer breaks the chi's share of e
+        target = e * plan.full_scale[cp.out] * abs(plan.k[cp.out]) / 2
+        assert resample(cp, cp.table.shape[1] - 1)[1] > target >= cp.table_error
+
+
+def test_resampled_table_equals_the_models_surrogate(sample_model):
+    """hermite()/resample() against the model's own ChiSurrogate, built independently."""
+    plan = plan_export(sample_model)
+    for cp, c in zip(plan.chis, sample_model.chi.values(), strict=True):
+        s = c.surrogate
+        h = (s.hi - s.lo) / s.intervals
+        assert np.array_equal(hermite(s.values, s.slopes, h), s.coefficients())
+        coef, err = resample(cp, s.intervals)
+        assert np.allclose(coef, s.coefficients(), rtol=0, atol=1e-12)
+        assert err == pytest.approx(s.max_error, rel=0.1, abs=1e-12)
+
+
+@needs_cc
+def test_refinement_steps_invert_the_coupling_model(sample_model, tmp_path):
+    """With settings.refine, the fixed point on the prime voltages undoes eq. (1).
+
+    Simulate measured voltages from known prime voltages p (u_a = p_a + sum_b
+    chi_ab(p_b), the coupling error model of eq. (1) and eq. (4)); 30 steps then
+    recover p, so the forces are p_a / k_aa.
+    """
+    model = dataclasses.replace(sample_model, settings=_Settings(sample_model.settings, refine=30))
+    run, text = build(model, tmp_path)
+    assert "#define FSD_REFINE_STEPS 30" in text
+    lo, hi = np.asarray(model.calibrated_range).T
+    p = lo + (hi - lo) * np.random.default_rng(5).random((20_000, 3))
+    u = p + model.coupling_errors(p)
+    f_c, _ = run(u)
+    assert_close(f_c, p / model.k, model.settings.full_scale)
+
+
+@needs_cc
+def test_saturation_limits_compare_the_values_passed_in(sample_model, tmp_path):
+    run, text = build(sample_model, tmp_path, limits={"ux": [-1.0, 1.0], 2: (-1.1, 0.05)})
+    assert "u[0] <= -1.0 or u[0] >= 1.0" in text
+    x = [-1.0, np.nextafter(-1.0, 0), 0.0, np.nextafter(1.0, 0), 1.0, 1.5]
+    u = np.array([[v, 0.0, -0.5] for v in x] + [[0.0, 0.0, 0.05], [0.0, 0.0, -1.1]])
+    _, status = run(u)
+    assert ((status & SATURATED) != 0).tolist() == [True, False, False, False, True, True, True, True]
+    with pytest.raises(ConfigError, match="unknown channel 'uq'"):
+        export_header(sample_model, tmp_path / "x.h", limits={"uq": [0, 1]})
+    with pytest.raises(ConfigError, match="expected finite lo < hi"):
+        export_header(sample_model, tmp_path / "x.h", limits={"uy": [1, 0]})
+
+
+@needs_cc
+def test_sensor_name_and_units_are_escaped_literally(sample_model, tmp_path):
+    evil = 'rig */ #define X "q" \\ ??= 100 % \u00e9\n\t end'
+    # units are checked against a list (fsdecouple.units); the sensor name is free text
+    settings = dataclasses.replace(sample_model.settings, sensor=evil, units=Units("kN", "mV"))
+    model = dataclasses.replace(sample_model, settings=settings)
+    header = tmp_path / "evil.h"
+    export_header(model, header, prefix="ev_")
+    src = tmp_path / "evil.c"
+    src.write_text('#define EV_IMPLEMENTATION\n#include "evil.h"\n#include <stdio.h>\n'
+                   'int main(void) { fputs(EV_SENSOR, stdout); fputs("|", stdout);'
+                   ' fputs(EV_LOAD_UNIT, stdout); fputs(EV_OUTPUT_UNIT, stdout);'
+                   ' return ev_selftest(); }\n')
+    subprocess.run([CC, *FLAGS, str(src), "-o", str(tmp_path / "evil"), "-lm"], check=True)
+    out = subprocess.run([str(tmp_path / "evil")], capture_output=True, check=True).stdout
+    assert out == (evil + "|kNmV").encode("utf-8")
+
+
+@needs_cc
+def test_two_prefixes_link_into_one_program(sample_model, rotated_model, tmp_path):
+    export_header(sample_model, tmp_path / "a.h", prefix="left_")
+    export_header(rotated_model, tmp_path / "b.h", prefix="right_", precision="float")
+    src = tmp_path / "two.c"
+    src.write_text('#define LEFT_IMPLEMENTATION\n#define RIGHT_IMPLEMENTATION\n'
+                   '#include "a.h"\n#include "b.h"\n'
+                   "int main(void) { return left_selftest() + right_selftest(); }\n")
+    subprocess.run([CC, *FLAGS, "-O2", str(src), "-o", str(tmp_path / "two"), "-lm"], check=True)
+    subprocess.run([str(tmp_path / "two")], check=True)
+
+
+def test_library_errors(sample_model, tmp_path):
+    with pytest.raises(ConfigError, match="expected a C identifier"):
+        export_header(sample_model, tmp_path / "x.h", prefix="fsd-")
+    with pytest.raises(ConfigError, match="expected one of double, float"):
+        export_header(sample_model, tmp_path / "x.h", precision="half")
+    with pytest.raises(FsdecoupleError, match="below what a table can reach"):
+        export_header(sample_model, tmp_path / "x.h", max_error=1e-14)
+    with pytest.raises(FsdecoupleError, match="the float function reaches"):
+        export_header(sample_model, tmp_path / "x.h", precision="float", max_error=1e-8)
+    assert not (tmp_path / "x.h").exists()
+
+
+# --- the command line ---------------------------------------------------------------
+
+
+def test_cli_export_writes_a_header(tmp_path):
+    out = tmp_path / "decoupler.h"
+    r = invoke(["export", GOLDEN / "model-v1.json", "-o", out, "--precision", "float"])
+    assert "float error <=" in r.stdout and "FSD_FLOAT_MAX_ERROR" in out.read_text()
+    digest = model_to_dict(load_model(GOLDEN / "model-v1.json"))["integrity"]["digest"]
+    assert f'#define FSD_MODEL_DIGEST "{digest}"' in out.read_text()
+    r = invoke(["export", GOLDEN / "model-v1.json", "-o", out, "--force", "--json", "--max-error", "1e-5"])
+    doc = json.loads(r.stdout)
+    assert doc["precision"] == "double" and 0 < doc["table_max_error"] <= 1e-5
+    assert f"#define FSD_TABLE_BYTES {doc['table_bytes']}" in out.read_text()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--max-error", "1e-14"], "below what a table can reach"),
+    (["--prefix", "1fsd"], "expected a C identifier"),
+    (["--prefix", "a b"], "expected a C identifier"),
+    (["--precision", "half"], "expected one of double, float"),
+    (["--max-error", "-1"], "expected a positive fraction"),
+])
+def test_cli_export_bad_options(tmp_path, args, message):
+    out = tmp_path / "decoupler.h"
+    r = invoke(["export", GOLDEN / "model-v1.json", "-o", out, *args], code=2)
+    assert message in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_cli_export_refuses_a_corrupt_model(tmp_path):
+    out = tmp_path / "decoupler.h"
+    r = invoke(["export", ROOT / "tests/fixtures/bad/model-bit-flip/model.json", "-o", out], code=2)
+    assert "integrity check failed" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_cli_export_keeps_an_existing_file_without_force(tmp_path):
+    out = tmp_path / "decoupler.h"
+    out.write_text("mine")
+    r = invoke(["export", GOLDEN / "model-v1.json", "-o", out], code=2)
+    assert len(r.stderr.strip().splitlines()) == 1 and out.read_text() == "mine"
+    invoke(["export", GOLDEN / "model-v1.json", "-o", out, "--force"])
+    assert out.read_text().startswith("/*")
+    model = tmp_path / "model.json"
+    shutil.copy(GOLDEN / "model-v1.json", model)
+    invoke(["export", model, "-o", model, "--force"], code=2)  # never over its own input
+    assert load_model(model)

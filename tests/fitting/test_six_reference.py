@@ -1,0 +1,93 @@
+"""Issue 14: the six-axis pipeline against an independent, straightforward reference.
+
+benchmarks/reference_six.py writes the paper's method out plainly (zero rows,
+eq. 2 slopes, one Table-2 libsvm eps-SVR per chi in the data's volts, eq. 11),
+sharing nothing with fsdecouple's fitting.  fsdecouple with ``zero: rows`` must
+give the same forces: this pins, for N components, the chi training targets, the
+kernel width (gamma = 1 / (2 delta^2) in volts, no scaling), the slopes and the
+surrogate tables to the paper's method (measured: 1e-10 F.S. apart; gamma = 1 or
+``scaling: full_scale`` would be 1e-3 apart).  The default ``zero: fit``
+must then be no worse than that reference on a combined-load log.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from conftest import ROOT
+
+from fsdecouple import load_calibration, load_config
+from fsdecouple.data.calibration import from_table
+from fsdecouple.fitting.fit import fit
+from fsdecouple.fitting.noise import solved_to_the_noise
+
+
+def _reference_module():
+    spec = importlib.util.spec_from_file_location("reference_six", ROOT / "benchmarks" / "reference_six.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+REF = _reference_module()
+SETTINGS = load_config(ROOT / "configs" / "six-axis.yaml")
+
+
+@pytest.fixture(scope="module")
+def case():
+    sensor, table, u, f = REF.sensor_case(0)
+    return sensor, table, u, f, REF.Reference(table)
+
+
+def test_zero_rows_decouples_as_the_straightforward_reference(case):
+    sensor, table, u, _, ref = case
+    settings = replace(SETTINGS, zero="rows")
+    model = fit(from_table(table, settings), settings, workers=1)
+    np.testing.assert_allclose(model.k, ref.k, rtol=1e-12)
+    # the same libsvm problems in the same point order: the forces differ only by the
+    # table path's promise (1e-9 of each full-scale output, decouple.PROMISE)
+    diff = np.abs(model.decouple(u, rotate=False) - ref.decouple(u)) / np.asarray(sensor.full_scale)
+    assert diff.max() < 1e-8, diff.max(axis=0)
+
+
+def test_default_is_no_worse_than_the_reference_on_combined_loads(case):
+    """Every component, and the worst one: a broken zero: fit (or any default that
+    drifts from the paper's chi) shows here; measured 1.45-1.92x the floor against the
+    reference's 1.6-2.49x on this seed (benchmarks/reference_six.py)."""
+    sensor, table, u, f, ref = case
+    model = fit(from_table(table, SETTINGS), SETTINGS, workers=1)
+    floor = REF.rms(sensor.solve(u), f)
+    ours = REF.rms(model.decouple(u, rotate=False), f) / floor
+    theirs = REF.rms(ref.decouple(u), f) / floor
+    assert ours.max() <= theirs.max(), (ours, theirs)
+    assert (ours <= 2.0).all(), ours
+
+
+@pytest.mark.slow
+def test_full_scale_scaling_keeps_six_axis_defaults_within_twice_the_floor(case):
+    """What a six-axis config with outputs in mV or counts gets (scaling: full_scale is then
+    automatic).  Solved to Table 2's tolerance, 1e-3 F.S. (2-4x the noise), it was 2.3x the
+    floor on this seed and 2.6x mean (3.5x worst) over seeds 0-7; solved to half the
+    noise (noise.py) it is within 2x, and the model records the tolerance used."""
+    sensor, table, u, f, _ = case
+    settings = replace(SETTINGS, scaling="full_scale")
+    model = fit(from_table(table, settings), settings, workers=1)
+    ratio = REF.rms(model.decouple(u, rotate=False), f) / REF.rms(sensor.solve(u), f)
+    assert (ratio <= 2.0).all(), ratio
+    # the simulator's sigma is 0.5 mV on full-scale outputs of 1-2 V
+    assert 1e-4 <= model.settings.svr.tolerance <= 2.5e-4, model.settings.svr.tolerance
+
+
+def test_volts_and_three_axes_keep_the_configured_tolerance(case):
+    """Only normalised six-axis fits are solved to the noise: volts keep Table 2 (the
+    paper's units), and so does any three-axis config (its figures must not move)."""
+    _, table, *_ = case
+    model = fit(from_table(table, SETTINGS), SETTINGS, workers=1, tables=False)
+    assert model.settings.svr.tolerance == 1e-3
+    three = load_config(ROOT / "configs" / "loadcell.yaml")
+    assert three.scaling == "full_scale" and three.components is None
+    calib = load_calibration(ROOT / "sample_data" / "loadcell" / "calibration.csv", three)
+    assert solved_to_the_noise(calib, three) is three

@@ -1,0 +1,248 @@
+"""Many-log apply on a real Dask cluster (issue 16): two worker processes on small data.
+
+Every output is compared with the local engine's (itself single-file ``apply``,
+test_batch.py): CSV byte for byte, Parquet as Arrow tables, every column and type.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import json
+import os
+import signal
+import socket
+import threading
+import time
+
+import pyarrow.parquet as pq
+import pytest
+from conftest import SAMPLE, assert_one_line_error, invoke
+from test_batch import SIX_MODEL, make_logs, make_six_axis_logs, spoil
+
+distributed = pytest.importorskip("distributed")
+
+pytestmark = pytest.mark.slow  # a cluster of worker processes
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=":0", silence_logs=50) as c:
+        yield c
+
+
+def _tables_equal(a, b):
+    ta, tb = pq.read_table(a), pq.read_table(b)
+    assert ta.schema.equals(tb.schema, check_metadata=False), (ta.schema, tb.schema)
+    assert ta.equals(tb)
+    for key in (b"fsdecouple.force_unit", b"fsdecouple.output_unit"):
+        assert ta.schema.metadata[key] == tb.schema.metadata[key]
+
+
+def _same_outputs(local, dask):
+    files = sorted(p.relative_to(local) for p in local.rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(dask) for p in dask.rglob("*") if p.is_file())
+    for rel in files:
+        if rel.suffix == ".csv":
+            assert (local / rel).read_bytes() == (dask / rel).read_bytes(), rel
+        else:
+            _tables_equal(local / rel, dask / rel)
+    return files
+
+
+def test_dask_writes_what_the_local_engine_writes(sample_model, tmp_path, cluster):
+    logs = make_logs(tmp_path)
+    args = ["apply", sample_model, logs, "--tare", 200, "--unit", "gf", "--json"]
+    local = json.loads(invoke([*args, "-o", f"{tmp_path / 'local'}/"]).stdout)
+    dask = json.loads(invoke([*args, "-o", f"{tmp_path / 'dask'}/", "--engine", "dask",
+                              "--scheduler", cluster.scheduler_address]).stdout)
+    files = _same_outputs(tmp_path / "local", tmp_path / "dask")
+    assert len(files) == 6  # two CSV logs, three dataset parts, one Parquet log
+    strip = [{k: v for k, v in f.items() if k != "output"} for f in local["files"]]
+    assert strip == [{k: v for k, v in f.items() if k != "output"} for f in dask["files"]]
+    assert dask["engine"] == "dask" and dask["failed"] == []
+    assert {f["rows"] for f in dask["files"]} == {1000, 3000}
+
+
+def test_dask_writes_every_component_of_a_six_axis_model(tmp_path, cluster):
+    """Forces and moments (mixed units), a dataset tared across its parts: as the local engine."""
+    logs = make_six_axis_logs(tmp_path)
+    args = ["apply", SIX_MODEL, logs, "--tare", 200]
+    invoke([*args, "-o", f"{tmp_path / 'local'}/"])
+    invoke([*args, "-o", f"{tmp_path / 'dask'}/", "--engine", "dask",
+            "--scheduler", cluster.scheduler_address])
+    _same_outputs(tmp_path / "local", tmp_path / "dask")
+    assert {"mx", "my", "mz"} <= set(pq.read_table(tmp_path / "dask" / "ds").column_names)
+
+
+def test_dask_local_cluster_of_its_own_and_bad_logs(sample_model, tmp_path):
+    """Without --scheduler: a LocalCluster of --workers processes.  A bad CSV log and a
+    dataset whose part lacks a column fail alone; nothing of them is written."""
+    logs = spoil(make_logs(tmp_path))
+    out = tmp_path / "out"
+    r = invoke(["apply", sample_model, logs, "-o", f"{out}/", "--engine", "dask", "--workers", 2,
+                "--json"], code=2)
+    doc = json.loads(r.stdout)
+    assert doc["failed"] == [str(logs / "b" / "two.csv"), str(logs / "ds")]
+    assert "two.csv, row 6, column 'uy'" in r.stderr and "part.3.parquet: columns" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 2, r.stderr  # no worker tracebacks
+    assert sorted(p.name for p in out.iterdir()) == ["a", "single.parquet"]
+    ref = tmp_path / "ref.csv"
+    invoke(["apply", sample_model, logs / "a" / "one.csv", "-o", ref])
+    assert (out / "a" / "one.csv").read_bytes() == ref.read_bytes()
+
+
+def test_our_local_cluster_keeps_glibcs_malloc_thresholds(monkeypatch):
+    """Dask's nannies set MALLOC_TRIM_THRESHOLD_, which turns off glibc's dynamic mmap
+    threshold (a page fault per 4 KiB of every array over 128 KiB); our workers go without."""
+    from fsdecouple.logs.dask_engine import dask_client
+
+    # an earlier LocalCluster of this process wrote it into os.environ (the nanny does)
+    monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
+    with dask_client(workers=1) as client:
+        env = client.run(lambda: {k: os.environ.get(k) for k in ("MALLOC_TRIM_THRESHOLD_",
+                                                                 "OMP_NUM_THREADS")})
+    assert list(env.values()) == [{"MALLOC_TRIM_THRESHOLD_": None, "OMP_NUM_THREADS": "1"}]
+
+
+def test_unreachable_scheduler_is_one_line(sample_model, tmp_path, monkeypatch):
+    import fsdecouple.batch_dask as engine
+
+    monkeypatch.setattr(engine, "CONNECT_TIMEOUT", 2.0)
+    logs = make_logs(tmp_path)
+    with socket.socket() as s:  # a port on this machine that nothing listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    t0 = time.monotonic()
+    r = invoke(["apply", sample_model, logs, "-o", f"{tmp_path / 'out'}/", "--engine", "dask",
+                "--scheduler", f"tcp://127.0.0.1:{port}"], code=2)
+    assert time.monotonic() - t0 < 30
+    assert_one_line_error(r, f"--scheduler tcp://127.0.0.1:{port}: cannot connect")
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_worker_killed_mid_log_leaves_no_partial_output(sample_model, tmp_path, cluster):
+    """A log read from a FIFO: the test feeds it in part (output is being written), kills
+    the worker decoupling it with SIGKILL, then feeds the whole log to the task Dask runs
+    again.  The output is the whole log's, as the local engine writes it, and the killed
+    worker's partial file is gone."""
+    from fsdecouple.logs.many import apply_many
+
+    rows = (SAMPLE / "task_voltages.csv").read_bytes().splitlines(keepends=True)
+    body = b"".join(rows[1:]) * 150  # 450,000 rows, ~17 MB: four 4 MB blocks
+    content = rows[0] + body
+    (tmp_path / "src").mkdir()
+    regular = tmp_path / "src" / "log.csv"
+    regular.write_bytes(content)
+    fifo = tmp_path / "fifo" / "log.csv"
+    fifo.parent.mkdir()
+    os.mkfifo(fifo)
+    out = tmp_path / "out"
+    result = {}
+    run = threading.Thread(target=lambda: result.update(r=apply_many(
+        sample_model, [fifo], out, engine="dask", scheduler=cluster.scheduler_address)))
+    with distributed.Client(cluster, set_as_default=False) as client:
+        run.start()
+        fh = _wait_for(lambda: _open_writer(fifo))  # once the task opens the FIFO
+        try:
+            # two blocks and a half: apply writes block 1 once block 2 is read
+            fh.write(content[:10_000_000])
+            fh.flush()
+            partial = _wait_for(lambda: [p for p in out.rglob(".*.tmp") if p.stat().st_size > 0])
+            busy = [w for w, keys in client.processing().items() if keys]
+            assert len(busy) == 1, client.processing()
+            pid = client.run(os.getpid, workers=busy)[busy[0]]
+            os.kill(pid, signal.SIGKILL)  # as the OOM killer or a lost node would
+        finally:
+            # at once: the task run again must not open the FIFO while this end is open, or
+            # it reads what the killed reader left in the pipe and the log ends there
+            with contextlib.suppress(BrokenPipeError):  # the killed reader is gone
+                fh.close()
+        _wait_for(lambda: busy[0] not in client.scheduler_info()["workers"])
+        with _wait_for(lambda: _open_writer(fifo)) as fh:  # the task, run again on a live worker
+            fh.write(content)
+        run.join(60)
+        assert not run.is_alive()
+        client.wait_for_workers(2, timeout=60)
+    assert partial and not any(p.exists() for p in partial)
+    doc = result["r"].to_dict()
+    assert doc["failed"] == [] and doc["files"][0]["rows"] == 450_000
+    ref = tmp_path / "ref.csv"
+    invoke(["apply", sample_model, regular, "-o", ref])
+    assert (out / "log.csv").read_bytes() == ref.read_bytes()
+    assert sorted(p.name for p in out.iterdir()) == ["log.csv"]  # no staging, no temporary file
+
+
+def _wait_for(check, timeout=60.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        got = check()
+        if got:
+            return got
+        time.sleep(0.05)
+    raise AssertionError("timed out")
+
+
+def test_a_worker_killed_on_every_try_fails_the_log_alone(sample_model, tmp_path):
+    """With no retry allowed (allowed-failures 0), the one death of the worker decoupling a
+    log is its last: the log is reported failed in one line, its partial output is gone,
+    and the other log of the run is written."""
+    import dask
+
+    from fsdecouple.logs.many import apply_many
+
+    rows = (SAMPLE / "task_voltages.csv").read_bytes().splitlines(keepends=True)
+    content = rows[0] + b"".join(rows[1:]) * 150  # ~17 MB: four 4 MB blocks
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    fifo = logs / "dies.csv"
+    os.mkfifo(fifo)
+    (logs / "good.csv").write_bytes(b"".join(rows[:1001]))
+    out = tmp_path / "out"
+    result = {}
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}), \
+            distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                     dashboard_address=":0", silence_logs=50) as cluster, \
+            distributed.Client(cluster, set_as_default=False) as client:
+        run = threading.Thread(target=lambda: result.update(r=apply_many(
+            sample_model, [fifo, logs / "good.csv"], out, engine="dask",
+            scheduler=cluster.scheduler_address)))
+        run.start()
+        fh = _wait_for(lambda: _open_writer(fifo))  # once the task opens the FIFO
+        try:
+            fh.write(content[:10_000_000])  # apply writes block 1 once block 2 is read
+            fh.flush()
+            partial = _wait_for(lambda: [p for p in out.rglob(".*.tmp") if p.stat().st_size > 0])
+            _wait_for(lambda: (out / "good.csv").exists())  # the other log is done
+            busy = [w for w, keys in client.processing().items() if keys]
+            assert len(busy) == 1, client.processing()
+            pid = client.run(os.getpid, workers=busy)[busy[0]]
+            os.kill(pid, signal.SIGKILL)
+            run.join(60)
+        finally:
+            with contextlib.suppress(BrokenPipeError):
+                fh.close()
+        assert not run.is_alive()
+    doc = result["r"].to_dict()
+    assert doc["failed"] == [str(fifo)]
+    error = next(f["error"] for f in doc["files"] if f["input"] == str(fifo))
+    assert "dies.csv: Dask workers died while decoupling it" in error and "nothing written" in error
+    assert "\n" not in error
+    assert partial and not any(p.exists() for p in partial)
+    assert sorted(p.name for p in out.iterdir()) == ["good.csv"]  # no staging, nothing partial
+    ref = tmp_path / "ref.csv"
+    invoke(["apply", sample_model, logs / "good.csv", "-o", ref])
+    assert (out / "good.csv").read_bytes() == ref.read_bytes()
+
+
+def _open_writer(fifo):
+    """The FIFO's writing end once a reader has it open, else None (never blocks)."""
+    try:
+        fd = os.open(fifo, os.O_WRONLY | os.O_NONBLOCK)
+    except OSError as err:
+        if err.errno == errno.ENXIO:  # no reader yet
+            return None
+        raise
+    os.set_blocking(fd, True)
+    return os.fdopen(fd, "wb")
