@@ -23,6 +23,7 @@ from rich.console import Console
 from rich.progress import (
     BarColumn,
     Progress,
+    TextColumn,
 )
 from rich.text import Text
 
@@ -135,10 +136,11 @@ def _parse_zero(text: str) -> tuple[float, ...]:
 
 def _bar(*columns) -> Progress:
     """A progress bar on stderr, drawn on a terminal only (never with CI set), erased when done."""
-    return Progress(
-        "[progress.description]{task.description}", BarColumn(), *columns, console=err_console,
-        disable=not interactive(), transient=True,
-    )
+    # the console reads no markup (user text is literal), so the bar's own style is given
+    # as a style, not as "[progress.description]" markup it would print as it stands
+    description = TextColumn("{task.description}", style="progress.description", markup=False)
+    return Progress(description, BarColumn(), *columns, console=err_console,
+                    disable=not interactive(), transient=True)
 
 
 @contextlib.contextmanager

@@ -96,7 +96,7 @@ def fit(
         check_output(output, force=force)
         cs = load_calibration(calib, settings, exclude=exclude or ())
         refuse_overwriting_input(output, [*_read(cs), *_given(config)])
-        with progress_bar("tuning", MofNCompleteColumn()) as progress:
+        with progress_bar("tuning" if tune else "fitting", MofNCompleteColumn()) as progress:
             model = calibrate(cs, settings, method=method, verdict=not no_verdict, tune=tune,
                               tune_grid=grid, progress=progress)
         checks = assumption_checks(model)

@@ -217,10 +217,12 @@ def test_progress_bars_show_on_a_terminal_and_never_in_ci(tmp_path, sample_model
     log = SAMPLE / "task_voltages.csv"
     apply_args = ["apply", sample_model, log, "-o", tmp_path / "f.csv", "--force"]
     cv_args = ["cv", cal, "-o", tmp_path / "cv.json", "--force"]
+    fit_args = ["fit", cal, "-o", tmp_path / "m.json", "--force"]
     hide_cursor = "\x1b[?25l"  # rich hides the cursor while a live bar is drawn
-    for args, label in ((apply_args, "decoupling"), (cv_args, "training")):
+    for args, label in ((apply_args, "decoupling"), (cv_args, "training"), (fit_args, "fitting")):
         out = _on_a_terminal(args, env)
         assert hide_cursor in out and label in out, out
+        assert "[progress" not in out and "tuning" not in out, out  # styles, not markup text
     env["CI"] = "true"
     assert "decoupling" not in (out := _on_a_terminal(apply_args, env)) and hide_cursor not in out
     assert hide_cursor not in _on_a_terminal(cv_args, env)
