@@ -1,7 +1,7 @@
 """Combined-load accuracy against the floor, on simulated sensors (issue 12).
 
     python benchmarks/accuracy.py              # every scenario, five seeds each
-    python benchmarks/accuracy.py --readme     # the same, written into README's table
+    python benchmarks/accuracy.py --docs       # the same, written into docs/benchmarks.md's table
     python benchmarks/accuracy.py --seeds 2 --scenarios 5%
 
 Each scenario simulates sensors with :mod:`fsdecouple.sim.simulate` (six repetitions on
@@ -201,26 +201,26 @@ def markdown(results: dict[str, dict[str, float]], seeds: int, six: bool = False
         lines.append(f"| {label} | " + " | ".join(f"{row[m]:.2f}×" for m in methods) + " |")
     lines.append("")
     lines.append(f"Worst axis's combined-load RMS error / the floor's, mean of {seeds} simulated "
-                 f"sensors (`python benchmarks/accuracy.py {'--six ' if six else ''}--readme`).")
+                 f"sensors (`python benchmarks/accuracy.py {'--six ' if six else ''}--docs`).")
     return "\n".join(lines)
 
 
 def write_block(name: str, table: str) -> None:
-    """Print ``table`` and put it in README's ``name`` block (docs/readme_blocks.py)."""
+    """Print ``table`` and put it in the ``name`` block of its docs page (docs/readme_blocks.py)."""
     import sys
 
     sys.path.insert(0, str(ROOT / "docs"))
-    from readme_blocks import replace_block
+    from readme_blocks import replace_block, written
 
     print(table)
-    replace_block(name, table)
-    print(f"README.md: {name} block rewritten")
+    print(written(replace_block(name, table), name))
 
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=5)
-    ap.add_argument("--readme", action="store_true", help="write the README's markdown table")
+    ap.add_argument("--docs", "--readme", dest="docs", action="store_true",
+                    help="write the markdown table into docs/benchmarks.md")
     ap.add_argument("--scenarios", help="comma-separated labels (prefixes) to run")
     ap.add_argument("--six", action="store_true", help="the six-axis sensors instead")
     args = ap.parse_args()
@@ -228,7 +228,7 @@ if __name__ == "__main__":
         t0 = time.perf_counter()
         res = run_six(args.seeds)
         print(f"({time.perf_counter() - t0:.0f} s)")
-        if args.readme:
+        if args.docs:
             write_block("accuracy-six", markdown(res, args.seeds, six=True))
         raise SystemExit(0)
     chosen = SCENARIOS if not args.scenarios else [
@@ -236,5 +236,5 @@ if __name__ == "__main__":
     t0 = time.perf_counter()
     res = run(chosen, args.seeds)
     print(f"({time.perf_counter() - t0:.0f} s)")
-    if args.readme:
+    if args.docs:
         write_block("accuracy", markdown(res, args.seeds))

@@ -2,7 +2,7 @@
 
     python benchmarks/fleet.py            # 200 logs x 50,000 rows, 100 sensors, ~10 min
     python benchmarks/fleet.py --quick    # 40 logs x 20,000 rows, 8 sensors
-    python benchmarks/fleet.py --readme   # also rewrite README's fleet-benchmarks block
+    python benchmarks/fleet.py --docs     # also rewrite docs/benchmarks.md's fleet-benchmarks block
     python benchmarks/fleet.py --only parquet   # rows F1-F4 of one format, while iterating
 
 Every target is a ratio against a baseline measured in the same run (medians of
@@ -98,12 +98,12 @@ def main() -> int:
     ap.add_argument("--repeats", type=int, help="runs per median (default 3)")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--only", choices=("csv", "parquet"),
-                    help="only this format's rows F1-F4 (no F5-F7): for iterating, not for README")
-    ap.add_argument("--readme", action="store_true",
-                    help="write the results into README.md (between the fleet-benchmarks markers)")
+                    help="only this format's rows F1-F4 (no F5-F7): for iterating, not for the docs")
+    ap.add_argument("--docs", "--readme", dest="docs", action="store_true",
+                    help="write the results into docs/benchmarks.md (between the fleet-benchmarks markers)")
     args = ap.parse_args()
-    if args.only and args.readme:
-        ap.error("--readme writes every row: drop --only")
+    if args.only and args.docs:
+        ap.error("--docs writes every row: drop --only")
     n_logs = args.logs or (40 if args.quick else 200)
     rows = args.rows or (20_000 if args.quick else 50_000)
     n_sensors = args.sensors or (8 if args.quick else 100)
@@ -222,7 +222,7 @@ def main() -> int:
 
     return publish("fleet-benchmarks", f"Measured by `benchmarks/fleet.py` ({n_logs} logs x {rows:,} "
                    f"rows, {mb:.0f} MB of CSV; {n_sensors} sensors; {repeats} repeats): {started}",
-                   results, args.readme)
+                   results, args.docs)
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 
     python benchmarks/refine.py            # K = 3 vs K = 0, 1 M in-range vectors, 7 repeats
     python benchmarks/refine.py --sweep    # recommended K vs measured, simulated sensors
-    python benchmarks/refine.py --readme   # the cost run, written into README's block
+    python benchmarks/refine.py --docs     # the cost run, written into docs/benchmarks.md's block
 
 The ratio is of medians measured in the same run (other jobs on a shared machine
 slow both alike).  K steps and the forces are K + 1 evaluations of every chi, each
@@ -45,7 +45,7 @@ def sensor_model(factor: float, settings):
 
 
 def cost(rows: int, repeats: int, k: int) -> str:
-    """Both comparisons, printed and returned as the README's lines."""
+    """Both comparisons, printed and returned as the docs' lines."""
     started = machine()
     _, model = sensor_model(1.0, load_config())
     r = model.calibrated_range
@@ -99,15 +99,14 @@ if __name__ == "__main__":
     ap.add_argument("--rows", type=int, default=1_000_000)
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("-k", type=int, default=3)
-    ap.add_argument("--readme", action="store_true",
-                    help="also rewrite README's refine-benchmarks block (the default cost run)")
+    ap.add_argument("--docs", "--readme", dest="docs", action="store_true",
+                    help="also rewrite docs/benchmarks.md's refine-benchmarks block (the default cost run)")
     args = ap.parse_args()
     if args.sweep:
         sweep()
     else:
         text = cost(args.rows, args.repeats, args.k)
-        if args.readme:
-            from readme_blocks import replace_block
+        if args.docs:
+            from readme_blocks import replace_block, written
 
-            replace_block("refine-benchmarks", text)
-            print("README.md: refine-benchmarks block rewritten")
+            print(written(replace_block("refine-benchmarks", text), "refine-benchmarks"))

@@ -3,7 +3,7 @@ the same run, the ratio and pass/fail.
 
     python benchmarks/run.py            # full: 10 M-row log, ~6 min
     python benchmarks/run.py --quick    # 1 M-row log, fewer repeats
-    python benchmarks/run.py --readme   # also rewrite README's results block
+    python benchmarks/run.py --docs     # also rewrite the results block of docs/benchmarks.md
 
 Timings are medians of ``--repeats`` runs.  On a shared machine, other load
 inflates both a measurement and its baseline; the load average is printed.
@@ -116,7 +116,7 @@ def median_child(args, repeats):
 
 
 def markdown_table(rows) -> str:
-    """The README's table of benchmark rows (target, measured, unit, baseline, baseline name,
+    """The docs' table of benchmark rows (target, measured, unit, baseline, baseline name,
     ratio, goal, ok), as every benchmark script prints and writes it."""
     return "\n".join([
         "| target | measured (median) | baseline (median) | ratio | goal | |",
@@ -126,17 +126,17 @@ def markdown_table(rows) -> str:
     ])
 
 
-def publish(block: str, head: str, rows, readme: bool) -> int:
+def publish(block: str, head: str, rows, docs: bool) -> int:
     """Print ``head`` (what was measured), the machine's load now and the rows' table; with
-    ``readme``, write them into README's ``block``.  Returns 0 if every row passed, else 1."""
+    ``docs``, write them into ``block`` of its docs page (docs/readme_blocks.py's ``PAGES``).
+    Returns 0 if every row passed, else 1."""
     after = ", ".join(f"{v:.2f}" for v in os.getloadavg())
     text = f"{head}; after: {after}.\n\n{markdown_table(rows)}"
     print(f"\n{text}")
-    if readme:
-        from readme_blocks import replace_block
+    if docs:
+        from readme_blocks import replace_block, written
 
-        replace_block(block, text)
-        print(f"README.md: {block} block rewritten")
+        print(written(replace_block(block, text), block))
     return 0 if all(r[-1] for r in rows) else 1
 
 
@@ -203,8 +203,8 @@ def main() -> int:
     ap.add_argument("--repeats", type=int, help="runs per median (default 5, quick 3)")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--json", type=Path, help="also write the results here")
-    ap.add_argument("--readme", action="store_true",
-                    help="write the results table into README.md (between the benchmarks markers)")
+    ap.add_argument("--docs", "--readme", dest="docs", action="store_true",
+                    help="write the results table into docs/benchmarks.md (between the benchmarks markers)")
     args = ap.parse_args()
     rows = args.rows or (1_000_000 if args.quick else 10_000_000)
     repeats = args.repeats or (3 if args.quick else 5)
@@ -467,12 +467,12 @@ def main() -> int:
                              r_["baseline_name"], r_["ratio"], r_["goal"], r_["ok"]) for r_ in results])
     after = ", ".join(f"{v:.2f}" for v in os.getloadavg())
     print(f"\n{table}\n\n{started}; after: {after}; log {rows:,} rows; {repeats} repeats")
-    if args.readme:
-        from readme_blocks import replace_block
+    if args.docs:
+        from readme_blocks import replace_block, written
 
-        replace_block("benchmarks", f"Measured by `benchmarks/run.py` ({rows:,}-row log of "
-                      f"{size:.0f} MB; {repeats} repeats): {started}; after: {after}.\n\n{table}")
-        print("README.md: benchmarks block rewritten")
+        page = replace_block("benchmarks", f"Measured by `benchmarks/run.py` ({rows:,}-row log of "
+                             f"{size:.0f} MB; {repeats} repeats): {started}; after: {after}.\n\n{table}")
+        print(written(page, "benchmarks"))
     if args.json:
         args.json.write_text(json.dumps({"machine": started, "rows": rows, "results": results},
                                         indent=1))

@@ -3,7 +3,7 @@ the same run, the ratio and pass/fail.
 
     python benchmarks/six_axis.py            # full: 10 M-row log
     python benchmarks/six_axis.py --quick    # 1 M-row log, fewer repeats
-    python benchmarks/six_axis.py --readme   # full, and rewrite README's six-axis block
+    python benchmarks/six_axis.py --docs     # full, and rewrite docs/benchmarks.md's six-axis block
 
 1. in-memory decoupling of an (n, 6) array through the tables: >= 10 M vectors/s
    and >= 1000x libsvm's batch svm_predict for the 30 chi;
@@ -41,11 +41,11 @@ def main() -> int:
     ap.add_argument("--rows", type=int, help="rows of the apply log (default 10 M, quick 1 M)")
     ap.add_argument("--repeats", type=int, help="runs per median (default 5, quick 3)")
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--readme", action="store_true",
-                    help="also rewrite README's six-axis-benchmarks block (a full run)")
+    ap.add_argument("--docs", "--readme", dest="docs", action="store_true",
+                    help="also rewrite docs/benchmarks.md's six-axis-benchmarks block (a full run)")
     args = ap.parse_args()
-    if args.readme and (args.quick or args.rows):
-        ap.error("--readme writes the full run: drop --quick and --rows")
+    if args.docs and (args.quick or args.rows):
+        ap.error("--docs writes the full run: drop --quick and --rows")
     rows = args.rows or (1_000_000 if args.quick else 10_000_000)
     repeats = args.repeats or (3 if args.quick else 5)
     started = machine()
@@ -117,7 +117,7 @@ def main() -> int:
             app_mb / base_mb, "< 500 MB", app_mb < 500)
 
     return publish("six-axis-benchmarks", f"Measured by `benchmarks/six_axis.py` ({rows:,}-row log; "
-                   f"{repeats} repeats): {started}", results, args.readme)
+                   f"{repeats} repeats): {started}", results, args.docs)
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""Regenerate the README's figure (docs/figure7.png) from the sample data.
+"""Regenerate the figure of the README and docs/report.md (docs/figure7.png) from the sample data.
 
 Run from the repository root:  python docs/make_figures.py
 """

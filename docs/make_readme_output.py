@@ -1,7 +1,7 @@
-"""Regenerate the sample `fsdecouple cv` output quoted in the README.
+"""Regenerate the sample `fsdecouple cv` output quoted in the docs (docs/cv.md).
 
 Runs the command below on the committed sample data, writes its printed text to
-docs/cv-sample-output.txt and copies that text into README.md between the
+docs/cv-sample-output.txt and copies that text into docs/cv.md between the
 ``<!-- cv-sample-output:start -->`` and ``<!-- cv-sample-output:end -->`` markers.
 Never edit either by hand; run ``python docs/make_readme_output.py`` from the
 repository root instead.
@@ -40,8 +40,8 @@ def main() -> int:
     lines = [line for line in lines if not line.startswith("cv document written to")]
     text = "$ fsdecouple " + " ".join(ARGS) + " -o cv.json\n" + "\n".join(lines).rstrip() + "\n"
     (ROOT / "docs" / "cv-sample-output.txt").write_text(text, encoding="utf-8")
-    replace_block("cv-sample-output", f"```text\n{text}```")
-    print(f"wrote docs/cv-sample-output.txt and README.md ({len(lines)} lines)")
+    page = replace_block("cv-sample-output", f"```text\n{text}```")
+    print(f"wrote docs/cv-sample-output.txt and {page.relative_to(ROOT)} ({len(lines)} lines)")
     return 0
 
 
