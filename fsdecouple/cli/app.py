@@ -50,7 +50,9 @@ err_console = Console(stderr=True, markup=False, emoji=False, highlight=False,
                       width=None if sys.stderr.isatty() else WIDE)
 
 ConfigOpt = Annotated[
-    Path | None, typer.Option("--config", "-c", help="YAML config (default: the paper's sensor).")
+    Path | None,
+    typer.Option("--config", "-c",
+                 help="YAML config (default: the paper's sensor; for a model, its own settings)."),
 ]
 ForceOpt = Annotated[bool, typer.Option("--force", help="Overwrite existing output files.")]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print a JSON document on stdout.")]
@@ -106,7 +108,8 @@ def version_callback(value: bool) -> None:
 @app.callback()
 def _main(
     version: Annotated[
-        bool, typer.Option("--version", callback=version_callback, is_eager=True)
+        bool, typer.Option("--version", callback=version_callback, is_eager=True,
+                             help="Print the version and exit.")
     ] = False,
 ) -> None:
     pass

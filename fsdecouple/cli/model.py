@@ -51,7 +51,8 @@ def fit(
                                "(the lower held-out worst gamma).")
     ] = "svr",
     exclude: Annotated[
-        list[str] | None, typer.Option(help="Drop the calibration point FILE:ROW (repeatable), "
+        list[str] | None,
+        typer.Option(metavar="FILE:ROW", help="Drop the calibration point FILE:ROW (repeatable), "
                                             "e.g. a gross error fit flagged.")
     ] = None,
     refine: Annotated[
