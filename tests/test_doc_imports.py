@@ -1,4 +1,4 @@
-"""Every ``from fsdecouple... import ...`` in the README, docs/ and benchmarks/ resolves.
+"""Every ``from fsdecouple... import ...`` in the README, docs/ (scripts and pages) and benchmarks/ resolves.
 
 Those files are run by hand, so nothing else notices when a module they import is
 renamed.  Each import line is its own case; the ones broken today are strict xfails
@@ -15,6 +15,7 @@ from conftest import ROOT
 
 IMPORT = re.compile(r"^\s*from (fsdecouple(?:\.[a-z_.]+)?) import ([A-Za-z_, ]+)", re.M)
 SOURCES = ["README.md", *sorted(str(p.relative_to(ROOT)) for p in (ROOT / "docs").glob("*.py")),
+           *sorted(str(p.relative_to(ROOT)) for p in (ROOT / "docs").rglob("*.md")),
            *sorted(str(p.relative_to(ROOT)) for p in (ROOT / "benchmarks").glob("*.py"))]
 # (source, module) -> reason, for an import known to be broken (a strict xfail)
 BROKEN: dict[tuple[str, str], str] = {}
@@ -40,4 +41,8 @@ def test_documented_import_resolves(module, names):
 
 
 def test_every_source_has_been_scanned():
-    assert len(cases()) >= 7  # README (2), docs (1), benchmarks (5) today
+    scanned = {c.id.split(":")[0] for c in cases()}  # the sources with at least one import
+    # the docs pages (the API page and the Dask example), a docs script and the benchmarks
+    assert {"docs/api.md", "docs/apply.md", "docs/make_figures.py", "benchmarks/accuracy.py"} <= scanned
+    assert sum(s.startswith("docs/design/") for s in SOURCES) >= 1  # the design notes too
+    assert len(cases()) >= 8  # docs pages (2), docs scripts (1), benchmarks (5) today

@@ -115,7 +115,7 @@ def test_bad_input(name, tmp_path, good_model, tmp_path_factory):
             assert needle in r.stderr, (needle, r.stderr)
         assert "Traceback" not in r.stderr + r.stdout
         if "rows" in spec:  # apply: every input row out, in order, with its status
-            # pass-through bytes need not be UTF-8 (README: the encoding rule); latin-1 reads any
+            # pass-through bytes need not be UTF-8 (docs/errors.md: the encoding rule); latin-1 reads any
             f = pd.read_csv(out, dtype=str, keep_default_na=False, encoding="latin-1")
             assert len(f) == spec["rows"]
             assert f["status"].iat[-1] == spec["last_status"]

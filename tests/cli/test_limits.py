@@ -63,7 +63,7 @@ def test_dev_zero_is_read_to_the_limit_only(tmp_path, good_model, kind):
 
 
 def test_limits_are_as_documented():
-    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    readme = (ROOT / "docs" / "errors.md").read_text(encoding="utf-8")
     assert (CONFIG_LIMIT, MODEL_LIMIT, CV_LIMIT) == (1 << 20, 64 << 20, 64 << 20)
     for text in ("1 MB", "64 MB"):
         assert text in readme

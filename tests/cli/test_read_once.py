@@ -1,6 +1,6 @@
 """Inputs that can be read once (FIFOs), bytes that are not UTF-8, and Parquet nested columns.
 
-README, "Errors and exit codes": a FIFO gets FIFO_WAIT seconds to deliver its
+docs/errors.md, "Errors and exit codes": a FIFO gets FIFO_WAIT seconds to deliver its
 first bytes; the header of a CSV log must be UTF-8, its data lines are bytes that
 CSV output passes through unchanged, and Parquet output refuses (naming row and
 column) any that are not UTF-8, whatever the block; a Parquet log's list, struct

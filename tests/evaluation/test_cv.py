@@ -152,10 +152,10 @@ def test_gate_and_timing_and_checks_in_document(doc):
 
 
 def _documented_layout():
-    """The cv.json layout block of the README, between its markers."""
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    """The cv.json layout block of docs/cv.md, between its markers."""
+    text = (ROOT / "docs" / "cv.md").read_text(encoding="utf-8")
     m = re.search(r"<!-- cv-json-layout -->\n```json\n(.*?)```", text, re.S)
-    assert m, "README lacks the cv.json layout block"
+    assert m, "docs/cv.md lacks the cv.json layout block"
     return m.group(1)
 
 

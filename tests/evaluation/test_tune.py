@@ -257,7 +257,7 @@ def test_five_percent_coupling_tuned_and_refined_is_near_the_floor(tmp_path):
 @pytest.mark.slow
 def test_sample_like_coupling_tuned_and_refined_is_near_the_floor(tmp_path):
     """At the sample's coupling the defaults (K = 0, Table 2) reach 1.2-1.8x the floor per
-    axis on simulate's log (README, Accuracy against the floor); tune + refine close most of it."""
+    axis on simulate's log (docs/benchmarks.md, the accuracy table); tune + refine close most of it."""
     ratio = _ratio_to_floor(tmp_path, 0.0175, ["--tune", "--refine", "3"])
     assert (ratio <= 1.5).all(), ratio
 

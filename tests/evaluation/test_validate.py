@@ -100,7 +100,7 @@ def test_layout(doc, model_file, set_file):
     # one record per (method, axis, metric, range), both ranges present here
     assert len(doc["records"]) == 2 * 3 * 3 * 2
     json.dumps(doc, allow_nan=False)
-    readme = (SAMPLE.parent / "README.md").read_text(encoding="utf-8")
+    readme = (SAMPLE.parent / "docs" / "validate.md").read_text(encoding="utf-8")
     layout = re.search(r"<!-- validation-json-layout -->\n```json\n(.*?)```", readme, re.S).group(1)
     assert set(re.findall(r'^  "(\w+)":', layout, re.M)) == TOP_KEYS
 
