@@ -126,6 +126,8 @@ def apply_file(
         paper's sensor in N), a tenth of the fast path's 1e-9.  Parquet output
         always stores the doubles.
 
+    Notes
+    -----
     Rows with a raw output (after ``scale:``, before the tare or zero) at or
     beyond its ``limits`` get the status ``saturated``; their forces are written.
 

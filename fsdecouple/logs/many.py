@@ -222,6 +222,8 @@ def apply_many(model_path: str | Path, inputs, out_dir: str | Path, *, engine: s
     progress : callable, optional
         Called as ``progress(done, total)`` in logs.
 
+    Notes
+    -----
     Only :class:`~fsdecouple.errors.FsdecoupleError` of a log is caught and
     recorded (a bug raises); bad arguments raise before any log is read.
     """
