@@ -1,11 +1,14 @@
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
 from fsdecouple import load_calibration, load_config
+from fsdecouple.core.decouple import PROMISE
 from fsdecouple.fitting.fit import fit
 from fsdecouple.sim.simulate import SimulatedSensor, simulate
 
@@ -39,6 +42,79 @@ def calib(sim_dir, settings):
 @pytest.fixture(scope="session")
 def model(calib, settings):
     return fit(calib, settings)
+
+
+def eq11_from_file(doc: dict, u: np.ndarray) -> np.ndarray:
+    """Forces [load unit] by eq. (11) from a model file's own numbers, sharing no code
+    with fsdecouple: f_a = [u_a - sum_{b != a} chi_ab(u_b)] / k_a, with
+
+        chi_ab(u) = output_scale (sum_i dual_coef_i exp(-gamma (u / input_scale - sv_i)^2) - rho)
+
+    the kernel sum everywhere (a file whose settings name no ``extrapolation`` reads as
+    a kernel model).  The golden files' check: decoupling a stored model is
+    deterministic arithmetic, unlike re-fitting it (libsvm's last bits differ between
+    machines and grow through a fit).  ``u``: zero-corrected outputs, (n, N), in the
+    order of the file's components.
+    """
+    settings = doc["settings"]
+    assert settings.get("extrapolation", "kernel") == "kernel", "tangent chi: not written out here"
+    assert settings.get("rotation") is None and settings.get("frame") is None
+    assert doc.get("method", "svr") == "svr"
+    labels = list(settings.get("components") or ("x", "y", "z"))
+    assert set(labels) == set(doc["omega"])
+    k = np.array([float(doc["omega"][a]["k"]) for a in labels])
+    e = np.zeros_like(u, dtype=float)
+    for chi in doc["chi"].values():
+        a, b = labels.index(chi["output_axis"]), labels.index(chi["input_axis"])
+        sv, coef = np.asarray(chi["support_vectors"], float), np.asarray(chi["dual_coef"], float)
+        x = u[:, b] / float(chi["input_scale"])
+        kernel = np.exp(-float(chi["gamma"]) * np.subtract.outer(x, sv) ** 2) @ coef
+        e[:, a] += float(chi["output_scale"]) * (kernel - float(chi["rho"]))
+    return (u - e) / k
+
+
+# Decoupling a stored model is arithmetic on the file's numbers: the same on every
+# machine up to rounding.  The exact path and eq11_from_file (conftest.py) sum the
+# same ~100-170 kernel terms of up to C = 1000 V in another order and with another
+# exp: n_sv C eps / (|k| F_FS) ~ 170 * 1000 * 2.2e-16 / 1.2 V = 3e-11 of full scale;
+# measured 1.2e-11 (three axes and six).  The table path adds its promise
+# (PROMISE, 1e-9 of full scale; measured 8e-11).
+EXACT_TOL = 1e-10  # of full scale
+TABLE_TOL = PROMISE + EXACT_TOL
+
+# A re-fit is not arithmetic on fixed numbers: libsvm is compiled on each machine and
+# stops at its tolerance (Table 2: 1e-3 V of KKT violation, ~2x the 0.5 mV noise), so
+# last-bit differences in its training pick a slightly different solution.  Moving
+# every training output of sample_data by one ulp (20 random draws, emulating another
+# build) moved the task log's forces by up to 0.080 % F.S. (RMS up to 0.031 %) on
+# three axes and 0.053 % (RMS 0.025 %) on six; another machine's six-axis re-fit
+# differed by up to 0.089 N (0.089 % of 100 N).  Limits: about 3x those, still far
+# below the coupling the chi correct (gamma_before 2-6 % F.S.): a broken fit (a chi
+# lost, a wrong target, a sign) shows, a change within the solver's tolerance (eps
+# 2e-4, gamma 0.4 or C 300 instead of Table 2 moved forces 0.05-0.11 % F.S.) need
+# not: no re-fit can pin those on every machine (the file checks pin the stored model).
+REFIT_MAX = 2.5e-3  # of full scale, per component
+REFIT_RMS = 1e-3
+
+
+def assert_refit_close(golden, fresh, u):
+    """A fresh fit decouples ``u`` like the golden model within REFIT_MAX / REFIT_RMS F.S."""
+    fs = np.asarray(golden.settings.full_scale, dtype=float)
+    d = (fresh.decouple(u) - golden.decouple(u)) / fs
+    assert np.abs(d).max() <= REFIT_MAX, np.abs(d).max(axis=0)
+    assert np.sqrt(np.mean(d ** 2, axis=0)).max() <= REFIT_RMS, np.sqrt(np.mean(d ** 2, axis=0))
+
+
+def assert_decouples_by_its_own_numbers(path, u):
+    """The stored model's forces on ``u`` against eq. (11) written out from the file."""
+    from fsdecouple import load_model
+
+    golden = load_model(path)  # verifies the digest and the format version
+    want = eq11_from_file(json.loads(path.read_text()), u)
+    fs = np.asarray(golden.settings.full_scale, dtype=float)
+    for exact, tol in ((True, EXACT_TOL), (False, TABLE_TOL)):
+        err = np.abs(golden.decouple(u, exact=exact) - want) / fs
+        assert err.max() <= tol, (exact, err.max(axis=0))
 
 
 def invoke(args, code=0, **kw):

@@ -5,10 +5,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 import pytest
-from conftest import SAMPLE, invoke
+from conftest import SAMPLE, assert_decouples_by_its_own_numbers, assert_refit_close, invoke
 
 from fsdecouple import load_calibration, load_config, load_model
 from fsdecouple.core import modelfile as model_module
@@ -29,17 +28,24 @@ def test_there_is_a_golden_file_of_the_current_version():
     assert any(p.name == f"model-v{FORMAT_VERSION}.json" for p in GOLDEN)
 
 
+def _task_outputs():
+    """The sample's combined-load log, zero-corrected by its first 200 rows (3000 x 3)."""
+    u = pd.read_csv(SAMPLE / "task_voltages.csv")[["ux", "uy", "uz"]].to_numpy()
+    return u - u[:200].mean(axis=0)
+
+
 @pytest.mark.parametrize("path", GOLDEN, ids=lambda p: p.name)
-def test_golden_file_loads_and_decouples_like_a_fresh_fit(path, fresh):
-    golden = load_model(path)  # verifies the digest and the format version
+def test_golden_file_loads_and_decouples_by_its_own_numbers(path):
+    """The stored model, not a re-fit: the same on every machine to rounding (conftest.py)."""
     assert json.loads(path.read_text())["format_version"] <= FORMAT_VERSION
-    log = pd.read_csv(SAMPLE / "task_voltages.csv")
-    u = log[["ux", "uy", "uz"]].to_numpy()
-    u = u - u[:200].mean(axis=0)
-    # Same data, same settings, same libsvm: the fit is deterministic, so the forces
-    # agree to rounding.  1e-6 N (1e-8 of full scale) leaves room for a faster
-    # evaluator of chi in a newer format; a real change of the method is far larger.
-    np.testing.assert_allclose(golden.decouple(u), fresh.decouple(u), rtol=0, atol=1e-6)
+    assert_decouples_by_its_own_numbers(path, _task_outputs())
+
+
+@pytest.mark.parametrize("path", GOLDEN, ids=lambda p: p.name)
+def test_a_fresh_fit_decouples_like_the_golden_file_within_the_noise(path, fresh):
+    """Same data and settings, fitted today on this machine: within REFIT_MAX / REFIT_RMS
+    of full scale (conftest.py says why a re-fit is not compared to rounding)."""
+    assert_refit_close(load_model(path), fresh, _task_outputs())
 
 
 @pytest.mark.parametrize("path", GOLDEN, ids=lambda p: p.name)

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import ROOT, SAMPLE, invoke
+from conftest import ROOT, SAMPLE, assert_decouples_by_its_own_numbers, assert_refit_close, invoke
 
 from fsdecouple import load_calibration, load_config, load_model
 from fsdecouple.axes import AXES, CHI_NAMES, DEFAULT, FORCE_COLUMNS, VOLTAGE_COLUMNS, Layout
@@ -264,12 +264,24 @@ def test_sample_six_axis_is_the_simulator_output(tmp_path):
         == CONFIG.read_text()
 
 
-def test_golden_six_axis_file_loads_and_decouples_like_a_fresh_fit(six_model):
-    golden = load_model(ROOT / "tests" / "fixtures" / "golden" / "six-axis-v3.json")
+GOLDEN_SIX = ROOT / "tests" / "fixtures" / "golden" / "six-axis-v3.json"
+
+
+def _six_task_outputs():
     u = pd.read_csv(SIX / "task_voltages.csv")[list(OUTPUTS)].to_numpy()
-    u = u - u[:TARE_ROWS].mean(axis=0)
-    # same data, settings and libsvm: the fit is deterministic (tests/test_golden.py)
-    np.testing.assert_allclose(golden.decouple(u), six_model.decouple(u), rtol=0, atol=1e-6)
+    return u - u[:TARE_ROWS].mean(axis=0)
+
+
+def test_golden_six_axis_file_loads_and_decouples_by_its_own_numbers():
+    """The stored model, not a re-fit: eq. (11) from the file's slopes, support vectors
+    and coefficients, to rounding on every machine (conftest.py, EXACT_TOL / TABLE_TOL)."""
+    assert_decouples_by_its_own_numbers(GOLDEN_SIX, _six_task_outputs())
+
+
+def test_a_fresh_six_axis_fit_decouples_like_the_golden_file_within_the_noise(six_model):
+    """A re-fit differs from the file by libsvm's last bits grown through the fit (another
+    machine: up to 0.089 % F.S.): within REFIT_MAX / REFIT_RMS of full scale (conftest.py)."""
+    assert_refit_close(load_model(GOLDEN_SIX), six_model, _six_task_outputs())
 
 
 # --- the frame transform (wrench.py) -------------------------------------------------
