@@ -124,8 +124,11 @@ def _dataset_graph(spec: ApplySpec, job: Job, target):
     settings, unit = check_options(model, spec.settings, spec.tare, spec.zero, spec.unit)
     _same_columns(job)
     zero = dataset_zero(spec, job)
+    # no hive partitioning: a part under robot=A/ gets no 'robot' column inside its file
+    # (the directory names it already, as in apply's local engine, whose parts readers
+    # merge whole; Dask's column would be a dictionary whose index width varies by part)
     frame = dd.read_parquet([str(p) for p in job.parts], split_row_groups=False,
-                            dtype_backend="pyarrow", index=False)
+                            dtype_backend="pyarrow", index=False, dataset={"partitioning": None})
     try:  # the columns, before any row is read
         frame_outputs(model, frame._meta, settings)
     except InputError as err:
