@@ -41,12 +41,39 @@ app = typer.Typer(
     rich_markup_mode=None,
     help="Static decoupling of 3-axis force sensors: coupling error model + six eps-SVRs.",
 )
+
+
+def _standard_streams() -> None:
+    """A stream that the caller closed (``fsdecouple ... >&-``, a daemon without a
+    terminal) reads and writes nothing instead of failing at the first print."""
+    for name, mode in (("stdin", "r"), ("stdout", "w"), ("stderr", "w")):
+        if getattr(sys, name) is None:
+            setattr(sys, name, open(os.devnull, mode, encoding="utf-8"))  # noqa: SIM115
+
+
+_standard_streams()
+
+
+def _stdout_gone() -> None:
+    """Point stdout at /dev/null, so the interpreter's last flush cannot fail again."""
+    with contextlib.suppress(OSError, ValueError):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+
+
+class _Console(Console):
+    def on_broken_pipe(self) -> None:
+        """The reader of stdout went away (``| head``): exit 141, as after SIGPIPE, not
+        rich's 1, which here means a failed gate."""
+        _stdout_gone()
+        raise SystemExit(128 + signal.SIGPIPE)
+
 # No markup, no emoji codes and no highlighting: every name and cell from a user's
 # file is printed literally (a sensor named ':thumbs_up:' or 'a[/]b' included, in
 # table titles too).  Redirected output (a CI log) is not cut at 80 columns.
-console = Console(markup=False, emoji=False, highlight=False,
+console = _Console(markup=False, emoji=False, highlight=False,
                   width=None if sys.stdout.isatty() else WIDE)
-err_console = Console(stderr=True, markup=False, emoji=False, highlight=False,
+err_console = _Console(stderr=True, markup=False, emoji=False, highlight=False,
                       width=None if sys.stderr.isatty() else WIDE)
 
 ConfigOpt = Annotated[
@@ -168,10 +195,31 @@ def _terminate(signum, frame) -> None:
     raise SystemExit(128 + signum)
 
 
+def _cannot_write(err: OSError) -> int:
+    """stdout or stderr failed (a full disk, a closed reader): exit 2 like any output that
+    cannot be written, or 141 as after SIGPIPE when the reader went away (``| head``)."""
+    _stdout_gone()
+    if isinstance(err, BrokenPipeError):
+        return 128 + signal.SIGPIPE
+    with contextlib.suppress(OSError, ValueError):
+        err_console.print(Text("error: ", "red") + Text(f"cannot write the output: {printable(err)}"),
+                          soft_wrap=True)
+    return 2
+
+
 def main() -> None:
     signal.signal(signal.SIGTERM, _terminate)
     try:
         code = app(standalone_mode=False)
+        sys.stdout.flush()
+    except OSError as err:  # the standard streams: every file the commands write is checked
+        code = _cannot_write(err)
+    except SystemExit:
+        # Click answers a broken pipe with exit 1, the failed-gate code, after wrapping
+        # stdout so that its last flush stays quiet; the reader went away: 141, as SIGPIPE
+        if type(sys.stdout).__name__ != "PacifyFlushWrapper":
+            raise
+        code = _cannot_write(BrokenPipeError())
     except typer.Abort:
         err_console.print(Text("error: ", "red") + Text("aborted"))
         code = 1

@@ -1,0 +1,57 @@
+"""The standard streams: a reader that goes away, a full disk, a stream that is closed.
+
+Exit codes keep their meaning (docs/errors.md): 1 is a failed gate only; a reader of
+stdout that went away (``| head``) is 141, as after SIGPIPE; a stream that cannot be
+written is an output that cannot be written, 2; a closed stream is no stream.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from conftest import SAMPLE
+
+CLI = [sys.executable, "-m", "fsdecouple"]
+
+
+def _run(args, **kw):
+    return subprocess.run([*CLI, *map(str, args)], timeout=120, **kw)
+
+
+def test_a_reader_that_goes_away_is_141_not_the_gate_code(sample_model):
+    for args in (["show", sample_model], ["--help"]):
+        with subprocess.Popen([*CLI, *map(str, args)], stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE) as p:
+            p.stdout.close()  # as `| head -0`: every write meets a closed pipe
+            err = p.stderr.read()
+            assert p.wait(timeout=120) == 141, (args, err)
+        assert err == b""  # no traceback, no "Exception ignored"
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full")
+def test_a_full_stdout_or_stderr_is_exit_2(sample_model):
+    with open("/dev/full", "w") as full:
+        r = _run(["show", sample_model], stdout=full, stderr=subprocess.PIPE, text=True)
+        assert r.returncode == 2
+        lines = r.stderr.splitlines()
+        assert len(lines) == 1 and lines[0].startswith("error: cannot write the output") \
+            and "No space left" in lines[0], r.stderr
+        # the error itself cannot be written: still bad input, never the gate's 1
+        r = _run(["show", SAMPLE / "no-such-model.json"], stdout=subprocess.PIPE, stderr=full)
+        assert r.returncode == 2
+
+
+def test_closed_standard_streams_are_no_streams(sample_model, tmp_path):
+    def close(*fds):
+        return lambda: [os.close(fd) for fd in fds]
+
+    r = _run(["show", sample_model], preexec_fn=close(0, 1), stderr=subprocess.PIPE, text=True)
+    assert r.returncode == 0 and r.stderr == ""
+    out = tmp_path / "f.csv"
+    r = _run(["apply", sample_model, SAMPLE / "task_voltages.csv", "--tare", 200, "-o", out],
+             preexec_fn=close(0, 1, 2))
+    assert r.returncode == 0 and len(out.read_text().splitlines()) == 3001
