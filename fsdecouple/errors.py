@@ -26,14 +26,17 @@ class ModelFileError(FsdecoupleError):
     """A model file is not a usable fsdecouple model."""
 
 
-def printable(text: object) -> str:
+def printable(text: object, keep: str = "") -> str:
     """``text`` with control characters (a newline in a file name) escaped as repr does,
-    so that a message stays on one line; other characters, accents too, are kept."""
+    so that a message stays on one line; other characters, accents too, are kept, and so
+    are the characters of ``keep`` (the console keeps its own line breaks).  The one
+    function for user text on the terminal: the CLI's consoles apply it to everything."""
     text = str(text)
     if text.isprintable():
         return text
     return "".join(
-        c if c == " " or not unicodedata.category(c).startswith(("C", "Z")) else repr(c)[1:-1]
+        c if c == " " or c in keep or not unicodedata.category(c).startswith(("C", "Z"))
+        else repr(c)[1:-1]
         for c in text
     )
 

@@ -25,6 +25,7 @@ from rich.progress import (
     Progress,
     TextColumn,
 )
+from rich.segment import Segment
 from rich.text import Text
 
 from .. import __version__
@@ -62,6 +63,16 @@ def _stdout_gone() -> None:
 
 
 class _Console(Console):
+    """Every piece of text shown is literal: control characters that are not the console's
+    own (ESC, a carriage return, a bell, a clear-screen in a sensor name) are shown
+    escaped, by :func:`~fsdecouple.errors.printable`, in tables and titles too."""
+
+    def _render_buffer(self, buffer) -> str:
+        return super()._render_buffer(
+            s if s.control or s.text == "\n" or s.text.isprintable()
+            else Segment(printable(s.text, keep="\n"), s.style, s.control)
+            for s in buffer)
+
     def on_broken_pipe(self) -> None:
         """The reader of stdout went away (``| head``): exit 141, as after SIGPIPE, not
         rich's 1, which here means a failed gate."""

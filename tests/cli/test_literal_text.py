@@ -81,3 +81,27 @@ def test_errors_quote_names_literally(tricky):
     r = invoke(["apply", tricky["model"], missing, "-o", tricky["root"] / "o.csv"], code=2)
     _literal(r, missing)
     assert r.stderr.startswith("error:")
+
+
+ESC = "\x1b[2J\x1b[31m"  # clear the screen, then print red
+
+
+def test_control_characters_are_shown_escaped_never_sent_raw(tmp_path, sample_model):
+    """A clear-screen in a sensor name or a directory name reaches the terminal escaped
+    (``\\x1b[2J``), in titles, tables and summary lines alike."""
+    cfg = tmp_path / "cfg.yaml"
+    cfg.write_text('sensor: "rig\\e[2J\\e[31m"\n')
+    model = tmp_path / "m.json"
+    fit = invoke(["fit", SAMPLE / "calibration", "-c", cfg, "-o", model, "--no-verdict"])
+    shown = invoke(["show", model])
+    sensors = tmp_path / f"fleet{ESC}"
+    (sensors / f"s{ESC}1").mkdir(parents=True)
+    for f in (SAMPLE / "calibration").iterdir():
+        (sensors / f"s{ESC}1" / f.name).write_bytes(f.read_bytes())
+    (sensors / f"s{ESC}1" / "sensor.yaml").write_text("sensor: one\n")
+    many = invoke(["fit-many", sensors, "-o", tmp_path / "models", "--workers", 1])
+    for r in (fit, shown, many):
+        out = r.stdout + r.stderr
+        assert "\x1b" not in out, out
+    assert "rig\\x1b[2J\\x1b[31m" in fit.stdout and "rig\\x1b[2J" in shown.stdout
+    assert "s\\x1b[2J\\x1b[31m1" in many.stdout + many.stderr
