@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pandas as pd
@@ -247,3 +248,23 @@ def test_usage_errors_are_one_line_and_exit_2(sample_model):
         assert r.returncode == 2 and len(lines) == 1, r.stderr
         assert lines[0].startswith("error: ") and expected in lines[0] and "--help" in lines[0]
         assert "Traceback" not in r.stderr and r.stdout == ""
+
+
+@pytest.mark.slow  # a six-axis cv
+def test_redirected_output_keeps_every_column_and_every_sentence_whole(tmp_path):
+    """Not on a terminal (a CI log read with grep): the six-axis cv table, 30 gamma
+    columns wide, keeps its svr columns, and no sentence is wrapped."""
+    import subprocess
+    import sys
+
+    six = SAMPLE / "six_axis"
+    r = subprocess.run([sys.executable, "-m", "fsdecouple", "cv", six / "calibration", "-c",
+                        six / "sensor.yaml", "-o", tmp_path / "cv.json"],
+                       capture_output=True, text=True, timeout=600, env={**os.environ, "COLUMNS": "80"})
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.splitlines()
+    at = next(i for i, line in enumerate(lines) if "test (rep)" in line)
+    assert lines[at].count("γmz") == 5 and lines[at].split()[-1] == "γmz", lines[at]
+    assert lines[at - 1].split()[-1] == "svr", lines[at - 1]  # the methods, initial ... svr
+    summary = [line for line in lines if line.startswith("svr ")]  # one sentence, one line
+    assert summary and all(line.rstrip().endswith("cells worse than initial") for line in summary)
