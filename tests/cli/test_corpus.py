@@ -37,10 +37,10 @@ CASES = sorted(p.name for p in BAD.iterdir() if (p / "case.yaml").is_file())
 
 
 @pytest.fixture(scope="module")
-def good_model(tmp_path_factory):
-    path = tmp_path_factory.mktemp("model") / "model.json"
-    invoke(["fit", SAMPLE / "calibration", "-o", path])
-    return path
+def good_model(sample_model):
+    """A good model fitted on sample_data/calibration: conftest's sample_model, fitted once
+    a session (the cases only read it)."""
+    return sample_model
 
 
 SIX_CONFIG = ROOT / "configs" / "six-axis.yaml"

@@ -189,9 +189,16 @@ def test_decoupler_takes_six_outputs(six_model):
     np.testing.assert_allclose(got, six_model.decouple(u), rtol=0, atol=1e-12)
 
 
-def test_cli_fit_show_apply(tmp_path):
-    model = tmp_path / "m.json"
+@pytest.fixture(scope="module")
+def six_model_file(tmp_path_factory):
+    """`fsdecouple fit` of the six-axis sample, run once for the CLI tests below."""
+    model = tmp_path_factory.mktemp("six") / "m.json"
     invoke(["fit", SIX / "calibration", "-c", CONFIG, "-o", model])
+    return model
+
+
+def test_cli_fit_show_apply(tmp_path, six_model_file):
+    model = six_model_file
     shown = invoke(["show", model]).stdout
     assert "chi_mz:my" in shown and "u6" in shown
     out = tmp_path / "f.csv"
@@ -552,14 +559,11 @@ def test_simulate_six_axis_with_a_gross_error_moves_one_prime_output(tmp_path):
     assert "fx, fy, fz, mx, my, mz" in bad.stderr and not (tmp_path / "bad").exists()
 
 
-def test_validate_shows_mixed_unit_errors_in_full_scale_only(tmp_path):
+def test_validate_shows_mixed_unit_errors_in_full_scale_only(six_model_file, sample_model):
     """Forces and moments have no one unit: the table keeps % F.S. and drops the
     absolute columns a 3-axis model shows in its load unit."""
-    model = tmp_path / "m.json"
-    invoke(["fit", SIX / "calibration", "-c", CONFIG, "-o", model])
-    shown = invoke(["validate", model, SIX / "calibration", "-c", CONFIG]).stdout
+    shown = invoke(["validate", six_model_file, SIX / "calibration", "-c", CONFIG]).stdout
     assert "max % F.S." in shown and "N / N·m]" not in shown
     assert "no one unit, so the errors are in % F.S. only" in shown.replace("\n", " ")
-    three = tmp_path / "m3.json"
-    invoke(["fit", SAMPLE / "calibration", "-o", three])
-    assert "max [N]" in invoke(["validate", three, SAMPLE / "calibration"]).stdout
+    # sample_model (conftest.py): `fsdecouple fit` of sample_data/calibration
+    assert "max [N]" in invoke(["validate", sample_model, SAMPLE / "calibration"]).stdout
