@@ -233,7 +233,15 @@ def test_tangent_beats_kernel_on_loads_up_to_120_percent_of_full_scale(tmp_path)
 
     Worst axis's RMS force error [% F.S.]: on these seeds the tangent gives
     0.10-0.12, the kernel sum 0.12-0.19 (the floor of 0.5 mV noise is ~0.05).
+
+    Limits from the scatter over seeds 0-23 (this procedure per seed): tangent / kernel
+    per seed mean 0.69, sd 0.13, max 0.95 (seed 19; 0.86 for seed 0), below 1 on all
+    24; the ratio of the means over three consecutive seeds mean 0.66, sd 0.085, max
+    0.84 (0.75 for seeds 0-2).  So per seed at most SEED_LIMIT = 1.2 (the max x 1.25:
+    one seed's fit moves between machines) and over the three at most MEAN_LIMIT =
+    0.92 (mean + 3 sd, the max x 1.1): the tangent is better on average.
     """
+    seed_limit, mean_limit = 1.2, 0.92  # SEED_LIMIT, MEAN_LIMIT above
     sensor = SimulatedSensor()
     worst = {"tangent": [], "kernel": []}
     for seed in range(3):
@@ -251,8 +259,8 @@ def test_tangent_beats_kernel_on_loads_up_to_120_percent_of_full_scale(tmp_path)
             err = (model.decouple(u) - f) / np.asarray(settings.full_scale)
             worst[mode].append(100 * np.sqrt((err ** 2).mean(axis=0)).max())
     t, k = np.array(worst["tangent"]), np.array(worst["kernel"])
-    assert (t < k).all(), worst
-    assert t.mean() < 0.85 * k.mean(), worst
+    assert (t <= seed_limit * k).all(), worst
+    assert t.mean() < mean_limit * k.mean(), worst
 
 
 

@@ -50,6 +50,8 @@ def test_omega_is_least_squares_through_origin(calib):
 
 
 def test_decoupling_reduces_interference_error(model):
+    # gamma_after / gamma_before, worst axis, over simulate's seeds 0-23: mean 0.126,
+    # sd 0.014, max 0.158 (0.108 for the fixture's seed 7): 0.5 is 3x the max
     for axis in AXES:
         assert model.report.gamma_after[axis] < 0.5 * model.report.gamma_before[axis]
 
@@ -79,6 +81,8 @@ def test_task_forces_close_to_truth(model, sim_dir):
     u = volts[["ux", "uy", "uz"]].to_numpy()
     u = u - u[:200].mean(axis=0)  # the log starts with 200 unloaded rows
     err = np.abs(model.decouple(u) - truth) / np.array([100.0, 100.0, 150.0])
+    # over simulate's seeds 0-23: max error mean 0.0025, sd 0.0003, max 0.0033 F.S.
+    # (0.0021 for seed 7), and err / initial mean 0.11, max 0.14: limits above the max x 1.25
     assert err.max() < 0.005
     initial = np.abs(model.initial_forces(u) - truth) / np.array([100.0, 100.0, 150.0])
     assert err.max() < 0.3 * initial.max()
@@ -132,9 +136,10 @@ def test_full_scale_scaling_handles_millivolts(sim_dir, settings):
     assert not any("kernel widths" in w for w in v_model.warnings)
     u = np.array([[0.5, -0.4, -0.7], [-1.0, 0.8, -0.2]])
     # The same normalised problem up to rounding; libsvm's stopping tolerance 0.001
-    # lets such solutions differ by up to ~0.1 N (0.1 % F.S.), so allow 0.2 N.
+    # lets such solutions differ by up to ~0.1 N (0.1 % F.S.), so allow 0.2 N (over
+    # simulate's seeds 0-23: mean 0.042, sd 0.025, max 0.103 N; 0.072 for seed 7).
     np.testing.assert_allclose(scaled.decouple(u * 1e3), v_model.decouple(u), atol=0.2)
-    for axis in AXES:
+    for axis in AXES:  # seeds 0-23: worst axis mean 0.13, max 0.15
         assert scaled.report.gamma_after[axis] < 0.5 * scaled.report.gamma_before[axis]
 
 

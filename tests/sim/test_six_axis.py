@@ -139,7 +139,8 @@ def test_a_component_without_a_sweep_is_refused(six_settings):
 
 def test_fit_recovers_the_simulated_slopes(six_model):
     truth = six_axis_sensor(0)
-    # 126 points a slope at 0.5 mV noise on ~1.5 V: k to about 1e-4 relative
+    # 126 points a slope at 0.5 mV noise on ~1.5 V: k to about 1e-4 relative (worst
+    # of sensors of seeds 0-23: mean 0.9e-4, max 2.2e-4)
     np.testing.assert_allclose(six_model.k, truth.k, rtol=1e-3)
     assert len(six_model.chi) == 30
     assert six_model.chi["my:fz"].output_axis == 4 and six_model.chi["my:fz"].input_axis == 2
@@ -151,7 +152,8 @@ def test_fitted_chi_follow_the_true_coupling(six_model):
         b = c.input_axis
         f = np.linspace(-0.6, 0.6, 50) * truth.full_scale[b]
         # in the b sweeps u_b = k_b f_b exactly (eq. 2), so chi_ab(k_b f) = phi_ab(f) (eq. 4);
-        # 8 sigma of the 0.5 mV noise bounds an SVR fit to 126 noisy points
+        # 8 sigma of the 0.5 mV noise bounds an SVR fit to 126 noisy points (the worst
+        # chi of sensors of seeds 0-23: mean 1.47, max 1.80 sigma)
         assert np.abs(c(truth.k[b] * f) - truth.phi(name, f)).max() < 8 * truth.noise, name
 
 
@@ -167,6 +169,8 @@ def test_fitted_offsets_are_closer_to_the_truth_than_the_zero_rows(six_settings)
         got = from_table(t, replace(six_settings, zero=method)).offsets
         err[method] = np.sqrt(np.mean((got[list(OUTPUTS)].to_numpy()
                                        - true[list(OUTPUTS)].to_numpy()) ** 2))
+    # over seeds 0-23: rows / sigma mean 1.01, sd 0.056, range 0.87-1.11; fit / rows
+    # mean 0.26, sd 0.021, max 0.31: both limits beyond the max x 1.25
     assert err["rows"] == pytest.approx(sensor.noise, rel=0.2)  # one zero row: sigma
     assert err["fit"] < 0.6 * err["rows"]
 
@@ -438,9 +442,12 @@ def test_validate_accepts_combined_loads(six_model, six_settings, tmp_path):
     assert any("20 combined-load points" in w for w in doc["warnings"])
     rec = {(r["axis"], r["method"], r["metric"]): r["value"] for r in doc["records"]
            if r["range"] == "calibrated"}
-    # the combined points are decoupled as well as single loads: both near the noise
+    # the combined points are decoupled as well as single loads: both near the noise.
+    # Over sensors and sets of seeds 0-23 (set seed + 9): fy / fx mean 1.05, sd 0.17,
+    # max 1.41; fy / initial mean 0.12, sd 0.025, max 0.17 (0.11 here).  Limits: 3 and
+    # 0.25, above the max x 1.25 (0.22); undecoupled combined points are 1 x initial.
     assert rec[("fy", "model", "rms_error")] < 3 * rec[("fx", "model", "rms_error")]
-    assert rec[("fy", "model", "rms_error")] < 0.2 * rec[("fy", "initial", "rms_error")]
+    assert rec[("fy", "model", "rms_error")] < 0.25 * rec[("fy", "initial", "rms_error")]
 
 
 @pytest.mark.slow
