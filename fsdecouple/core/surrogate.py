@@ -198,24 +198,34 @@ LOAD_CHECK_MIN_POINTS = 16
 
 
 def spot_check(chi, table: ChiSurrogate) -> tuple[float, float]:
-    """``(largest |table - chi|, where)`` at interval midpoints: a model file's check at load.
+    """``(largest error, where)`` of a table against its chi: a model file's check at load.
 
-    Midpoints are points of the check grid that ``max_error`` was measured on (so
-    a table as fit built it passes exactly), and each depends on both knot values
-    and both slopes of its interval: every midpoint when the budget
-    (:data:`LOAD_CHECK_BUDGET`) allows, else at least
-    :data:`LOAD_CHECK_MIN_POINTS` spread evenly over the table.
+    On each interval checked, the knot values and slopes at both ends against chi and
+    chi' (which fix the interval's cubic: a table is the Hermite interpolant of chi, so
+    no edit of values and slopes can hide between check points), and the midpoint
+    against chi (the interpolation error, measured on the check grid at fit).  A slope
+    error d is counted as the largest value error it makes inside its intervals,
+    |d| h max|H10| = 4 |d| h / 27 on a step h.  Every interval when the budget
+    (:data:`LOAD_CHECK_BUDGET`) allows, else at least :data:`LOAD_CHECK_MIN_POINTS`
+    spread evenly over the table.
     """
     n = table.intervals
-    count = min(n, max(LOAD_CHECK_MIN_POINTS, int(LOAD_CHECK_BUDGET // max(1, chi.support_vectors.size))))
+    per_interval = 3 * max(1, chi.support_vectors.size)  # a midpoint, a knot's value and slope
+    count = min(n, max(LOAD_CHECK_MIN_POINTS, int(LOAD_CHECK_BUDGET // per_interval)))
     i = np.unique(np.linspace(0, n - 1, count).round().astype(np.intp))
-    # check_points' expression for the midpoints (sub = 1/2), so the same doubles
+    # check_points' expression for the midpoints (sub = 1/2), knots' for the knots, so
+    # the same doubles as the fit's
     x = table.lo + (table.hi - table.lo) * (i / n + 0.5 / n)
+    k = np.unique(np.concatenate([i, i + 1]))
+    xk = table.lo + (table.hi - table.lo) * k / n
+    h = (table.hi - table.lo) / n
     with np.errstate(all="ignore"):
-        err = np.abs(table(x) - chi(x))
+        err = np.concatenate([np.abs(table(x) - chi(x)),
+                              np.abs(table.values[k] - chi(xk)),
+                              np.abs(table.slopes[k] - _slope_fn(chi)(xk)) * (4 * h / 27)])
     err = np.where(np.isnan(err), np.inf, err)
     worst = int(np.argmax(err))
-    return float(err[worst]), float(x[worst])
+    return float(err[worst]), float(np.concatenate([x, xk, xk])[worst])
 
 
 def _interleave(even: np.ndarray, odd: np.ndarray) -> np.ndarray:
