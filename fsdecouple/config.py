@@ -22,6 +22,8 @@ from .wrench import Frame, parse_frame, parse_rotation
 from .yamlfile import SafeUniqueLoader, read_yaml  # noqa: F401 (the loader, for tests)
 
 SCALINGS = ("none", "full_scale")
+NOT_CSV = "0123456789eE+-\"\r\n"  # csv: characters that stand inside a number or a quoted cell
+CSV_CHARS = {"decimal": "'.' or ','", "sep": "one character that is no digit, sign, 'e', quote or line break"}
 ZERO_MODES = ("rows", "fit")  # how sweeps are zeroed: Section 3, or zero.fitted_offsets
 # chi beyond its range (core/extrapolation.py): tangent for new fits, kernel for older files
 EXTRAPOLATIONS = DEFAULT_EXTRAPOLATION, LEGACY_EXTRAPOLATION = ("tangent", "kernel")
@@ -137,9 +139,8 @@ _SVR_KEYS = {"C", "epsilon", "gamma", "delta2", "tolerance"}
 def _unknown(key: str, allowed: set[str], where: str) -> ConfigError:
     hint = difflib.get_close_matches(key, sorted(allowed), n=1)
     did_you_mean = f" (did you mean '{hint[0]}'?)" if hint else ""
-    return ConfigError(
-        f"{where}: unknown key '{key}'{did_you_mean}; allowed: {', '.join(sorted(allowed))}"
-    )
+    return ConfigError(f"{where}: unknown key '{key}'{did_you_mean}; "
+                       f"allowed: {', '.join(sorted(allowed))}")
 
 
 def _number(value: Any, where: str, *, positive: bool = False) -> float:
@@ -301,9 +302,7 @@ FULL_SCALE_RANGE = (1e-12, 1e12)
 
 def settings_from_dict(raw: Any, source: str = "config") -> Settings:
     """Validate a parsed YAML document into :class:`Settings` (unknown keys refused)."""
-    if raw is None:
-        raw = {}
-    raw = _mapping(raw, source)
+    raw = _mapping({} if raw is None else raw, source)
     for key in raw:
         if key not in _TOP_KEYS:
             raise _unknown(str(key), _TOP_KEYS, source)
@@ -368,8 +367,9 @@ def settings_from_dict(raw: Any, source: str = "config") -> Settings:
         for key, value in csv.items():
             if key not in ("sep", "decimal"):
                 raise _unknown(str(key), {"sep", "decimal"}, f"{source}: csv")
-            if not isinstance(value, str) or len(value) != 1:
-                raise ConfigError(f"{source}: csv: {key}: expected one character, found {value!r}")
+            if not isinstance(value, str) or len(value) != 1 or value in NOT_CSV \
+                    or (key == "decimal" and value not in ".,"):
+                raise ConfigError(f"{source}: csv: {key}: expected {CSV_CHARS[key]}, found {value!r}")
             kw[key] = value
         if kw.get("sep", ",") == kw.get("decimal", "."):
             raise ConfigError(f"{source}: csv: sep and decimal must differ")

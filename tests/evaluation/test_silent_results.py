@@ -6,6 +6,7 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
+import pytest
 from conftest import assert_one_line_error, invoke
 
 from fsdecouple.core.model import FORCE_LIMIT
@@ -50,3 +51,20 @@ def test_inf_voltage_is_one_rule_in_csv_and_parquet(sample_model, tmp_path):
         r = invoke(["apply", sample_model, tmp_path / name, "-o", tmp_path / f"out-{name}"], code=2)
         assert_one_line_error(r, name, "row 3", "column 'uy'", "expected a finite number")
         assert not (tmp_path / f"out-{name}").exists()
+
+
+@pytest.mark.parametrize("csv, key", [("{decimal: e}", "decimal"), ("{decimal: ';'}", "decimal"),
+                                      ("{sep: '1'}", "sep"), ("{sep: '-'}", "sep"),
+                                      ("{sep: '\"'}", "sep")])
+def test_a_csv_dialect_that_misreads_numbers_is_refused(tmp_path, csv, key):
+    """decimal 'e' was accepted, and apply wrote 1.08651756 as '1e08651756'."""
+    from fsdecouple.config import load_config
+    from fsdecouple.errors import ConfigError
+
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(f"csv: {csv}\n")
+    with pytest.raises(ConfigError, match=f"csv: {key}: expected"):
+        load_config(cfg)
+    cfg.write_text("csv: {sep: ';', decimal: ','}\n")
+    s = load_config(cfg)
+    assert (s.sep, s.decimal) == (";", ",")  # the European dialect still reads
