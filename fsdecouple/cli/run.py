@@ -36,9 +36,10 @@ def apply(
         list[Path], typer.Argument(help="Voltage log with ux, uy, uz: CSV, or Parquet (.parquet); "
                                         "or several logs, globs or directories (-o OUT_DIR/).")
     ],
-    output: Annotated[
-        Path, typer.Option("--output", "-o", help="Forces file to write: CSV, or Parquet (.parquet); "
-                                                  "for several logs, a directory.")
+    output: Annotated[  # text, not a Path, which would drop the trailing / of OUT_DIR/
+        str, typer.Option("--output", "-o", metavar="OUTPUT",
+                          help="Forces file to write: CSV, or Parquet (.parquet); for several "
+                               "logs, a directory (a trailing / makes it one).")
     ],
     config: ConfigOpt = None,
     tare: Annotated[
@@ -77,13 +78,13 @@ def apply(
     from ..logs.reader import is_parquet
 
     if is_batch(voltages, output):
-        return _apply_many(model_file, voltages, output, config, tare, zero, unit, refine,
+        return _apply_many(model_file, voltages, Path(output), config, tare, zero, unit, refine,
                            round_trip, engine, scheduler, workers, force, json_out)
     with user_errors():
         if engine != "local" or scheduler is not None or workers is not None or json_out:
             raise InputError("--engine, --scheduler, --workers and --json are for many logs: "
                              "give the output directory with a trailing / (-o OUT_DIR/)")
-        voltages = voltages[0]
+        voltages, output = voltages[0], Path(output)
         model = load_model(model_file)
         if refine is not None:
             model = model.refined(refine)

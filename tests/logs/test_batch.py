@@ -192,3 +192,12 @@ def test_six_axis_logs_and_datasets_get_all_six_components(tmp_path, how):
     assert got.equals(want.cast(got.schema))
     csv = single(model, logs / "log.csv", tmp_path / "log-out.csv", *how)
     assert (tmp_path / "out" / "log.csv").read_bytes() == csv.read_bytes()
+
+
+def test_one_log_to_an_output_ending_in_a_slash_is_the_many_log_form(sample_model, tmp_path):
+    """`-o forces/` wrote a regular file 'forces': the trailing / was lost on the way in."""
+    out = tmp_path / "forces"
+    invoke(["apply", sample_model, SAMPLE / "task_voltages.csv", "--tare", 200, "-o", f"{out}/"])
+    assert out.is_dir() and (out / "task_voltages.csv").is_file()
+    invoke(["apply", sample_model, SAMPLE / "task_voltages.csv", "-o", tmp_path / "f.csv"])
+    assert (tmp_path / "f.csv").is_file()  # without the slash: one file, as before
