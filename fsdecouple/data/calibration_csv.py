@@ -59,6 +59,8 @@ def _repetition_labels(cells, path: Path, column: str, rows, decimal: str) -> np
     values, bad = np.zeros(len(uniq), dtype=np.int64), np.zeros(len(uniq), dtype=bool)
     for j, t in enumerate(uniq):
         try:
+            if "_" in t:  # Python reads 1_0 as 10; a spreadsheet does not
+                raise InvalidOperation
             value = Decimal(t)
         except InvalidOperation:
             bad[j] = True
