@@ -106,6 +106,11 @@ def validate(
     if settings.layout != model.layout:
         raise InputError(f"the config names components {', '.join(settings.layout.loads)}, the "
                          f"model {', '.join(model.layout.loads)}; use the calibration's config")
+    if settings.units != model.settings.units:
+        def shown(u):
+            return f"loads in {', '.join(u.loads) or u.load}, outputs in {', '.join(u.outputs) or u.output}"
+        raise InputError(f"the config reads the set with {shown(settings.units)}; the model was "
+                         f"calibrated with {shown(model.settings.units)}: use the calibration's config")
     cs = load_calibration(set_path, replace(settings, min_repetitions=1), combined=True)
     points = cs.points
     u, loads = cs.voltages.astype(float), cs.forces.astype(float)

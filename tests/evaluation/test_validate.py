@@ -15,7 +15,7 @@ from dataclasses import replace
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import SAMPLE, invoke
+from conftest import ROOT, SAMPLE, assert_one_line_error, invoke
 
 from fsdecouple.axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from fsdecouple.core.modelfile import load_model
@@ -226,3 +226,11 @@ def test_cli_prints_file_text_literally(model_file, tmp_path):
     validation_table().to_csv(path, index=False)
     r = invoke(["validate", model_file, path])
     assert "val[red]x[bold].csv" in r.stdout.replace("\n", "")
+
+
+def test_a_set_read_in_other_units_than_the_models_is_refused(sample_model, tmp_path):
+    """An N/V model scored on a gf/count set exited 0 with figures in nobody's units."""
+    r = invoke(["validate", sample_model, SAMPLE / "loadcell" / "validation.csv", "-c",
+                ROOT / "configs" / "loadcell.yaml", "-o", tmp_path / "v.json"], code=2)
+    assert_one_line_error(r, "gf", "count", "N", "V", "calibration's config")
+    assert not (tmp_path / "v.json").exists()
