@@ -20,6 +20,7 @@ import pandas as pd
 from .. import __version__
 from ..axes import labels_in, load_name
 from ..core.metrics import pct
+from ..errors import InputError, printable
 from ..evaluation.checks import assumption_checks
 from ..evaluation.cv_results import gamma_index, test_name
 from .html import CSS, badge, badge_span, cell, figure_html, note, table, th, tr, worse
@@ -330,6 +331,15 @@ def _checks(model, cv) -> str:
 
 
 
+def _check_cv_fits(model, cv: dict) -> None:
+    """A cv.json of another sensor's layout (a six-axis cv for a 3-axis model) is refused."""
+    axes = sorted({r.get("axis") for r in cv.get("records") or [] if isinstance(r, dict)})
+    unknown = [str(a) for a in axes if a not in model.layout.labels]
+    if unknown:
+        raise InputError(f"cv.json scores components {', '.join(map(printable, axes))}; the model's "
+                         f"are {', '.join(model.layout.labels)}: give the cv.json of its calibration")
+
+
 def build_report(model, cv: dict | None = None, calib=None) -> Report:
     """Render the calibration report of ``model``.
 
@@ -341,6 +351,8 @@ def build_report(model, cv: dict | None = None, calib=None) -> Report:
     calib : CalibrationSet, optional
         The calibration set, to plot its points.
     """
+    if cv is not None:
+        _check_cv_fits(model, cv)
     figs: dict[str, bytes] = {}
     body = [f"<h1>Calibration report: {escape(model.settings.sensor)}</h1>\n",
             _header(model, cv)]

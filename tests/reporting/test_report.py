@@ -404,3 +404,15 @@ def test_held_out_labels_name_the_repetition(tmp_path, sample_model, cv_json):
     invoke(["report", sample_model, "--cv", cv_json, "-o", tmp_path / "r.html"])
     text = (tmp_path / "r.html").read_text(encoding="utf-8")
     assert "test I (rep 3)" in text and "test II (rep 4)" in text
+
+
+def test_a_cv_json_of_another_layout_is_refused(tmp_path, sample_model, cv_json):
+    """A six-axis cv.json for a 3-axis model was accepted and reported as if it fitted."""
+    doc = json.loads(cv_json.read_text())
+    rename = {"x": "fx", "y": "fy", "z": "fz"}
+    for r in doc["records"]:
+        r["axis"] = rename.get(r["axis"], r["axis"])
+    cv = tmp_path / "cv6.json"
+    cv.write_text(json.dumps(doc))
+    r = invoke(["report", sample_model, "--cv", cv, "-o", tmp_path / "r.html"], code=2)
+    assert "fx" in r.stderr and "x, y, z" in r.stderr and not (tmp_path / "r.html").exists()
