@@ -11,6 +11,15 @@ import pytest
 from conftest import SAMPLE, invoke
 
 
+@pytest.fixture(scope="module")
+def sim_model_file(tmp_path_factory, sim_dir):
+    """`fsdecouple fit` of the session's simulated set, once a module: the tests below only
+    read it (test_fit_apply_round_trip runs and checks the command itself)."""
+    path = tmp_path_factory.mktemp("sim_model") / "model.json"
+    invoke(["fit", sim_dir / "calibration", "-o", path])
+    return path
+
+
 def test_fit_apply_round_trip(tmp_path, sim_dir):
     model = tmp_path / "model.json"
     r = invoke(["fit", sim_dir / "calibration", "-o", model])
@@ -56,7 +65,7 @@ def test_ingest_summary_and_tidy_output(tmp_path):
     assert np.abs(zero.groupby(["repetition", "axis"])[["ux", "uy", "uz"]].mean()).max().max() < 1e-12
 
 
-def test_single_csv_with_repetition_column_gives_same_model(tmp_path, sim_dir):
+def test_single_csv_with_repetition_column_gives_same_model(tmp_path, sim_dir, sim_model_file):
     frames = []
     for rep in range(1, 7):
         df = pd.read_csv(sim_dir / "calibration" / f"rep{rep}.csv", dtype=str)
@@ -64,22 +73,20 @@ def test_single_csv_with_repetition_column_gives_same_model(tmp_path, sim_dir):
         frames.append(df)
     single = tmp_path / "all.csv"
     pd.concat(frames).to_csv(single, index=False)
-    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    a, b = tmp_path / "a.json", sim_model_file
     invoke(["fit", single, "-o", a])
-    invoke(["fit", sim_dir / "calibration", "-o", b])
     da, db = json.loads(a.read_text()), json.loads(b.read_text())
     assert da["chi"] == db["chi"] and da["omega"] == db["omega"]
 
 
-def test_axis_column_is_optional(tmp_path, sim_dir):
+def test_axis_column_is_optional(tmp_path, sim_dir, sim_model_file):
     """Without `axis`, sweeps are inferred from consecutive rows: same model."""
     d = tmp_path / "noaxis"
     d.mkdir()
     for f in (sim_dir / "calibration").glob("*.csv"):
         pd.read_csv(f, dtype=str).drop(columns="axis").to_csv(d / f.name, index=False)
-    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    a, b = tmp_path / "a.json", sim_model_file
     invoke(["fit", d, "-o", a])
-    invoke(["fit", sim_dir / "calibration", "-o", b])
     assert json.loads(a.read_text())["chi"] == json.loads(b.read_text())["chi"]
 
 
@@ -98,11 +105,10 @@ def test_show_and_flags_override(tmp_path):
     assert "chi_zy" in invoke(["show", m]).stdout
 
 
-def test_rotation_from_config(tmp_path):
+def test_rotation_from_config(tmp_path, sample_model):
     cfg = tmp_path / "rot.yaml"
     cfg.write_text("rotation: [[0, -1, 0], [1, 0, 0], [0, 0, 1]]\n")
-    plain, rotated = tmp_path / "p.json", tmp_path / "r.json"
-    invoke(["fit", SAMPLE / "calibration", "-o", plain])
+    plain, rotated = sample_model, tmp_path / "r.json"  # sample_model: the same fit, no config
     invoke(["fit", SAMPLE / "calibration", "-o", rotated, "-c", cfg])
     from fsdecouple import load_model
     u = np.array([[0.3, -0.2, -0.5]])
@@ -110,9 +116,8 @@ def test_rotation_from_config(tmp_path):
     np.testing.assert_allclose(load_model(rotated).decouple(u)[0], [-f[1], f[0], f[2]], rtol=1e-12)
 
 
-def test_zero_option_equals_tare(tmp_path, sim_dir):
-    m = tmp_path / "m.json"
-    invoke(["fit", sim_dir / "calibration", "-o", m])
+def test_zero_option_equals_tare(tmp_path, sim_dir, sim_model_file):
+    m = sim_model_file
     log = pd.read_csv(sim_dir / "task_voltages.csv")
     offs = log[["ux", "uy", "uz"]].iloc[:50].mean().to_numpy()
     a, b = tmp_path / "a.csv", tmp_path / "b.csv"
@@ -123,9 +128,8 @@ def test_zero_option_equals_tare(tmp_path, sim_dir):
                                atol=1e-9)
 
 
-def test_apply_keeps_rows_with_missing_values(tmp_path, sim_dir):
-    m = tmp_path / "m.json"
-    invoke(["fit", sim_dir / "calibration", "-o", m])
+def test_apply_keeps_rows_with_missing_values(tmp_path, sim_model_file):
+    m = sim_model_file
     log = tmp_path / "log.csv"
     log.write_text("t,ux,uy,uz\n0,0.1,0.0,-0.1\n1,,0.0,-0.1\n2,0.2,0.1,-0.2\n")
     out = tmp_path / "f.csv"

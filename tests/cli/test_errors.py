@@ -99,17 +99,15 @@ def test_model_of_another_format(tmp_path):
     fails(["apply", bad, SAMPLE / "task_voltages.csv"], tmp_path, "not an fsdecouple model")
 
 
-def test_voltage_log_missing_column(tmp_path):
-    m = tmp_path / "m.json"
-    invoke(["fit", CAL, "-o", m])
+def test_voltage_log_missing_column(tmp_path, sample_model):
+    m = sample_model  # conftest: `fit` of sample_data/calibration, once a session
     log = tmp_path / "log.csv"
     log.write_text("t,ux,uy\n0,0.1,0.2\n")
     fails(["apply", m, log], tmp_path, "log.csv", "missing column 'uz'")
 
 
-def test_voltage_log_non_numeric(tmp_path):
-    m = tmp_path / "m.json"
-    invoke(["fit", CAL, "-o", m])
+def test_voltage_log_non_numeric(tmp_path, sample_model):
+    m = sample_model
     log = tmp_path / "log.csv"
     log.write_text("t,ux,uy,uz\n0,0.1,0.2,0.3\n1,0.1,abc,0.3\n")
     fails(["apply", m, log], tmp_path, "log.csv", "row 3", "column 'uy'", "'abc'")

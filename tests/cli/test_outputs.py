@@ -56,10 +56,9 @@ def test_simulate_negative_seed():
 
 
 @pytest.fixture(scope="module")
-def model(tmp_path_factory):
-    path = tmp_path_factory.mktemp("m") / "model.json"
-    invoke(["fit", SAMPLE / "calibration", "-o", path])
-    return path
+def model(sample_model):
+    """conftest's sample_model: `fit` of sample_data/calibration, once a session."""
+    return sample_model
 
 
 def test_report_png_failure_creates_no_directory(tmp_path, model):

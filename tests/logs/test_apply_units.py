@@ -96,10 +96,9 @@ def test_volts_millivolts_and_counts_give_the_same_forces(per_unit, unit):
 
 
 @pytest.fixture(scope="module")
-def sample_model_file(tmp_path_factory):
-    path = tmp_path_factory.mktemp("model") / "model.json"
-    invoke(["fit", SAMPLE / "calibration", "-o", path])
-    return path
+def sample_model_file(sample_model):
+    """conftest's sample_model: `fit` of sample_data/calibration, once a session."""
+    return sample_model
 
 
 def test_unit_gf_converts_the_forces(sample_model_file, tmp_path):
@@ -288,10 +287,9 @@ def test_apply_and_c_saturation_agree_without_a_tare(tmp_path):
     assert (got == "saturated").sum() > 1000
 
 
-def test_a_config_in_other_units_than_the_model_is_refused(tmp_path):
+def test_a_config_in_other_units_than_the_model_is_refused(tmp_path, sample_model):
     """A log in counts read with a model fitted in volts would be off by orders of magnitude."""
-    model = tmp_path / "m.json"
-    invoke(["fit", SAMPLE / "calibration", "-o", model, "--no-verdict"])
+    model = sample_model  # fitted in volts (conftest)
     cfg = tmp_path / "counts.yaml"
     cfg.write_text("units: {load: N, output: count}\n")
     out = tmp_path / "f.csv"
