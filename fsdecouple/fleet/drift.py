@@ -81,8 +81,9 @@ def compare(old: CouplingErrorModel | str | Path, new: CouplingErrorModel | str 
         c_new = new.chi[name]
         lo = max(c_old.input_range[0], c_new.input_range[0])
         hi = min(c_old.input_range[1], c_new.input_range[1])
-        if not lo <= hi:
-            raise InputError(f"chi {name}: the two calibrations share no range of "
+        if not _shared(lo, hi, c_old.input_range, c_new.input_range):
+            raise InputError(f"chi {name}: the two calibrations share less than "
+                             f"{100 * MIN_SHARED:.0f} % of their ranges of "
                              f"{_output(old, c_old.input_axis)} "
                              f"(old {_range(c_old.input_range)}, new {_range(c_new.input_range)})")
         u = np.linspace(lo, hi, CHI_POINTS)
@@ -148,15 +149,27 @@ def _check_comparable(old: CouplingErrorModel, new: CouplingErrorModel, a: str, 
                          "compare models in the same units")
 
 
+# The range both calibrations cover must be at least this fraction of each one's span:
+# ranges that meet only at 0 (one calibrated in tension, one in compression) share a
+# point, where every chi is near 0, and would report a drift of nothing.
+MIN_SHARED = 0.1
+
+
+def _shared(lo: float, hi: float, r_old, r_new) -> bool:
+    span = hi - lo
+    return bool(span >= MIN_SHARED * (r_old[1] - r_old[0]) and span >= MIN_SHARED * (r_new[1] - r_new[0])
+                and span > 0)
+
+
 def _output_grid(old: CouplingErrorModel, new: CouplingErrorModel) -> np.ndarray:
     """Combined outputs spanning the calibrated range both models cover, shape (n, N) [V]."""
     r_old, r_new = old.calibrated_range, new.calibrated_range
     lo, hi = np.maximum(r_old[:, 0], r_new[:, 0]), np.minimum(r_old[:, 1], r_new[:, 1])
-    bad = np.flatnonzero(~(lo <= hi))
-    if bad.size:
+    bad = [i for i in range(len(lo)) if not _shared(lo[i], hi[i], r_old[i], r_new[i])]
+    if bad:
         a = old.layout.labels[bad[0]]
-        raise InputError(f"component {a}: the two calibrations share no range of "
-                         f"{_output(old, bad[0])} "
+        raise InputError(f"component {a}: the two calibrations share less than "
+                         f"{100 * MIN_SHARED:.0f} % of their ranges of {_output(old, bad[0])} "
                          f"(old {_range(r_old[bad[0]])}, new {_range(r_new[bad[0]])})")
     # 21 points a component for three (9261 vectors); fewer for more components,
     # so the grid stays near 10^5 vectors (seven a component for six)

@@ -308,3 +308,22 @@ def test_fit_many_refuses_a_models_dir_inside_a_sensor(fleet, tmp_path):
     assert "inside the sensor directory" in r.stderr
     r = invoke(["fit-many", tmp_path / "none", "-o", tmp_path / "m"], 2)
     assert "not a directory" in r.stderr
+
+
+def test_ranges_that_meet_only_at_zero_are_not_compared(tmp_path):
+    """One calibration in tension, one in compression (x and y), sharing the single
+    point 0: compare reported a drift of 0.01-0.08 % with no warning."""
+    config = tmp_path / "three.yaml"
+    config.write_text(THREE_REPS)
+    for name, keep in (("pull", lambda v: v >= 0), ("push", lambda v: v <= 0)):
+        (tmp_path / name).mkdir()
+        for r in (1, 2, 3):
+            lines = (SAMPLE / "calibration" / f"rep{r}.csv").read_text().splitlines()
+            rows = [line for line in lines[1:]
+                    if line.split(",")[0] == "z" or keep(float(line.split(",")[1 + "xyz".index(line[0])]))]
+            (tmp_path / name / f"rep{r}.csv").write_text("\n".join([lines[0], *rows]) + "\n")
+        _fit(tmp_path / name, config, tmp_path / f"{name}.json")
+    r = invoke(["compare", tmp_path / "pull.json", tmp_path / "push.json"], 2)
+    assert "share less than 10 %" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    with pytest.raises(InputError, match="share less than"):
+        compare(load_model(tmp_path / "pull.json"), load_model(tmp_path / "push.json"))
