@@ -27,6 +27,7 @@ class Job:
     input: Path
     rel: Path  # its output, relative to OUT_DIR
     parts: tuple[Path, ...] = ()
+    problem: str | None = None  # why a name found in a directory cannot be read as a log
 
     @property
     def dataset(self) -> bool:

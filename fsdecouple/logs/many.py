@@ -30,6 +30,7 @@ import contextlib
 import glob
 import os
 import shutil
+import stat
 import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -123,11 +124,27 @@ def _walk(directory: Path, base: Path) -> list[Job]:
     for p in sorted(directory.iterdir(), key=lambda p: natural_key(p.name)):
         if p.name.startswith("."):
             continue
+        named_like_a_log = p.suffix.lower() in LOG_SUFFIXES
         if p.is_dir():
-            jobs += _walk(p, base)
-        elif p.is_file() and p.suffix.lower() in LOG_SUFFIXES:
-            jobs.append(Job(p, p.relative_to(base)))
+            inside = _walk(p, base)
+            if named_like_a_log and not inside:
+                inside = [Job(p, p.relative_to(base), problem="a directory named like a log, "
+                                                              "holding none")]
+            jobs += inside
+        elif named_like_a_log:  # never passed over in silence: listed as failed if unreadable
+            jobs.append(Job(p, p.relative_to(base), problem=_not_a_log(p)))
     return jobs
+
+
+def _not_a_log(p: Path) -> str | None:
+    """Why an entry named like a log cannot be read as one (None: a regular file)."""
+    if p.is_file():
+        return None
+    if p.is_symlink() and not p.exists():
+        return "a symbolic link to nothing"
+    mode = p.stat().st_mode
+    kind = "a FIFO" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode) else "a device"
+    return f"{kind}, not a regular file (a directory's logs must be files)"
 
 
 def find_jobs(inputs) -> tuple[list[Job], list[Path]]:
@@ -246,7 +263,9 @@ def apply_many(model_path: str | Path, inputs, out_dir: str | Path, *, engine: s
     results = [FileResult(str(j.input), str(out / j.rel)) for j in jobs]
     todo = []
     for i, job in enumerate(jobs):
-        if (out / job.rel).exists() and not force:
+        if job.problem is not None:
+            results[i].error = f"{printable(job.input)}: {job.problem}; not decoupled"
+        elif (out / job.rel).exists() and not force:
             results[i].error = f"{printable(out / job.rel)}: already exists; pass --force to overwrite it"
         else:
             todo.append(i)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import shutil
 import sys
+from pathlib import Path
 
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -201,3 +202,30 @@ def test_one_log_to_an_output_ending_in_a_slash_is_the_many_log_form(sample_mode
     assert out.is_dir() and (out / "task_voltages.csv").is_file()
     invoke(["apply", sample_model, SAMPLE / "task_voltages.csv", "-o", tmp_path / "f.csv"])
     assert (tmp_path / "f.csv").is_file()  # without the slash: one file, as before
+
+
+def odd_entries(root: Path) -> Path:
+    """A directory of one good log beside a FIFO, a dangling link and a directory, each
+    named like a log."""
+    import os
+
+    logs = root / "odd"
+    logs.mkdir()
+    (logs / "good.csv").write_text((SAMPLE / "task_voltages.csv").read_text())
+    os.mkfifo(logs / "fifo.csv")
+    (logs / "dangling.csv").symlink_to(root / "nowhere.csv")
+    (logs / "folder.csv").mkdir()
+    return logs
+
+
+def test_entries_named_like_logs_that_are_not_files_are_listed_as_failed(sample_model, tmp_path):
+    """A FIFO, a dangling link or a directory named like a log was skipped with exit 0 and
+    never listed: each is now a failed log (exit 2), named with what it is."""
+    logs = odd_entries(tmp_path)
+    r = invoke(["apply", sample_model, logs, "-o", f"{tmp_path / 'out'}/", "--json"], code=2)
+    doc = json.loads(r.stdout)
+    errors = {Path(f["input"]).name: f["error"] for f in doc["files"]}
+    assert errors["good.csv"] is None and (tmp_path / "out" / "good.csv").is_file()
+    assert "FIFO" in errors["fifo.csv"] and "link to nothing" in errors["dangling.csv"]
+    assert "directory named like a log" in errors["folder.csv"]
+    assert sorted(Path(p).name for p in doc["failed"]) == ["dangling.csv", "fifo.csv", "folder.csv"]

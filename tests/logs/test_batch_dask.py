@@ -15,6 +15,7 @@ import socket
 import threading
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
@@ -283,3 +284,14 @@ def test_a_hive_partitioned_dataset_reads_back_whole_from_both_engines(sample_mo
         whole[engine] = readings[1].sort_values(["robot", "t"]).reset_index(drop=True)
     for c in ("fx", "fy", "fz"):
         np.testing.assert_array_equal(whole["local"][c].to_numpy(float), whole["dask"][c].to_numpy(float))
+
+
+def test_dask_lists_entries_named_like_logs_that_are_not_files(sample_model, tmp_path, cluster):
+    from test_batch import odd_entries
+
+    logs = odd_entries(tmp_path)
+    r = invoke(["apply", sample_model, logs, "-o", f"{tmp_path / 'out'}/", "--json", "--engine", "dask",
+                "--scheduler", cluster.scheduler_address], code=2)
+    doc = json.loads(r.stdout)
+    assert sorted(Path(p).name for p in doc["failed"]) == ["dangling.csv", "fifo.csv", "folder.csv"]
+    assert (tmp_path / "out" / "good.csv").is_file()
