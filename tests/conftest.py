@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import typer.testing
 from typer.testing import CliRunner
 
 from fsdecouple import load_calibration, load_config
@@ -14,6 +15,23 @@ from fsdecouple.sim.simulate import SimulatedSensor, simulate
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLE = ROOT / "sample_data"
+
+# typer's CliRunner builds the app's click command tree anew at every invoke: ~40 ms
+# of the ~50 ms a refused command takes, over a thousand invocations a run.  The tree
+# is the same each time (the commands' callbacks look their globals up when called,
+# so monkeypatching still works), so it is built once per app.
+_build_command = getattr(typer.testing, "_get_command", None)
+_commands: dict[int, tuple] = {}
+
+
+def _command_once(app):
+    if id(app) not in _commands:
+        _commands[id(app)] = (app, _build_command(app))  # the app kept: its id stays its own
+    return _commands[id(app)][1]
+
+
+if _build_command is not None:
+    typer.testing._get_command = _command_once
 
 
 @pytest.fixture(scope="session")
