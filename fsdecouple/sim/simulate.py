@@ -10,7 +10,10 @@ written as a lab's spreadsheet by :mod:`fsdecouple.sim.lab`.
 
 from __future__ import annotations
 
+import contextlib
 import numbers
+import os
+import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -245,6 +248,39 @@ def _whole(value: int, name: str, minimum: int) -> None:
         raise InputError(f"--{name} {value!r}: expected a whole number >= {minimum}")
 
 
+@contextlib.contextmanager
+def one_set(out: Path, n_reps: int, force: bool):
+    """Write a simulated set into ``out`` as one: runs into the same place take turns (an
+    exclusive lock named after the place, in the user's cache directory, so nothing is
+    made in the user's folders), and with ``force`` the repetition files of an earlier,
+    larger set (``calibration/rep7.csv`` beside a new set of six) are removed once the
+    new set is in place, so no set is ever read mixed."""
+    import fcntl
+    import hashlib
+
+    import platformdirs
+
+    locks = Path(platformdirs.user_cache_dir("fsdecouple")) / "locks"
+    name = hashlib.sha256(os.fsencode(out.resolve())).hexdigest()[:32]
+    try:
+        locks.mkdir(parents=True, exist_ok=True)
+        fd = os.open(locks / f"simulate-{name}.lock", os.O_RDWR | os.O_CREAT, 0o600)
+    except OSError:
+        fd = None  # no cache directory: runs into one place are then not kept apart
+    try:
+        if fd is not None:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+        if force and (out / "calibration").is_dir():
+            for path in (out / "calibration").iterdir():
+                m = re.fullmatch(r"rep(\d+)\.csv", path.name)
+                if m and not 1 <= int(m.group(1)) <= n_reps and path.is_file():
+                    path.unlink()
+    finally:
+        if fd is not None:
+            os.close(fd)  # and the lock with it
+
+
 def simulate(
     out_dir: str | Path,
     *,
@@ -289,10 +325,18 @@ def simulate(
         sensor = with_coupling(sensor or (load_cell_sensor() if layout == "lab"
                                           else SimulatedSensor()), coupling)
     if layout == "lab":
-        return _simulate_lab(out, seed=seed, gross_error=gross_error, sensor=sensor,
-                             force=force, repetitions=repetitions or 1, levels=levels or 4)
+        with one_set(out, 0, force=False):
+            return _simulate_lab(out, seed=seed, gross_error=gross_error, sensor=sensor,
+                                 force=force, repetitions=repetitions or 1, levels=levels or 4)
     sensor = sensor or SimulatedSensor()
     n_reps = repetitions or 6
+    with one_set(out, n_reps, force):
+        return _simulate_paper(out, seed=seed, gross_error=gross_error, sensor=sensor, force=force,
+                               n_reps=n_reps)
+
+
+def _simulate_paper(out: Path, *, seed: int, gross_error: GrossError | None,
+                    sensor: SimulatedSensor, force: bool, n_reps: int) -> list[Path]:
     for path in (*(out / "calibration" / f"rep{r}.csv" for r in range(1, n_reps + 1)),
                  out / "task_voltages.csv", out / "task_forces.csv"):
         if path.parent.is_dir():  # all or nothing: refuse before the first file is written

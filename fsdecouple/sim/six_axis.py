@@ -19,7 +19,7 @@ import pandas as pd
 from ..axes import Layout
 from ..errors import InputError
 from ..files import atomic_files, check_output
-from .simulate import SimulatedSensor, with_coupling, write_csv
+from .simulate import SimulatedSensor, one_set, with_coupling, write_csv
 
 COMPONENTS = ("fx", "fy", "fz", "mx", "my", "mz")
 OUTPUTS = ("u1", "u2", "u3", "u4", "u5", "u6")
@@ -145,7 +145,7 @@ def write_six_axis(out: str | Path, *, seed: int = 0, repetitions: int = 6, forc
     volt_fmt = {c: "%.7f" for c in layout.outputs}
     load_fmt = {c: "%.6f" for c in layout.loads}
     volts, loads = simulate_task(sensor, seed=seed)
-    with atomic_files(force=force) as group:
+    with one_set(out, repetitions, force), atomic_files(force=force) as group:
         for rep, g in table.groupby("repetition"):
             write_csv(g.drop(columns="repetition"), out / "calibration" / f"rep{rep}.csv",
                        {**load_fmt, **volt_fmt}, group)
