@@ -145,7 +145,7 @@ def test_a_candidate_worse_than_table2_on_any_axis_is_never_chosen(monkeypatch):
     settings = load_config()
     calib = load_calibration(SAMPLE, settings)
     chosen, record = tune_settings(calib, settings, grid=Grid(gamma=(5000.0,), C=(1000.0,),
-                                                              epsilon=(0.5,)), workers=1)
+                                                              epsilon=(0.5,)), workers=2)
     assert record["candidates"][1]["figure"] > record["candidates"][0]["figure"]
     assert record["chosen"] == 0 and chosen == settings
 
