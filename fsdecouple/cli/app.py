@@ -53,6 +53,14 @@ def _standard_streams() -> None:
     for name, mode in (("stdin", "r"), ("stdout", "w"), ("stderr", "w")):
         if getattr(sys, name) is None:
             setattr(sys, name, open(os.devnull, mode, encoding="utf-8"))  # noqa: SIM115
+    # an ASCII locale (LC_ALL=POSIX without Python's UTF-8 mode) cannot encode the
+    # gamma of a table header: tables show '?' in its place (one cell, so columns stay
+    # aligned), error lines an escape (\u03b3, so no name is lost); never a traceback
+    for stream, errors in ((sys.stdout, "replace"), (sys.stderr, "backslashreplace")):
+        encoding = (getattr(stream, "encoding", None) or "").lower().replace("-", "")
+        if encoding != "utf8" and hasattr(stream, "reconfigure"):
+            with contextlib.suppress(ValueError, OSError):
+                stream.reconfigure(errors=errors)
 
 
 _standard_streams()

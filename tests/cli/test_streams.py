@@ -55,3 +55,15 @@ def test_closed_standard_streams_are_no_streams(sample_model, tmp_path):
     r = _run(["apply", sample_model, SAMPLE / "task_voltages.csv", "--tare", 200, "-o", out],
              preexec_fn=close(0, 1, 2))
     assert r.returncode == 0 and len(out.read_text().splitlines()) == 3001
+
+
+def test_an_ascii_locale_gets_tables_and_errors_not_a_traceback(sample_model, tmp_path):
+    """LC_ALL=POSIX without UTF-8 mode: the gamma of validate's table could not be encoded."""
+    env = {**os.environ, "LC_ALL": "POSIX", "PYTHONUTF8": "0"}
+    env.pop("PYTHONIOENCODING", None)
+    r = _run(["validate", sample_model, SAMPLE / "calibration"], env=env, capture_output=True)
+    assert r.returncode == 0 and b"Traceback" not in r.stderr, r.stderr[-2000:]
+    assert b"| ? % F.S. |" in r.stdout  # the gamma of the header, one cell wide
+    missing = tmp_path / "n\u00f6pe.json"
+    r = _run(["show", missing], env=env, capture_output=True)
+    assert r.returncode == 2 and r.stderr.startswith(b"error: ") and b"Traceback" not in r.stderr
