@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import collections
 import csv
+import io
 import itertools
 import json
 import math
@@ -21,8 +22,8 @@ from typing import Any, NamedTuple
 import yaml
 
 from ..axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
-from ..errors import InputError
-from ..files import reading
+from ..errors import InputError, excerpt, printable
+from ..files import CALIBRATION_LIMIT, read_bounded, reading
 
 MAX_ROWS = 100_000  # enough for any calibration; bounds a wrong file's cost
 
@@ -253,16 +254,26 @@ def _sniff_sep(first_line: str) -> str:
 
 
 def read_rows(path: Path, max_rows: int) -> tuple[list[str], list[list[str]], str, bool]:
-    """(header names, up to ``max_rows`` rows of cells, separator, whether rows were left)."""
-    with reading(path), open(path, encoding="utf-8-sig", newline="") as fh:
-        first = fh.readline(1 << 20)
+    """(header names, up to ``max_rows`` rows of cells, separator, whether rows were left).
+
+    The file is read once, within the calibration files' size limit, so a pipe, a FIFO
+    (waited for as every input is) or ``/dev/zero`` is read like a file or refused.
+    """
+    with reading(path):
+        text = read_bounded(path, CALIBRATION_LIMIT, "a calibration file").decode("utf-8-sig")
+    lines = io.StringIO(text, newline="")
+    reader = None
+    try:
+        first = text.split("\n", 1)[0]
         if not first.strip():
-            raise InputError(f"{path}: no header row (the first line is empty)")
+            raise InputError(f"{printable(path)}: no header row (the first line is empty)")
         sep = _sniff_sep(first)
-        fh.seek(0)  # utf-8-sig drops the byte-order mark again
-        reader = csv.reader(fh, delimiter=sep)
+        reader = csv.reader(lines, delimiter=sep)
         names = [n.strip() for n in next(reader)]
         raw_rows = list(itertools.islice(reader, max_rows + 1))
+    except csv.Error as err:  # a field over the csv module's 128 KiB, a NUL byte
+        row = f", row {reader.line_num}" if reader is not None else ", row 1"
+        raise InputError(f"{printable(path)}{row}: not a table of numbers ({excerpt(err)})") from None
     truncated = len(raw_rows) > max_rows
     del raw_rows[max_rows:]
     return names, raw_rows, sep, truncated

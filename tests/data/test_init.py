@@ -5,10 +5,11 @@ from __future__ import annotations
 import json
 import re
 import shutil
+from pathlib import Path
 
 import pytest
 import yaml
-from conftest import ROOT, SAMPLE, invoke
+from conftest import ROOT, SAMPLE, assert_one_line_error, invoke
 
 from fsdecouple.config import settings_from_dict
 from fsdecouple.data.columns import guess_config, nice_ceil
@@ -293,3 +294,30 @@ def test_an_infinite_reading_is_skipped_not_a_traceback(tmp_path):
         data.write_text(src.read_text() + bad + "\n")
         doc = json.loads(invoke(["init", data, "-o", tmp_path / f"{data.stem}.yaml", "--json"]).stdout)
         assert max(doc["full_scale"].values()) == 200, doc["full_scale"]
+
+
+def test_init_reads_any_input_once_and_within_the_limits(tmp_path):
+    """A 200 KB cell or header, /dev/zero, a pipe (`init <(cat f)`, `cat f | init /dev/stdin`):
+    one line and exit 2 for the bad ones, the same guess for a pipe as for the file."""
+    import subprocess
+    import sys
+
+    cell = tmp_path / "cell.csv"
+    cell.write_text("fx,fy,fz,ux,uy,uz\n1,2,3," + "4" * 200_000 + ",5,6\n")
+    r = invoke(["init", cell, "-o", tmp_path / "a.yaml"], code=2)
+    assert_one_line_error(r, "cell.csv, row 2", "field larger")
+    header = tmp_path / "header.csv"
+    header.write_text("x" * 200_000 + ",fy\n1,2\n")
+    assert_one_line_error(invoke(["init", header, "-o", tmp_path / "a.yaml"], code=2), "row 1")
+    if Path("/dev/zero").exists():
+        assert_one_line_error(invoke(["init", "/dev/zero", "-o", tmp_path / "a.yaml"], code=2),
+                              "limit for a calibration file")
+    assert not (tmp_path / "a.yaml").exists()
+    lab = SAMPLE / "loadcell" / "calibration.csv"
+    invoke(["init", lab, "-o", tmp_path / "file.yaml"])
+    r = subprocess.run([sys.executable, "-m", "fsdecouple", "init", "/dev/stdin", "-o",
+                        str(tmp_path / "pipe.yaml")], input=lab.read_bytes(), capture_output=True)
+    assert r.returncode == 0, r.stderr
+    pipe, file = (yaml.safe_load((tmp_path / n).read_text()) for n in ("pipe.yaml", "file.yaml"))
+    assert pipe.pop("sensor") != file.pop("sensor")  # named after the file: stdin here
+    assert pipe == file
