@@ -57,7 +57,7 @@ def case():
 def default_model(case):
     """The default (``zero: fit``) model of the case, fitted once for the tests below."""
     _, table, *_ = case
-    return fit(from_table(table, SETTINGS), SETTINGS, workers=1)
+    return fit(from_table(table, SETTINGS), SETTINGS, workers=2)
 
 
 OURS_LIMIT, REFERENCE_LIMIT = 3.0, 1.5  # from the scatter over seeds 0-29: see below
@@ -67,7 +67,7 @@ FULL_SCALE_LIMIT = 2.35
 def test_zero_rows_decouples_as_the_straightforward_reference(case):
     sensor, table, u, _, ref, ref_forces = case
     settings = replace(SETTINGS, zero="rows")
-    model = fit(from_table(table, settings), settings, workers=1)
+    model = fit(from_table(table, settings), settings, workers=2)
     np.testing.assert_allclose(model.k, ref.k, rtol=1e-12)
     # the same libsvm problems in the same point order, on the same machine: the forces
     # differ only by the table path's promise (1e-9 of each full-scale output, decouple.PROMISE)

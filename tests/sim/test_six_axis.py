@@ -409,7 +409,7 @@ def test_gamma_with_forces_and_moments_is_dimensionless():
 def test_cv_runs_every_baseline_on_six_axes(six_settings):
     from fsdecouple.evaluation.cv import run_cv
 
-    doc = run_cv(SIX / "calibration", six_settings, workers=1,
+    doc = run_cv(SIX / "calibration", six_settings, workers=2,
                  task=(SIX / "task_voltages.csv", SIX / "task_forces.csv"), task_tare=TARE_ROWS)
     gammas = [r for r in doc["records"] if r["metric"] == "gamma"]
     assert {r["axis"] for r in gammas} == set(COMPONENTS)
@@ -512,7 +512,7 @@ def test_cv_moves_a_point_of_a_named_component(six_settings, six_calib):
 
     ge = GrossError.parse("MY:2:5:0.2", six_settings.layout)
     assert ge.axis == "my"
-    doc = run_cv(six_calib, six_settings, workers=1, gross_error=ge, folds=[[1, 2], [3, 4]])
+    doc = run_cv(six_calib, six_settings, workers=2, gross_error=ge, folds=[[1, 2], [3, 4]])
     assert doc["gross_error"]["rounds_affected"] == [2]  # repetition 2 trains round 2 only
     with pytest.raises(InputError, match="AXIS:REP:POINT:OFFSET"):
         GrossError.parse("x:1:5:0.2", six_settings.layout)
