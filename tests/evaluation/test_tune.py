@@ -141,10 +141,11 @@ def test_a_candidate_worse_than_table2_beyond_the_range_is_never_chosen():
 
 
 def test_a_candidate_worse_than_table2_on_any_axis_is_never_chosen(monkeypatch):
-    # a grid of one bad candidate (far too narrow a kernel): Table 2 stays
+    # a grid of one bad candidate (far too narrow a kernel): Table 2 stays.  C = 10: the
+    # held-out figure is 3.9x Table 2's (C = 1000: 106x, and 6x the libsvm time)
     settings = load_config()
     calib = load_calibration(SAMPLE, settings)
-    chosen, record = tune_settings(calib, settings, grid=Grid(gamma=(5000.0,), C=(1000.0,),
+    chosen, record = tune_settings(calib, settings, grid=Grid(gamma=(5000.0,), C=(10.0,),
                                                               epsilon=(0.5,)), workers=2)
     assert record["candidates"][1]["figure"] > record["candidates"][0]["figure"]
     assert record["chosen"] == 0 and chosen == settings
