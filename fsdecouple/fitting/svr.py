@@ -6,6 +6,7 @@ stores the dual coefficients ``a_i - a_i*`` as ``sv_coef`` and ``rho = -b``.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,7 +49,36 @@ def train(x: np.ndarray, y: np.ndarray, params: SVRSettings):
     if x.shape[0] != y.size or y.size < 2:
         raise FsdecoupleError(f"an SVR needs at least 2 points, got {y.size}")
     with single_threaded_libraries():
-        return svmutil.svm_train(y, x, params.libsvm_options())
+        return _off_the_main_thread(svmutil.svm_train, y, x, params.libsvm_options())
+
+
+def _off_the_main_thread(fn, *args):
+    """``fn(*args)`` on a daemon thread while the main thread waits in short joins.
+
+    libsvm calls back into Python to print (``-q``: to print nothing).  A SIGTERM or
+    Ctrl-C that arrives during training runs its handler inside that callback, where
+    ctypes ignores the exception it raises ("Exception ignored on calling ctypes
+    callback function"), and training went on until SIGKILL.  Waiting here, the main
+    thread handles the signal within a join's timeout and unwinds (temporary files
+    removed); the daemon thread dies with the process.  Other threads call directly.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return fn(*args)
+    box: dict = {}
+
+    def run():
+        try:
+            box["value"] = fn(*args)
+        except BaseException as err:  # noqa: BLE001 (re-raised on the main thread)
+            box["error"] = err
+
+    worker = threading.Thread(target=run, name="libsvm", daemon=True)
+    worker.start()
+    while worker.is_alive():
+        worker.join(0.05)
+    if "error" in box:
+        raise box["error"]
+    return box["value"]
 
 
 def extract(model, gamma: float) -> SVRFit:

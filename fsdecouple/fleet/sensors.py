@@ -17,7 +17,9 @@ sensor that has an earlier model there is compared with it
 
 from __future__ import annotations
 
+import contextlib
 import os
+import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
@@ -216,14 +218,39 @@ def fit_many(sensors_dir: str | Path, models_dir: str | Path, *, method: str = "
               force=force, workers=1)
     results: dict[str, SensorResult] = {}
     pool = ProcessPoolExecutor if executor == "process" else ThreadPoolExecutor
-    with pool(workers) as ex:
+    ex = pool(workers)
+    try:
         futures = [ex.submit(fit_sensor, d, out, **kw) for d in dirs]
         for n, fut in enumerate(as_completed(futures), 1):
             r = fut.result()
             results[r.sensor] = r
             if progress is not None:
                 progress(n, len(dirs))
+    except BaseException:  # SIGTERM, Ctrl-C, a bug: stop the workers too, now
+        _stop(ex)
+        raise
+    ex.shutdown()
     return FleetResult(str(sensors_dir), str(models_dir), [results[d.name] for d in dirs],
                        max_gamma, max_drift, None if baseline is None else str(baseline))
 
 
+
+
+def _stop(ex) -> None:
+    """Cancel what has not started and end the worker processes.  Each unwinds its sensor
+    on SIGTERM (temporary files removed) instead of finishing it; as the pool's worker
+    loop then waits for more work, what still runs a moment later is killed."""
+    processes = list((getattr(ex, "_processes", None) or {}).values())
+    ex.shutdown(wait=False, cancel_futures=True)
+    for p in processes:
+        with contextlib.suppress(OSError, ValueError):
+            p.terminate()
+    deadline = time.monotonic() + STOP_GRACE
+    for p in processes:
+        p.join(timeout=max(0.0, deadline - time.monotonic()))
+        if p.is_alive():
+            p.kill()
+            p.join(timeout=1)
+
+
+STOP_GRACE = 2.0  # seconds for a worker to unwind after SIGTERM

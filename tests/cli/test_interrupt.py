@@ -63,3 +63,58 @@ def test_interrupted_apply_keeps_previous_output(tmp_path, big_log, sig):
         assert all(n.startswith(".forces.csv.") and n.endswith(".tmp") for n in left if n != "forces.csv")
     else:
         assert left == ["forces.csv"], left
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
+def test_a_signal_during_libsvm_training_stops_the_command(tmp_path, sig, code):
+    """libsvm prints through a Python callback; a signal handled inside it was ignored by
+    ctypes ("Exception ignored on calling ctypes callback function") and training went on
+    until SIGKILL.  Now the command stops within seconds, writing nothing."""
+    slow = tmp_path / "slow.yaml"
+    slow.write_text("svr: {C: 1000000, tolerance: 1.0e-9}\n")  # seconds per SVR
+    out = tmp_path / "cv.json"
+    proc = subprocess.Popen([sys.executable, "-m", "fsdecouple", "cv", str(SAMPLE / "calibration"),
+                             "-c", str(slow), "--workers", "1", "-o", str(out)],
+                            env={**os.environ, "PYTHONPATH": str(ROOT)}, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    time.sleep(3)  # reading, then training in this process's main thread
+    proc.send_signal(sig)
+    sent = time.monotonic()
+    try:
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == code and time.monotonic() - sent < 10, err.decode()[-2000:]
+    assert b"Exception ignored" not in err and b"Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["slow.yaml"]
+
+
+@pytest.mark.slow
+def test_sigterm_stops_fit_many_and_its_worker_processes(tmp_path):
+    """The pool's workers caught the SystemExit of their sensor and waited for more work,
+    and fit-many never exited after SIGTERM.  Now: exit 143 within seconds, no worker
+    process left, no model or temporary file written."""
+    sensors = tmp_path / "sensors"
+    for name in ("a", "b", "c"):
+        d = sensors / name
+        d.mkdir(parents=True)
+        for f in (SAMPLE / "calibration").glob("rep*.csv"):
+            (d / f.name).write_bytes(f.read_bytes())
+        (d / "sensor.yaml").write_text(f"sensor: {name}\nsvr: {{C: 1000000, tolerance: 1.0e-9}}\n")
+    models = tmp_path / "models"
+    proc = subprocess.Popen([sys.executable, "-m", "fsdecouple", "fit-many", str(sensors), "-o",
+                             str(models), "--workers", "2"],
+                            env={**os.environ, "PYTHONPATH": str(ROOT)}, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    time.sleep(4)  # the workers are training
+    proc.send_signal(signal.SIGTERM)
+    sent = time.monotonic()
+    try:
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 143 and time.monotonic() - sent < 10, err.decode()[-2000:]
+    alive = subprocess.run(["pgrep", "-f", str(sensors)], capture_output=True, text=True).stdout
+    assert alive == "", alive
+    assert not models.exists() or list(models.iterdir()) == []
