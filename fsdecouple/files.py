@@ -81,6 +81,7 @@ CONFIG_LIMIT = 1 * MB
 MODEL_LIMIT = 64 * MB
 CV_LIMIT = 64 * MB
 CALIBRATION_LIMIT = 64 * MB  # per file: a calibration is thousands of rows, not millions
+TASK_LIMIT = 256 * MB  # cv --task and --task-forces: read whole, ~10 million rows
 
 
 def _size(n: int) -> str:

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..config import Settings
 from ..errors import InputError, excerpt, where
-from ..files import CALIBRATION_LIMIT, natural_key, open_input, read_bounded, reading
+from ..files import CALIBRATION_LIMIT, TASK_LIMIT, natural_key, read_bounded, reading
 from .csv_text import HEADER_ROW, read_csv_text, read_header, require_columns, to_numbers
 
 if TYPE_CHECKING:
@@ -209,8 +209,8 @@ def read_task_log(
     out = []
     layout = settings.layout
     for path, canon in ((Path(voltages), layout.outputs), (Path(forces), layout.loads)):
-        with reading(path), open_input(path) as fh:  # read once: it may be a pipe
-            data = fh.read()
+        with reading(path):  # read once: it may be a pipe; never beyond the limit
+            data = read_bounded(path, TASK_LIMIT, "a task log")
         header = read_header(path, settings, data)
         names = {c: settings.columns[c] for c in canon}
         require_columns(header, names, path)

@@ -111,6 +111,9 @@ def _curves(rounds, models, protocol) -> dict[str, Any]:
     return {"round": first.index, "train": train, "test": test, "chi": chi}
 
 
+MAX_REPEATS = 100
+
+
 def _decouple_seconds(model, vectors, repeats) -> float:
     """Median over repeats of the time to decouple one voltage vector (a (1, 3) call)."""
     times = []
@@ -199,8 +202,8 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
         folds = folds if folds is not None else default_folds(reps)
         check_folds(folds, reps)
     rounds = rounds_for(calib, protocol, folds)
-    if repeats < 1:
-        raise InputError(f"--repeats {repeats}: needs at least 1 timing pass")
+    if not 1 <= repeats <= MAX_REPEATS:
+        raise InputError(f"--repeats {repeats}: expected 1 to {MAX_REPEATS} timing passes")
     check_max_gamma(max_gamma)
     workers = workers or os.cpu_count() or 1
     task_data = None

@@ -128,7 +128,13 @@ def parse_folds(text: str) -> list[list[int]]:
                 "';' between rounds, e.g. '1,2;3,4;5,6'"
             ) from None
         folds.append(fold)
+    if len(folds) > MAX_ROUNDS:
+        raise InputError(f"--folds: {len(folds)} rounds; at most {MAX_ROUNDS} (each round fits "
+                         "every method once)")
     return folds
+
+
+MAX_ROUNDS = 100
 
 
 def default_folds(repetitions: list[int]) -> list[list[int]]:

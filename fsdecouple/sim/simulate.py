@@ -243,9 +243,15 @@ def with_coupling(sensor: SimulatedSensor, coupling: float) -> SimulatedSensor:
     return replace(sensor, amplitude=amp)
 
 
-def _whole(value: int, name: str, minimum: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < minimum:
-        raise InputError(f"--{name} {value!r}: expected a whole number >= {minimum}")
+# Counts a simulated set may ask for: a calibration is tens of repetitions of tens of
+# levels, and --repetitions 1000000000 would run until the memory is gone.
+MAX_REPETITIONS, MAX_LEVELS, MAX_SEED = 1000, 10_000, 2**63 - 1
+
+
+def _whole(value: int, name: str, minimum: int, maximum: int = MAX_SEED) -> None:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) \
+            or not minimum <= value <= maximum:
+        raise InputError(f"--{name} {value!r}: expected a whole number from {minimum} to {maximum}")
 
 
 @contextlib.contextmanager
@@ -313,11 +319,11 @@ def simulate(
         raise InputError(f"--layout {layout!r}: expected one of {', '.join(LAYOUTS)}")
     _whole(seed, "seed", 0)
     if repetitions is not None:
-        _whole(repetitions, "repetitions", 1)
+        _whole(repetitions, "repetitions", 1, MAX_REPETITIONS)
     if levels is not None:
         if layout != "lab":
             raise InputError("--levels: only with --layout lab (the paper layout uses the paper's grid)")
-        _whole(levels, "levels", 1)
+        _whole(levels, "levels", 1, MAX_LEVELS)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: is a file, expected a directory to write into")

@@ -19,7 +19,7 @@ import pandas as pd
 from ..axes import Layout
 from ..errors import InputError
 from ..files import atomic_files, check_output
-from .simulate import SimulatedSensor, one_set, with_coupling, write_csv
+from .simulate import MAX_REPETITIONS, SimulatedSensor, _whole, one_set, with_coupling, write_csv
 
 COMPONENTS = ("fx", "fy", "fz", "mx", "my", "mz")
 OUTPUTS = ("u1", "u2", "u3", "u4", "u5", "u6")
@@ -122,10 +122,8 @@ def write_six_axis(out: str | Path, *, seed: int = 0, repetitions: int = 6, forc
     calibration point, as for three axes (Section 4.4).
     """
     out = Path(out)
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise InputError(f"--seed {seed!r}: expected a whole number >= 0")
-    if isinstance(repetitions, bool) or not isinstance(repetitions, int) or repetitions < 1:
-        raise InputError(f"--repetitions {repetitions!r}: expected a whole number >= 1")
+    _whole(seed, "seed", 0)
+    _whole(repetitions, "repetitions", 1, MAX_REPETITIONS)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: is a file, expected a directory to write into")
     sensor = sensor or six_axis_sensor(seed)

@@ -8,6 +8,7 @@ import shutil
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import pytest
 from conftest import ROOT, SAMPLE, assert_one_line_error, invoke
@@ -170,3 +171,26 @@ def test_a_nul_padded_calibration_file_is_refused_small(tmp_path):
     code, lines, rss = _maxrss_kb(["ingest", cal])
     assert code == 2 and len(lines) == 1 and "NUL byte" in lines[0] and len(lines[0]) < 300
     assert rss < 500_000, f"{rss} kB"
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["simulate", "{tmp}/s", "--repetitions", "1000000000"], "from 1 to 1000"),
+    (["simulate", "{tmp}/s", "--layout", "lab", "--levels", "100000000"], "from 1 to 10000"),
+    (["simulate", "{tmp}/s", "--components", "6", "--repetitions", "5000"], "from 1 to 1000"),
+    (["cv", "{cal}", "--folds", ";".join(["1,2"] * 3000)], "3000 rounds; at most 100"),
+    (["cv", "{cal}", "--repeats", "1000000"], "1 to 100 timing passes"),
+])
+def test_counts_have_documented_bounds(tmp_path, args, needle):
+    """--repetitions 1e9 and --levels 1e8 ran until the memory was gone; --folds with 3000
+    rounds was accepted.  Each count has a bound, refused before any work."""
+    args = [a.format(tmp=tmp_path, cal=SAMPLE / "calibration") for a in args]
+    assert_one_line_error(invoke(args, code=2), needle)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(not Path("/dev/zero").exists(), reason="no /dev/zero")
+def test_a_task_log_has_a_size_limit():
+    """cv --task /dev/zero grew to 13-23 GB before it was killed."""
+    r = invoke(["cv", SAMPLE / "calibration", "--task", "/dev/zero", "--task-forces",
+                SAMPLE / "task_forces.csv"], code=2)
+    assert_one_line_error(r, "/dev/zero", "limit for a task log")
