@@ -92,7 +92,7 @@ def eq11_from_file(doc: dict, u: np.ndarray) -> np.ndarray:
 
 
 # Decoupling a stored model is arithmetic on the file's numbers: the same on every
-# machine up to rounding.  The exact path and eq11_from_file (conftest.py) sum the
+# machine up to rounding.  The exact path and eq11_from_file (above) sum the
 # same ~100-170 kernel terms of up to C = 1000 V in another order and with another
 # exp: n_sv C eps / (|k| F_FS) ~ 170 * 1000 * 2.2e-16 / 1.2 V = 3e-11 of full scale;
 # measured 1.2e-11 (three axes and six).  The table path adds its promise
