@@ -106,6 +106,21 @@ def read_bounded(path: str | Path, limit: int, what: str, error: type = InputErr
     return data
 
 
+def output_directory(path: str | Path) -> Path:
+    """Create the output directory ``path`` if it is missing (its parent must exist); an
+    OS error (read-only, no permission, a name too long) is one line naming it."""
+    path = Path(path)
+    try:
+        path.mkdir(exist_ok=True)
+        if not os.access(path, os.W_OK | os.X_OK):
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES))
+    except FileExistsError:
+        raise InputError(f"{printable(path)}: is a file, expected a directory for the outputs") from None
+    except OSError as err:
+        raise InputError(f"{printable(path)}: cannot write into it ({err.strerror})") from None
+    return path
+
+
 def natural_key(name: str) -> list:
     """Sort ``rep2`` before ``rep10``."""
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", name)]

@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import FsdecoupleError, InputError
-from ..files import natural_key
+from ..files import natural_key, output_directory
 
 FORMAT = "fsdecouple.fleet"
 CONFIG_NAME = "sensor.yaml"
@@ -211,7 +211,7 @@ def fit_many(sensors_dir: str | Path, models_dir: str | Path, *, method: str = "
         raise InputError(f"{out}: is a file, expected a directory for the models")
     if not out.parent.is_dir():
         raise InputError(f"{out}: directory {out.parent} does not exist")
-    out.mkdir(exist_ok=True)
+    output_directory(out)
 
     workers = min(workers or os.cpu_count() or 1, len(dirs))
     kw = dict(method=method, max_gamma=max_gamma, baseline=baseline, max_drift=max_drift,

@@ -39,7 +39,7 @@ from typing import Any
 
 from ..config import Settings
 from ..errors import FsdecoupleError, InputError, printable
-from ..files import natural_key, place, place_directory
+from ..files import natural_key, output_directory, place, place_directory
 from .apply import MAX_WORKERS
 from .jobs import ApplySpec, Job, apply_job
 from .reader import PARQUET_SUFFIXES, is_parquet
@@ -270,8 +270,11 @@ def apply_many(model_path: str | Path, inputs, out_dir: str | Path, *, engine: s
         else:
             todo.append(i)
     made = not out.exists()
-    out.mkdir(exist_ok=True)
-    stage = Path(tempfile.mkdtemp(prefix=STAGE_PREFIX, dir=out))
+    output_directory(out)
+    try:
+        stage = Path(tempfile.mkdtemp(prefix=STAGE_PREFIX, dir=out))
+    except OSError as err:
+        raise InputError(f"{printable(out)}: cannot write into it ({err.strerror})") from None
     done = [0]
 
     def finish(i: int, outcome) -> None:

@@ -229,3 +229,30 @@ def test_entries_named_like_logs_that_are_not_files_are_listed_as_failed(sample_
     assert "FIFO" in errors["fifo.csv"] and "link to nothing" in errors["dangling.csv"]
     assert "directory named like a log" in errors["folder.csv"]
     assert sorted(Path(p).name for p in doc["failed"]) == ["dangling.csv", "fifo.csv", "folder.csv"]
+
+
+@pytest.mark.parametrize("command", ["apply", "fit-many"])
+def test_an_output_directory_that_cannot_be_written_is_one_line(sample_model, tmp_path, monkeypatch,
+                                                                command):
+    """A read-only output directory was a PermissionError traceback in many-log apply and
+    fit-many (tests run as root here, so the directory's refusal is simulated)."""
+    import os as os_module
+
+    out = tmp_path / "ro"
+    out.mkdir()
+    real = os_module.access
+    def access(p, mode, **kw):  # readable, not writable
+        return False if Path(p) == out and mode & os_module.W_OK else real(p, mode, **kw)
+
+    monkeypatch.setattr(os_module, "access", access)
+    if command == "apply":
+        args = ["apply", sample_model, SAMPLE / "task_voltages.csv", "-o", f"{out}/"]
+    else:
+        sensor = tmp_path / "sensors" / "a"
+        sensor.mkdir(parents=True)
+        for f in (SAMPLE / "calibration").glob("rep*.csv"):
+            (sensor / f.name).write_bytes(f.read_bytes())
+        (sensor / "sensor.yaml").write_text("sensor: a\n")
+        args = ["fit-many", tmp_path / "sensors", "-o", out]
+    assert_one_line_error(invoke(args, code=2), "ro", "cannot write into it", "Permission denied")
+    assert list(out.iterdir()) == []
