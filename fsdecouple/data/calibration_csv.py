@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import os
 from dataclasses import dataclass
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
@@ -12,7 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..config import Settings
-from ..errors import InputError, excerpt, where
+from ..errors import InputError, excerpt, printable, where
 from ..files import CALIBRATION_LIMIT, TASK_LIMIT, natural_key, read_bounded, reading
 from .csv_text import HEADER_ROW, read_csv_text, read_header, require_columns, to_numbers
 
@@ -123,6 +124,12 @@ def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationT
     layout = settings.layout
     numeric = {c: cols[c] for c in (*layout.loads, *layout.outputs)}
     for rep_index, f in enumerate(files, start=1):
+        if not str(f).isascii():
+            try:  # the name is recorded in tables, model files and messages as text
+                str(f).encode("utf-8")
+            except UnicodeEncodeError:
+                shown = printable(os.fsencode(f).decode("utf-8", "backslashreplace"))
+                raise InputError(f"{shown}: the file's name is not UTF-8 text; rename the file") from None
         with reading(f):  # a FIFO: read once, never waited on for ever
             data = read_bounded(f, CALIBRATION_LIMIT, "a calibration file")
         nul = data.find(b"\x00")

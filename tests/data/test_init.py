@@ -321,3 +321,18 @@ def test_init_reads_any_input_once_and_within_the_limits(tmp_path):
     pipe, file = (yaml.safe_load((tmp_path / n).read_text()) for n in ("pipe.yaml", "file.yaml"))
     assert pipe.pop("sensor") != file.pop("sensor")  # named after the file: stdin here
     assert pipe == file
+
+
+def test_a_repetition_file_whose_name_is_not_utf8_is_one_line(tmp_path):
+    """A 0xff byte in a repetition's file name was a UnicodeEncodeError inside pyarrow."""
+    import os
+
+    cal = tmp_path / "cal"
+    cal.mkdir()
+    for f in (SAMPLE / "calibration").glob("rep*.csv"):
+        (cal / f.name).write_bytes(f.read_bytes())
+    os.rename(cal / "rep3.csv", os.fsencode(cal) + b"/rep3\xff.csv")
+    for command in ("fit", "ingest"):
+        r = invoke([command, cal, "-o", tmp_path / "out.json"], code=2)
+        assert_one_line_error(r, "rep3\\xff.csv", "not UTF-8")
+    assert not (tmp_path / "out.json").exists()
