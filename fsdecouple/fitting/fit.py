@@ -26,7 +26,7 @@ from ..core.extrapolation import table_interval as tangent_interval
 from ..core.metrics import interference_errors
 from ..core.model import Chi, CouplingErrorModel, FitReport
 from ..core.surrogate import TOLERANCE, build_pair, table_interval
-from ..errors import InputError
+from ..errors import InputError, printable
 from .linear import fit_omega
 from .noise import solved_to_the_noise
 from .threads import single_threaded_libraries
@@ -166,6 +166,8 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
     def one(job):
         name, x, y, in_scale, out_scale = job
         s = fit_svr(x / in_scale, y / out_scale, settings.svr)
+        if not all(np.isfinite(v).all() for v in (s.dual_coef, s.rho, s.support_vectors)):
+            raise _overflow(calib, f"the fit of chi_{name}")
         return Chi(
             name, s.gamma, s.support_vectors, s.dual_coef, s.rho, in_scale, out_scale,
             (float(x.min()), float(x.max())), int(x.size), extrapolation=settings.extrapolation,
@@ -209,6 +211,8 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
                                  layout, units)
     after = interference_errors(calib.points, model.decouple(u, rotate=False, exact=True),
                                 settings.full_scale, layout, units)
+    if not all(np.isfinite(v) for g in (before, after) for v in g.values()):
+        raise _overflow(calib, "gamma (eq. 12) on the calibration points")
     model.report = FitReport(
         r2=dict(zip(labels, map(float, omega.r2), strict=True)),
         n_points=dict(zip(labels, map(int, omega.n), strict=True)),
@@ -228,3 +232,14 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         model.provenance["excluded"] = list(calib.excluded)
     model.created = datetime.now(UTC).replace(microsecond=0).isoformat()
     return model
+
+
+def _overflow(calib: CalibrationSet, what: str) -> InputError:
+    """``what`` came out infinite: name the calibration cell of largest magnitude."""
+    outputs = list(calib.layout.outputs)
+    values = calib.points[outputs].abs().to_numpy(dtype=float)
+    i, c = np.unravel_index(int(np.argmax(values)), values.shape)
+    at = calib.points.iloc[i]
+    return InputError(f"{printable(at['file'])}, row {int(at['row'])}, column '{outputs[c]}': "
+                      f"{at[outputs[c]]:.6g} makes {what} overflow (not finite); check that cell "
+                      "and the units")
