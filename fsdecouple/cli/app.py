@@ -12,6 +12,7 @@ import contextlib
 import json
 import math
 import os
+import re
 import signal
 import sys
 import warnings
@@ -38,6 +39,24 @@ from ..errors import FsdecoupleError, InputError, printable
 # six-axis cv table is 30 gamma columns wide, and a sentence stays on its line.
 # Tables take their natural width; nothing here is padded to the console's width.
 WIDE = 100_000
+
+def _plain_list_types() -> None:
+    """typer (0.2x) shows a repeatable argument's type as ``<list[Path]>`` after its
+    ``voltages...`` name: shown as the element's type, ``<path>``, instead."""
+    from typer import core
+
+    shown = getattr(getattr(core, "_TyperParameter", None), "display_type", None)
+    if shown is None or getattr(shown, "plain", False):
+        return
+
+    def display_type(self, ctx):
+        return re.sub(r"list\[(\w+)\]", lambda m: m.group(1).lower(), shown(self, ctx))
+
+    display_type.plain = True
+    core._TyperParameter.display_type = display_type
+
+
+_plain_list_types()
 
 app = typer.Typer(
     add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,

@@ -29,7 +29,8 @@ def simulate(
     out_dir: Annotated[Path, typer.Argument(help="Directory to write the data set into.")],
     seed: Annotated[int, typer.Option(help="Random seed (>= 0).")] = 0,
     gross_error: Annotated[
-        str | None, typer.Option(help="Move one point: AXIS:REP:POINT:OFFSET[V], e.g. x:1:5:0.2")
+        str | None,
+        typer.Option(help="Move one point: AXIS:REP:POINT:OFFSET (in the output unit), e.g. x:1:5:0.2"),
     ] = None,
     layout: Annotated[
         str,

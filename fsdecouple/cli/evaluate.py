@@ -51,11 +51,13 @@ def cv(
     ] = None,
     gross_error: Annotated[
         str | None,
-        typer.Option(help="Move one training point: AXIS:REP:POINT:OFFSET[V], e.g. x:1:5:0.2"),
+        typer.Option(help="Move one training point: AXIS:REP:POINT:OFFSET (in the output unit), "
+                          "e.g. x:1:5:0.2"),
     ] = None,
     max_gamma: Annotated[
         float | None,
-        typer.Option(help="Exit 1 if any svr gamma on held-out data exceeds this fraction."),
+        typer.Option(help="Exit 1 if any svr interference error (eq. 12) on held-out data exceeds "
+                          "this fraction."),
     ] = None,
     workers: Annotated[
         int | None, typer.Option(help="Training threads (default: cores; 1: sequential).")
@@ -134,7 +136,8 @@ def validate(
     set_path: Annotated[Path, typer.Argument(metavar="SET", help="Independent set, calibration format.")],
     config: ConfigOpt = None,
     output: Annotated[Path | None, typer.Option("--output", "-o", help="Write validation.json.")] = None,
-    max_gamma: Annotated[float | None, typer.Option(help="Exit 1 if calibrated gamma exceeds this.")] = None,
+    max_gamma: Annotated[float | None, typer.Option(
+        help="Exit 1 if the interference error (eq. 12) on calibrated points exceeds this fraction.")] = None,
     force: ForceOpt = False, json_out: JsonOpt = False,
 ) -> None:
     """Score a model on an independent single-axis set: gamma and force errors, per axis."""

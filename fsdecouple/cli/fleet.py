@@ -46,7 +46,8 @@ def fit_many(
              "(or a calibration/ folder).")],
     output: Annotated[Path, typer.Option("--output", "-o", help="Directory for <sensor>.json models.")],
     max_gamma: Annotated[float | None, typer.Option(
-        help="Exit 1 if a sensor's held-out worst gamma exceeds this fraction, e.g. 0.016.")] = None,
+        help="Exit 1 if a sensor's held-out worst interference error (eq. 12) "
+             "exceeds this fraction, e.g. 0.016.")] = None,
     baseline: Annotated[Path | None, typer.Option(
         help="Directory of earlier <sensor>.json models: report each sensor's drift.")] = None,
     max_drift: MaxDriftOpt = None,

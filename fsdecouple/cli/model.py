@@ -38,13 +38,15 @@ def fit(
     C: Annotated[float | None, typer.Option("--C", help="SVR regularisation C.")] = None,
     epsilon: Annotated[float | None, typer.Option(
         help="SVR epsilon (in full-scale units with scaling: full_scale, else output units).")] = None,
-    gamma: Annotated[float | None, typer.Option(help="RBF gamma = 1/(2 delta^2).")] = None,
+    gamma: Annotated[float | None,
+                     typer.Option(help="SVR kernel width: libsvm gamma = 1/(2 delta^2).")] = None,
     delta2: Annotated[float | None, typer.Option(help="RBF delta^2.")] = None,
     tolerance: Annotated[float | None, typer.Option(help="libsvm stopping tolerance.")] = None,
     scaling: Annotated[str | None, typer.Option(help="Kernel input scaling: none|full_scale.")] = None,
     max_gamma: Annotated[
         float | None,
-        typer.Option(help="Exit 1 if any gamma after decoupling exceeds this fraction."),
+        typer.Option(help="Exit 1 if any interference error (eq. 12) after decoupling "
+                          "exceeds this fraction."),
     ] = None,
     method: Annotated[
         str, typer.Option(help="svr (the paper's), linear (calibration matrix) or auto "

@@ -251,7 +251,8 @@ MAX_REPETITIONS, MAX_LEVELS, MAX_SEED = 1000, 10_000, 2**63 - 1
 def _whole(value: int, name: str, minimum: int, maximum: int = MAX_SEED) -> None:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral) \
             or not minimum <= value <= maximum:
-        raise InputError(f"--{name} {value!r}: expected a whole number from {minimum} to {maximum}")
+        bound = f">= {minimum}" if maximum == MAX_SEED else f"from {minimum} to {maximum}"
+        raise InputError(f"--{name} {value!r}: expected a whole number {bound}")
 
 
 @contextlib.contextmanager

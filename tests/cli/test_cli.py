@@ -275,3 +275,20 @@ def test_redirected_output_keeps_every_column_and_every_sentence_whole(tmp_path)
     assert lines[at - 1].split()[-1] == "svr", lines[at - 1]  # the methods, initial ... svr
     summary = [line for line in lines if line.startswith("svr ")]  # one sentence, one line
     assert summary and all(line.rstrip().endswith("cells worse than initial") for line in summary)
+
+
+def test_every_commands_help_reads_as_plain_words():
+    """--help of every command: no Python type names (<list[str]>, <bool>), no volts
+    assumed for count data, and --version says what it does."""
+    import typer.main
+
+    from fsdecouple.cli import app as typer_app
+
+    commands = sorted(typer.main.get_command(typer_app).commands)
+    assert {"fit", "apply", "cv", "validate", "export", "fit-many"} <= set(commands)
+    for command in [None, *commands]:
+        args = ["--help"] if command is None else [command, "--help"]
+        text = invoke(args).stdout
+        for bad in ("list[", "<bool>", "[V]", "the paper's sensor)."):
+            assert bad not in text, (command, bad, text)
+    assert "Print the version" in invoke(["--help"]).stdout
