@@ -357,7 +357,7 @@ class _NAxisModel:
 @needs_cc
 @pytest.mark.parametrize("n", [2, 4])
 def test_any_number_of_axes(sample_model, n, tmp_path, monkeypatch):
-    import fsdecouple.export as export_module
+    import fsdecouple.export.header as export_module
 
     model = _NAxisModel(sample_model, n)
     # the model file of a stand-in: the sample's document (digest, format_version)
