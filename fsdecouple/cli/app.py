@@ -251,9 +251,30 @@ def _cannot_write(err: OSError) -> int:
 def main() -> None:
     signal.signal(signal.SIGTERM, _terminate)
     try:
+        code = _run()
+    except KeyboardInterrupt:
+        code = 128 + signal.SIGINT
+    except SystemExit as stop:
+        code = stop.code
+    if code in (128 + signal.SIGINT, 128 + signal.SIGTERM):
+        # stopped: every finally block has run (temporary files removed); threads still
+        # inside libsvm or a thread pool's job are not waited for
+        with contextlib.suppress(OSError, ValueError):
+            sys.stdout.flush()
+            sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code if isinstance(code, int) else 0)
+
+
+def _run() -> int:
+    try:
         code = app(standalone_mode=False)
         sys.stdout.flush()
-    except OSError as err:  # the standard streams: every file the commands write is checked
+    except OSError as err:
+        if getattr(err, "filename", None) is not None:  # a file's, not a standard stream's
+            err_console.print(Text("error: ", "red") + Text(f"{printable(err.filename)}: "
+                                                            f"{err.strerror or err}"), soft_wrap=True)
+            return 2
         code = _cannot_write(err)
     except SystemExit:
         # Click answers a broken pipe with exit 1, the failed-gate code, after wrapping
@@ -261,7 +282,9 @@ def main() -> None:
         if type(sys.stdout).__name__ != "PacifyFlushWrapper":
             raise
         code = _cannot_write(BrokenPipeError())
-    except typer.Abort:
+    except typer.Abort as abort:
+        if isinstance(abort.__cause__ or abort.__context__, KeyboardInterrupt):
+            return 128 + signal.SIGINT
         err_console.print(Text("error: ", "red") + Text("aborted"))
         code = 1
     except Exception as err:
@@ -276,4 +299,4 @@ def main() -> None:
             err_console.print(Text("error: ", "red") + Text(f"{command}: {message} (see '{command} --help')"),
                               highlight=False, soft_wrap=True)
         code = err.exit_code
-    sys.exit(code if isinstance(code, int) else 0)
+    return code if isinstance(code, int) else 0

@@ -239,7 +239,7 @@ class GrossError:
         try:
             axis, rep, point, offset = parts
             axis = layout.label_map().get(axis.strip().lower(), "")
-            if not axis or "_" in spec:  # int() and float() read 1_0 as 10
+            if not axis or "_" in rep + point + offset:  # int() and float() read 1_0 as 10
                 raise ValueError
             ge = cls(axis, int(rep), int(point), float(offset))
         except ValueError:

@@ -38,7 +38,6 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -48,7 +47,7 @@ from ..config import Settings
 from ..data.calibration import CalibrationSet
 from ..errors import InputError
 from ..fitting.noise import noise
-from ..fitting.threads import single_threaded_libraries
+from ..fitting.threads import single_threaded_libraries, thread_pool
 from .heldout import HeldOutRound, choose_protocol, level_index, rounds_for
 
 # The default grid, in full-scale units (see the module docstring).  The issue's
@@ -219,7 +218,7 @@ def heldout_errors(calib: CalibrationSet, settings: Settings, cands: list[Candid
     n_workers = workers or os.cpu_count() or 1
     with single_threaded_libraries():
         if n_workers > 1:
-            with ThreadPoolExecutor(n_workers) as pool:
+            with thread_pool(n_workers) as pool:
                 models = list(pool.map(one, jobs))
         else:
             models = [one(j) for j in jobs]

@@ -12,7 +12,7 @@ Every fitted method has ``decouple(u, rotate=False)`` -> forces [N]:
 from __future__ import annotations
 
 import time
-from concurrent.futures import ThreadPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,7 +23,7 @@ from ..data.calibration import CalibrationSet
 from .fit import chi_training_data, fit
 from .linear import fit_calibration_matrix, fit_omega
 from .rbf import SPREAD, fit_mimo, fit_siso
-from .threads import single_threaded_libraries
+from .threads import single_threaded_libraries, thread_pool
 
 METHODS = ("initial", "linear", "rbf-mimo", "rbf-siso", "svr")
 
@@ -89,7 +89,7 @@ def _train_all(jobs, settings, workers, progress, tables) -> tuple[dict, float]:
     else:
         # the SVR jobs are the long ones: start them first
         order = sorted(jobs, key=lambda j: j[1] != "svr")
-        with ThreadPoolExecutor(workers) as pool:
+        with thread_pool(workers) as pool:
             # one thread per model: a fit's own pool on top would only oversubscribe
             futures = {pool.submit(establish, m, tr, settings, workers=1, tables=tables): key
                        for key, m, tr in order}

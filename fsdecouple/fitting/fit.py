@@ -11,7 +11,6 @@ from __future__ import annotations
 import functools
 import os
 import platform
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from datetime import UTC, datetime
 from importlib import metadata
@@ -29,7 +28,7 @@ from ..core.surrogate import TOLERANCE, build_pair, table_interval
 from ..errors import InputError, printable
 from .linear import fit_omega
 from .noise import solved_to_the_noise
-from .threads import single_threaded_libraries
+from .threads import single_threaded_libraries, thread_pool
 
 if TYPE_CHECKING:
     from ..data.calibration import CalibrationSet
@@ -189,7 +188,7 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
 
     n_workers = workers or min(len(jobs), os.cpu_count() or 1)
     if n_workers > 1:
-        with ThreadPoolExecutor(n_workers) as pool:
+        with thread_pool(n_workers) as pool:
             chis = list(pool.map(one, jobs))
             done = [c for pair in pool.map(tables, labels) for c in pair] if with_tables else chis
     else:

@@ -6,6 +6,7 @@ stores the dual coefficients ``a_i - a_i*`` as ``sv_coef`` and ``rho = -b``.
 
 from __future__ import annotations
 
+import functools
 import threading
 from dataclasses import dataclass
 
@@ -49,7 +50,21 @@ def train(x: np.ndarray, y: np.ndarray, params: SVRSettings):
     if x.shape[0] != y.size or y.size < 2:
         raise FsdecoupleError(f"an SVR needs at least 2 points, got {y.size}")
     with single_threaded_libraries():
-        return _off_the_main_thread(svmutil.svm_train, y, x, params.libsvm_options())
+        return _off_the_main_thread(_svm_train, y, x, params.libsvm_options())
+
+
+@functools.cache
+def _controller():
+    from threadpoolctl import ThreadpoolController
+
+    return ThreadpoolController()  # the libraries loaded now, libsvm's OpenMP among them
+
+
+def _svm_train(y, x, options):
+    # OpenMP's thread count is a setting of each thread: set it on the one that trains (a
+    # pool's, or _off_the_main_thread's), or libsvm spawns a thread per core for each SVR
+    with _controller().limit(limits=1, user_api="openmp"):
+        return svmutil.svm_train(y, x, options)
 
 
 def _off_the_main_thread(fn, *args):

@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import threading
 from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 
 _lock = threading.Lock()
 _depth = 0
@@ -44,3 +45,17 @@ def single_threaded_libraries() -> Iterator[None]:
             if _depth == 0:
                 _limits.restore_original_limits()
                 _limits = None
+
+
+@contextlib.contextmanager
+def thread_pool(workers: int) -> Iterator[ThreadPoolExecutor]:
+    """A ThreadPoolExecutor that, when its block ends by an exception (Ctrl-C, SIGTERM),
+    cancels the queued jobs and does not wait for the running ones: a stopped command
+    stops now, not after every SVR already started (the CLI then exits without joining)."""
+    pool = ThreadPoolExecutor(workers)
+    try:
+        yield pool
+    except BaseException:
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown()

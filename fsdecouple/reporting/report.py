@@ -333,7 +333,7 @@ def _checks(model, cv) -> str:
 
 def _check_cv_fits(model, cv: dict) -> None:
     """A cv.json of another sensor's layout (a six-axis cv for a 3-axis model) is refused."""
-    axes = sorted({r.get("axis") for r in cv.get("records") or [] if isinstance(r, dict)})
+    axes = sorted({str(r.get("axis")) for r in cv.get("records") or [] if isinstance(r, dict)})
     unknown = [str(a) for a in axes if a not in model.layout.labels]
     if unknown:
         raise InputError(f"cv.json scores components {', '.join(map(printable, axes))}; the model's "

@@ -251,7 +251,8 @@ MAX_REPETITIONS, MAX_LEVELS, MAX_SEED = 1000, 10_000, 2**63 - 1
 def _whole(value: int, name: str, minimum: int, maximum: int = MAX_SEED) -> None:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral) \
             or not minimum <= value <= maximum:
-        bound = f">= {minimum}" if maximum == MAX_SEED else f"from {minimum} to {maximum}"
+        too_big = isinstance(value, numbers.Integral) and value > maximum
+        bound = f"from {minimum} to {maximum}" if too_big else f">= {minimum}"
         raise InputError(f"--{name} {value!r}: expected a whole number {bound}")
 
 
