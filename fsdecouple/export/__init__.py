@@ -11,6 +11,10 @@ still import from here.
 """
 
 
+__all__ = ["ChiPlan", "ExportPlan", "ExportResult", "PRECISIONS", "emulate_float", "exact_forces",
+           "expected_status", "export_header", "float_bound", "plan_export"]  # noqa: F822 (lazy)
+
+
 def __getattr__(name: str):
     import importlib
 

@@ -6,6 +6,10 @@ The old module ``fsdecouple.fleet``'s names (``fit_many``, ...) still import fro
 """
 
 
+__all__ = ["FleetResult", "SensorResult", "calibration_path", "fit_many", "fit_sensor",  # noqa: F822
+           "sensor_dirs"]  # the old module's names, loaded on first use
+
+
 def __getattr__(name: str):
     import importlib
 
