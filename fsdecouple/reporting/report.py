@@ -23,11 +23,10 @@ from ..core.metrics import pct
 from ..errors import InputError, printable
 from ..evaluation.checks import assumption_checks
 from ..evaluation.cv_results import gamma_index, test_name
+from ..units import output_display
+from .cv_tables import cv_test_name, gamma_tables, gross_tables, task_table
 from .html import CSS, badge, badge_span, cell, figure_html, note, table, th, tr, worse
 from .plots import chi_figure, omega_figure, residual_figure, to_png
-
-METHOD_NAMES = {"initial": "initial (ω⁻¹ only)", "linear": "linear matrix",
-                "rbf-mimo": "MIMO RBF NN", "rbf-siso": "SISO RBF NN", "svr": "ε-SVR"}
 
 
 @dataclass
@@ -44,7 +43,12 @@ class Report:
 def _point_roles(model, calib, cv) -> tuple[pd.DataFrame, str]:
     pts = calib.points.copy()
     curves = (cv or {}).get("curves")
-    if curves:
+    if curves and _levels(cv):
+        held = ((cv.get("folds") or [[]])[curves["round"] - 1:curves["round"]] or [[]])[0]
+        role = {r: "training" for r in calib.repetitions}
+        where = (f"of every repetition, as in cross-validation round {curves['round']}, which held "
+                 f"out load level {_reps(held) or '?'} of each sweep (the load levels protocol)")
+    elif curves:
         train, test = set(curves["train"]), list(curves["test"])
         role = {r: "training" for r in train}
         role.update({r: f"test {test_name(i)}" if i < 2 else "not used" for i, r in enumerate(test)})
@@ -62,15 +66,21 @@ def _reps(reps) -> str:
     return ", ".join(str(r) for r in sorted(reps))
 
 
-def _test_name(cv, rnd: int, test_set: int) -> str:
-    """'test I' / 'test II': the held-out repetition's place in its round's fold.
+def _one_unit(per: tuple[str, ...], unit: str) -> str | None:
+    """The unit every component or output shares, or None where they differ (N and N·m)."""
+    return unit if not per or len(set(per)) == 1 else None
 
-    ``test_set`` is the held-out repetition's number (README, cv.json).
-    """
-    try:
-        return f"test {test_name(cv['folds'][rnd - 1].index(test_set))}"
-    except (KeyError, IndexError, ValueError, TypeError):
-        return "test"
+
+def _shown(units) -> dict[str, str]:
+    """The data's own units for captions: loads, outputs, and small output figures."""
+    load = _one_unit(units.loads, units.load) or " / ".join(dict.fromkeys(units.loads))
+    output = _one_unit(units.outputs, units.output) or " / ".join(dict.fromkeys(units.outputs))
+    small = output_display(output)[1] if _one_unit(units.outputs, units.output) else output
+    return {"load": load, "output": output, "small": small}
+
+
+def _levels(cv) -> bool:
+    return (cv or {}).get("protocol") == "levels"
 
 
 def _cv_residuals(cv) -> pd.DataFrame | None:
@@ -79,7 +89,8 @@ def _cv_residuals(cv) -> pd.DataFrame | None:
         return None
     df = pd.DataFrame(pts)
     df["rep"] = df["test_set"]
-    df["label"] = [f"rep {t} (round {r}, {_test_name(cv, r, t)})"
+    df["label"] = [f"level {t} (round {r})" if _levels(cv)
+                   else f"rep {t} (round {r}, {cv_test_name(cv, r, t)})"
                    for r, t in zip(df["round"], df["test_set"], strict=True)]
     df = df.sort_values(["rep", "round"], kind="stable")
     for axis in labels_in(pts):
@@ -169,19 +180,33 @@ def _flatten(d: dict, prefix: str = "") -> dict:
 
 def _model_tables(model) -> str:
     rep = model.report.to_dict() if model.report else {}
-    rows = [tr(cell(a), cell(f"{model.k[i]:.6g}"), cell(f"{1 / model.k[i]:.4f}"),
+    units = model.settings.units
+    same = _one_unit(units.loads, units.load) and _one_unit(units.outputs, units.output)
+
+    def with_unit(x: float, unit: str) -> str:  # six significant digits; the unit per cell if mixed
+        return f"{x:.6g}" if same else f"{x:.6g} {unit}"
+
+    rows = [tr(cell(a), cell(with_unit(model.k[i], f"{units.output_of(i)}/{units.load_of(i)}")),
+               cell(with_unit(1 / model.k[i], f"{units.load_of(i)}/{units.output_of(i)}")),
                cell(f"{rep.get('r2', {}).get(a, float('nan')):.6f}"),
                cell(str(rep.get("n_points", {}).get(a, "–"))))
             for i, a in enumerate(model.layout.labels)]
+    k_unit = f" [{units.output}/{units.load}]" if same else ""
+    inv_unit = f" [{units.load}/{units.output}]" if same else ""
     out = table("table-omega", "Non-coupling functions ω (eq. 2) of the model file",
-                [tr(th("axis"), th("k [V/N]"), th("1/k [N/V] (eq. 13)"), th("R²"), th("points"))], rows)
+                [tr(th("axis"), th(f"k{k_unit}"), th(f"1/k{inv_unit} (eq. 13)"), th("R²"),
+                    th("points"))], rows)
     rows = []
     for name, c in model.chi.items():
+        b = units.output_of(c.input_axis)
+        span = f"{c.input_range[0]:+.6g} … {c.input_range[1]:+.6g}"
         rows.append(tr(cell(f"χ{name}"), cell(model.layout.outputs[c.input_axis]),
                        cell(f"{c.support_vectors.size} / {c.n_points}"),
-                       cell(f"{c.input_range[0]:+.4f} … {c.input_range[1]:+.4f}")))
+                       cell(span if same else f"{span} {b}")))
+    range_unit = f" [{units.output}]" if same else ""
     out += table("table-chi", "Corrected coupling functions χ (eq. 4): ε-SVRs",
-                 [tr(th("χ"), th("input"), th("support vectors / points"), th("input range [V]"))], rows)
+                 [tr(th("χ"), th("input"), th("support vectors / points"),
+                     th(f"input range{range_unit}"))], rows)
     rows = []
     for a in model.layout.labels:
         b, g = rep.get("gamma_before", {}).get(a), rep.get("gamma_after", {}).get(a)
@@ -190,105 +215,6 @@ def _model_tables(model) -> str:
                  "(in-sample, all repetitions pooled), % F.S.",
                  [tr(th("loaded axis"), th("initial (ω⁻¹ only)"), th("after decoupling (eq. 11)"))], rows)
     return out
-
-
-def _gamma_tables(cv) -> str:
-    g = gamma_index(cv.get("records"))
-    labels = labels_in(cv.get("records"))  # the components scored
-    keys = sorted({(r, t) for r, t, _, _ in g})
-    methods = [m for m in cv.get("methods", []) if any(k[2] == m for k in g)]
-
-    levels = cv.get("protocol") == "levels"
-
-    def held(r, t):
-        return f"level {t} (interior points)" if levels else f"{_test_name(cv, r, t)} (rep {t})"
-
-    def val(r, t, m, a, base="initial"):
-        v, b = g.get((r, t, m, a)), g.get((r, t, base, a))
-        return cell(pct(v), m != base and worse(v, b))
-
-    head = [tr(th("round", rowspan=2), th("held out", rowspan=2),
-               *(th(f"γ{a}", span=len(methods)) for a in labels)),
-            tr(*(th(METHOD_NAMES.get(m, m)) for _ in labels for m in methods))]
-    rows = [tr(cell(str(r)), cell(held(r, t)), *(val(r, t, m, a) for a in labels for m in methods))
-            for r, t in keys]
-    out = table("table-gamma-methods", "Table 1 analogue: interference error γ (eq. 12) of the "
-                f"held-out {'load levels' if levels else 'repetitions'} ({cv.get('protocol', 'repetitions')} "
-                "protocol), every method, % F.S.", head, rows)
-    absent = [METHOD_NAMES[m] for m in METHOD_NAMES if m not in methods]
-    if absent:
-        out += note("Not in cv.json (not run): " + ", ".join(absent) + ".")
-    if "svr" in methods:
-        rows = [tr(cell(str(r)), cell(held(r, t)), *(val(r, t, "svr", a) for a in labels)) for r, t in keys]
-        worst = [max((g.get((r, t, "svr", a)) or 0.0) for r, t in keys) for a in labels]
-        rows.append(tr(th("worst"), cell(""), *(cell(pct(w)) for w in worst)))
-        out += table("table-gamma-svr", "Table 3 analogue: γ after decoupling by the coupling "
-                     "error model and ε-SVRs, % F.S.",
-                     [tr(th("round"), th("held out"), *(th(f"γ{a}") for a in labels))], rows)
-    return out
-
-
-def _gross_tables(cv) -> str:
-    ge = cv.get("gross_error")
-    if not ge:
-        return note("No gross-error run in cv.json (fsdecouple cv --gross-error AXIS:REP:POINT:OFFSET "
-                    "adds Table 5).")
-    spec = ge.get("spec", {})
-    clean, gross = gamma_index(cv.get("records")), gamma_index(ge.get("records"))
-    labels = labels_in(cv.get("records"))  # the components scored
-    keys = sorted({(r, t) for r, t, m, _ in gross if m == "svr"})
-    rows = []
-    for r, t in keys:
-        cells = []
-        for a in labels:
-            c, w = clean.get((r, t, "svr", a)), gross.get((r, t, "svr", a))
-            cells += [cell(pct(c)), cell(pct(w), worse(w, gross.get((r, t, "initial", a))))]
-        rows.append(tr(cell(str(r)), cell(f"{_test_name(cv, r, t)} (rep {t})"), *cells))
-    head = [tr(th("round", rowspan=2), th("held out", rowspan=2),
-               *(th(f"γ{a} (ε-SVR)", span=2) for a in labels)),
-            tr(*(th(x) for _ in labels for x in ("without", "with gross error")))]
-    out = note(f"Gross error: prime voltage of point {spec.get('point')} of the {spec.get('axis')} sweep "
-               f"of repetition {spec.get('repetition')} moved by {spec.get('offset')} V (Section 4.4).")
-    out += table("table-gross-error", "Table 5 analogue: γ with and without the gross error, % F.S.",
-                 head, rows)
-    rows = []
-    for o in ge.get("omega", []):
-        change = o["inverse_gross"] / o["inverse_clean"] - 1.0
-        rows.append(tr(cell(str(o["round"])), cell(o["axis"]), cell(f"{o['k_clean']:.6g}"),
-                       cell(f"{o['k_gross']:.6g}"), cell(f"{o['inverse_clean']:.3f}"),
-                       cell(f"{o['inverse_gross']:.3f}"), cell(f"{100 * change:+.2f} %")))
-    out += table("table-omega-gross", "ω with and without the gross error (eq. 13 vs eq. 14)",
-                 [tr(*(th(h) for h in ("round", "axis", "k clean [V/N]", "k gross [V/N]",
-                                       "1/k clean [N/V] (eq. 13)", "1/k gross [N/V] (eq. 14)",
-                                       "change of 1/k")))], rows)
-    return out
-
-
-def _task_table(cv) -> str:
-    task = cv.get("task")
-    if not task:
-        return note("No combined-load validation in cv.json (fsdecouple cv --task VOLTAGES "
-                    "--task-forces FORCES adds it).")
-    v = {(r["round"], r["method"], r["axis"], r["metric"]): r["value"] for r in task.get("records", [])}
-    rounds = sorted({k[0] for k in v})
-    labels = labels_in(task.get("records"))  # the components scored
-    methods = [m for m in cv.get("methods", []) if any(k[1] == m for k in v)]
-    rows = []
-    for r in rounds:
-        for m in methods:
-            cells = []
-            for a in labels:
-                for metric in ("max_error", "rms_error"):
-                    x, b = v.get((r, m, a, metric)), v.get((r, "initial", a, metric))
-                    cells.append(cell(pct(x, 3), m != "initial" and worse(x, b)))
-            rows.append(tr(cell(str(r)), cell(METHOD_NAMES.get(m, m)), *cells))
-    head = [tr(th("round", rowspan=2), th("method", rowspan=2),
-               *(th(load_name(a), span=2) for a in labels)),
-            tr(*(th(x) for _ in labels for x in ("max error", "rms error")))]
-    out = note(f"Combined loads: {task.get('voltages')} against {task.get('forces')}, "
-               f"{task.get('rows')} rows, tare {task.get('tare')}.")
-    return out + table("table-task", "Combined-load comparison: error as % of each axis's full scale",
-                       head, rows)
 
 
 def _fmt_check(c: dict) -> tuple[str, str]:
@@ -322,7 +248,11 @@ def _checks(model, cv) -> str:
         for r in sorted({c.get("round") for c in checks}):
             cs = [c for c in checks if c.get("round") == r]
             warns = [f"{c['name']} {c['subject']}" for c in cs if c["status"] != "pass"]
-            rows.append(tr(cell(str(r)), cell(str(len(cs) - len(warns))), cell(str(len(warns))),
+            folds = cv.get("folds") or []
+            # the levels protocol's last round holds out the end levels (cv.json end_records)
+            end = _levels(cv) and isinstance(r, int) and 0 < r <= len(folds) and not folds[r - 1]
+            rows.append(tr(cell(f"{r} (end levels)" if end else str(r)), cell(str(len(cs) - len(warns))),
+                           cell(str(len(warns))),
                            badge("warn" if warns else "pass"), cell(", ".join(warns) or "–")))
         out += table("table-cv-checks", "The same checks on each cross-validation round's model",
                      [tr(th("round"), th("pass"), th("warn"), th("status"), th("warnings"))], rows)
@@ -360,13 +290,14 @@ def build_report(model, cv: dict | None = None, calib=None) -> Report:
         body.append("<ul>" + "".join(f"<li>warning: {escape(w)}</li>" for w in model.warnings) + "</ul>\n")
 
     points, where = _point_roles(model, calib, cv) if calib is not None else (None, "")
+    shown = _shown(model.settings.units)
     body.append("<h2>Non-coupling functions ω (Figure 6)</h2>\n")
     figs["figure6_omega"] = to_png(omega_figure(model, points))
     body.append(figure_html(
-        "fig-omega", figs["figure6_omega"], "Figure 6: prime voltage against prime force per axis",
-        "Per axis: prime voltage against prime force of that axis's sweeps and the fitted line of "
-        "the model file (eq. 2); slope k, 1/k (eq. 13) and R². "
-        + (f"Points {where}; lower row: deviation from the line [mV]." if calib is not None
+        "fig-omega", figs["figure6_omega"], "Figure 6: prime output against prime load per axis",
+        f"Per axis: prime output [{shown['output']}] against prime load [{shown['load']}] of that "
+        "axis's sweeps and the fitted line of the model file (eq. 2); slope k, 1/k (eq. 13) and R². "
+        + (f"Points {where}; lower row: deviation from the line [{shown['small']}]." if calib is not None
            else "No calibration points: pass --calib CALIB to plot them.")))
     body.append(_model_tables(model))
 
@@ -383,7 +314,8 @@ def build_report(model, cv: dict | None = None, calib=None) -> Report:
     body.append(figure_html(
         "fig-chi", figs["figure7_chi"], "Figure 7: the "
         f"{'six' if len(model.chi) == 6 else len(model.chi)} corrected coupling functions",
-        f"Each χab: coupling error eab on channel a [mV] against the prime voltage ub [V]. {src}. "
+        f"Each χab: coupling error eab on output a [{shown['small']}] against the prime output ub "
+        f"[{shown['output']}]. {src}. "
         + (f"Points {where}." if calib is not None else "No calibration points: pass --calib CALIB "
            "to plot the training and held-out points.")))
 
@@ -391,10 +323,10 @@ def build_report(model, cv: dict | None = None, calib=None) -> Report:
     if cv:
         body.append(note("Cells marked ▲ (bold, boxed) are worse than the initial data of the same "
                          "held-out repetition."))
-        body.append(_gamma_tables(cv))
-        body.append(_gross_tables(cv))
+        body.append(gamma_tables(cv))
+        body.append(gross_tables(cv))
         body.append("<h2>Combined loads</h2>\n")
-        body.append(_task_table(cv))
+        body.append(task_table(cv))
     else:
         body.append(note("No cross-validation results: run fsdecouple cv CALIB -o cv.json and pass "
                          "--cv cv.json to add Tables 1, 3 and 5 and the combined-load comparison."))
@@ -405,16 +337,17 @@ def build_report(model, cv: dict | None = None, calib=None) -> Report:
     body.append("<h2>Residuals</h2>\n")
     residuals = _cv_residuals(cv) if cv else None
     if residuals is not None:
-        title = "Decoupled force error of each held-out repetition (ε-SVR, cross-validation)"
-        cap = ("Decoupled minus applied force [N] against the applied load, per loaded axis (rows) "
-               "and force component (columns); one series per held-out repetition, each decoupled "
-               "by the model of the round that held it out.")
+        held = "load level" if _levels(cv) else "repetition"
+        title = f"Decoupled load error of each held-out {held} (ε-SVR, cross-validation)"
+        cap = (f"Decoupled minus applied load [{shown['load']}] against the applied load, per loaded "
+               f"axis (rows) and component (columns); one series per held-out {held}, each "
+               "decoupled by the model of the round that held it out.")
     elif calib is not None:
         residuals = _calib_residuals(model, calib)
         title = "Decoupled force error on the calibration data (in-sample, not held out)"
-        cap = ("Decoupled minus applied force [N] against the applied load, per loaded axis (rows) "
-               "and force component (columns), one series per repetition. These points trained the "
-               "model: pass --cv cv.json for held-out residuals.")
+        cap = (f"Decoupled minus applied load [{shown['load']}] against the applied load, per loaded "
+               "axis (rows) and component (columns), one series per repetition. These points "
+               "trained the model: pass --cv cv.json for held-out residuals.")
     if residuals is not None:
         figs["residuals"] = to_png(residual_figure(residuals, title, model.settings.load_unit))
         body.append(figure_html("fig-residuals", figs["residuals"], "Residual plot", cap))

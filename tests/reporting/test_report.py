@@ -9,7 +9,7 @@ from html.parser import HTMLParser
 
 import numpy as np
 import pytest
-from conftest import SAMPLE, invoke
+from conftest import ROOT, SAMPLE, invoke
 from matplotlib.image import imread
 
 pytestmark = pytest.mark.slow  # renders every figure of the report with matplotlib
@@ -416,3 +416,38 @@ def test_a_cv_json_of_another_layout_is_refused(tmp_path, sample_model, cv_json)
     cv.write_text(json.dumps(doc))
     r = invoke(["report", sample_model, "--cv", cv, "-o", tmp_path / "r.html"], code=2)
     assert "fx" in r.stderr and "x, y, z" in r.stderr and not (tmp_path / "r.html").exists()
+
+
+def _report_text(html_text: str) -> str:
+    import html as html_module
+    import re
+
+    text = re.sub(r"<img[^>]*>|<style.*?</style>", "", html_text, flags=re.S)
+    return re.sub(r"\s+", " ", html_module.unescape(re.sub(r"<[^>]+>", " ", text)))
+
+
+@pytest.mark.slow  # two reports with their figures
+def test_the_report_speaks_the_datas_own_units(tmp_path):
+    """A gf / count load cell's report said k [V/N], input range [V], [mV] and [N] and
+    printed 1/k as 0.0012; a six-axis one shows N, N·m and V (mV for small figures) only."""
+    import re
+
+    from fsdecouple import build_report, fit, load_calibration, load_config, load_model
+
+    lab = SAMPLE / "loadcell" / "calibration.csv"
+    settings = load_config(ROOT / "configs" / "loadcell.yaml")
+    calib = load_calibration(lab, settings)
+    model = fit(calib, settings)
+    text = _report_text(build_report(model, None, calib).html)
+    units = set(re.findall(r"\[([^\]]{1,20})\]", text))
+    assert units <= {"gf", "count", "count/gf", "gf/count"}, units
+    assert "gf/count" in text and "count/gf" in text
+    inverse = f"{1 / model.k[0]:.6g}"
+    assert inverse in text and len(inverse.replace("0.", "").lstrip("0")) >= 5  # not 0.0012
+
+    six = load_model(ROOT / "tests" / "fixtures" / "golden" / "six-axis-v3.json")
+    six_calib = load_calibration(SAMPLE / "six_axis" / "calibration", six.settings)
+    text = _report_text(build_report(six, None, six_calib).html)
+    units = set(re.findall(r"\[([^\]]{1,20})\]", text))
+    assert units <= {"V", "mV", "N / N·m"}, units
+    assert "V/N·m" in text and "N·m/V" in text
