@@ -22,7 +22,7 @@ PRINT_CSS = """
 @media print{body{font-size:9pt;margin:0;padding:0}table{font-size:8pt}
 figure img{max-width:170mm}h2{page-break-after:avoid}section.component{page-break-before:always}
 section.component:first-of-type{page-break-before:auto}.noprint{display:none}}
-.ident td:first-child{font-weight:600}.class{font-size:1.2em;font-weight:700}
+.ident td{text-align:left}.ident td:first-child{font-weight:600}.class{font-size:1.2em;font-weight:700}
 """
 
 
