@@ -104,7 +104,9 @@ def fit(
         advice = refine_advice(checks, model.n_components)
         save_model(model, output, force=force)
     if json_out:
-        print_json({"model": str(output), "method": model.method, **model.report.to_dict(),
+        # the certificate's step data and scores are the model file's: fsdecouple certificate
+        report = {k: v for k, v in model.report.to_dict().items() if k != "certificate"}
+        print_json({"model": str(output), "method": model.method, **report,
                     "checks": [c.to_dict() for c in checks], "refine": settings.refine,
                     "extrapolation": settings.extrapolation,
                     "refine_advice": advice, "tune": model.report.tune})

@@ -68,3 +68,13 @@ def test_coverage_must_lie_between_0_and_1(bad):
 def test_a_model_without_residuals_refuses_intervals(model):
     with pytest.raises(InputError, match="no held-out residuals"):
         half_widths(replace(model, report=replace(model.report, certificate=None)), 0.9)
+
+
+def test_a_model_file_with_a_broken_certificate_block_is_refused(model):
+    from fsdecouple.core.modelfile import content_digest, model_from_dict, model_to_dict
+    from fsdecouple.errors import ModelFileError
+
+    doc = model_to_dict(replace(model, report=replace(model.report, certificate={"steps": {}})))
+    doc["integrity"]["digest"] = content_digest(doc)  # digest-valid, so only the shape is wrong
+    with pytest.raises(ModelFileError, match="certificate needs steps"):
+        model_from_dict(doc, "m.json")
