@@ -38,9 +38,13 @@ def _steps(doc: dict, axis: str) -> dict[float, dict]:
     return dict(sorted(out.items()))
 
 
+def _unit(doc: dict, axis: str) -> str:
+    return doc["units"].get("loads", {}).get(axis, doc["units"]["load"])
+
+
 def u_figure(doc: dict, axis: str) -> Figure:
     """U (k = 2) against the load of one component's steps."""
-    unit = doc["units"]["load"]
+    unit = _unit(doc, axis)
     steps = [b for b in doc["budget"] if b["axis"] == axis]
     fig = Figure(figsize=(6.0, 2.6))
     ax = fig.subplots()
@@ -80,6 +84,7 @@ def certificate_html(doc: dict) -> str:
     for n in doc["notes"]:
         parts.append(note(n))
     for axis in doc["full_scale"]:
+        unit = _unit(doc, axis)
         steps = _steps(doc, axis)
         metrics = [m for m in METRIC_NAMES if any(m in s for s in steps.values())]
         head = [tr(th(f"load [{unit}]"), *[th(METRIC_NAMES[m]) for m in metrics],
@@ -113,7 +118,7 @@ def certificate_html(doc: dict) -> str:
         "f_c = 100 (X̄ − X_a)/X_a, X_a a least-squares cubic without constant term per load "
         "sign; X_i the zero-corrected prime output of repetition i. The budget combines "
         "relative standard uncertainties in quadrature (w_c) and states W = 2 w_c, "
-        f"U = W |load| in {unit}; the model contribution is the decoupled force's error on "
+        f"U = W |load| in {doc['units']['load']}; the model contribution is the decoupled force's error on "
         "held-out calibration points, interference included."))
     parts.append('<p class="noprint note">Print this page on A4 (the print style sheet '
                  "starts each component on its own page).</p>")
@@ -124,7 +129,6 @@ def certificate_html(doc: dict) -> str:
 
 def certificate_tables(doc: dict) -> list[Table]:
     """The terminal's view: classes, and per component its figures and U."""
-    unit = doc["units"]["load"]
     out = []
     t = Table(title=f"Certificate of {doc['sensor']}: class (ISO 376)")
     for col in ("component", "loads", "class"):
@@ -133,6 +137,7 @@ def certificate_tables(doc: dict) -> list[Table]:
         t.add_row(c["axis"], "positive" if c["sign"] == "+" else "negative", c["class"])
     out.append(t)
     for axis in doc["full_scale"]:
+        unit = _unit(doc, axis)
         steps = _steps(doc, axis)
         metrics = [m for m in METRIC_NAMES if any(m in s for s in steps.values())]
         t = Table(title=f"{axis}: figures [%] and U (k = 2) [{unit}]")
