@@ -85,7 +85,8 @@ def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str
     n_reps = len(calib.repetitions)
     if n_reps < 2:
         notes.append(f"one repetition: b (reproducibility) and b' (repeatability) compare "
-                     f"repetitions and need at least two; the set has {n_reps}")
+                     f"repetitions and need at least two; the set has {n_reps}, so no class "
+                     "(ISO 376 classes need both) and no reproducibility in the budget")
     resolutions = {}
     for a, axis in enumerate(layout.labels):
         st = component_steps(calib, a)

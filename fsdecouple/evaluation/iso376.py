@@ -157,7 +157,8 @@ def interpolation_errors(loads: np.ndarray, means: np.ndarray) -> np.ndarray:
 def classify(st: ComponentSteps, full_scale: float) -> dict[str, str]:
     """The ISO 376 class per load sign (``"+"``, ``"-"``) from b, b', f_c at steps >= 10 % F.S.
 
-    ``none`` when no class's limits hold, or no step reaches 10 % of full scale.
+    ``none`` when no class's limits hold, when no step reaches 10 % of full scale, or
+    when b or b' is absent there (one repetition): ISO 376 classes need both.
     """
     out = {}
     for sign, name in ((1.0, "+"), (-1.0, "-")):
@@ -166,9 +167,10 @@ def classify(st: ComponentSteps, full_scale: float) -> dict[str, str]:
         if not (np.sign(st.loads) == sign).any():
             continue
         chosen = "none"
-        for cls, limits in CLASS_LIMITS if idx.size else ():
+        measured = idx.size and all(np.isfinite(st.figures[m][idx]).all() for m in ("b", "b_prime"))
+        for cls, limits in CLASS_LIMITS if measured else ():
             worst = {m: np.abs(st.figures[m][idx]) for m in limits}
-            if all(np.all(~np.isfinite(w) | (w <= limits[m])) for m, w in worst.items()):
+            if all(np.all(~np.isfinite(w) | (w <= limits[m])) for m, w in worst.items()):  # f_c: 2+ steps
                 chosen = cls
                 break
         out[name] = chosen
@@ -176,13 +178,21 @@ def classify(st: ComponentSteps, full_scale: float) -> dict[str, str]:
 
 
 def resolution(calib: CalibrationSet, a: int) -> float:
-    """The smallest step between distinct raw readings of output ``a`` [output unit].
+    """The resolution r of output ``a``'s readings [output unit]: the step they are recorded in.
 
-    Readings printed to a fixed number of decimals, or ADC counts, differ by whole
-    multiples of it; 0 when every reading is the same.
+    Readings printed to k decimals (or whole ADC counts, k = 0) are multiples of
+    10^-k: r is the largest such step all readings are multiples of, for k up to 12.
+    Readings with more digits than that give the smallest difference between two
+    distinct readings instead; 0 when every reading is the same.
     """
     col = f"{calib.layout.outputs[a]}_raw"
     values = np.unique(calib.points[col].to_numpy(dtype=float))
+    for k in range(0, 13):
+        scaled = values * 10.0 ** k
+        # a double holds ~16 digits: allow its rounding, never a fraction of the step
+        tol = np.maximum(1e-6, 8.0 * np.finfo(float).eps * np.abs(scaled))
+        if np.all(np.abs(scaled - np.round(scaled)) <= tol):
+            return 10.0 ** -k
     steps = np.diff(values)
     steps = steps[steps > 1e-12 * max(1.0, float(np.abs(values).max(initial=0.0)))]
     return float(steps.min()) if steps.size else 0.0

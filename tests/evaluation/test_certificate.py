@@ -160,10 +160,15 @@ def test_budget_adds_the_contributions_in_quadrature(hand_set):
         assert b["U"][j] == pytest.approx(2 * wc * abs(f), rel=1e-9)
 
 
-def test_resolution_is_the_smallest_step_between_readings(hand_set):
-    _, calib = hand_set
+def test_resolution_is_the_step_readings_are_recorded_in(hand_set):
+    table, calib = hand_set
+    # readings with every digit of a double: the smallest step between two of them
     raw = sorted(set(calib.points["uy_raw"]))
     assert resolution(calib, 1) == pytest.approx(min(np.diff(raw)[np.diff(raw) > 0]))
+    # whole ADC counts, however sparse: 1 count; printed to 4 decimals: 1e-4
+    counts = table.assign(ux=np.round(table["ux"] * 1e6), uy=np.round(table["uy"], 4))
+    read = from_table(counts, replace(load_config(), min_repetitions=1))
+    assert resolution(read, 0) == 1.0 and resolution(read, 1) == pytest.approx(1e-4)
 
 
 def test_reading_noise_recovers_the_simulated_noise(calib, model):
@@ -210,6 +215,8 @@ def test_one_repetition_has_no_b_and_says_why(calib, settings):
     metrics = {r["metric"] for r in doc["records"]}
     assert "b" not in metrics and "b_prime" not in metrics and "U" in metrics
     assert any("one repetition" in n for n in doc["notes"])
+    # without b and b' ISO 376 gives no class, however small f_c is
+    assert {c["class"] for c in doc["classes"]} == {"none"}
 
 
 def test_a_set_the_model_was_not_fitted_on_is_refused(certified, calib):
