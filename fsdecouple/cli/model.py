@@ -184,3 +184,6 @@ def export(
         return
     for line in result.summary_lines():
         console.print(line, highlight=False, soft_wrap=True)
+    if model.report is not None and model.report.certificate:
+        console.print("note: the header decouples forces only; apply --interval's bounds are not "
+                      "in it (docs/certificate.md)", highlight=False, soft_wrap=True)

@@ -79,3 +79,8 @@ def test_interval_outside_0_1_is_one_line_and_writes_nothing(fitted, sim_dir, tm
                 "--interval", p], 2)
     assert_one_line_error(r, f"--interval {float(p)!r}")
     assert not out.exists()
+
+
+def test_export_says_the_header_has_no_intervals(fitted, tmp_path):
+    r = invoke(["export", fitted, "-o", tmp_path / "d.h"])
+    assert "apply --interval's bounds are not in it" in r.stdout
