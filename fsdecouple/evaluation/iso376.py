@@ -36,10 +36,10 @@ from ..data.calibration import CalibrationSet
 # |f_c| a class allows.  (Its zero, reversibility and creep limits need series
 # this calibration does not always have: they are shown, not classed.)
 CLASS_LIMITS = (
-    ("00", {"b": 0.025, "b_prime": 0.012, "f_c": 0.025}),
-    ("0.5", {"b": 0.05, "b_prime": 0.025, "f_c": 0.05}),
-    ("1", {"b": 0.10, "b_prime": 0.05, "f_c": 0.10}),
-    ("2", {"b": 0.20, "b_prime": 0.10, "f_c": 0.20}),
+    ("00", {"b": 0.05, "b_prime": 0.025, "f_c": 0.025}),
+    ("0.5", {"b": 0.10, "b_prime": 0.05, "f_c": 0.05}),
+    ("1", {"b": 0.20, "b_prime": 0.10, "f_c": 0.10}),
+    ("2", {"b": 0.40, "b_prime": 0.20, "f_c": 0.20}),
 )
 CLASS_FROM = 0.1  # ISO 376: the class holds from the lower limit, here 10 % of full scale
 METRICS = ("b", "b_prime", "f_c", "f_0", "v")

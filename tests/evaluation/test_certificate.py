@@ -125,14 +125,16 @@ def test_class_from_the_iso_376_limits_at_steps_from_ten_percent(hand_set):
     _, calib = hand_set
     st = component_steps(calib, 0)
     n = st.loads.size
-    for name, b, bp, fc, want in (("00", 0.02, 0.01, 0.02, "00"), ("0.5", 0.05, 0.01, 0.0, "0.5"),
-                                  ("1", 0.06, 0.05, -0.1, "1"), ("2", 0.2, 0.0, 0.0, "2"),
-                                  ("none", 0.21, 0.0, 0.0, "none")):
+    # ISO 376:2011 Table 2: b 0.05/0.10/0.20/0.40, b' 0.025/0.05/0.10/0.20, |f_c| 0.025/0.05/0.10/0.20
+    for name, b, bp, fc, want in (("00", 0.05, 0.025, -0.025, "00"), ("0.5", 0.06, 0.01, 0.0, "0.5"),
+                                  ("0.5 by b'", 0.0, 0.03, 0.0, "0.5"), ("1", 0.2, 0.05, -0.1, "1"),
+                                  ("2 by f_c", 0.0, 0.0, 0.15, "2"), ("none", 0.41, 0.0, 0.0, "none"),
+                                  ("none by f_c", 0.0, 0.0, -0.21, "none")):
         st.figures = {**st.figures, "b": np.full(n, b), "b_prime": np.full(n, bp),
                       "f_c": np.full(n, fc)}
         assert classify(st, 100.0) == {"+": want}, name
     # a bad step below 10 % of full scale does not count; at 10 % it does
-    st.figures = {**st.figures, "b": np.where(st.loads < 21.0, 5.0, 0.01),
+    st.figures = {**st.figures, "b": np.where(st.loads < 21.0, 5.0, 0.02),
                   "b_prime": np.zeros(n), "f_c": np.zeros(n)}
     assert classify(st, 250.0) == {"+": "00"}  # 20 < 25 = 10 % of 250
     assert classify(st, 200.0) == {"+": "none"}  # 20 = 10 % of 200
