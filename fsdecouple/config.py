@@ -17,6 +17,7 @@ from typing import Any
 
 from .axes import CANONICAL_COLUMNS, CHI_SEPARATOR, DEFAULT, FORCE_COLUMNS, VOLTAGE_COLUMNS, Layout
 from .errors import ConfigError, printable
+from .labinfo import LAB_KEYS, LabInfo, lab_from_dict
 from .units import LOAD_UNITS, MOMENT_UNITS, OUTPUT_UNITS, Units
 from .wrench import Frame, parse_frame, parse_rotation
 from .yamlfile import SafeUniqueLoader, read_yaml  # noqa: F401 (the loader, for tests)
@@ -81,6 +82,7 @@ class Settings:
     outputs: tuple[str, ...] | None = None
     zero: str | None = None  # ZERO_MODES; None: rows for x, y, z, fit for components
     frame: Frame | None = None  # six axes: the wrench transform after eq. (11) (wrench.py)
+    lab: LabInfo = LabInfo()  # the certificate's serial, reference, environment (labinfo.py)
 
     @property
     def zero_method(self) -> str:
@@ -118,6 +120,8 @@ class Settings:
             d["components"], d["outputs"] = list(self.components), list(self.outputs)
         d["rotation"] = None if self.rotation is None else [list(r) for r in self.rotation]
         d["csv"] = {"sep": d.pop("sep"), "decimal": d.pop("decimal")}
+        d.pop("lab")
+        d.update(self.lab.to_dict())  # none of its keys when all are defaults
         d["checks"] = {"min_r2": d.pop("min_r2")}
         if self.refine == 0:
             del d["refine"]  # eq. (11) as written: files from before refine keep their bytes
@@ -131,7 +135,7 @@ class Settings:
 _TOP_KEYS = {
     "limits", "refine", "extrapolation", "sensor", "full_scale", "min_repetitions", "columns",
     "scale", "csv", "svr", "scaling", "rotation", "checks", "units", "components", "outputs",
-    "zero", "frame",
+    "zero", "frame", *LAB_KEYS,
 }
 _SVR_KEYS = {"C", "epsilon", "gamma", "delta2", "tolerance"}
 
@@ -139,8 +143,7 @@ _SVR_KEYS = {"C", "epsilon", "gamma", "delta2", "tolerance"}
 def _unknown(key: str, allowed: set[str], where: str) -> ConfigError:
     hint = difflib.get_close_matches(key, sorted(allowed), n=1)
     did_you_mean = f" (did you mean '{hint[0]}'?)" if hint else ""
-    return ConfigError(f"{where}: unknown key '{key}'{did_you_mean}; "
-                       f"allowed: {', '.join(sorted(allowed))}")
+    return ConfigError(f"{where}: unknown key '{key}'{did_you_mean}; allowed: {', '.join(sorted(allowed))}")
 
 
 def _number(value: Any, where: str, *, positive: bool = False) -> float:
@@ -191,10 +194,8 @@ def _svr_settings(raw: Any, where: str, base: SVRSettings) -> SVRSettings:
             raise _unknown(key, _SVR_KEYS, where)
     if "gamma" in raw and "delta2" in raw:
         raise ConfigError(f"{where}: give either 'gamma' or 'delta2' (gamma = 1/(2 delta2)), not both")
-    kw = {}
-    for key in ("C", "epsilon", "tolerance", "gamma"):
-        if key in raw:
-            kw[key] = _number(raw[key], f"{where}: {key}", positive=True)
+    kw = {key: _number(raw[key], f"{where}: {key}", positive=True)
+          for key in ("C", "epsilon", "tolerance", "gamma") if key in raw}
     if "delta2" in raw:
         kw["gamma"] = 1.0 / (2.0 * _number(raw["delta2"], f"{where}: delta2", positive=True))
     return replace(base, **kw)
@@ -401,6 +402,7 @@ def settings_from_dict(raw: Any, source: str = "config") -> Settings:
         if "scaling" not in raw and kw["units"].output != "V":
             # Table 2's kernel width assumes outputs of order 1 V
             kw["scaling"] = "full_scale"
+    kw.update(lab_from_dict(raw, source))
     if "checks" in raw:
         checks = _mapping(raw["checks"], f"{source}: checks")
         for key, value in checks.items():
@@ -440,9 +442,7 @@ def apply_overrides(settings: Settings, **overrides: Any) -> Settings:
             settings, svr=_svr_settings(svr_raw, "command-line SVR setting", settings.svr)
         )
     if "scaling" in given and given["scaling"] not in SCALINGS:
-        raise ConfigError(
-            f"--scaling: expected one of {', '.join(SCALINGS)}, found {given['scaling']!r}"
-        )
+        raise ConfigError(f"--scaling: expected one of {', '.join(SCALINGS)}, found {given['scaling']!r}")
     if "refine" in given:
         given["refine"] = check_refine(given["refine"], "--refine")
     if "extrapolation" in given:

@@ -106,7 +106,9 @@ def fit(
         advice = refine_advice(checks, model.n_components)
         save_model(model, output, force=force)
     if json_out:
-        print_json({"model": str(output), "method": model.method, **model.report.to_dict(),
+        # the certificate's step data and scores are the model file's: fsdecouple certificate
+        report = {k: v for k, v in model.report.to_dict().items() if k != "certificate"}
+        print_json({"model": str(output), "method": model.method, **report,
                     "checks": [c.to_dict() for c in checks], "refine": settings.refine,
                     "extrapolation": settings.extrapolation,
                     "refine_advice": advice, "tune": model.report.tune})
@@ -184,3 +186,6 @@ def export(
         return
     for line in result.summary_lines():
         console.print(line, highlight=False, soft_wrap=True)
+    if model.report is not None and model.report.certificate:
+        console.print("note: the header decouples forces only; apply --interval's bounds are not "
+                      "in it (docs/certificate.md)", highlight=False, soft_wrap=True)

@@ -69,6 +69,10 @@ def apply(
         int | None, typer.Option(help="Many logs: threads, as many logs at once (local), or the "
                                       "LocalCluster's worker processes (dask); default: the cores.")
     ] = None,
+    interval: Annotated[
+        float | None, typer.Option(help="Add <component>_lo and _hi columns holding the true force "
+                                        "with this probability (0 < P < 1), e.g. 0.95.")
+    ] = None,
     force: ForceOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
@@ -78,6 +82,10 @@ def apply(
     from ..logs.reader import is_parquet
 
     if is_batch(voltages, output):
+        if interval is not None:
+            with user_errors():
+                raise InputError("--interval: one log at a time for now (many logs do not add "
+                                 "the interval columns)")
         return _apply_many(model_file, voltages, Path(output), config, tare, zero, unit, refine,
                            round_trip, engine, scheduler, workers, force, json_out)
     with user_errors():
@@ -98,6 +106,7 @@ def apply(
             summary = apply_file(
                 model, voltages, output, settings=settings, tare=tare, zero=offsets,
                 unit=unit, force=force, round_trip=round_trip, progress=progress,
+                interval=interval,
             )
     for line in apply_lines(summary, output):
         console.print(line, highlight=False, markup=False)  # '[mV]' is no markup

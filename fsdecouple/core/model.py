@@ -198,10 +198,12 @@ class FitReport:
     verdict: dict[str, Any] | None = None  # held-out comparison (fsdecouple.evaluation.verdict)
     outliers: list[dict[str, Any]] | None = None  # possible gross errors (fsdecouple.fitting.outliers)
     tune: dict[str, Any] | None = None  # fit --tune's grid and choice (evaluation.tune); None: untuned
+    # per step: outputs, model error and U; held-out scores for intervals (evaluation.budget)
+    certificate: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         d = {f.name: getattr(self, f.name) for f in fields(self)}
-        for key in ("surrogate_max_error", "verdict", "outliers", "tune"):
+        for key in ("surrogate_max_error", "verdict", "outliers", "tune", "certificate"):
             if d[key] is None:  # files from before these figures
                 del d[key]
         return d

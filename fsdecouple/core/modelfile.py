@@ -226,6 +226,32 @@ def _check_report(report: Any, source: str, labels) -> None:
     warnings = report.get("warnings", [])
     if not (isinstance(warnings, list) and all(isinstance(w, str) for w in warnings)):
         raise ModelFileError(f"{source}: malformed model file (report: warnings is not a list of text)")
+    if report.get("certificate") is not None and not _certificate_ok(report["certificate"], labels):
+        raise ModelFileError(f"{source}: malformed model file (report: certificate needs steps and "
+                             "interval scores per component)")
+
+
+def _certificate_ok(cert: Any, labels) -> bool:
+    """The step data compare reads and the scores apply --interval reads (evaluation.budget)."""
+    def numbers(v, n=None):
+        return isinstance(v, list) and (n is None or len(v) == n) and all(
+            isinstance(x, int | float) and not isinstance(x, bool) for x in v)
+
+    try:
+        for a in labels:
+            st = cert["steps"][a]
+            n = len(st["load"])
+            if not (numbers(st["load"]) and numbers(st["U"], n) and numbers(st["model_error"], n)
+                    and isinstance(st["outputs"], list) and len(st["outputs"]) == n
+                    and all(numbers(o, len(labels)) for o in st["outputs"])):
+                return False
+            c = cert["interval"]["components"][a]
+            own = c["scores"] if c["scores"] is not None else cert["interval"]["scores"]
+            if not (numbers([c["sigma"]]) and numbers(own) and own):
+                return False
+    except (KeyError, TypeError):
+        return False
+    return True
 
 
 def _settings_yaml_form(d: dict[str, Any]) -> dict[str, Any]:

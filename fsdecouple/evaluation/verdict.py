@@ -18,12 +18,15 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
+import numpy as np
+
 from ..config import Settings
 from ..core.metrics import interference_error, pct
 from ..data.calibration import CalibrationSet
 from ..errors import InputError
 from ..fitting.baselines import train_all
 from ..fitting.outliers import gross_errors
+from .budget import certificate_data, heldout_predictions
 from .heldout import HeldOutRound, choose_protocol, rounds_for
 
 VERDICT_METHODS = ("initial", "linear", "svr")
@@ -70,6 +73,9 @@ def heldout_verdict(calib: CalibrationSet, settings: Settings, *, protocol: str 
             "gamma": {a: max(r["value"] for r in inner if r["axis"] == a)
                       for a in settings.layout.labels if any(r["axis"] == a for r in inner)},
         }
+    # the held-out forces of each method, for the certificate's budget and intervals
+    predictions = {m: heldout_predictions(rounds, models, m) for m in ("svr", "linear")}
+    trained = float(np.mean([len(r.train.repetitions) for r in rounds]))
     svr, linear = heldout["svr"]["worst_gamma"], heldout["linear"]["worst_gamma"]
     better = "svr" if linear is None or (svr is not None and svr <= linear) else "linear"
     return {
@@ -80,6 +86,8 @@ def heldout_verdict(calib: CalibrationSet, settings: Settings, *, protocol: str 
         "heldout": heldout,
         "better": better,
         "records": records,
+        "predictions": predictions,
+        "trained": trained,
     }
 
 
@@ -112,7 +120,7 @@ def verdict_warning(verdict: dict[str, Any], method: str) -> str | None:
 
 def summary(verdict: dict[str, Any]) -> dict[str, Any]:
     """The verdict without its records: what the model file and ``fit --json`` keep."""
-    return {k: v for k, v in verdict.items() if k != "records"}
+    return {k: v for k, v in verdict.items() if k not in ("records", "predictions", "trained")}
 
 
 def calibrate(calib: CalibrationSet, settings: Settings, *, method: str = "svr",
@@ -164,6 +172,8 @@ def calibrate(calib: CalibrationSet, settings: Settings, *, method: str = "svr",
             settings.layout, settings.units.loads or None)
     if found is not None:
         model.report.verdict = {**summary(found), "asked": method, "chosen": chosen}
+        model.report.certificate = certificate_data(calib, model, *found["predictions"][chosen],
+                                                    found["trained"])
         warning = verdict_warning(found, chosen)
         if warning:
             model.report.warnings.append(warning)

@@ -13,6 +13,11 @@ of its calibration.  :func:`compare` says by how much it does not, per component
   spanning both models' calibrated ranges, in % of the full-scale load F_FS,a
   (the old model's).  Both models decouple the *same* outputs, so the figure is
   what a log would change by if decoupled with the new model instead of the old.
+
+And ``en``, per component the largest |E_n| over the calibrated steps of both
+(:mod:`fsdecouple.fleet.en`): a change told apart from the calibrations' own
+uncertainty.  ``passed`` is False when any |E_n| > 1 or, with ``max_drift``, any
+figure above exceeds it.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ import numpy as np
 
 from ..core.model import CouplingErrorModel
 from ..errors import InputError
+from .en import en_figures
 
 FORMAT = "fsdecouple.drift"
 CHI_POINTS = 2001  # per chi, over the common range: chi is smooth at this spacing
@@ -38,7 +44,7 @@ def check_max_drift(max_drift: float | None) -> None:
 
 
 def compare(old: CouplingErrorModel | str | Path, new: CouplingErrorModel | str | Path, *,
-            max_drift: float | None = None) -> dict[str, Any]:
+            max_drift: float | None = None, en_gate: bool = True) -> dict[str, Any]:
     """The drift document of ``new`` against ``old`` (models or model files).
 
     Parameters
@@ -47,14 +53,19 @@ def compare(old: CouplingErrorModel | str | Path, new: CouplingErrorModel | str 
         Two models of the same sensor: same components, same units.
     max_drift : float, optional
         Gate [%]: ``passed`` is False when any slope change, chi difference or
-        force difference exceeds it (in absolute value); None leaves ``passed`` null.
+        force difference exceeds it (in absolute value).  Without it, and without
+        E_n (a model with no certificate data), ``passed`` is null.
+    en_gate : bool
+        Whether |E_n| > 1 fails ``passed`` (``compare``); ``fit-many`` gates its
+        drift by ``max_drift`` alone and only reports E_n.
 
     Returns
     -------
     dict
         ``{"format": "fsdecouple.drift", "old", "new", "components": {a:
         {"slope_change_pct", "chi_max_pct": {chi name: %}, "force_max_pct"}},
-        "max_drift", "passed", "exceeded"}``.
+        "max_drift", "en": {a: max |E_n|} or None, "en_steps", "en_note", "passed",
+        "exceeded"}``.
     """
     from ..core.modelfile import load_model
 
@@ -100,14 +111,24 @@ def compare(old: CouplingErrorModel | str | Path, new: CouplingErrorModel | str 
         for i, a in enumerate(axes)
     }
     exceeded = [] if max_drift is None else _exceeded(components, max_drift)
+    en, why = en_figures(old, new)
+    unit = old.settings.units.load
+    if en is not None and en_gate:
+        exceeded += [f"{s['axis']}: E_n {s['en']:+.2f} at {s['load']:g} {unit} ({s['steps_of']}'s step)"
+                     for s in en["steps"] if abs(s["en"]) > 1.0][:5]
+    gated = max_drift is not None or (en is not None and en_gate)
     return {
         "format": FORMAT,
         "old": docs[0],
         "new": docs[1],
-        "units": {"load": old.settings.units.load, "output": old.settings.units.output},
+        "units": {"load": unit, "output": old.settings.units.output},
         "components": components,
         "max_drift": max_drift,
-        "passed": None if max_drift is None else not exceeded,
+        "en": None if en is None else en["en"],
+        "en_steps": None if en is None else en["steps"],
+        "en_note": why,
+        "en_gate": en is not None and en_gate,
+        "passed": None if not gated else not exceeded,
         "exceeded": exceeded,
     }
 

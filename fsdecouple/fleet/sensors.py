@@ -135,7 +135,7 @@ def fit_sensor(sensor_dir: str | Path, models_dir: str | Path, *, method: str = 
         calib = load_calibration(calibration_path(d), settings)
         model = calibrate(calib, settings, method=method, workers=workers)
         if old is not None:
-            result.drift = compare(old, model, max_drift=max_drift)
+            result.drift = compare(old, model, max_drift=max_drift, en_gate=False)
             result.drift["old"]["model"], result.drift["new"]["model"] = str(old_path), str(out)
         save_model(model, out, force=force)
     except FsdecoupleError as err:

@@ -29,6 +29,7 @@ import pyarrow.compute as pc
 
 from ..axes import VOLTAGE_COLUMNS
 from ..config import Settings
+from ..core.intervals import half_widths, interval_names, with_intervals
 from ..core.model import FORCE_LIMIT, CouplingErrorModel
 from ..data.csv_text import HEADER_ROW, require_columns
 from ..data.zero import tare_offsets
@@ -98,6 +99,7 @@ def apply_file(
     progress: Callable[[int, int], None] | None = None,
     workers: int | None = None,
     round_trip: bool = False,
+    interval: float | None = None,
 ) -> ApplySummary:
     """Decouple the voltage log ``voltages`` into ``out`` by eq. (11).
 
@@ -125,6 +127,10 @@ def apply_file(
         (:func:`~fsdecouple.logs.sinks.force_decimals`, 8 decimals for the
         paper's sensor in N), a tenth of the fast path's 1e-9.  Parquet output
         always stores the doubles.
+    interval : float, optional
+        Add ``<component>_lo`` and ``<component>_hi``: bounds holding the true force
+        with probability ``interval`` (0 < P < 1), by conformal prediction on the
+        fit's held-out residuals (:mod:`fsdecouple.core.intervals`).
 
     Notes
     -----
@@ -137,10 +143,12 @@ def apply_file(
     """
     path, out = Path(voltages), Path(out)
     settings, unit = check_options(model, settings, tare, zero, unit)
+    if interval is not None:
+        half_widths(model, interval)  # refused before the log is read
     refuse_overwriting_input(out, [path])
     with LogFile(path, settings) as log:
         return _apply(model, log, out, settings, tare, zero, unit, force, chunk_rows, progress,
-                      workers, round_trip)
+                      workers, round_trip, interval)
 
 
 def check_options(model: CouplingErrorModel, settings: Settings | None, tare, zero,
@@ -253,12 +261,13 @@ def _limit_bounds(settings: Settings, model: CouplingErrorModel) -> tuple[np.nda
 
 
 def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit, force,
-           chunk_rows, progress, workers, round_trip) -> ApplySummary:
+           chunk_rows, progress, workers, round_trip, interval=None) -> ApplySummary:
     path, header = log.path, log.header
     layout = model.layout
     names = [settings.columns[c] for c in layout.outputs]
     require_columns(header, dict(zip(layout.outputs, names, strict=True)), path)
-    clash = [c for c in (*layout.loads, STATUS_COLUMN) if c in header]
+    columns = layout.loads + (interval_names(layout.loads) if interval is not None else ())
+    clash = [c for c in (*columns, STATUS_COLUMN) if c in header]
     if clash:
         raise InputError(
             f"{where(path, HEADER_ROW, clash[0])}: the log already has a column named "
@@ -285,13 +294,13 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
         if is_parquet(out):
             sink = ParquetSink(fh, (STATUS_COLUMN,), {FORCE_UNIT_KEY: unit,
                                                       OUTPUT_UNIT_KEY: summary.output_unit},
-                               columns=layout.loads)
+                               columns=columns)
         else:
             full_scale = np.asarray(model.settings.full_scale) * to_unit
             decimals = None if round_trip else force_decimals(full_scale)
             sink = CsvSink(fh, header, None if log.parquet else log.header_line, decimals,
                            sep=settings.sep, decimal=settings.decimal, extra=(STATUS_COLUMN,),
-                           columns=layout.loads)
+                           columns=columns)
 
         def work(job):
             # parse, eq. (11) and format one block; numpy and pyarrow release the
@@ -299,6 +308,8 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
             block = job()
             f, code, empty = decouple_rows(model, block.u * scale, summary.offsets, rows,
                                            truncated=block.truncated)
+            if interval is not None:
+                f = with_intervals(model, f, interval, block.u * scale - summary.offsets)
             if to_unit != 1.0:
                 f = f * to_unit
             counts = np.bincount(code, minlength=len(STATUSES))

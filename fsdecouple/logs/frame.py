@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..core.intervals import half_widths, interval_names, with_intervals
 from ..core.model import CouplingErrorModel
 from ..data.zero import tare_offsets
 from ..errors import InputError
@@ -81,7 +82,8 @@ def frame_tare(model: CouplingErrorModel, frame: pd.DataFrame, n: int,
 
 
 def decouple_frame(model: CouplingErrorModel, frame: pd.DataFrame, *, tare: int | None = None,
-                   zero=None, settings: Settings | None = None) -> pd.DataFrame:
+                   zero=None, settings: Settings | None = None,
+                   interval: float | None = None) -> pd.DataFrame:
     """Forces by eq. (11) for every row of ``frame``; the rows and columns unchanged.
 
     Parameters
@@ -97,28 +99,40 @@ def decouple_frame(model: CouplingErrorModel, frame: pd.DataFrame, *, tare: int 
     settings : Settings, optional
         Column names, ``scale`` and ``limits`` of the frame (``apply -c CONFIG``);
         default: the model's.  Its units must be the model's.
+    interval : float, optional
+        Also ``fx_lo, fx_hi, ...``: bounds holding the true force with probability
+        ``interval`` (0 < P < 1), as ``apply --interval`` (:mod:`fsdecouple.core.intervals`).
 
     Returns
     -------
     pandas.DataFrame
         A copy of ``frame`` with ``fx, fy, fz`` [load unit] (NaN where a row has no
-        forces) and ``status`` (:data:`fsdecouple.logs.apply.STATUSES`).
+        forces), the bounds if asked, and ``status`` (:data:`fsdecouple.logs.apply.STATUSES`).
     """
-    f, code = frame_forces(model, frame, tare=tare, zero=zero, settings=settings)
+    f, code = frame_forces(model, frame, tare=tare, zero=zero, settings=settings, interval=interval)
     out = frame.copy()
-    for a, name in enumerate(model.layout.loads):
+    names = model.layout.loads + (interval_names(model.layout.loads) if interval is not None else ())
+    for a, name in enumerate(names):
         out[name] = f[:, a]
     out[STATUS_COLUMN] = _NAMES[code]
     return out
 
 
 def frame_forces(model: CouplingErrorModel, frame: pd.DataFrame, *, tare: int | None = None,
-                 zero=None, settings: Settings | None = None) -> tuple[np.ndarray, np.ndarray]:
+                 zero=None, settings: Settings | None = None,
+                 interval: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The arrays of :func:`decouple_frame`, for engines that build their own columns.
 
-    Returns ``(f, code)``: forces, shape (n, N) [load unit], NaN where a row has
+    Returns ``(f, code)``: forces, shape (n, N) [load unit] (with ``interval``: shape
+    (n, 3N), the forces then each one's lower and upper bound), NaN where a row has
     none, and each row's status as an index into :data:`fsdecouple.logs.apply.STATUSES`.
     """
+    if interval is not None:
+        half_widths(model, interval)  # refused before any work
+        clash = [c for c in interval_names(model.layout.loads) if c in frame.columns]
+        if clash:
+            raise InputError(f"the frame already has a column named '{clash[0]}', which the "
+                             "interval would overwrite")
     if tare is not None and zero is not None:
         raise InputError("give either tare or zero, not both")
     settings, _ = check_options(model, settings, None, None, None)  # its units: the model's
@@ -131,5 +145,7 @@ def frame_forces(model: CouplingErrorModel, frame: pd.DataFrame, *, tare: int | 
         if offsets.shape != (model.n_components,) or not np.isfinite(offsets).all():
             raise InputError(f"zero {zero!r}: expected {model.n_components} finite outputs")
     f, code, empty = decouple_rows(model, raw, offsets, RowRules.for_model(model, settings))
+    if interval is not None:
+        f = with_intervals(model, f, interval, raw - offsets)
     f[empty] = np.nan
     return f, code

@@ -42,11 +42,15 @@ def drift_table(doc: dict[str, Any]) -> Table:
 
 def drift_line(doc: dict[str, Any]) -> str | None:
     """The gate's verdict, or None without ``--max-drift``."""
+    en = doc.get("en")
+    en_text = None if en is None else "largest |E_n| " + ", ".join(f"{a} {v:.2f}" for a, v in en.items())
     if doc["passed"] is None:
-        return None
+        return f"note: {doc['en_note']}" if doc.get("en_note") else None
+    gates = " or ".join(([f"--max-drift {doc['max_drift']:g} %"] if doc["max_drift"] is not None
+                         else []) + (["|E_n| > 1"] if doc.get("en_gate") else []))
     if doc["passed"]:
-        return f"no change exceeds --max-drift {doc['max_drift']:g} %"
-    return f"drift exceeds --max-drift {doc['max_drift']:g} %: {'; '.join(doc['exceeded'])}"
+        return f"no change exceeds {gates}" + (f" ({en_text})" if en_text else "")
+    return f"changed beyond {gates}: {'; '.join(doc['exceeded'])}" + (f" ({en_text})" if en_text else "")
 
 
 def fleet_table(doc: dict[str, Any]) -> Table:

@@ -285,7 +285,10 @@ def build_report(model, cv: dict | None = None, calib=None) -> Report:
         _check_cv_fits(model, cv)
     figs: dict[str, bytes] = {}
     body = [f"<h1>Calibration report: {escape(model.settings.sensor)}</h1>\n",
-            _header(model, cv)]
+            _header(model, cv),
+            '<p id="certificate-link">Calibration certificate (ISO 376 figures, class, uncertainty '
+            'budget): <a href="certificate.html">certificate.html</a>, written beside this report '
+            "by <code>fsdecouple certificate MODEL CALIB -o certificate.html</code>.</p>\n"]
     if model.warnings:
         body.append("<ul>" + "".join(f"<li>warning: {escape(w)}</li>" for w in model.warnings) + "</ul>\n")
 

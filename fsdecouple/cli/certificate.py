@@ -1,0 +1,52 @@
+"""The command that writes a calibration certificate: certificate."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..config import load_config
+from ..core.modelfile import load_model
+from ..files import atomic_write, check_output, refuse_overwriting_input
+from .app import ConfigOpt, ForceOpt, JsonOpt, _given, _read, app, console, print_json, user_errors
+
+
+@app.command()
+def certificate(
+    model_file: Annotated[Path, typer.Argument(help="Model file (JSON) fitted on CALIB.")],
+    calib: Annotated[Path, typer.Argument(help="The calibration directory or CSV it was fitted on.")],
+    config: ConfigOpt = None,
+    output: Annotated[
+        Path | None, typer.Option("--output", "-o", help="HTML certificate to write (prints on A4).")
+    ] = None,
+    force: ForceOpt = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """ISO 376 figures (b, b', f_c, f_0, v), class and uncertainty budget (U, k = 2) per step."""
+    from ..data.calibration import load_calibration
+    from ..evaluation.certificate import certificate as build
+    from ..reporting.certificate import certificate_html, certificate_tables
+
+    with user_errors():
+        model = load_model(model_file)
+        settings = load_config(config) if config is not None else None
+        if output is not None:
+            check_output(output, force=force)
+        cs = load_calibration(calib, settings or model.settings)
+        doc = build(model, cs, source=str(model_file), settings=settings)
+        if output is not None:
+            refuse_overwriting_input(output, [model_file, *_read(cs), *_given(config)])
+            html = certificate_html(doc)
+            with atomic_write(output, force=force) as fh:
+                fh.write(html)
+    if json_out:
+        print_json(doc)
+    else:
+        for t in certificate_tables(doc):
+            console.print(t)
+        for n in doc["notes"]:
+            console.print(f"note: {n}")
+    if output is not None and not json_out:
+        console.print(f"certificate written to {output}")

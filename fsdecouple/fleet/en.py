@@ -1,0 +1,63 @@
+"""E_n between two calibrations of one sensor: a change told apart from the scatter.
+
+At every calibrated step of each component, of either calibration,
+
+    E_n = (F_A - F_B) / sqrt(U_A^2 + U_B^2)
+
+(ISO/IEC 17043:2010, B.4.1.1; EURAMET cg-4 uses it to compare force calibrations),
+with F_A and F_B the decoupled prime force of that step's mean outputs under model A
+and under model B, and U_A, U_B their expanded uncertainties (k = 2) at that load
+(the step's own U from the model that calibrated it, the other model's interpolated
+over its steps).  Both models decouple the *same* outputs: A's step means under A
+and under B, and B's under both; a calibration whose outputs are all 1 % larger
+decouples its own steps perfectly, and only the crossing shows the change.
+|E_n| <= 1: the calibrations agree within their uncertainties.
+
+The step means and U come from the model file's ``report.certificate`` (written by
+``fit``); a model without them (an older file, or ``--no-verdict``) gives no E_n.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..core.model import CouplingErrorModel
+
+
+def _steps(model: CouplingErrorModel) -> dict[str, dict] | None:
+    cert = model.report.certificate if model.report is not None else None
+    return None if not cert else cert.get("steps")
+
+
+def en_figures(a: CouplingErrorModel, b: CouplingErrorModel, names=("old", "new")
+               ) -> tuple[dict[str, Any] | None, str | None]:
+    """``({"en": {component: max |E_n|}, "steps": [...]}, None)``, or ``(None, why not)``."""
+    sa, sb = _steps(a), _steps(b)
+    missing = [n for n, s in zip(names, (sa, sb), strict=True) if s is None]
+    if missing:
+        return None, (f"the {' and '.join(missing)} model file has no certificate data (fitted "
+                      "by an older fsdecouple, or with --no-verdict): no E_n; refit it, or gate "
+                      "by --max-drift")
+    out, steps = {}, []
+    for i, axis in enumerate(a.layout.labels):
+        worst = 0.0
+        for own, data, other in ((names[0], sa[axis], sb[axis]), (names[1], sb[axis], sa[axis])):
+            loads = np.asarray(data["load"], dtype=float)
+            outputs = np.asarray(data["outputs"], dtype=float)
+            f_a = a.decouple(outputs, rotate=False, exact=True)[:, i]
+            f_b = b.decouple(outputs, rotate=False, exact=True)[:, i]
+            u_own = np.asarray(data["U"], dtype=float)
+            order = np.argsort(other["load"])
+            u_other = np.interp(loads, np.asarray(other["load"], dtype=float)[order],
+                                np.asarray(other["U"], dtype=float)[order])
+            u_a, u_b = (u_own, u_other) if own == names[0] else (u_other, u_own)
+            en = (f_a - f_b) / np.sqrt(u_a ** 2 + u_b ** 2)
+            worst = max(worst, float(np.abs(en).max(initial=0.0)))
+            steps += [{"axis": axis, "load": float(f), "steps_of": own, f"F_{names[0]}": float(x),
+                       f"F_{names[1]}": float(y), f"U_{names[0]}": float(p), f"U_{names[1]}": float(q),
+                       "en": float(e)}
+                      for f, x, y, p, q, e in zip(loads, f_a, f_b, u_a, u_b, en, strict=True)]
+        out[axis] = worst
+    return {"en": out, "steps": steps}, None

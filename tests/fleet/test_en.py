@@ -1,0 +1,72 @@
+"""E_n between two calibrations: recomputed by hand from the model files' step data."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from conftest import invoke
+
+from fsdecouple import save_model
+from fsdecouple.evaluation.verdict import calibrate
+from fsdecouple.fleet.drift import compare
+from fsdecouple.fleet.en import en_figures
+
+
+def _scaled(calib, factor: float):
+    """The same calibration with every output ``factor`` times larger (zero-corrected and raw)."""
+    pts = calib.points.copy()
+    for c in ("ux", "uy", "uz", "ux_raw", "uy_raw", "uz_raw"):
+        pts[c] = pts[c] * factor
+    return replace(calib, points=pts)
+
+
+@pytest.fixture(scope="module")
+def pair(calib, settings):
+    return calibrate(calib, settings), calibrate(_scaled(calib, 1.01), settings)
+
+
+def test_en_is_the_difference_of_both_models_on_the_same_outputs_over_both_us(pair):
+    a, b = pair
+    got, why = en_figures(a, b)
+    assert why is None
+    for i, axis in enumerate("xyz"):
+        worst = 0.0
+        for own, other in ((a, b), (b, a)):
+            st, ot = own.report.certificate["steps"][axis], other.report.certificate["steps"][axis]
+            for load, outputs, u_own in zip(st["load"], st["outputs"], st["U"], strict=True):
+                fa = a.decouple(np.array([outputs]), rotate=False, exact=True)[0, i]
+                fb = b.decouple(np.array([outputs]), rotate=False, exact=True)[0, i]
+                # the other model's U at this load: its steps share the load grid here
+                u_other = ot["U"][ot["load"].index(load)]
+                en = (fa - fb) / np.hypot(u_own, u_other)
+                worst = max(worst, abs(en))
+        assert got["en"][axis] == pytest.approx(worst, rel=1e-9)
+
+
+def test_outputs_one_percent_larger_give_en_above_one_on_every_component(pair):
+    a, b = pair
+    got, _ = en_figures(a, b)
+    # B decouples A's step means 1 % low: 1 N at 100 N against U of 0.2-0.5 N (k = 2)
+    assert all(v > 1.0 for v in got["en"].values()), got["en"]
+    same, _ = en_figures(a, a)
+    assert all(v == 0.0 for v in same["en"].values())
+
+
+def test_compare_gates_on_en_and_an_old_model_falls_back_with_a_note(pair, tmp_path):
+    a, b = pair
+    pa, pb = tmp_path / "a.json", tmp_path / "b.json"
+    save_model(a, pa)
+    save_model(b, pb)
+    out = invoke(["compare", pa, pb, "--json"], 1).stdout
+    doc = json.loads(out)
+    assert doc["passed"] is False and set(doc["en"]) == {"x", "y", "z"}
+    assert min(doc["en"].values()) > 1.0
+    invoke(["compare", pa, pa], 0)
+    old = replace(a, report=replace(a.report, certificate=None))
+    doc = compare(old, b)
+    assert doc["en"] is None and "no certificate data" in doc["en_note"]
+    assert doc["passed"] is None  # neither E_n nor --max-drift: nothing to gate on
+    assert compare(old, b, max_drift=0.5)["passed"] is False  # the fixed threshold stays
