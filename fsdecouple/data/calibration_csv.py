@@ -14,6 +14,7 @@ import numpy as np
 from ..config import Settings
 from ..errors import InputError, excerpt, where
 from ..files import CALIBRATION_LIMIT, natural_key, open_input, read_bounded, reading
+from .columns import applied_load
 from .csv_text import HEADER_ROW, read_csv_text, read_header, require_columns, to_numbers
 
 if TYPE_CHECKING:
@@ -137,6 +138,11 @@ def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationT
                 f"{layout.outputs[0]}_raw), not a repetition; move it out of the calibration directory"
             )
         require_columns(header, numeric, f)
+        for c in layout.outputs:  # a reading mapped to a reference column: a swapped config
+            if applied_load(cols[c]):
+                raise InputError(f"{where(f, HEADER_ROW, cols[c])}: output {c} is mapped to "
+                                 f"'{cols[c]}', named like an applied load; map the sensor's "
+                                 "own reading under columns:")
         # a single CSV without a repetition column is one repetition
         numbered = single and cols["repetition"] in header
         mapped = {name: name for name in numeric.values()}

@@ -244,6 +244,15 @@ def _candidates(names: list[str], usable: list[int]) -> list[_Candidate]:
     return found
 
 
+_APPLIED = re.compile(r"(?:known|applied|reference|ref|true|nominal)[a-z]+\d*"
+                      r"|[a-z]+\d*(?:ref|reference|applied|known)")
+
+
+def applied_load(header: str) -> bool:
+    """Whether ``header`` names an applied (reference) load: ``known_Fx``, ``Fz_ref [N]``."""
+    return bool(_APPLIED.fullmatch(_parse_name(header)[0]))
+
+
 def _sniff_sep(first_line: str) -> str:
     counts = {s: len(next(csv.reader([first_line], delimiter=s), [])) for s in _SEPS}
     return max(_SEPS, key=lambda s: (counts[s], s == ","))  # a tie is a comma file
