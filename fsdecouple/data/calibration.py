@@ -126,7 +126,7 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
     ``combined``: rows loading several components are kept (``validate``), not refused.
     """
     layout = settings.layout
-    table = assign_sweeps(table, layout, combined)
+    table = assign_sweeps(table, layout, combined, None if combined else settings.full_scale)
     reps = sorted(table["repetition"].unique())
     if len(reps) < settings.min_repetitions:
         raise InputError(
@@ -149,7 +149,11 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
                 f"{first['file']}: repetition {rep} has no {' or '.join(missing)} sweep; "
                 f"every repetition must calibrate {every}"
             )
-    points, offsets = zero_correct(table, layout, settings.zero_method)
+    # rows loading several components (a lever arm) are zeroed by their sweep's zero rows:
+    # the polynomial of zero: fit assumes one load per sweep
+    several = ((table[list(layout.loads)].to_numpy() != 0.0).sum(axis=1) > 1).any()
+    method = settings.zero or ("rows" if several else settings.zero_method)
+    points, offsets = zero_correct(table, layout, method)
     warnings = []
     cs = CalibrationSet(points, offsets, tuple(files), tuple(skipped), layout=layout)
     for axis in layout.labels:

@@ -30,7 +30,7 @@ def loaded_axes(forces: np.ndarray) -> np.ndarray:
 
 
 def assign_sweeps(table: pd.DataFrame, layout: Layout = DEFAULT,
-                  combined: bool = False) -> pd.DataFrame:
+                  combined: bool = False, full_scale=None) -> pd.DataFrame:
     """Check that each row loads one axis at most and give every row its sweep axis.
 
     With an ``axis`` column, a row's load must lie on that axis.  Without one, the
@@ -47,6 +47,12 @@ def assign_sweeps(table: pd.DataFrame, layout: Layout = DEFAULT,
     forces = table[list(loads)].to_numpy()
     loaded = loaded_axes(forces)
     two = np.flatnonzero(loaded == -2)
+    if full_scale is not None and two.size:
+        # a calibration row loading several components (a moment on a lever arm) joins
+        # the sweep of the load largest relative to its full scale (fitting/joint.py)
+        loaded = loaded.copy()
+        loaded[two] = np.argmax(np.abs(forces[two]) / np.asarray(full_scale, dtype=float), axis=1)
+        two = two[:0]
     if combined and two.size:
         loaded = loaded.copy()
         loaded[two] = np.argmax(np.abs(forces[two]), axis=1)  # overridden by a label below
