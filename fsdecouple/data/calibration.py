@@ -188,16 +188,17 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
 
 
 def load_calibration(path: str | Path, settings: Settings, exclude=(),
-                     combined: bool = False) -> CalibrationSet:
+                     combined: bool = False, strict: bool = False) -> CalibrationSet:
     """Read, validate and zero-correct a calibration set (a directory or one CSV).
 
     ``exclude``: ``FILE:ROW`` points to drop before zero correction (``fit --exclude``);
     FILE is a file of the set by path or by name, ROW its spreadsheet row.
     """
-    read = read_calibration_table(path, settings)
+    read = read_calibration_table(path, settings, strict)
     table, dropped = _exclude(read.table, exclude)
     cs = from_table(table, settings, read.files, [*read.skipped, *dropped], combined)
     hidden = tuple(f"{f}: hidden file, not read as a repetition" for f in read.hidden)
+    hidden += read.warnings
     cs = replace(cs, excluded=tuple(dropped))
     return replace(cs, warnings=hidden + cs.warnings) if hidden else cs
 

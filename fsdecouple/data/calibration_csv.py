@@ -105,9 +105,11 @@ class CalibrationTable:
     skipped: list[str]
     files: tuple[tuple[str, str], ...]  # (path, SHA-256) of every file read
     hidden: list[Path]
+    warnings: tuple[str, ...] = ()
 
 
-def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationTable:
+def read_calibration_table(path: str | Path, settings: Settings,
+                           strict: bool = False) -> CalibrationTable:
     """Read a calibration set into one long table in file order.
 
     The directory is listed once and each file read once (its digest, header
@@ -117,7 +119,7 @@ def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationT
 
     files, hidden = list_calibration(path)
     single = len(files) == 1 and not Path(path).is_dir()
-    frames, skipped, digests = [], [], []
+    frames, skipped, digests, warnings = [], [], [], []
     cols = settings.columns
     layout = settings.layout
     numeric = {c: cols[c] for c in (*layout.loads, *layout.outputs)}
@@ -166,6 +168,18 @@ def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationT
             skipped.append(f"{f}, row {r}: skipped, no value in any mapped column (a blank row, "
                            "or a side table running past the data)")
         raw, rows = raw[~blank], rows[~blank]
+        # a row whose applied loads are all blank (a load not yet typed in): skipped with
+        # a warning naming its lines, or refused with --strict
+        loads = [cols[c] for c in layout.loads]
+        noload = np.logical_and.reduce([raw[c].str.strip().eq("").to_numpy() for c in loads])
+        if noload.any():
+            lines = ("lines " if noload.sum() > 1 else "line ") + ", ".join(map(str, rows[noload]))
+            if strict:
+                raise InputError(f"{where(f, int(rows[noload][0]), loads[0])}: the applied loads "
+                                 f"are blank ({lines}); --strict refuses rows without a load")
+            warnings.append(f"{f}, {lines}: applied loads blank; rows skipped "
+                            "(--strict refuses them)")
+            raw, rows = raw[~noload], rows[~noload]
         if raw.empty:
             raise InputError(f"{f}: header only, no data rows")
         out = pd.DataFrame({"file": str(f), "row": rows})
@@ -199,7 +213,7 @@ def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationT
     # training order is file order: repetition, then row (stable)
     table = table.sort_values(["repetition"], kind="stable").reset_index(drop=True)
     table = table[["repetition", "axis", "file", "row", *layout.loads, *layout.outputs]]
-    return CalibrationTable(table, skipped, tuple(digests), hidden)
+    return CalibrationTable(table, skipped, tuple(digests), hidden, tuple(warnings))
 
 
 

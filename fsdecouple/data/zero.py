@@ -48,10 +48,16 @@ def assign_sweeps(table: pd.DataFrame, layout: Layout = DEFAULT,
     loaded = loaded_axes(forces)
     two = np.flatnonzero(loaded == -2)
     if full_scale is not None and two.size:
-        # a calibration row loading several components (a moment on a lever arm) joins
-        # the sweep of the load largest relative to its full scale (fitting/joint.py)
+        # a calibration row loading several components (a moment on a lever arm) joins the
+        # sweep of a load never applied alone (the moment; its force has a sweep of its own),
+        # of those the largest relative to its full scale (fitting/joint.py)
         loaded = loaded.copy()
-        loaded[two] = np.argmax(np.abs(forces[two]) / np.asarray(full_scale, dtype=float), axis=1)
+        alone = np.zeros(len(loads), dtype=bool)
+        alone[loaded[loaded >= 0]] = True
+        rel = np.abs(forces[two]) / np.asarray(full_scale, dtype=float)
+        rel = np.where(alone & (rel > 0).any(axis=0) & (rel * ~alone > 0).any(axis=1)[:, None],
+                       0.0, rel)
+        loaded[two] = np.argmax(rel, axis=1)
         two = two[:0]
     if combined and two.size:
         loaded = loaded.copy()

@@ -125,3 +125,21 @@ def test_the_rig_is_nearly_calibrated_with_lever_arm_moments(tmp_path):
     assert (f[rows, settings.layout.loads.index("fy")] != 0).all()  # the lever arm's force
     # readings in N and N·m: within cross-talk plus coupling of the applied loads
     assert np.abs(u - f).max() < 0.1 * FULL_SCALE.max()
+
+
+def test_rows_with_blank_loads_are_skipped_with_their_lines_or_refused_with_strict(tmp_path):
+    path, settings, whole = rig(tmp_path)
+
+    def blank(rows):
+        for line in (14, 30):  # editor lines (rows[line - 1]), loaded rows of fy and fz
+            for c in range(7, 13):
+                rows[line - 1][c] = ""
+
+    bad = _edit(path, tmp_path / "blank.csv", blank)
+    calib = load_calibration(bad, settings)
+    assert len(calib.points) == len(whole.points) - 2
+    assert any("blank.csv, lines 14, 30: applied loads blank; rows skipped" in w
+               for w in calib.warnings)
+    with pytest.raises(InputError, match=r"blank.csv, row 14, column 'known_Fx': the applied "
+                                         r"loads are blank \(lines 14, 30\); --strict"):
+        load_calibration(bad, settings, strict=True)
