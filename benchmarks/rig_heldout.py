@@ -100,6 +100,7 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--file", type=Path, help="a rig file instead of simulated ones")
+    ap.add_argument("--limit", type=float, help="exit 1 when any file's ratio is above this")
     args = ap.parse_args(argv)
     ratios = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -115,6 +116,8 @@ def main(argv=None) -> None:
             print(f"seed {seed}: worst RMS model {100 * max(r['model']):.3f} % F.S., matrix "
                   f"{100 * max(r['matrix']):.3f} % F.S., ratio {r['ratio']:.3f}")
     print(f"ratio over {len(ratios)} files: mean {np.mean(ratios):.3f}, max {np.max(ratios):.3f}")
+    if args.limit is not None and max(ratios) > args.limit:
+        raise SystemExit(1)
 
 
 if __name__ == "__main__":
