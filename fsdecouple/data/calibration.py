@@ -149,10 +149,10 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
                 f"{first['file']}: repetition {rep} has no {' or '.join(missing)} sweep; "
                 f"every repetition must calibrate {every}"
             )
-    # rows loading several components (a lever arm) are zeroed by their sweep's zero rows:
-    # the polynomial of zero: fit assumes one load per sweep
+    # rows loading several components (a lever arm): each row is zeroed by the nearest
+    # zero row before it (docs/rigs.md); the polynomial of zero: fit assumes one load a sweep
     several = ((table[list(layout.loads)].to_numpy() != 0.0).sum(axis=1) > 1).any()
-    method = settings.zero or ("rows" if several else settings.zero_method)
+    method = settings.zero or ("before" if several else settings.zero_method)
     points, offsets = zero_correct(table, layout, method)
     warnings = []
     cs = CalibrationSet(points, offsets, tuple(files), tuple(skipped), layout=layout)
