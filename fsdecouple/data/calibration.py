@@ -155,6 +155,12 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
     method = settings.zero or ("before" if several else settings.zero_method)
     points, offsets = zero_correct(table, layout, method)
     warnings = []
+    if several:  # a typo in a single-axis set reads the same: say where, once
+        rows = table[(table[list(layout.loads)].to_numpy() != 0.0).sum(axis=1) > 1]
+        first = ", ".join(f"{f}, row {r}" for f, r in zip(rows["file"][:3], rows["row"][:3],
+                                                          strict=True))
+        warnings.append(f"{len(rows)} rows load several components ({first}"
+                        f"{', ...' if len(rows) > 3 else ''}): fitted jointly (docs/rigs.md)")
     cs = CalibrationSet(points, offsets, tuple(files), tuple(skipped), layout=layout)
     for axis in layout.labels:
         grids = cs.load_grid(axis)
