@@ -123,7 +123,8 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
                combined: bool = False) -> CalibrationSet:
     """Validate a long table (as :func:`read_calibration_table` returns) and zero-correct it.
 
-    ``combined``: rows loading several components are kept (``validate``), not refused.
+    ``combined`` (``validate``): rows loading several components keep their labelled sweep and
+    its zero rows; without it (``fit``) they are fitted jointly and zeroed by the zero row before.
     """
     layout = settings.layout
     table = assign_sweeps(table, layout, combined, None if combined else settings.full_scale)
@@ -151,7 +152,7 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
             )
     # rows loading several components (a lever arm): each row is zeroed by the nearest
     # zero row before it (docs/rigs.md); the polynomial of zero: fit assumes one load a sweep
-    several = ((table[list(layout.loads)].to_numpy() != 0.0).sum(axis=1) > 1).any()
+    several = not combined and ((table[list(layout.loads)].to_numpy() != 0.0).sum(axis=1) > 1).any()
     method = settings.zero or ("before" if several else settings.zero_method)
     points, offsets = zero_correct(table, layout, method)
     warnings = []
