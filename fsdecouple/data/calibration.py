@@ -160,7 +160,8 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
         rows = table[(table[list(layout.loads)].to_numpy() != 0.0).sum(axis=1) > 1]
         first = ", ".join(f"{f}, row {r}" for f, r in zip(rows["file"][:3], rows["row"][:3],
                                                           strict=True))
-        warnings.append(f"{len(rows)} rows load several components ({first}"
+        many = "rows load" if len(rows) > 1 else "row loads"
+        warnings.append(f"{len(rows)} {many} several components ({first}"
                         f"{', ...' if len(rows) > 3 else ''}): fitted jointly (docs/rigs.md)")
     cs = CalibrationSet(points, offsets, tuple(files), tuple(skipped), layout=layout)
     for axis in layout.labels:

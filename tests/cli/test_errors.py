@@ -67,7 +67,7 @@ def test_row_loading_two_axes_is_fitted_jointly_and_named(cal, tmp_path):
     the warning names it, in case it is a typo."""
     edit(cal / "rep4.csv", 3, "fy", "10.000")
     r = invoke(["fit", cal, "-o", tmp_path / "m.json", "--no-verdict"])
-    assert "1 rows load several components (" in r.stderr
+    assert "1 row loads several components (" in r.stderr
     assert "rep4.csv, row 3): fitted jointly" in r.stderr
 
 
