@@ -127,7 +127,7 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
     its zero rows; without it (``fit``) they are fitted jointly and zeroed by the zero row before.
     """
     layout = settings.layout
-    table = assign_sweeps(table, layout, combined, None if combined else settings.full_scale)
+    table = assign_sweeps(table, layout, combined, settings.full_scale)
     reps = sorted(table["repetition"].unique())
     if len(reps) < settings.min_repetitions:
         raise InputError(

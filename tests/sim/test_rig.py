@@ -59,3 +59,15 @@ def test_eight_gauges_are_refused_in_one_line(tmp_path):
                  code=2)
     assert "more outputs than components (M > N) is not supported yet" in res.stderr
     assert not (tmp_path / "c.yaml").exists()
+
+
+def test_validate_scores_a_rig_file_with_its_lever_arm_rows(tmp_path):
+    """validate labels a lever-arm row by its moment, as fit does: every component keeps a
+    sweep (by raw magnitude the Mx rows' 50 N would outweigh their 5 N·m)."""
+    invoke(["simulate", str(tmp_path), "--rig", "lever-arm", "--seed", "1"])
+    cal, cfg, model = tmp_path / "calibration.csv", tmp_path / "cfg.yaml", tmp_path / "m.json"
+    invoke(["init", str(cal), "-o", str(cfg)])
+    invoke(["fit", str(cal), "-c", str(cfg), "-o", str(model), "--no-verdict"])
+    doc = json.loads(invoke(["validate", str(model), str(cal), "-c", str(cfg), "--json"]).stdout)
+    assert {r["axis"] for r in doc["records"]} == {"fx", "fy", "fz", "mx", "my", "mz"}
+    assert any("27 combined-load points" in w for w in doc["warnings"])
