@@ -51,6 +51,14 @@ def simulate(
         int, typer.Option(help="3: the paper's force sensor; 6: a six-axis force/torque sensor "
                                "(fx..mz, u1..u6) with its config sensor.yaml.")
     ] = 3,
+    rig: Annotated[
+        str | None, typer.Option(help="lever-arm: a six-axis rig's calibration.csv whose moments "
+                                      "come from a force on a lever arm (known_Fx.. headers).")
+    ] = None,
+    gauges: Annotated[
+        int, typer.Option(help="--rig only: output channels (6: readings Fx..Mz; 8: gauges "
+                               "g1..g8, more outputs than components).")
+    ] = 6,
     force: ForceOpt = False,
 ) -> None:
     """Write a simulated calibration set: the paper's (with a combined-load task log) or a lab's."""
@@ -61,6 +69,14 @@ def simulate(
     from ..sim.six_axis import COMPONENTS, OUTPUTS, write_six_axis
 
     with user_errors():
+        if rig is not None:
+            from ..sim.rig import write_rig
+
+            if rig != "lever-arm":
+                raise InputError(f"--rig {rig!r}: expected lever-arm")
+            files = write_rig(out_dir, seed=seed, gauges=gauges, levels=levels or 9, force=force)
+            console.print(f"wrote {len(files)} files under {out_dir}")
+            return
         if components not in (3, 6):
             raise InputError(f"--components {components}: expected 3 or 6")
         named = Layout.named(COMPONENTS, OUTPUTS) if components == 6 else DEFAULT

@@ -78,6 +78,10 @@ def fit(
         bool, typer.Option("--no-verdict", help="Skip the held-out comparison with the "
                                                 "calibration matrix.")
     ] = False,
+    strict: Annotated[
+        bool, typer.Option("--strict", help="Refuse rows whose applied loads are blank "
+                                            "(default: skip them with a warning).")
+    ] = False,
     force: ForceOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
@@ -97,7 +101,7 @@ def fit(
         check_max_gamma(max_gamma)
         grid = grid_option(tune, tune_grid)
         check_output(output, force=force)
-        cs = load_calibration(calib, settings, exclude=exclude or ())
+        cs = load_calibration(calib, settings, exclude=exclude or (), strict=strict)
         refuse_overwriting_input(output, [*_read(cs), *_given(config)])
         with progress_bar("tuning" if tune else "fitting", MofNCompleteColumn()) as progress:
             model = calibrate(cs, settings, method=method, verdict=not no_verdict, tune=tune,

@@ -21,6 +21,7 @@ from .app import (
     _parse_zero,
     app,
     console,
+    print_json,
     progress_bar,
     say,
     show,
@@ -89,8 +90,8 @@ def apply(
         return _apply_many(model_file, voltages, Path(output), config, tare, zero, unit, refine,
                            round_trip, engine, scheduler, workers, force, json_out)
     with user_errors():
-        if engine != "local" or scheduler is not None or workers is not None or json_out:
-            raise InputError("--engine, --scheduler, --workers and --json are for many logs: "
+        if engine != "local" or scheduler is not None or workers is not None:
+            raise InputError("--engine, --scheduler and --workers are for many logs: "
                              "give the output directory with a trailing / (-o OUT_DIR/)")
         voltages, output = voltages[0], Path(output)
         model = load_model(model_file)
@@ -108,6 +109,9 @@ def apply(
                 unit=unit, force=force, round_trip=round_trip, progress=progress,
                 interval=interval,
             )
+    if json_out:
+        print_json({"output": str(output), **summary.to_dict()})
+        return
     for line in apply_lines(summary, output):
         console.print(line, highlight=False, markup=False)  # '[mV]' is no markup
     warn(apply_warnings(summary))

@@ -59,8 +59,13 @@ def interference_errors(points, forces: np.ndarray, full_scale, layout: Layout =
     ``units``: each component's load unit (mixed units: module docstring); None: one unit.
     """
     axis = points["axis"].to_numpy()
+    # the off-axis loads a row really carries (a lever arm's force) are no interference:
+    # gamma counts decoupled minus applied, which on single-axis rows is eq. (12) itself
+    errors = np.asarray(forces, dtype=float)
+    if set(layout.loads) <= set(points.columns):
+        errors = errors - points[list(layout.loads)].to_numpy(dtype=float)
     return {
-        a: interference_error(forces[axis == a], i, full_scale, units)
+        a: interference_error(errors[axis == a], i, full_scale, units)
         for i, a in enumerate(layout.labels)
         if (axis == a).any()
     }

@@ -123,10 +123,11 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
                combined: bool = False) -> CalibrationSet:
     """Validate a long table (as :func:`read_calibration_table` returns) and zero-correct it.
 
-    ``combined``: rows loading several components are kept (``validate``), not refused.
+    ``combined`` (``validate``): rows loading several components keep their labelled sweep and
+    its zero rows; without it (``fit``) they are fitted jointly and zeroed by the zero row before.
     """
     layout = settings.layout
-    table = assign_sweeps(table, layout, combined)
+    table = assign_sweeps(table, layout, combined, settings.full_scale)
     reps = sorted(table["repetition"].unique())
     if len(reps) < settings.min_repetitions:
         raise InputError(
@@ -149,8 +150,19 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
                 f"{first['file']}: repetition {rep} has no {' or '.join(missing)} sweep; "
                 f"every repetition must calibrate {every}"
             )
-    points, offsets = zero_correct(table, layout, settings.zero_method)
+    # rows loading several components (a lever arm): each row is zeroed by the nearest
+    # zero row before it (docs/rigs.md); the polynomial of zero: fit assumes one load a sweep
+    several = not combined and ((table[list(layout.loads)].to_numpy() != 0.0).sum(axis=1) > 1).any()
+    method = settings.zero or ("before" if several else settings.zero_method)
+    points, offsets = zero_correct(table, layout, method)
     warnings = []
+    if several:  # a typo in a single-axis set reads the same: say where, once
+        rows = table[(table[list(layout.loads)].to_numpy() != 0.0).sum(axis=1) > 1]
+        first = ", ".join(f"{f}, row {r}" for f, r in zip(rows["file"][:3], rows["row"][:3],
+                                                          strict=True))
+        many = "rows load" if len(rows) > 1 else "row loads"
+        warnings.append(f"{len(rows)} {many} several components ({first}"
+                        f"{', ...' if len(rows) > 3 else ''}): fitted jointly (docs/rigs.md)")
     cs = CalibrationSet(points, offsets, tuple(files), tuple(skipped), layout=layout)
     for axis in layout.labels:
         grids = cs.load_grid(axis)
@@ -184,16 +196,17 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
 
 
 def load_calibration(path: str | Path, settings: Settings, exclude=(),
-                     combined: bool = False) -> CalibrationSet:
+                     combined: bool = False, strict: bool = False) -> CalibrationSet:
     """Read, validate and zero-correct a calibration set (a directory or one CSV).
 
     ``exclude``: ``FILE:ROW`` points to drop before zero correction (``fit --exclude``);
     FILE is a file of the set by path or by name, ROW its spreadsheet row.
     """
-    read = read_calibration_table(path, settings)
+    read = read_calibration_table(path, settings, strict)
     table, dropped = _exclude(read.table, exclude)
     cs = from_table(table, settings, read.files, [*read.skipped, *dropped], combined)
     hidden = tuple(f"{f}: hidden file, not read as a repetition" for f in read.hidden)
+    hidden += read.warnings
     cs = replace(cs, excluded=tuple(dropped))
     return replace(cs, warnings=hidden + cs.warnings) if hidden else cs
 

@@ -15,6 +15,7 @@ import numpy as np
 from ..config import Settings
 from ..errors import InputError, excerpt, printable, where
 from ..files import CALIBRATION_LIMIT, TASK_LIMIT, natural_key, read_bounded, reading
+from .columns import applied_load
 from .csv_text import HEADER_ROW, read_csv_text, read_header, require_columns, to_numbers
 
 if TYPE_CHECKING:
@@ -107,9 +108,11 @@ class CalibrationTable:
     skipped: list[str]
     files: tuple[tuple[str, str], ...]  # (path, SHA-256) of every file read
     hidden: list[Path]
+    warnings: tuple[str, ...] = ()
 
 
-def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationTable:
+def read_calibration_table(path: str | Path, settings: Settings,
+                           strict: bool = False) -> CalibrationTable:
     """Read a calibration set into one long table in file order.
 
     The directory is listed once and each file read once (its digest, header
@@ -119,7 +122,7 @@ def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationT
 
     files, hidden = list_calibration(path)
     single = len(files) == 1 and not Path(path).is_dir()
-    frames, skipped, digests = [], [], []
+    frames, skipped, digests, warnings = [], [], [], []
     cols = settings.columns
     layout = settings.layout
     numeric = {c: cols[c] for c in (*layout.loads, *layout.outputs)}
@@ -146,6 +149,11 @@ def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationT
                 f"{layout.outputs[0]}_raw), not a repetition; move it out of the calibration directory"
             )
         require_columns(header, numeric, f)
+        for c in layout.outputs:  # a reading mapped to a reference column: a swapped config
+            if applied_load(cols[c]):
+                raise InputError(f"{where(f, HEADER_ROW, cols[c])}: output {c} is mapped to "
+                                 f"'{cols[c]}', named like an applied load; map the sensor's "
+                                 "own reading under columns:")
         # a single CSV without a repetition column is one repetition
         numbered = single and cols["repetition"] in header
         mapped = {name: name for name in numeric.values()}
@@ -169,6 +177,18 @@ def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationT
             skipped.append(f"{f}, row {r}: skipped, no value in any mapped column (a blank row, "
                            "or a side table running past the data)")
         raw, rows = raw[~blank], rows[~blank]
+        # a row whose applied loads are all blank (a load not yet typed in): skipped with
+        # a warning naming its lines, or refused with --strict
+        loads = [cols[c] for c in layout.loads]
+        noload = np.logical_and.reduce([raw[c].str.strip().eq("").to_numpy() for c in loads])
+        if noload.any():
+            lines = ("lines " if noload.sum() > 1 else "line ") + ", ".join(map(str, rows[noload]))
+            if strict:
+                raise InputError(f"{where(f, int(rows[noload][0]), loads[0])}: the applied loads "
+                                 f"are blank ({lines}); --strict refuses rows without a load")
+            warnings.append(f"{f}, {lines}: applied loads blank; rows skipped "
+                            "(--strict refuses them)")
+            raw, rows = raw[~noload], rows[~noload]
         if raw.empty:
             raise InputError(f"{f}: header only, no data rows")
         out = pd.DataFrame({"file": str(f), "row": rows})
@@ -202,7 +222,7 @@ def read_calibration_table(path: str | Path, settings: Settings) -> CalibrationT
     # training order is file order: repetition, then row (stable)
     table = table.sort_values(["repetition"], kind="stable").reset_index(drop=True)
     table = table[["repetition", "axis", "file", "row", *layout.loads, *layout.outputs]]
-    return CalibrationTable(table, skipped, tuple(digests), hidden)
+    return CalibrationTable(table, skipped, tuple(digests), hidden, tuple(warnings))
 
 
 

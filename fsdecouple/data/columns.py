@@ -9,9 +9,6 @@ header names, side tables, text in number columns); ``ingest`` validates.
 from __future__ import annotations
 
 import collections
-import csv
-import io
-import itertools
 import json
 import math
 import re
@@ -22,8 +19,8 @@ from typing import Any, NamedTuple
 import yaml
 
 from ..axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
-from ..errors import InputError, excerpt, printable
-from ..files import CALIBRATION_LIMIT, read_bounded, reading
+from ..errors import InputError
+from .csv_text import read_rows
 
 MAX_ROWS = 100_000  # enough for any calibration; bounds a wrong file's cost
 
@@ -53,7 +50,6 @@ _REPETITION = {"repetition", "rep", "repeat", "run", "cycle", "trial", "repno", 
 
 _NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
 _INTEGER = re.compile(r"[+-]?\d+")
-_SEPS = (",", ";", "\t")
 
 # Above this largest |load| a load in newtons is unlikely for a lab force sensor:
 # gram-force is the usual unit of weights-on-a-hanger calibrations.
@@ -245,38 +241,16 @@ def _candidates(names: list[str], usable: list[int]) -> list[_Candidate]:
     return found
 
 
-def _sniff_sep(first_line: str) -> str:
-    counts = {s: len(next(csv.reader([first_line], delimiter=s), [])) for s in _SEPS}
-    return max(_SEPS, key=lambda s: (counts[s], s == ","))  # a tie is a comma file
+_APPLIED = re.compile(r"(?:known|applied|reference|ref|true|nominal)[a-z]+\d*"
+                      r"|[a-z]+\d*(?:ref|reference|applied|known)")
+
+
+def applied_load(header: str) -> bool:
+    """Whether ``header`` names an applied (reference) load: ``known_Fx``, ``Fz_ref [N]``."""
+    return bool(_APPLIED.fullmatch(_parse_name(header)[0]))
 
 
 # --- the guess ---------------------------------------------------------------------
-
-
-def read_rows(path: Path, max_rows: int) -> tuple[list[str], list[list[str]], str, bool]:
-    """(header names, up to ``max_rows`` rows of cells, separator, whether rows were left).
-
-    The file is read once, within the calibration files' size limit, so a pipe, a FIFO
-    (waited for as every input is) or ``/dev/zero`` is read like a file or refused.
-    """
-    with reading(path):
-        text = read_bounded(path, CALIBRATION_LIMIT, "a calibration file").decode("utf-8-sig")
-    lines = io.StringIO(text, newline="")
-    reader = None
-    try:
-        first = text.split("\n", 1)[0]
-        if not first.strip():
-            raise InputError(f"{printable(path)}: no header row (the first line is empty)")
-        sep = _sniff_sep(first)
-        reader = csv.reader(lines, delimiter=sep)
-        names = [n.strip() for n in next(reader)]
-        raw_rows = list(itertools.islice(reader, max_rows + 1))
-    except csv.Error as err:  # a field over the csv module's 128 KiB, a NUL byte
-        row = f", row {reader.line_num}" if reader is not None else ", row 1"
-        raise InputError(f"{printable(path)}{row}: not a table of numbers ({excerpt(err)})") from None
-    truncated = len(raw_rows) > max_rows
-    del raw_rows[max_rows:]
-    return names, raw_rows, sep, truncated
 
 
 def guess_config(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:

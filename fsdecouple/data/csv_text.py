@@ -9,6 +9,7 @@ from __future__ import annotations
 import csv
 import difflib
 import io
+import itertools
 import os
 import re
 import warnings
@@ -18,8 +19,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..config import Settings
-from ..errors import InputError, excerpt, where
-from ..files import reading
+from ..errors import InputError, excerpt, printable, where
+from ..files import CALIBRATION_LIMIT, read_bounded, reading
 
 if TYPE_CHECKING:  # pandas loads on first use: apply and show never need it
     import pandas as pd
@@ -235,3 +236,37 @@ def require_columns(header: list[str], wanted: dict[str, str], path: Path) -> No
                 f"{where(path, HEADER_ROW)}: missing column '{name}'{hint}{mean}; "
                 f"found {', '.join(h or '(no name)' for h in header) or 'no columns'}{blank}"
             )
+
+
+_SEPS = (",", ";", "\t")  # what init tries on a file it has never seen
+
+
+def _sniff_sep(first_line: str) -> str:
+    counts = {s: len(next(csv.reader([first_line], delimiter=s), [])) for s in _SEPS}
+    return max(_SEPS, key=lambda s: (counts[s], s == ","))  # a tie is a comma file
+
+
+def read_rows(path: Path, max_rows: int) -> tuple[list[str], list[list[str]], str, bool]:
+    """(header names, up to ``max_rows`` rows of cells, separator, whether rows were left).
+
+    The file is read once, within the calibration files' size limit, so a pipe, a FIFO
+    (waited for as every input is) or ``/dev/zero`` is read like a file or refused.
+    """
+    with reading(path):
+        text = read_bounded(path, CALIBRATION_LIMIT, "a calibration file").decode("utf-8-sig")
+    lines = io.StringIO(text, newline="")
+    reader = None
+    try:
+        first = text.split("\n", 1)[0]
+        if not first.strip():
+            raise InputError(f"{printable(path)}: no header row (the first line is empty)")
+        sep = _sniff_sep(first)
+        reader = csv.reader(lines, delimiter=sep)
+        names = [n.strip() for n in next(reader)]
+        raw_rows = list(itertools.islice(reader, max_rows + 1))
+    except csv.Error as err:  # a field over the csv module's 128 KiB, a NUL byte
+        row = f", row {reader.line_num}" if reader is not None else ", row 1"
+        raise InputError(f"{printable(path)}{row}: not a table of numbers ({excerpt(err)})") from None
+    truncated = len(raw_rows) > max_rows
+    del raw_rows[max_rows:]
+    return names, raw_rows, sep, truncated

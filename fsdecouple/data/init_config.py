@@ -47,6 +47,10 @@ COMPONENTS = ("fx", "fy", "fz", "mx", "my", "mz")
 _LOAD = re.compile(r"(?:f|force|load)([xyz])|([xyz])(?:force|load)")
 _MOMENT = re.compile(r"(?:m|t|moment|torque)([xyz])|([xyz])(?:moment|torque)")
 _NUMBERED = re.compile(r"([a-zµμ]+)(\d+)")
+# an applied (reference) load: a component's name after or before one of these words
+_APPLIED = re.compile(r"(?:known|applied|reference|ref|true|load|nominal)(\w+)"
+                      r"|(\w+?)(?:ref|reference|applied|known|true)")
+_TIMESTAMP = {"time", "timestamp", "datetime", "date", "t", "timesec", "elapsed", "elapsedtime"}
 _MOMENT_HINTS = {u.lower(): u for u in MOMENT_UNITS}
 _BRACKETS = re.compile(r"[\[(]([^\])]*)[\])]")
 
@@ -58,6 +62,14 @@ def _component(header: str) -> str | None:
         return "m" + (m.group(1) or m.group(2))
     if m := _LOAD.fullmatch(name):
         return "f" + (m.group(1) or m.group(2))
+    return None
+
+
+def _applied(header: str) -> str | None:
+    """fx .. mz when ``header`` names an applied load (``known_Fx``, ``Fz_ref [N]``), else None."""
+    name, _ = _parse_name(header)
+    if m := _APPLIED.fullmatch(name):
+        return _component(m.group(1) or m.group(2))
     return None
 
 
@@ -97,7 +109,7 @@ def guess_layout(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
     """:func:`guess_components` when the header names a moment, else the 3-axis guess."""
     path = Path(path)
     names, rows, sep, truncated = read_rows(path, max_rows)
-    if not any((_component(n) or " ")[0] == "m" for n in names):
+    if not any((_component(n) or _applied(n) or " ")[0] == "m" for n in names):
         return guess_rows(path, names, rows, sep, truncated)
     try:
         return guess_components(path, names, rows, sep, truncated)
@@ -117,9 +129,13 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
     ignored = {i: ("no header name" if not n else f"header name repeated ({count[n]} columns)")
                for i, n in enumerate(names) if not n or count[n] > 1}
     usable = [i for i in range(len(names)) if i not in ignored]
+    # applied loads named as such (known_Fx, Fz_ref) make the plain component names
+    # (Fx .. Mz) the sensor's own readings: its outputs
+    applied = {i: _applied(names[i]) for i in usable}
+    named_as = _applied if any(applied.values()) else _component
     loads: dict[str, int] = {}
     for i in usable:
-        key = _component(names[i])
+        key = named_as(names[i])
         if key and key not in loads:
             loads[key] = i
     components = tuple(c for c in COMPONENTS if c in loads)
@@ -129,14 +145,29 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
         key = "axis" if parsed[i] in _AXIS else "repetition" if parsed[i] in _REPETITION else None
         if key and key not in special.values():
             special[i] = key
+    stamps = [i for i in usable if parsed[i] in _TIMESTAMP and i not in special]
+    readings = {}
+    if named_as is _applied:
+        for i in usable:
+            key = _component(names[i])
+            if key in components and key not in readings and i not in loads.values():
+                readings[key] = i
     families: dict[str, list[tuple[int, int]]] = {}
     for i in usable:
         if i not in loads.values() and i not in special and (m := _NUMBERED.fullmatch(parsed[i])):
             families.setdefault(m.group(1), []).append((int(m.group(2)), i))
+    if len(readings) == len(components):  # the readings, named: one family, in component order
+        families = {"": [(k, readings[c]) for k, c in enumerate(components)]}
     fits = [sorted(f) for f in families.values() if len(f) == len(components)]
     if len(components) < 2:
         raise InputError(f"{where}: the header names {len(components)} load component "
                          f"({', '.join(components)}); a coupling model needs at least 2; header: {header}")
+    more = [f for f in families.values() if len(f) > len(components)]
+    if not fits and len(more) == 1:
+        raise InputError(
+            f"{where}: {len(more[0])} output channels ({names[min(more[0])[1]]}..) for "
+            f"{len(components)} load components: more outputs than components (M > N) is not "
+            "supported yet; map one output per component under columns: and outputs: by hand")
     if len(fits) != 1:
         raise InputError(
             f"{where}: a force/torque header needs one numbered output channel per load "
@@ -153,8 +184,10 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
     if (left := sum(any(c.strip() for c in row) for row in rows) - len(table)) > 0:
         notes.append(f"{left} rows without a finite number in every load and output column "
                      "were left out")
-    prime, why = _pair(f, u, components, [names[i] for i in channels], notes)
-    outputs = tuple(parsed[channels[j]] for j in prime)
+    prime, why = _pair(f, u, components, [names[i] for i in channels], notes,
+                       named=len(readings) == len(components))
+    outputs = tuple(parsed[channels[j]] + ("_out" if named_as is _applied and readings else "")
+                    for j in prime)
     if len({o.lower() for o in outputs}) < len(outputs):
         same = ", ".join(shown(names[i]) for i in channels)
         raise InputError(f"{where}: output channels {same} do not have one name each once units "
@@ -201,7 +234,8 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
     reasons["csv"] = (f"{'the default' if sep == ',' else 'detected'}: \"{sep}\"-separated"
                       f"{', decimal comma' if decimal == ',' else ''}")
     for i in set(usable) - set(mapped) - set(special):
-        ignored[i] = "not a load component or an output channel"
+        ignored[i] = ("a timestamp: not used" if i in stamps
+                      else "not a load component or an output channel")
     return Guess(
         path=path, columns=columns,
         units={"load": next(iter(load_units.values())) if not mixed else "mixed", "output": out_unit},
@@ -226,7 +260,7 @@ def _numbers(rows: list[list[str]], cols: list[int], decimal: str) -> np.ndarray
 
 
 def _pair(f: np.ndarray, u: np.ndarray, components: tuple[str, ...], channels: list[str],
-          notes: list[str]) -> tuple[list[int], dict[str, str]]:
+          notes: list[str], named: bool = False) -> tuple[list[int], dict[str, str]]:
     """Each component's prime output: the channel its single-load rows move most.
 
     Score: a channel's range over the component's rows (and the unloaded ones),
@@ -237,16 +271,22 @@ def _pair(f: np.ndarray, u: np.ndarray, components: tuple[str, ...], channels: l
     span = np.ptp(u, axis=0)
     span[span == 0] = np.inf
     loaded = f != 0
+    combined = int((loaded.sum(axis=1) > 1).sum())
+    if combined:
+        notes.append(f"{combined} rows load more than one component (a moment on a lever arm "
+                     "loads a force too): fit fits them jointly (docs/rigs.md)")
+    if named:
+        return list(range(len(components))), {
+            c: f"the sensor's own reading of {c}, named like the component" for c in components}
+    peak = np.abs(f).max(axis=0)
+    # a row belongs to the component it loads most, relative to that component's peak
+    main = np.argmax(np.abs(f) / np.where(peak > 0, peak, np.inf), axis=1)
     score = np.zeros((len(components), u.shape[1]))
     for a in range(len(components)):
-        rows = loaded[:, a] & (loaded.sum(axis=1) == 1) | ~loaded.any(axis=1)
+        rows = loaded[:, a] & (main == a) | ~loaded.any(axis=1)
         if loaded[rows, a].any():
             score[a] = np.ptp(u[rows], axis=0) / span
     best = [int(np.argmax(s)) for s in score]
-    combined = int((loaded.sum(axis=1) > 1).sum())
-    if combined:
-        notes.append(f"{combined} rows load more than one component: fit refuses combined-load "
-                     "sweeps (validate and cv --task take them)")
     if len(set(best)) == len(best) and all(score[a, j] > 0 for a, j in enumerate(best)):
         return best, {c: f"prime output of {c}: {c} alone moves it over {100 * score[a, best[a]]:.3g} % "
                       f"of its span (the next channel {100 * np.sort(score[a])[-2]:.2g} %)"

@@ -30,7 +30,7 @@ def loaded_axes(forces: np.ndarray) -> np.ndarray:
 
 
 def assign_sweeps(table: pd.DataFrame, layout: Layout = DEFAULT,
-                  combined: bool = False) -> pd.DataFrame:
+                  combined: bool = False, full_scale=None) -> pd.DataFrame:
     """Check that each row loads one axis at most and give every row its sweep axis.
 
     With an ``axis`` column, a row's load must lie on that axis.  Without one, the
@@ -47,6 +47,18 @@ def assign_sweeps(table: pd.DataFrame, layout: Layout = DEFAULT,
     forces = table[list(loads)].to_numpy()
     loaded = loaded_axes(forces)
     two = np.flatnonzero(loaded == -2)
+    if full_scale is not None and two.size:
+        # a calibration row loading several components (a moment on a lever arm) joins the
+        # sweep of a load never applied alone (the moment; its force has a sweep of its own),
+        # of those the largest relative to its full scale (fitting/joint.py)
+        loaded = loaded.copy()
+        alone = np.zeros(len(loads), dtype=bool)
+        alone[loaded[loaded >= 0]] = True
+        rel = np.abs(forces[two]) / np.asarray(full_scale, dtype=float)
+        rel = np.where(alone & (rel > 0).any(axis=0) & (rel * ~alone > 0).any(axis=1)[:, None],
+                       0.0, rel)
+        loaded[two] = np.argmax(rel, axis=1)
+        two = two[:0]
     if combined and two.size:
         loaded = loaded.copy()
         loaded[two] = np.argmax(np.abs(forces[two]), axis=1)  # overridden by a label below
@@ -120,7 +132,10 @@ def zero_correct(table: pd.DataFrame, layout: Layout = DEFAULT,
     keys = list(grouped.groups)  # (repetition, axis), sorted as ngroup numbers them
     n_all = np.bincount(sweep, minlength=len(keys))
     n_zero = np.bincount(sweep[zero], minlength=len(keys))
-    bad = np.flatnonzero((n_zero == 0) | (n_zero == n_all))
+    # zeroed by the zero row before (rows loading several components), a sweep needs no
+    # zero row of its own, only its repetition does
+    before = method == "before" and zero.any()
+    bad = np.flatnonzero(((n_zero == 0) & (not before)) | (n_zero == n_all))
     if bad.size:
         g = int(bad[0])
         first = points.iloc[int(np.argmax(sweep == g))]
@@ -139,17 +154,37 @@ def zero_correct(table: pd.DataFrame, layout: Layout = DEFAULT,
     for k in range(len(outputs)):
         col = np.ascontiguousarray(u[rows, k])
         for g, (s, n) in enumerate(zip(starts, n_zero, strict=True)):
-            mean[g, k] = col[s:s + n].sum() / n
+            mean[g, k] = col[s:s + n].sum() / n if n else np.nan
     if method == "fit":
         mean = fitted_offsets(points, sweep, keys, layout, mean)
-    for k, c in enumerate(outputs):
-        points[c] = u[:, k] - mean[sweep, k]
+    if method == "before":
+        base = zero_before(points["repetition"].to_numpy(), zero)
+        points[list(outputs)] = u - u[base]
+        # the offsets table: the mean zero each sweep's rows had removed
+        mean = np.array([u[base[sweep == g]].mean(axis=0) for g in range(len(keys))])
+    else:
+        for k, c in enumerate(outputs):
+            points[c] = u[:, k] - mean[sweep, k]
     offsets = pd.DataFrame({
         "repetition": [rep for rep, _ in keys], "axis": [axis for _, axis in keys],
         "n_zero": n_zero.astype(int),
         **{c: mean[:, k] for k, c in enumerate(outputs)},
     })
     return points, offsets
+
+
+def zero_before(repetition: np.ndarray, zero: np.ndarray) -> np.ndarray:
+    """Each row's zero: the nearest zero-load row before it in its repetition (file order),
+    or for rows before the first one, that first zero row."""
+    idx = np.arange(zero.size)
+    last = np.maximum.accumulate(np.where(zero, idx, -1))
+    start = np.r_[True, repetition[1:] != repetition[:-1]]
+    first_of = np.maximum.accumulate(np.where(start, idx, 0))  # the repetition's first row
+    base = np.where(last >= first_of, last, -1)
+    for r in np.flatnonzero(base < 0):  # before any zero row of its repetition: the next one
+        after = np.flatnonzero(zero[r:] & (repetition[r:] == repetition[r]))
+        base[r] = r + after[0] if after.size else r
+    return base
 
 
 MAX_DEGREE = 5  # of the shared polynomial in fitted_offsets

@@ -69,7 +69,8 @@ def _score(tests, forces, settings, points=None) -> list[dict]:
         _, axis, loads = tests[(r, label)]
         for a, name in enumerate(layout.labels):
             if (axis == name).any():
-                gamma = interference_error(f[axis == name], a,
+                # decoupled minus applied: a lever arm's own force is no interference
+                gamma = interference_error((f - loads)[axis == name], a,
                                            settings.full_scale if units else settings.full_scale[a], units)
                 records.append({"round": r, "test_set": label, "method": method, "axis": name,
                                 "metric": "gamma", "value": gamma})

@@ -45,7 +45,8 @@ def gamma_records(rounds: list[HeldOutRound], models: dict, settings: Settings,
         for label, test, points in groups:
             axis = test.points["axis"].to_numpy()
             for m in methods:
-                f = models[(rnd.index, m)].decouple(test.voltages, rotate=False)
+                # decoupled minus applied: a lever arm's own force is no interference
+                f = models[(rnd.index, m)].decouple(test.voltages, rotate=False) - test.forces
                 for a, name in enumerate(labels):
                     if (axis == name).any():
                         gamma = interference_error(f[axis == name], a, fs if units else fs[a], units)

@@ -26,6 +26,7 @@ from ..core.metrics import interference_errors
 from ..core.model import Chi, CouplingErrorModel, FitReport
 from ..core.surrogate import TOLERANCE, build_pair, table_interval
 from ..errors import InputError, printable
+from .joint import backfit, check_separable, multi_load
 from .linear import fit_omega
 from .noise import solved_to_the_noise
 from .threads import single_threaded_libraries, thread_pool
@@ -101,6 +102,11 @@ def fit(
         return _establish(calib, settings, workers, fit_svr, tables)
 
 
+def _svr_chi(s) -> Chi:
+    """A fitted SVR as a chi of normalised units, to evaluate while backfitting."""
+    return Chi("", s.gamma, s.support_vectors, s.dual_coef, s.rho, pair=(0, 1))
+
+
 def _omega_failure(calib: CalibrationSet, a: int) -> str:
     """Why omega_a has no finite non-zero slope: values too large, or a flat sweep.
 
@@ -151,6 +157,9 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
     for name, (o, i) in pairs.items():
         x, y = chi_training_data(calib, name)
         jobs.append((name, x, y, float(scale[i]), float(scale[o])))
+    joint = multi_load(calib.forces)  # rows loading several components (joint.py)
+    if joint:
+        check_separable(calib.forces, settings.full_scale, layout.loads, calib.source)
     for a, axis in enumerate(labels):
         x = calib.sweep(axis)[layout.outputs[a]].to_numpy() / scale[a]
         span = (x.max() - x.min()) * np.sqrt(2.0 * settings.svr.gamma)
@@ -186,8 +195,33 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         return [replace(c, surrogate=s)
                 for c, s in zip(pair, build_pair(pair, lo, hi, tolerance), strict=True)]
 
+    def output(a: int) -> tuple[float, list[Chi]]:
+        # eq. (11) rearranged, fitted from multi-load rows by backfitting (joint.py)
+        u, f = calib.voltages, calib.forces
+        k, fitted = backfit(f / np.asarray(settings.full_scale), u / scale, a,
+                            lambda x, y: _svr_chi(fit_svr(x, y, settings.svr)))
+        out = []
+        for b, c in fitted.items():
+            x = u[:, b]
+            out.append(Chi(layout.chi_name(a, b), c.gamma, c.support_vectors, c.dual_coef,
+                           c.rho, float(scale[b]), float(scale[a]),
+                           (float(x.min()), float(x.max())), int(x.size),
+                           extrapolation=settings.extrapolation,
+                           pair=None if layout.is_default else (a, b)))
+        return k * scale[a] / settings.full_scale[a], out
+
     n_workers = workers or min(len(jobs), os.cpu_count() or 1)
-    if n_workers > 1:
+    if joint:
+        with thread_pool(max(1, min(n_workers, layout.n))) as pool:
+            per_output = list(pool.map(output, range(layout.n)))
+        omega = replace(omega, k=np.array([k for k, _ in per_output]))
+        chis = [c for _, cs in per_output for c in cs]
+        if with_tables:
+            with thread_pool(max(1, min(n_workers, layout.n))) as pool:
+                done = [c for pair in pool.map(tables, labels) for c in pair]
+        else:
+            done = chis
+    elif n_workers > 1:
         with thread_pool(n_workers) as pool:
             chis = list(pool.map(one, jobs))
             done = [c for pair in pool.map(tables, labels) for c in pair] if with_tables else chis

@@ -27,7 +27,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from ..axes import VOLTAGE_COLUMNS
+from ..axes import FORCE_COLUMNS, VOLTAGE_COLUMNS
 from ..config import Settings
 from ..core.intervals import half_widths, interval_names, with_intervals
 from ..core.model import FORCE_LIMIT, CouplingErrorModel
@@ -83,6 +83,32 @@ class ApplySummary:
     force_unit: str = "N"
     output_unit: str = "V"
     outputs: tuple[str, ...] = VOLTAGE_COLUMNS  # the names of ``offsets``
+    force_columns: tuple[str, ...] = FORCE_COLUMNS  # the columns written (force_columns)
+
+    def to_dict(self) -> dict:
+        """The ``apply --json`` document of one log."""
+        return {"rows": self.rows, "force_columns": list(self.force_columns),
+                "force_unit": self.force_unit, "output_unit": self.output_unit,
+                "status_counts": dict(self.status_counts),
+                "offsets": dict(zip(self.outputs, map(float, self.offsets), strict=True))}
+
+
+def force_columns(loads, header) -> tuple[str, ...]:
+    """The names of ``apply``'s force columns: never a name the log already has.
+
+    Each component's load name (``fx`` .. ``mz``), prefixed with ``decoupled_`` while
+    the log has a column of that name in any case: a sensor's own readings named
+    ``Fx .. Mz`` get ``decoupled_fx .. decoupled_mz`` beside them.
+    """
+    taken = {str(h).lower() for h in header} | {STATUS_COLUMN}
+    out = []
+    for c in loads:
+        name = c
+        while name.lower() in taken:
+            name = f"decoupled_{name}"
+        taken.add(name.lower())
+        out.append(name)
+    return tuple(out)
 
 
 def apply_file(
@@ -266,18 +292,24 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
     layout = model.layout
     names = [settings.columns[c] for c in layout.outputs]
     require_columns(header, dict(zip(layout.outputs, names, strict=True)), path)
-    columns = layout.loads + (interval_names(layout.loads) if interval is not None else ())
-    clash = [c for c in (*columns, STATUS_COLUMN) if c in header]
-    if clash:
+    if STATUS_COLUMN in header:
         raise InputError(
-            f"{where(path, HEADER_ROW, clash[0])}: the log already has a column named "
-            f"'{clash[0]}', which the output would overwrite"
+            f"{where(path, HEADER_ROW, STATUS_COLUMN)}: the log already has a column named "
+            f"'{STATUS_COLUMN}', which the output would overwrite"
         )
+    forces = force_columns(layout.loads, header)
+    columns = forces + (interval_names(forces) if interval is not None else ())
+    taken = {str(h).lower() for h in header}
+    clash = [c for c in columns[len(forces):] if c.lower() in taken]
+    if clash:
+        raise InputError(f"{where(path, HEADER_ROW, clash[0])}: the log already has a column named "
+                         f"'{clash[0]}', which the output would overwrite")
     scale = np.array([settings.scale[c] for c in layout.outputs])
     jobs: Iterator[Callable[[], Block]] = log.blocks(names, chunk_rows=chunk_rows,
                                                      want_table=is_parquet(out))
     summary = ApplySummary(force_unit=unit, output_unit=model.settings.output_unit,
-                           outputs=layout.outputs, offsets=np.zeros(layout.n))
+                           outputs=layout.outputs, offsets=np.zeros(layout.n),
+                           force_columns=forces)
     to_unit = load_factor(model.settings.load_unit, unit)
     sat_lo, sat_hi = _limit_bounds(settings, model)
     if tare is not None:

@@ -62,9 +62,13 @@ def test_nan_inf_empty(cal, tmp_path, value):
     fails(["fit", cal], tmp_path, "rep1.csv", "row 5", "column 'fx'")
 
 
-def test_row_loading_two_axes(cal, tmp_path):
+def test_row_loading_two_axes_is_fitted_jointly_and_named(cal, tmp_path):
+    """Issue 22: such a row is a lever arm's or a multi-axis rig's, fitted, not refused;
+    the warning names it, in case it is a typo."""
     edit(cal / "rep4.csv", 3, "fy", "10.000")
-    fails(["fit", cal], tmp_path, "rep4.csv", "row 3", "fx and fy")
+    r = invoke(["fit", cal, "-o", tmp_path / "m.json", "--no-verdict"])
+    assert "1 row loads several components (" in r.stderr
+    assert "rep4.csv, row 3): fitted jointly" in r.stderr
 
 
 def test_sweep_without_zero_load_row(cal, tmp_path):

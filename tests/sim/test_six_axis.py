@@ -120,13 +120,18 @@ def test_ingest_reads_component_labels(six_calib):
     assert len(six_calib.offsets) == 36  # six sweeps a repetition
 
 
-def test_a_combined_load_row_is_refused_naming_its_sweep(six_settings):
+def test_a_combined_load_row_joins_the_sweep_of_its_largest_relative_load(six_settings):
+    """A force at a lever arm (fy and mx at once) is fitted, not refused (issue 22): the row
+    joins the sweep whose load is the larger fraction of its full scale."""
     t = _table(six_axis_sensor(0), six_settings)
     i = int(np.flatnonzero((t["axis"] == "fy") & (t["fy"] != 0))[3])
-    t.loc[i, "mx"] = 1.0  # a force at a lever arm: Fy and Mx at once
-    with pytest.raises(InputError, match=rf"row {i + 2}, column 'mx'.*loads fy and mx at once "
-                                         r"\(the fy sweep\).*validate and cv --task accept it"):
-        from_table(t, six_settings)
+    t["axis"] = ""  # inferred from the loads, as in a rig file without an axis column
+    fs = dict(zip(six_settings.layout.loads, six_settings.full_scale, strict=True))
+    t.loc[i, "mx"] = 0.9 * fs["mx"] * abs(t.loc[i, "fy"]) / fs["fy"]  # just below fy's fraction
+    cs = from_table(t, six_settings)
+    pts = cs.points
+    row = pts[(pts["row"] == t.loc[i, "row"]) & (pts["repetition"] == t.loc[i, "repetition"])]
+    assert list(row["axis"]) == ["fy"]
 
 
 def test_a_component_without_a_sweep_is_refused(six_settings):
@@ -436,8 +441,6 @@ def test_validate_accepts_combined_loads(six_model, six_settings, tmp_path):
     t[list(OUTPUTS)] = sensor.voltages(t[list(COMPONENTS)].to_numpy()) + drift
     (tmp_path / "set").mkdir()
     t.drop(columns="repetition").to_csv(tmp_path / "set" / "rep1.csv", index=False)
-    with pytest.raises(InputError, match="loads fy and mx at once"):  # never for fitting
-        load_calibration(tmp_path / "set", replace(six_settings, min_repetitions=1))
     doc = validate(six_model, tmp_path / "set", six_settings)
     assert any("20 combined-load points" in w for w in doc["warnings"])
     rec = {(r["axis"], r["method"], r["metric"]): r["value"] for r in doc["records"]

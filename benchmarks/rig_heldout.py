@@ -1,0 +1,124 @@
+"""Held-out load levels on a lever-arm rig, through the CLI: the model against the matrix.
+
+The protocol of issue 22's check, on ``simulate --rig lever-arm`` files:
+
+1. ``fsdecouple init FILE -o cfg.yaml`` once, on the whole file;
+2. for each load level k (the k-th loaded row of every sweep): write the file without
+   those rows, ``fit --method auto -c cfg.yaml`` on it, zero-correct the held-out rows
+   by the zero row before them, write their outputs as a log with the file's own output
+   columns (``Fx .. Mz``) and ``apply`` the model to it;
+3. the same folds for the least-squares calibration matrix f = C u (Section 1);
+4. per component, the RMS error over all folds as a fraction of its full scale; the
+   figure is the worst component's RMS of the model divided by the matrix's.
+
+    python benchmarks/rig_heldout.py --seeds 0 1 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+CLI = [sys.executable, "-m", "fsdecouple"]
+
+
+def run(*args: str) -> str:
+    done = subprocess.run([*CLI, *args], capture_output=True, text=True)
+    if done.returncode != 0:
+        raise SystemExit(f"fsdecouple {' '.join(args)}: exit {done.returncode}\n{done.stderr}")
+    return done.stdout
+
+
+def read(path: Path) -> tuple[list[str], list[list[str]]]:
+    with open(path, newline="") as fh:
+        rows = list(csv.reader(fh))
+    return rows[0], [r for r in rows[1:] if any(c.strip() for c in r)]
+
+
+def heldout(path: Path, work: Path) -> dict:
+    """Both methods' per-component RMS errors [fraction of F.S.] over the level folds."""
+    cfg = work / "cfg.yaml"
+    run("init", str(path), "-o", str(cfg), "--force")
+    guess = json.loads(run("init", str(path), "-o", str(work / "again.yaml"), "--force", "--json"))
+    header, rows = read(path)
+    comps = guess["components"]
+    load_cols = [header.index(guess["columns"][c]) for c in comps]
+    out_cols = [header.index(guess["columns"][o]) for o in guess["outputs"]]
+    fs = np.array([guess["full_scale"][c] for c in comps])
+    f = np.array([[float(r[i]) for i in load_cols] for r in rows])
+    u = np.array([[float(r[i]) for i in out_cols] for r in rows])
+    zero = ~f.any(axis=1)
+    level = np.zeros(len(rows), dtype=int)  # the k-th loaded row after a zero row
+    base = np.zeros(len(rows), dtype=int)  # the zero row before each row
+    k = last = 0
+    for i in range(len(rows)):
+        if zero[i]:
+            k, last = 0, i
+        else:
+            k += 1
+            level[i] = k
+        base[i] = last
+    uc = u - u[base]  # zero-corrected by the zero row before
+    err = {"model": [], "matrix": []}
+    for lv in range(1, level.max() + 1):
+        held = level == lv
+        train = work / f"train{lv}.csv"
+        with open(train, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(header)
+            w.writerows(r for r, h in zip(rows, held, strict=True) if not h)
+        model = work / f"model{lv}.json"
+        run("fit", str(train), "-c", str(cfg), "-o", str(model), "--method", "auto", "--force")
+        log = work / f"log{lv}.csv"
+        with open(log, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow([header[i] for i in out_cols])
+            w.writerows([repr(float(v)) for v in row] for row in uc[held])
+        out = work / f"forces{lv}.csv"
+        summary = json.loads(run("apply", str(model), str(log), "-o", str(out), "--force",
+                                 "--round-trip", "--json"))
+        names = summary["force_columns"]
+        oh, orows = read(out)
+        got = np.array([[float(r[oh.index(n)]) for n in names] for r in orows])
+        err["model"].append((got - f[held]) / fs)
+        keep = ~held
+        ct, *_ = np.linalg.lstsq(uc[keep], f[keep], rcond=None)
+        err["matrix"].append((uc[held] @ ct - f[held]) / fs)
+    rms = {m: np.sqrt((np.concatenate(e) ** 2).mean(axis=0)) for m, e in err.items()}
+    return {"components": comps, **{m: r.tolist() for m, r in rms.items()},
+            "ratio": float(rms["model"].max() / rms["matrix"].max())}
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    ap.add_argument("--file", type=Path, help="a rig file instead of simulated ones")
+    ap.add_argument("--limit", type=float, help="exit 1 when any file's ratio is above this")
+    args = ap.parse_args(argv)
+    ratios = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in ([None] if args.file else args.seeds):
+            work = Path(tmp) / f"s{seed}"
+            work.mkdir()
+            path = args.file
+            if path is None:
+                run("simulate", str(work), "--rig", "lever-arm", "--seed", str(seed))
+                path = work / "calibration.csv"
+            r = heldout(path, work)
+            ratios.append(r["ratio"])
+            print(f"seed {seed}: worst RMS model {100 * max(r['model']):.3f} % F.S., matrix "
+                  f"{100 * max(r['matrix']):.3f} % F.S., ratio {r['ratio']:.3f}")
+    print(f"ratio over {len(ratios)} files: mean {np.mean(ratios):.3f}, max {np.max(ratios):.3f}")
+    if args.limit is not None and max(ratios) > args.limit:
+        raise SystemExit(1)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,111 @@
+"""The coupling error model from calibration rows that load several components (issue 22).
+
+The paper's sweeps load one component each (Section 3), so each chi_ab is trained
+on the b sweeps alone (Section 2.3, step 3).  A real rig applies a moment as a
+force on a lever arm: its moment rows load a force too, and no sweep isolates one
+coupling function.  Eq. (11) rearranged is a model of every output,
+
+    u_a = k_a f_a + sum_{b != a} chi_ab(u_b),                        (eq. 11)
+
+additive in the outputs u_b, linear in the prime load (eq. 2).  It is fitted for
+each output a by *backfitting*: start from its least-squares linear form (the
+calibration matrix's), then in turn fit each chi_ab as an epsilon-SVR (Table 2) on
+the partial residual
+
+    r_ab = u_a - k_a f_a - sum_{c != a, b} chi_ac(u_c)
+
+as a function of u_b (eq. 4's training pairs, eq. 10's form), and k_a by least
+squares through the origin on u_a - sum_b chi_ab(u_b) (eq. 2), until the chi stop
+changing.  On single-axis sweeps the partial residual of a b-sweep row is its
+coupling error element e_ab (eq. 1) and the other rows give chi_ab(0) = 0: the
+paper's training pairs; ``fit`` keeps the paper's own path for them.  The model
+is the same file, and eq. (11), refinement and extrapolation apply unchanged.
+
+The loads must be separable: two loads that move together in every row (a lever
+arm with no pure-force sweep) leave k_a and chi_ab confounded, and are refused by
+name (:func:`check_separable`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import InputError
+
+ITERATIONS = 2  # backfitting sweeps at most: on lever-arm rigs the residual stops falling after one
+# Stop when no chi moved by more than this fraction of its output's full scale in
+# one sweep: the SVRs' epsilon of Table 2 (1e-4) is the smallest change they resolve.
+CONVERGED = 1e-4
+# Singular values of the normalised load design below this fraction of the largest
+# mean loads that no row separates (a double's rounding of full-scale loads is 1e-16).
+SEPARABLE = 1e-6
+
+
+def multi_load(forces: np.ndarray) -> bool:
+    """Whether any calibration row loads more than one component."""
+    return bool(((np.asarray(forces) != 0.0).sum(axis=1) > 1).any())
+
+
+def check_separable(forces: np.ndarray, full_scale, loads, source: str) -> None:
+    """Refuse loads the rows cannot tell apart (a rank-deficient design), by name.
+
+    Also refuses a component loaded at fewer than two distinct non-zero levels: eq. (2)
+    and a chi need more than one loaded point to be fitted.
+    """
+    s = np.asarray(forces, dtype=float) / np.asarray(full_scale, dtype=float)
+    for a, name in enumerate(loads):
+        levels = np.unique(s[s[:, a] != 0.0, a])
+        if levels.size < 2:
+            raise InputError(f"{source}: {name} is loaded at {levels.size} distinct non-zero "
+                             f"level{'s' if levels.size != 1 else ''}; fitting needs at least 2")
+    _, sv, vt = np.linalg.svd(s, full_matrices=False)
+    if sv[-1] < SEPARABLE * sv[0]:
+        v = vt[-1]
+        tied = [loads[a] for a in np.flatnonzero(np.abs(v) > 0.1 * np.abs(v).max())]
+        raise InputError(f"{source}: loads {' and '.join(tied)} move together in every row "
+                         "(a rank-deficient design): the rows cannot separate them; add rows "
+                         f"that load {tied[0]} without {tied[1]}")
+
+
+def backfit(f: np.ndarray, u: np.ndarray, a: int, fit_chi, *, iterations: int = ITERATIONS,
+            converged: float = CONVERGED) -> tuple[float, dict[int, object]]:
+    """k_a and the chi_ab of output ``a`` by backfitting, in normalised units.
+
+    Parameters
+    ----------
+    f : ndarray, shape (n, N)
+        Loads as fractions of full scale.
+    u : ndarray, shape (n, N)
+        Zero-corrected outputs as fractions of their full-scale output.
+    a : int
+        The output modelled.
+    fit_chi : callable
+        ``fit_chi(x, y)`` -> a callable chi (an epsilon-SVR of eq. 10) of x.
+
+    Returns
+    -------
+    k : float
+        Slope of eq. (2) in normalised units.
+    chi : dict
+        One fitted chi per input b != a.
+    """
+    n = u.shape[1]
+    others = [b for b in range(n) if b != a]
+    design = np.column_stack([f[:, a], u[:, others]])
+    coef, *_ = np.linalg.lstsq(design, u[:, a], rcond=None)
+    k = float(coef[0])
+    part = {b: coef[j + 1] * u[:, b] for j, b in enumerate(others)}  # chi_ab(u_b), linear start
+    chi: dict[int, object] = {}
+    for _ in range(iterations):
+        moved = 0.0
+        for b in others:
+            r = u[:, a] - k * f[:, a] - sum(part[c] for c in others if c != b)
+            chi[b] = fit_chi(u[:, b], r)
+            new = chi[b](u[:, b])
+            moved = max(moved, float(np.abs(new - part[b]).max()))
+            part[b] = new
+        y = u[:, a] - sum(part.values())
+        k = float(f[:, a] @ y / (f[:, a] @ f[:, a]))
+        if moved <= converged:
+            break
+    return k, chi

@@ -1,0 +1,106 @@
+"""A lever-arm force/torque rig's calibration file (``simulate --rig lever-arm``).
+
+A real six-axis rig applies a moment as a force on a lever arm, so every moment
+row loads a force too (issue 22): the Mx rows load Fy, the My and Mz rows load Fx.
+The sensor's readings are already nearly calibrated (columns ``Fx .. Mz`` in N
+and N·m) with a few % linear cross-talk and a quadratic/cubic coupling
+nonlinearity, plus a milder nonlinearity of each component in its own load, the
+kind a factory matrix leaves behind.  The applied loads are ``known_Fx ..
+Known_Mz`` (mixed case), six sweeps of :data:`LEVELS` levels, each after one zero
+row, a timestamp column and trailing empty rows.  ``gauges = 8`` writes eight
+strain-gauge channels ``g1 .. g8`` instead (M > N): a fixed 8 x 6 mix of the readings.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..files import atomic_write, check_output
+
+COMPONENTS = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
+FULL_SCALE = np.array([100.0, 100.0, 200.0, 5.0, 5.0, 5.0])  # [N], [N·m]
+LEVELS = 9  # loads per sweep after its zero row: FS/9 .. FS
+ARM = 0.1  # lever arm [m]: Mx = -ARM * Fy, My = ARM * Fx, Mz = ARM * Fx
+CROSS_TALK = 0.03  # largest linear cross-talk, fraction of full scale
+COUPLING = 0.01  # largest quadratic + cubic coupling term, fraction of full scale
+SELF = 0.002  # largest nonlinearity of a component in its own load, fraction of F.S.
+NOISE = 2e-4  # reading noise, fraction of full scale
+# which force the lever arm loads with each moment, and its sign per N·m
+LEVER = {3: (1, -1.0 / ARM), 4: (0, 1.0 / ARM), 5: (0, 1.0 / ARM)}
+
+
+def rig_sensor(seed: int) -> dict[str, np.ndarray]:
+    """The sensor's true coefficients, normalised: s = f / FS in, r / FS out."""
+    rng = np.random.default_rng(seed)
+    n = len(COMPONENTS)
+    off = ~np.eye(n, dtype=bool)
+    linear = np.eye(n) + off * rng.uniform(-CROSS_TALK, CROSS_TALK, (n, n))
+    quad = off * rng.uniform(-COUPLING, COUPLING, (n, n))
+    cubic = off * rng.uniform(-COUPLING, COUPLING, (n, n))
+    quad[~off] = rng.uniform(-SELF, SELF, n)
+    cubic[~off] = rng.uniform(-SELF, SELF, n)
+    return {"linear": linear, "quad": quad, "cubic": cubic}
+
+
+def readings(s: np.ndarray, sensor: dict[str, np.ndarray]) -> np.ndarray:
+    """Normalised readings of normalised loads ``s`` (n, 6): linear plus, per source b,
+    a quadratic and cubic term in s_b (coupling functions of eq. 3 that are not linear)."""
+    return s @ sensor["linear"].T + (s ** 2) @ sensor["quad"].T + (s ** 3) @ sensor["cubic"].T
+
+
+def gauge_mix(seed: int, gauges: int) -> np.ndarray:
+    """A fixed, well-conditioned (gauges, 6) mix of the readings into gauge channels."""
+    rng = np.random.default_rng(seed + 1000)
+    q, _ = np.linalg.qr(rng.normal(size=(gauges, len(COMPONENTS))))
+    return q * rng.uniform(0.5, 1.5, len(COMPONENTS))
+
+
+def rig_rows(seed: int, levels: int = LEVELS) -> tuple[np.ndarray, np.ndarray]:
+    """(applied loads [N, N·m], outputs) of the six sweeps, each after one zero row."""
+    sensor = rig_sensor(seed)
+    rng = np.random.default_rng(seed + 1)
+    loads = []
+    for a in range(len(COMPONENTS)):
+        loads.append(np.zeros(len(COMPONENTS)))
+        for level in np.arange(1, levels + 1) / levels:
+            row = np.zeros(len(COMPONENTS))
+            row[a] = level * FULL_SCALE[a]
+            if a in LEVER:  # the moment comes from a force on the lever arm
+                b, per = LEVER[a]
+                row[b] = per * row[a]
+            loads.append(row)
+    f = np.array(loads)
+    r = readings(f / FULL_SCALE, sensor)
+    r = (r + rng.normal(0.0, NOISE, r.shape)) * FULL_SCALE
+    return f, r
+
+
+def write_rig(out: str | Path, *, seed: int = 0, gauges: int = 6, levels: int = LEVELS,
+              force: bool = False) -> list[Path]:
+    """Write ``calibration.csv`` of a lever-arm rig under ``out``; returns the file written."""
+    if gauges < len(COMPONENTS):
+        raise InputError(f"--gauges {gauges}: a six-axis rig needs at least 6 output channels")
+    if levels < 2:
+        raise InputError(f"--levels {levels}: a sweep needs at least 2 load levels")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "calibration.csv"
+    check_output(path, force=force)
+    f, r = rig_rows(seed, levels)
+    if gauges == len(COMPONENTS):
+        names, values = list(COMPONENTS), r
+    else:
+        names = [f"g{i + 1}" for i in range(gauges)]
+        values = (r / FULL_SCALE) @ gauge_mix(seed, gauges).T
+    loads = [("known_" if c[0] == "F" else "Known_") + c for c in COMPONENTS]
+    lines = [",".join(["timestamp", *names, *loads])]
+    for i, (fi, ri) in enumerate(zip(f, values, strict=True)):
+        stamp = f"2026-01-01T00:{i // 60:02d}:{i % 60:02d}"
+        lines.append(",".join([stamp, *(f"{v:.6f}" for v in ri), *(f"{v:.10g}" for v in fi)]))
+    lines += ["," * (len(names) + len(loads))] * 2  # trailing empty rows, as spreadsheets leave
+    with atomic_write(path, force=force) as fh:
+        fh.write("\n".join(lines) + "\n")
+    return [path]

@@ -1,0 +1,145 @@
+"""Calibration rows that load several components (issue 22): the joint fit by backfitting."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fsdecouple.config import load_config
+from fsdecouple.data.calibration import load_calibration
+from fsdecouple.data.init_config import init_config
+from fsdecouple.errors import InputError
+from fsdecouple.evaluation.heldout import level_index
+from fsdecouple.fitting.fit import fit
+from fsdecouple.fitting.joint import check_separable, multi_load
+from fsdecouple.sim.rig import FULL_SCALE, NOISE, write_rig
+
+
+def rig(tmp_path: Path, seed: int = 0):
+    path = write_rig(tmp_path, seed=seed)[0]
+    init_config(path, tmp_path / "cfg.yaml")
+    settings = load_config(tmp_path / "cfg.yaml")
+    return path, settings, load_calibration(path, settings)
+
+
+def heldout_rms(calib, settings) -> tuple[np.ndarray, np.ndarray]:
+    """Per-component RMS error [fraction of F.S.] of the model and of the least-squares
+    matrix, each load level of every sweep held out in turn (benchmarks/rig_heldout.py)."""
+    k, _ = level_index(calib)
+    fs = np.asarray(settings.full_scale)
+    err = {"model": [], "matrix": []}
+    for level in range(1, k.max() + 1):
+        held = k == level
+        train = calib.select(~held)
+        model = fit(train, settings, tables=False)
+        u, f = calib.voltages[held], calib.forces[held]
+        ct, *_ = np.linalg.lstsq(train.voltages, train.forces, rcond=None)
+        err["model"].append((model.decouple(u, rotate=False, exact=True) - f) / fs)
+        err["matrix"].append((u @ ct - f) / fs)
+    return tuple(np.sqrt((np.concatenate(err[m]) ** 2).mean(axis=0)) for m in ("model", "matrix"))
+
+
+def test_lever_arm_rows_are_fitted_and_beat_the_matrix_on_held_out_levels(tmp_path):
+    """The simulated rig's coupling is quadratic and cubic at up to 1 % F.S. per source: the
+    matrix cannot follow it, eq. (11)'s chi can.  Over seeds 0-4 the worst-component ratio
+    was 0.45-0.55 in process (0.09-0.10 % F.S. against the matrix's 0.15-0.20 %); 0.8 leaves
+    room for that scatter and still fails a model no better than the matrix (about 1)."""
+    _, settings, calib = rig(tmp_path)
+    assert multi_load(calib.forces)
+    model, matrix = heldout_rms(calib, settings)
+    assert model.max() / matrix.max() < 0.8
+    # and the model is within a few noise sigmas of the truth on every component
+    assert model.max() < 10 * NOISE
+
+
+def test_a_lever_arm_without_a_pure_force_sweep_is_named(tmp_path):
+    f = np.zeros((6, 2))
+    f[1:3, 0] = [1.0, 2.0]  # fx alone
+    f[3:, 1] = [1.0, 2.0, 3.0]  # fy always with mz on the lever arm
+    forces = np.column_stack([f, 0.1 * f[:, 1]])
+    with pytest.raises(InputError, match=r"cal.csv: loads fy and mz move together in every row "
+                                         r"\(a rank-deficient design\)"):
+        check_separable(forces, [2.0, 3.0, 0.3], ["fx", "fy", "mz"], "cal.csv")
+
+
+def test_a_component_loaded_at_one_level_is_refused():
+    forces = np.array([[0, 0], [1.0, 0], [2.0, 0], [0, 1.0], [0.5, 1.0]])
+    with pytest.raises(InputError, match="cal.csv: fy is loaded at 1 distinct non-zero level; "
+                                         "fitting needs at least 2"):
+        check_separable(forces, [2.0, 1.0], ["fx", "fy"], "cal.csv")
+
+
+def test_single_axis_sweeps_keep_the_papers_path():
+    """The paper's sample loads one axis a row: fit never reaches the joint branch, so its
+    model is today's (the golden model tests hold it to the last bit)."""
+    settings = load_config()
+    calib = load_calibration(Path(__file__).parents[2] / "sample_data" / "calibration", settings)
+    assert not multi_load(calib.forces)
+
+
+def _edit(path: Path, out: Path, change) -> Path:
+    with path.open(newline="") as fh:
+        rows = list(csv.reader(fh))
+    change(rows)
+    with out.open("w", newline="") as fh:
+        csv.writer(fh).writerows(rows)
+    return out
+
+
+def test_two_swapped_loads_are_flagged_by_their_editor_lines(tmp_path):
+    path, settings, _ = rig(tmp_path)
+
+    def swap(rows):
+        col = rows[0].index("known_Fx")
+        rows[4][col], rows[5][col] = rows[5][col], rows[4][col]  # editor lines 5 and 6
+
+    bad = _edit(path, tmp_path / "swapped.csv", swap)
+    from fsdecouple.evaluation.verdict import calibrate
+
+    model = calibrate(load_calibration(bad, settings), settings, verdict=False)
+    assert sorted(o["row"] for o in model.report.outliers) == [5, 6]
+
+
+def test_an_output_column_named_like_an_applied_load_is_refused(tmp_path):
+    path, _, _ = rig(tmp_path)
+
+    def rename(rows):
+        rows[0][rows[0].index("Fx")] = "Fx_ref"  # the reading's column named like a reference
+
+    bad = _edit(path, tmp_path / "renamed.csv", rename)
+    text = (tmp_path / "cfg.yaml").read_text().replace("fx_out: Fx", "fx_out: Fx_ref")
+    (tmp_path / "bad.yaml").write_text(text)
+    with pytest.raises(InputError, match=r"renamed.csv, row 1, column 'Fx_ref': output "
+                                         "fx_out is mapped to 'Fx_ref', named like an applied"):
+        load_calibration(bad, load_config(tmp_path / "bad.yaml"))
+
+
+def test_the_rig_is_nearly_calibrated_with_lever_arm_moments(tmp_path):
+    path, settings, calib = rig(tmp_path)
+    f, u = calib.forces, calib.voltages
+    mx = settings.layout.loads.index("mx")
+    rows = f[:, mx] != 0
+    assert (f[rows, settings.layout.loads.index("fy")] != 0).all()  # the lever arm's force
+    # readings in N and N·m: within cross-talk plus coupling of the applied loads
+    assert np.abs(u - f).max() < 0.1 * FULL_SCALE.max()
+
+
+def test_rows_with_blank_loads_are_skipped_with_their_lines_or_refused_with_strict(tmp_path):
+    path, settings, whole = rig(tmp_path)
+
+    def blank(rows):
+        for line in (14, 30):  # editor lines (rows[line - 1]), loaded rows of fy and fz
+            for c in range(7, 13):
+                rows[line - 1][c] = ""
+
+    bad = _edit(path, tmp_path / "blank.csv", blank)
+    calib = load_calibration(bad, settings)
+    assert len(calib.points) == len(whole.points) - 2
+    assert any("blank.csv, lines 14, 30: applied loads blank; rows skipped" in w
+               for w in calib.warnings)
+    with pytest.raises(InputError, match=r"blank.csv, row 14, column 'known_Fx': the applied "
+                                         r"loads are blank \(lines 14, 30\); --strict"):
+        load_calibration(bad, settings, strict=True)
