@@ -20,6 +20,7 @@ def sim_model_file(tmp_path_factory, sim_dir):
     return path
 
 
+@pytest.mark.slow  # over ~0.6 s: the not-slow run stays under a minute
 def test_fit_apply_round_trip(tmp_path, sim_dir):
     model = tmp_path / "model.json"
     r = invoke(["fit", sim_dir / "calibration", "-o", model])
@@ -90,6 +91,7 @@ def test_axis_column_is_optional(tmp_path, sim_dir, sim_model_file):
     assert json.loads(a.read_text())["chi"] == json.loads(b.read_text())["chi"]
 
 
+@pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_max_gamma_gate(tmp_path):
     invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "a.json", "--max-gamma", "0.5"])
     r = invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "b.json", "--max-gamma", "1e-6"],
@@ -174,6 +176,7 @@ def test_apply_counts_rows_outside_calibrated_range(tmp_path, model):
     assert summary.out_of_range_rows == 2 and summary.rows == 4
 
 
+@pytest.mark.slow  # over ~0.6 s: the not-slow run stays under a minute
 def test_outputs_get_the_usual_file_mode(tmp_path):
     """Atomic writes go through mkstemp (mode 0600); the result must not stay private."""
     import os
@@ -233,6 +236,7 @@ def test_progress_bars_show_on_a_terminal_and_never_in_ci(tmp_path, sample_model
     assert hide_cursor not in _on_a_terminal(cv_args, env)
 
 
+@pytest.mark.slow  # over ~0.6 s: the not-slow run stays under a minute
 def test_usage_errors_are_one_line_and_exit_2(sample_model):
     """A missing argument, a bad option value or an unknown command: bad input like any other."""
     import subprocess

@@ -62,6 +62,7 @@ def test_nan_inf_empty(cal, tmp_path, value):
     fails(["fit", cal], tmp_path, "rep1.csv", "row 5", "column 'fx'")
 
 
+@pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_row_loading_two_axes_is_fitted_jointly_and_named(cal, tmp_path):
     """Issue 22: such a row is a lever arm's or a multi-axis rig's, fitted, not refused;
     the warning names it, in case it is a typo."""

@@ -86,6 +86,7 @@ def test_errors_quote_names_literally(tricky):
 ESC = "\x1b[2J\x1b[31m"  # clear the screen, then print red
 
 
+@pytest.mark.slow  # over ~0.6 s: the not-slow run stays under a minute
 def test_control_characters_are_shown_escaped_never_sent_raw(tmp_path, sample_model):
     """A clear-screen in a sensor name or a directory name reaches the terminal escaped
     (``\\x1b[2J``), in titles, tables and summary lines alike."""

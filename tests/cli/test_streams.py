@@ -22,6 +22,7 @@ def _run(args, **kw):
     return subprocess.run([*CLI, *map(str, args)], timeout=120, **kw)
 
 
+@pytest.mark.slow  # over ~0.6 s: the not-slow run stays under a minute
 def test_a_reader_that_goes_away_is_141_not_the_gate_code(sample_model):
     for args in (["show", sample_model], ["--help"]):
         with subprocess.Popen([*CLI, *map(str, args)], stdout=subprocess.PIPE,
@@ -32,6 +33,7 @@ def test_a_reader_that_goes_away_is_141_not_the_gate_code(sample_model):
         assert err == b""  # no traceback, no "Exception ignored"
 
 
+@pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 @pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full")
 def test_a_full_stdout_or_stderr_is_exit_2(sample_model):
     with open("/dev/full", "w") as full:
@@ -45,6 +47,7 @@ def test_a_full_stdout_or_stderr_is_exit_2(sample_model):
         assert r.returncode == 2
 
 
+@pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_closed_standard_streams_are_no_streams(sample_model, tmp_path):
     def close(*fds):
         return lambda: [os.close(fd) for fd in fds]
@@ -57,6 +60,7 @@ def test_closed_standard_streams_are_no_streams(sample_model, tmp_path):
     assert r.returncode == 0 and len(out.read_text().splitlines()) == 3001
 
 
+@pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_an_ascii_locale_gets_tables_and_errors_not_a_traceback(sample_model, tmp_path):
     """LC_ALL=POSIX without UTF-8 mode: the gamma of validate's table could not be encoded."""
     env = {**os.environ, "LC_ALL": "POSIX", "PYTHONUTF8": "0"}

@@ -104,6 +104,7 @@ def test_nan_stays_nan_and_a_chi_without_range_is_not_continued(tangent):
 # --- every path agrees beyond the range -----------------------------------------------
 
 
+@pytest.mark.slow  # over ~0.6 s: the not-slow run stays under a minute
 @pytest.mark.parametrize("refine", [0, 3])
 def test_fast_paths_equal_the_exact_path_beyond_the_range(tangent, refine):
     """Rows up to 60 % of the span past the range: in the tables' margin and past them."""

@@ -82,6 +82,7 @@ def test_surrogate_equals_kernel_sum_on_dense_points(model):
         np.testing.assert_allclose(s(x), c(x), rtol=0, atol=BOUND_V, err_msg=name)
 
 
+@pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_surrogate_equals_libsvm_prediction(calib, model, settings):
     """The chain surrogate -> kernel sum -> libsvm, checked end to end."""
     for name in CHI_NAMES:
@@ -99,6 +100,7 @@ def test_surrogate_equals_libsvm_prediction(calib, model, settings):
         np.testing.assert_allclose(s(pts), want, rtol=0, atol=BOUND_V, err_msg=name)
 
 
+@pytest.mark.slow  # over ~0.6 s: the not-slow run stays under a minute
 def test_the_gate_leaves_room_for_errors_between_check_points(model):
     """Checked 25x more densely than at fit time (1000 points per interval), every
     surrogate stays within the gate: the recorded error is a sample, and the gate
@@ -223,6 +225,7 @@ def test_surrogate_with_a_poor_bound_is_not_used(model, recorded):
     assert m.fast_decoupler() is None
 
 
+@pytest.mark.slow  # over ~0.6 s: the not-slow run stays under a minute
 def test_table_path_keeps_the_promise_everywhere_inside_the_tables(model):
     """The promise re-derived: forces by the tables against the exact kernel sum on
     dense random points over the whole of every table (margins included).  Output a
@@ -353,6 +356,7 @@ def test_fit_warns_when_a_surrogate_misses_its_bound(calib, settings, monkeypatc
     assert m.fast_decoupler() is None
 
 
+@pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_the_kernel_compiles_where_no_cache_can_be_written(model, monkeypatch):
     """A read-only install without a user cache directory: numba refuses ``cache=True``
     when the module is imported; the kernel is then compiled per process, same forces."""

@@ -250,6 +250,7 @@ def test_refine_advice_on_the_sample_model(model):
     assert advice["recommended"] in (0, 1, 2)
 
 
+@pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_refine_in_config_and_model_file(tmp_path, sample_model):
     assert settings_from_dict({"refine": 3}).refine == 3
     assert settings_from_dict({}).refine == 0

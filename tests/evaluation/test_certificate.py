@@ -210,6 +210,7 @@ def test_certificate_on_a_simulated_sensor_matches_the_definitions(certified, ca
     assert steps["U"] == pytest.approx([budget_u[("x", f)] for f in steps["load"]])
 
 
+@pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_one_repetition_has_no_b_and_says_why(calib, settings):
     one = calib.subset([1])
     model = calibrate(one, replace(settings, min_repetitions=1))

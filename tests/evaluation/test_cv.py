@@ -121,6 +121,7 @@ def test_folds_parsing_and_checks():
     assert default_folds([1, 2, 3, 4]) == [[1, 2], [3, 4], [2, 3]]
 
 
+@pytest.mark.slow  # over ~0.6 s: the not-slow run stays under a minute
 def test_parallel_training_equals_sequential(doc, calib, settings):
     seq = run_cv(calib, settings, workers=1)
     assert seq["records"] == doc["records"] and seq["points"] == doc["points"]
@@ -188,6 +189,7 @@ def test_cv_json_has_the_documented_keys(doc):
 # --- the command ------------------------------------------------------------------
 
 
+@pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_cv_command_json_output_and_gate(tmp_path):
     out = tmp_path / "cv.json"
     r = invoke(["cv", SAMPLE / "calibration", "--json", "-o", out, "--max-gamma", "0.5"])

@@ -128,6 +128,7 @@ def test_edge_round_holds_out_each_sweeps_loads_beyond_its_others():
         assert not rnd.train.sweep(axis)["f" + axis].isin(loads).any()
 
 
+@pytest.mark.slow  # over ~0.6 s: the not-slow run stays under a minute
 def test_a_candidate_worse_than_table2_beyond_the_range_is_never_chosen():
     # gamma = 8 per F.S.^2: better than Table 2 on the held-out points inside the
     # loads (figure), worse extrapolating one load step (edge): its kernel is narrow
@@ -151,6 +152,7 @@ def test_a_candidate_worse_than_table2_on_any_axis_is_never_chosen(monkeypatch):
     assert record["chosen"] == 0 and chosen == settings
 
 
+@pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_fit_tune_round_trips_through_the_model_file(tmp_path):
     out = tmp_path / "m.json"
     r = runner.invoke(app, ["fit", SAMPLE, "-o", str(out), "--tune", "--tune-grid", TINY,
@@ -275,6 +277,7 @@ def test_sample_like_coupling_tuned_and_refined_is_near_the_floor(tmp_path):
     assert (ratio <= SAMPLE_LIKE_LIMIT).all(), ratio  # seed 7: 1.32x; see the scatter above
 
 
+@pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_cv_tune_records_the_choice_and_cross_validates_with_it(tmp_path):
     out = tmp_path / "cv.json"
     r = runner.invoke(app, ["cv", SAMPLE, "--tune", "--tune-grid", TINY, "-o", str(out)])

@@ -42,6 +42,7 @@ def heldout_rms(calib, settings) -> tuple[np.ndarray, np.ndarray]:
     return tuple(np.sqrt((np.concatenate(err[m]) ** 2).mean(axis=0)) for m in ("model", "matrix"))
 
 
+@pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_lever_arm_rows_are_fitted_and_beat_the_matrix_on_held_out_levels(tmp_path):
     """The simulated rig's coupling is quadratic and cubic at up to 1 % F.S. per source: the
     matrix cannot follow it, eq. (11)'s chi can.  Over seeds 0-4 the worst-component ratio

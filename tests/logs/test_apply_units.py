@@ -255,6 +255,7 @@ def test_config_limits_take_precedence_over_the_models(sample_model_file, tmp_pa
     assert pq.read_table(out).column("status").to_pylist() == ["ok"]
 
 
+@pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 @needs_cc
 def test_apply_and_c_saturation_agree_without_a_tare(tmp_path):
     """The C compares the values passed in, apply the raw ones: the same without a tare."""

@@ -227,6 +227,7 @@ def test_interrupted_write_leaves_previous_file(tmp_path):
 
 # --- model files ----------------------------------------------------------------------
 
+@pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_refit_is_byte_identical_apart_from_created(tmp_path):
     a, b = tmp_path / "a.json", tmp_path / "b.json"
     invoke(["fit", SAMPLE / "calibration", "-o", a])

@@ -6,6 +6,7 @@ import csv
 import json
 
 import numpy as np
+import pytest
 from conftest import invoke
 
 from fsdecouple.sim.rig import COMPONENTS, FULL_SCALE, LEVELS, rig_rows
@@ -26,6 +27,7 @@ def test_the_rig_file_has_lever_arm_sweeps_after_zero_rows_and_trailing_empty_ro
     np.testing.assert_allclose(f[mx, 1], -f[mx, 3] / 0.1)  # the lever arm's force
 
 
+@pytest.mark.slow  # over ~0.6 s: the not-slow run stays under a minute
 def test_init_fit_and_apply_on_a_rig_file(tmp_path):
     """init guesses known_* as the loads and Fx..Mz as the readings; fit takes the rows that
     load two components; apply writes force columns apart from the log's own Fx..Mz."""
@@ -61,6 +63,7 @@ def test_eight_gauges_are_refused_in_one_line(tmp_path):
     assert not (tmp_path / "c.yaml").exists()
 
 
+@pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_validate_scores_a_rig_file_with_its_lever_arm_rows(tmp_path):
     """validate labels a lever-arm row by its moment, as fit does: every component keeps a
     sweep (by raw magnitude the Mx rows' 50 N would outweigh their 5 N·m)."""

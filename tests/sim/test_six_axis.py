@@ -411,6 +411,7 @@ def test_gamma_with_forces_and_moments_is_dimensionless():
 
 # --- cv and validate -----------------------------------------------------------------
 
+@pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_cv_runs_every_baseline_on_six_axes(six_settings):
     from fsdecouple.evaluation.cv import run_cv
 
@@ -477,6 +478,7 @@ def chi_figure_axes(model):
     return chi_figure(model)
 
 
+@pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_decouple_frame_and_compare_take_the_layout(six_model):
     import fsdecouple
     from fsdecouple.fleet.drift import compare
@@ -509,6 +511,7 @@ def test_refinement_works_for_six_components(six_model):
     assert err2 < err0  # eq. (11)'s second-order error (eq. 6) shrinks with K
 
 
+@pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_cv_moves_a_point_of_a_named_component(six_settings, six_calib):
     from fsdecouple.data.calibration import GrossError
     from fsdecouple.evaluation.cv import run_cv
