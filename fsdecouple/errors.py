@@ -26,16 +26,18 @@ class ModelFileError(FsdecoupleError):
     """A model file is not a usable fsdecouple model."""
 
 
-def printable(text: object, keep: str = "") -> str:
+def printable(text: object, keep: str = "", *, spaces: bool = False) -> str:
     """``text`` with control characters (a newline in a file name) escaped as repr does,
     so that a message stays on one line; other characters, accents too, are kept, and so
-    are the characters of ``keep`` (the console keeps its own line breaks).  The one
+    are the characters of ``keep`` (the console keeps its own line breaks) and, with
+    ``spaces``, Unicode spaces (a no-break space in a spreadsheet's header).  The one
     function for user text on the terminal: the CLI's consoles apply it to everything."""
     text = str(text)
     if text.isprintable():
         return text
+    escaped = ("C",) if spaces else ("C", "Z")
     return "".join(
-        c if c == " " or c in keep or not unicodedata.category(c).startswith(("C", "Z"))
+        c if c == " " or c in keep or not unicodedata.category(c).startswith(escaped)
         else repr(c)[1:-1]
         for c in text
     )

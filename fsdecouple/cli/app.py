@@ -100,7 +100,7 @@ class _Console(Console):
     def _render_buffer(self, buffer) -> str:
         return super()._render_buffer(
             s if s.control or s.text == "\n" or s.text.isprintable()
-            else Segment(printable(s.text, keep="\n"), s.style, s.control)
+            else Segment(printable(s.text, keep="\n", spaces=True), s.style, s.control)
             for s in buffer)
 
     def on_broken_pipe(self) -> None:

@@ -106,3 +106,17 @@ def test_control_characters_are_shown_escaped_never_sent_raw(tmp_path, sample_mo
         assert "\x1b" not in out, out
     assert "rig\\x1b[2J\\x1b[31m" in fit.stdout and "rig\\x1b[2J" in shown.stdout
     assert "s\\x1b[2J\\x1b[31m1" in many.stdout + many.stderr
+
+
+def test_the_console_keeps_unicode_spaces_and_escapes_controls(capsys):
+    """A no-break space in a spreadsheet's header is text, shown as it is; an ESC is not."""
+    from rich.table import Table
+
+    from fsdecouple.cli.app import console
+
+    table = Table("Fx\u00a0[N]", "a\x1b[2Jb")
+    table.add_row("x\u2009y", "z")
+    console.print(table)
+    out = capsys.readouterr().out
+    assert "Fx\u00a0[N]" in out and "x\u2009y" in out
+    assert "a\\x1b[2Jb" in out and "\x1b" not in out
