@@ -66,17 +66,11 @@ def _reps(reps) -> str:
     return ", ".join(str(r) for r in sorted(reps))
 
 
-def _one_unit(per: tuple[str, ...], unit: str) -> str | None:
-    """The unit every component or output shares, or None where they differ (N and N·m)."""
-    return unit if not per or len(set(per)) == 1 else None
-
-
 def _shown(units) -> dict[str, str]:
-    """The data's own units for captions: loads, outputs, and small output figures."""
-    load = _one_unit(units.loads, units.load) or " / ".join(dict.fromkeys(units.loads))
-    output = _one_unit(units.outputs, units.output) or " / ".join(dict.fromkeys(units.outputs))
-    small = output_display(output)[1] if _one_unit(units.outputs, units.output) else output
-    return {"load": load, "output": output, "small": small}
+    """The data's own units for captions: loads, outputs, and small output figures.  Where
+    components differ (N and N·m), the config already made ``load`` read "N / N·m"."""
+    small = units.output if units.outputs else output_display(units.output)[1]
+    return {"load": units.load, "output": units.output, "small": small}
 
 
 def _levels(cv) -> bool:
@@ -181,7 +175,7 @@ def _flatten(d: dict, prefix: str = "") -> dict:
 def _model_tables(model) -> str:
     rep = model.report.to_dict() if model.report else {}
     units = model.settings.units
-    same = _one_unit(units.loads, units.load) and _one_unit(units.outputs, units.output)
+    same = not (units.loads or units.outputs)  # one unit each: in the headers, not per cell
 
     def with_unit(x: float, unit: str) -> str:  # six significant digits; the unit per cell if mixed
         return f"{x:.6g}" if same else f"{x:.6g} {unit}"
