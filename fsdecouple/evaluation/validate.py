@@ -107,10 +107,10 @@ def validate(
         raise InputError(f"the config names components {', '.join(settings.layout.loads)}, the "
                          f"model {', '.join(model.layout.loads)}; use the calibration's config")
     if settings.units != model.settings.units:
-        def shown(u):
-            return f"loads in {', '.join(u.loads) or u.load}, outputs in {', '.join(u.outputs) or u.output}"
-        raise InputError(f"the config reads the set with {shown(settings.units)}; the model was "
-                         f"calibrated with {shown(model.settings.units)}: use the calibration's config")
+        set_u, model_u = settings.units, model.settings.units  # 'N / N·m' where mixed
+        raise InputError(f"the config reads the set with loads in {set_u.load}, outputs in "
+                         f"{set_u.output}; the model was calibrated with loads in {model_u.load}, "
+                         f"outputs in {model_u.output}: use the calibration's config")
     cs = load_calibration(set_path, replace(settings, min_repetitions=1), combined=True)
     points = cs.points
     u, loads = cs.voltages.astype(float), cs.forces.astype(float)

@@ -248,7 +248,7 @@ def with_coupling(sensor: SimulatedSensor, coupling: float) -> SimulatedSensor:
 MAX_REPETITIONS, MAX_LEVELS, MAX_SEED = 1000, 10_000, 2**63 - 1
 
 
-def _whole(value: int, name: str, minimum: int, maximum: int = MAX_SEED) -> None:
+def check_count(value: int, name: str, minimum: int, maximum: int = MAX_SEED) -> None:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral) \
             or not minimum <= value <= maximum:
         too_big = isinstance(value, numbers.Integral) and value > maximum
@@ -319,13 +319,13 @@ def simulate(
     """
     if layout not in LAYOUTS:
         raise InputError(f"--layout {layout!r}: expected one of {', '.join(LAYOUTS)}")
-    _whole(seed, "seed", 0)
+    check_count(seed, "seed", 0)
     if repetitions is not None:
-        _whole(repetitions, "repetitions", 1, MAX_REPETITIONS)
+        check_count(repetitions, "repetitions", 1, MAX_REPETITIONS)
     if levels is not None:
         if layout != "lab":
             raise InputError("--levels: only with --layout lab (the paper layout uses the paper's grid)")
-        _whole(levels, "levels", 1, MAX_LEVELS)
+        check_count(levels, "levels", 1, MAX_LEVELS)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: is a file, expected a directory to write into")

@@ -19,7 +19,7 @@ import pandas as pd
 from ..axes import Layout
 from ..errors import InputError
 from ..files import atomic_files, check_output
-from .simulate import MAX_REPETITIONS, SimulatedSensor, _whole, one_set, with_coupling, write_csv
+from .simulate import MAX_REPETITIONS, SimulatedSensor, check_count, one_set, with_coupling, write_csv
 
 COMPONENTS = ("fx", "fy", "fz", "mx", "my", "mz")
 OUTPUTS = ("u1", "u2", "u3", "u4", "u5", "u6")
@@ -122,8 +122,8 @@ def write_six_axis(out: str | Path, *, seed: int = 0, repetitions: int = 6, forc
     calibration point, as for three axes (Section 4.4).
     """
     out = Path(out)
-    _whole(seed, "seed", 0)
-    _whole(repetitions, "repetitions", 1, MAX_REPETITIONS)
+    check_count(seed, "seed", 0)
+    check_count(repetitions, "repetitions", 1, MAX_REPETITIONS)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: is a file, expected a directory to write into")
     sensor = sensor or six_axis_sensor(seed)
