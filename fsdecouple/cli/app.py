@@ -40,6 +40,7 @@ from ..errors import FsdecoupleError, InputError, printable
 # Tables take their natural width; nothing here is padded to the console's width.
 WIDE = 100_000
 
+
 def _plain_list_types() -> None:
     """typer (0.2x) shows a repeatable argument's type as ``<list[Path]>`` after its
     ``voltages...`` name: shown as the element's type, ``<path>``, instead."""
@@ -90,14 +91,17 @@ def _stdout_gone() -> None:
     with contextlib.suppress(OSError, ValueError):
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
 
 
 class _Console(Console):
     """Every piece of text shown is literal: control characters that are not the console's
-    own (ESC, a carriage return, a bell, a clear-screen in a sensor name) are shown
-    escaped, by :func:`~fsdecouple.errors.printable`, in tables and titles too."""
+    own (ESC, a clear-screen in a sensor name) are shown escaped, by
+    :func:`~fsdecouple.errors.printable`, in tables and titles too (rich itself drops a
+    carriage return or a bell).  The escape is made after rich measured the text, so a
+    row holding one is wider than its table: misaligned, never raw."""
 
-    def _render_buffer(self, buffer) -> str:
+    def _render_buffer(self, buffer) -> str:  # rich's last step before writing (private)
         return super()._render_buffer(
             s if s.control or s.text == "\n" or s.text.isprintable()
             else Segment(printable(s.text, keep="\n", spaces=True), s.style, s.control)
@@ -108,6 +112,7 @@ class _Console(Console):
         rich's 1, which here means a failed gate."""
         _stdout_gone()
         raise SystemExit(128 + signal.SIGPIPE)
+
 
 # No markup, no emoji codes and no highlighting: every name and cell from a user's
 # file is printed literally (a sensor named ':thumbs_up:' or 'a[/]b' included, in
