@@ -30,9 +30,17 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..core.intervals import interval_names
 from ..errors import FsdecoupleError, InputError, excerpt, printable
 from ..units import load_factor
-from .apply import FORCE_UNIT_KEY, OUTPUT_UNIT_KEY, STATUS_COLUMN, STATUS_NAMES, check_options
+from .apply import (
+    FORCE_UNIT_KEY,
+    OUTPUT_UNIT_KEY,
+    STATUS_COLUMN,
+    STATUS_NAMES,
+    check_options,
+    force_columns,
+)
 from .frame import frame_forces, frame_outputs
 from .jobs import ApplySpec, Job, apply_job, dataset_zero
 from .sinks import force_arrays
@@ -134,7 +142,7 @@ def _dataset_graph(spec: ApplySpec, job: Job, target):
     except InputError as err:
         raise InputError(f"{printable(job.input)}: {err}") from None
     meta = frame._meta.copy()
-    for c in model.layout.loads:
+    for c in _columns(model, meta.columns, spec.interval):
         meta[c] = pd.Series([], dtype=pd.ArrowDtype(pa.float64()))
     meta[STATUS_COLUMN] = pd.Series([], dtype=pd.ArrowDtype(pa.string()))
     factor = load_factor(model.settings.load_unit, unit)
@@ -207,6 +215,12 @@ def _count_written(directory) -> tuple[int, dict[str, int]]:
     return sum(counts.values()), counts
 
 
+def _columns(model, header, interval: float | None) -> tuple[str, ...]:
+    """The columns a partition gains, named as single-file ``apply`` names them."""
+    forces = force_columns(model.layout.loads, header)
+    return forces + (interval_names(forces) if interval is not None else ())
+
+
 def decouple_partition(df, spec: ApplySpec, zero, factor: float = 1.0):
     """One partition of a dataset: ``decouple_frame``'s arrays, in ``apply``'s Parquet types.
 
@@ -219,11 +233,12 @@ def decouple_partition(df, spec: ApplySpec, zero, factor: float = 1.0):
     import pyarrow.compute as pc
 
     model = spec.model()
-    f, code = frame_forces(model, df, zero=zero, settings=spec.settings)
+    f, code = frame_forces(model, df, zero=zero, settings=spec.settings, interval=spec.interval)
     if factor != 1.0:
         f = f * factor
     empty = np.isnan(f[:, 0])  # the rows without forces have none at all
     cols = {c: pd.arrays.ArrowExtensionArray(a)
-            for c, a in zip(model.layout.loads, force_arrays(f, empty), strict=True)}
+            for c, a in zip(_columns(model, df.columns, spec.interval), force_arrays(f, empty),
+                            strict=True)}
     cols[STATUS_COLUMN] = pd.arrays.ArrowExtensionArray(pc.take(STATUS_NAMES, pa.array(code)))
     return df.assign(**cols)

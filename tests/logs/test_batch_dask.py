@@ -295,3 +295,28 @@ def test_dask_lists_entries_named_like_logs_that_are_not_files(sample_model, tmp
     doc = json.loads(r.stdout)
     assert sorted(Path(p).name for p in doc["failed"]) == ["dangling.csv", "fifo.csv", "folder.csv"]
     assert (tmp_path / "out" / "good.csv").is_file()
+
+
+def test_interval_columns_from_both_engines_as_single_file_apply(sample_model, tmp_path, cluster):
+    """Issue 23: ``--interval`` on many logs adds the _lo/_hi columns in both engines, the
+    same bytes and Arrow tables as single-file apply; a log with the sensor's own ``FX``
+    reading gets ``decoupled_fx`` and ``decoupled_fx_lo`` from Dask too (it wrote ``fx``)."""
+    import pandas as pd
+
+    logs = make_logs(tmp_path)
+    for part in (logs / "ds").glob("*.parquet"):
+        t = pq.read_table(part)
+        pq.write_table(t.append_column("FX", t.column("ux")), part)
+    args = ["apply", sample_model, logs, "--tare", 200, "--interval", 0.9, "--json"]
+    invoke([*args, "-o", f"{tmp_path / 'local'}/"])
+    invoke([*args, "-o", f"{tmp_path / 'dask'}/", "--engine", "dask",
+            "--scheduler", cluster.scheduler_address])
+    _same_outputs(tmp_path / "local", tmp_path / "dask")
+    one = tmp_path / "one.csv"
+    invoke(["apply", sample_model, logs / "a" / "one.csv", "-o", one, "--tare", 200,
+            "--interval", 0.9])
+    assert one.read_bytes() == (tmp_path / "dask" / "a" / "one.csv").read_bytes()
+    ds = pd.read_parquet(tmp_path / "dask" / "ds")
+    assert {"decoupled_fx", "decoupled_fx_lo", "decoupled_fx_hi", "fz_hi"} <= set(ds.columns)
+    assert (ds["decoupled_fx_lo"] < ds["decoupled_fx"]).all()
+    assert (ds["decoupled_fx"] < ds["decoupled_fx_hi"]).all()
