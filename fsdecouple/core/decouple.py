@@ -3,7 +3,9 @@
     f_a = omega_a^-1 [u_a - sum_{b != a} chi_ab(u_b)]                    eq. (11)
 
 with omega_a^-1(v) = v / k_aa (eq. 13 form).  N is the number of components
-(len(k)); nothing here knows their names.
+(len(k)); nothing here knows their names.  A joint fit of rig rows may add an own-load
+chi_aa(u_a) (:mod:`fsdecouple.fitting.joint`): it is subtracted like the others, always at
+the measured u_a (it models the outputs as measured), and only the exact path has it.
 
 * :func:`decouple_exact` evaluates every chi as given (the SVR's kernel sum, or
   any other callable such as the RBF baseline's networks);
@@ -92,10 +94,13 @@ def decouple_exact(u: np.ndarray, k: np.ndarray, chis: Iterable[ChiFunction],
     ``converged`` (n,), if given.  K = 0 is eq. (11) as written, every row converged.
     """
     chis = list(chis)
+    own = [c for c in chis if c.output_axis == c.input_axis]  # chi_aa of a joint fit (joint.py)
+    chis = [c for c in chis if c.output_axis != c.input_axis]
+    base = u - coupling_errors(u, own) if own else u  # the own-load chi always at the measured u_a
     p = u
     for _ in range(refine):
-        p = u - coupling_errors(p, chis)
-    kf = u - coupling_errors(p, chis)  # = p^(K+1)
+        p = base - coupling_errors(p, chis)
+    kf = base - coupling_errors(p, chis)  # = p^(K+1)
     f = kf / k
     ok = settled(kf - p, full_scale_output) if refine else np.ones(len(f), dtype=bool)
     f[~ok] = np.nan

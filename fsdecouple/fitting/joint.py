@@ -28,6 +28,8 @@ name (:func:`check_separable`).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ..errors import InputError
@@ -36,9 +38,29 @@ ITERATIONS = 2  # backfitting sweeps at most: on lever-arm rigs the residual sto
 # Stop when no chi moved by more than this fraction of its output's full scale in
 # one sweep: the SVRs' epsilon of Table 2 (1e-4) is the smallest change they resolve.
 CONVERGED = 1e-4
+# The joint fit's SVR penalty C in full-scale units (joint_svr): a chi is a few % of
+# F.S., so C = 1 still lets it reach any shape the calibration resolves, while Table
+# 2's C = 1000 (for volts and the paper's repeated sweeps) follows single readings' noise.
+JOINT_C = 1.0
 # Singular values of the normalised load design below this fraction of the largest
 # mean loads that no row separates (a double's rounding of full-scale loads is 1e-16).
 SEPARABLE = 1e-6
+
+
+def joint_svr(svr, f: np.ndarray, u: np.ndarray, a: int):
+    """Table 2's SVR settings as the joint fit of output ``a`` uses them (normalised units).
+
+    C is JOINT_C, and epsilon the noise sigma of output a (at least Table 2's): the
+    residual scatter of a least-squares pilot fit of u_a, quadratic in every load,
+    sigma^2 = RSS / (n - p).  An epsilon-tube as wide as the noise (Cherkassky and Ma,
+    2004) and a C that bounds a chi's coefficients keep the SVRs from following the
+    noise of single readings, which a rig file of one reading per load is made of.
+    """
+    design = np.column_stack([f, f ** 2])
+    coef, *_ = np.linalg.lstsq(design, u[:, a], rcond=None)
+    dof = len(u) - np.linalg.matrix_rank(design)
+    sigma = float(np.sqrt(((u[:, a] - design @ coef) ** 2).sum() / dof)) if dof > 0 else 0.0
+    return replace(svr, C=JOINT_C, epsilon=max(svr.epsilon, sigma))
 
 
 def multi_load(forces: np.ndarray) -> bool:
@@ -68,7 +90,7 @@ def check_separable(forces: np.ndarray, full_scale, loads, source: str) -> None:
 
 
 def backfit(f: np.ndarray, u: np.ndarray, a: int, fit_chi, *, iterations: int = ITERATIONS,
-            converged: float = CONVERGED) -> tuple[float, dict[int, object]]:
+            converged: float = CONVERGED, own: bool = False) -> tuple[float, dict[int, object]]:
     """k_a and the chi_ab of output ``a`` by backfitting, in normalised units.
 
     Parameters
@@ -95,11 +117,14 @@ def backfit(f: np.ndarray, u: np.ndarray, a: int, fit_chi, *, iterations: int = 
     coef, *_ = np.linalg.lstsq(design, u[:, a], rcond=None)
     k = float(coef[0])
     part = {b: coef[j + 1] * u[:, b] for j, b in enumerate(others)}  # chi_ab(u_b), linear start
+    terms = [*others, a] if own else others
+    if own:
+        part[a] = np.zeros(len(u))
     chi: dict[int, object] = {}
     for _ in range(iterations):
         moved = 0.0
-        for b in others:
-            r = u[:, a] - k * f[:, a] - sum(part[c] for c in others if c != b)
+        for b in terms:
+            r = u[:, a] - k * f[:, a] - sum(part[c] for c in terms if c != b)
             chi[b] = fit_chi(u[:, b], r)
             new = chi[b](u[:, b])
             moved = max(moved, float(np.abs(new - part[b]).max()))
