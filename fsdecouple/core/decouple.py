@@ -26,6 +26,8 @@ eq. (11) evaluated at estimates p of the prime outputs instead of u (eq. 5-6),
     p^0 = u,   p_b^(j+1) = u_b - sum_{c != b} chi_bc(p_c^j)   (j = 0 .. K - 1)
     f_a = [u_a - sum_{b != a} chi_ab(p_b^K)] / k_aa,  so k_a f_a = p_a^(K+1).
 
+A joint fit's own-load chi_aa (fitting/joint.py) is subtracted from u_a before these
+steps, at the measured u_a: p^(j+1) = u - chi_own(u) - sum chi(p^j).
 A contraction when (N - 1) max|chi'| < 1.  K = 0 is eq. (11), bit for bit, on
 every path.  A row whose last step k f - p^K is not finite or above
 REFINE_TOLERANCE F.S. gets NaN forces and converged = False, never silent forces.

@@ -7,19 +7,36 @@ coupling function.  Eq. (11) rearranged is a model of every output,
 
     u_a = k_a f_a + sum_{b != a} chi_ab(u_b),                        (eq. 11)
 
-additive in the outputs u_b, linear in the prime load (eq. 2).  It is fitted for
-each output a by *backfitting*: start from its least-squares linear form (the
-calibration matrix's), then in turn fit each chi_ab as an epsilon-SVR (Table 2) on
-the partial residual
+additive in the outputs u_b, linear in the prime load (eq. 2).  A rig's readings
+also bend with their *own* load (a factory-calibrated reading Fx that grows with
+Fx^2), which a linear omega cannot hold.  The joint fit therefore extends eq. (4)'s
+corrected coupling functions to b = a:
 
-    r_ab = u_a - k_a f_a - sum_{c != a, b} chi_ac(u_c)
+    u_a = k_a f_a + chi_aa(u_a) + sum_{b != a} chi_ab(u_b),          (eqs. 2, 4, 11)
+
+chi_aa(u_a) being what is left of u_a beyond the straight line of eq. (2) along
+its own load, as a function of the measured output, like every other chi.  So
+decoupling stays eq. (11) with one more term, f_a = [u_a - chi_aa(u_a) - sum_b
+chi_ab(u_b)] / k_a: no inversion of omega, and eq. (5)-(6)'s refinement iterates
+the cross terms as before with chi_aa held at the measured u_a
+(:func:`fsdecouple.core.decouple.decouple_exact`).
+
+It is fitted for each output a by *backfitting*: start from its least-squares
+linear form (the calibration matrix's), then in turn fit each chi_ab, chi_aa
+included, as an epsilon-SVR (eq. 10) on the partial residual
+
+    r_ab = u_a - k_a f_a - sum_{c != b} chi_ac(u_c)
 
 as a function of u_b (eq. 4's training pairs, eq. 10's form), and k_a by least
 squares through the origin on u_a - sum_b chi_ab(u_b) (eq. 2), until the chi stop
-changing.  On single-axis sweeps the partial residual of a b-sweep row is its
-coupling error element e_ab (eq. 1) and the other rows give chi_ab(0) = 0: the
-paper's training pairs; ``fit`` keeps the paper's own path for them.  The model
-is the same file, and eq. (11), refinement and extrapolation apply unchanged.
+changing.  The SVRs keep Table 2's kernel width but not its C and epsilon, chosen
+for the paper's repeated sweeps in volts: a rig file has one reading per load, and
+C = 1000 with epsilon = 1e-4 F.S. follows each reading's noise; :func:`joint_svr`
+sets C = JOINT_C and epsilon = the noise sigma.  On single-axis sweeps the partial
+residual of a b-sweep row is its coupling error element e_ab (eq. 1) and the other
+rows give chi_ab(0) = 0: the paper's training pairs; ``fit`` keeps the paper's own
+path (Table 2, no chi_aa) for them, so their model is today's.  The model file
+stores the chi_aa apart (``chi_own``, format version 4).
 
 The loads must be separable: two loads that move together in every row (a lever
 arm with no pure-force sweep) leave k_a and chi_ab confounded, and are refused by
@@ -103,13 +120,15 @@ def backfit(f: np.ndarray, u: np.ndarray, a: int, fit_chi, *, iterations: int = 
         The output modelled.
     fit_chi : callable
         ``fit_chi(x, y)`` -> a callable chi (an epsilon-SVR of eq. 10) of x.
+    own : bool
+        Fit the own-load chi_aa(u_a) too (module docstring).
 
     Returns
     -------
     k : float
         Slope of eq. (2) in normalised units.
     chi : dict
-        One fitted chi per input b != a.
+        One fitted chi per input b != a, and for b = a with ``own``.
     """
     n = u.shape[1]
     others = [b for b in range(n) if b != a]
