@@ -53,7 +53,9 @@ def simulate(
     ] = 3,
     rig: Annotated[
         str | None, typer.Option(help="lever-arm: a six-axis rig's calibration.csv whose moments "
-                                      "come from a force on a lever arm (known_Fx.. headers).")
+                                      "come from a force on a lever arm (known_Fx.. headers); "
+                                      "quadratic: the same rig, its readings bending with the "
+                                      "squares of the loads (a few % F.S.).")
     ] = None,
     gauges: Annotated[
         int, typer.Option(help="--rig only: output channels (6: readings Fx..Mz; 8: gauges "
@@ -72,9 +74,8 @@ def simulate(
         if rig is not None:
             from ..sim.rig import write_rig
 
-            if rig != "lever-arm":
-                raise InputError(f"--rig {rig!r}: expected lever-arm")
-            files = write_rig(out_dir, seed=seed, gauges=gauges, levels=levels or 9, force=force)
+            files = write_rig(out_dir, seed=seed, gauges=gauges, levels=levels or 9, force=force,
+                              kind=rig)
             console.print(f"wrote {len(files)} files under {out_dir}")
             return
         if components not in (3, 6):

@@ -101,6 +101,10 @@ def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",
     if model.method != "svr":
         raise ConfigError(f"the model decouples by the {model.method} calibration matrix; export "
                           "writes the coupling error model (eq. 11) only: refit with --method svr")
+    if getattr(model, "own", None):
+        raise ConfigError("the model has own-load chi (a joint fit of rig rows, chi "
+                          f"{', '.join(model.own)}); export writes the N(N - 1) cross chi of "
+                          "eq. (11) only, not yet these")
     rotation = None if settings.rotation is None else np.asarray(settings.rotation, dtype=float)
     fs = np.asarray(settings.full_scale, dtype=float)
     cal = np.asarray(model.calibrated_range, dtype=float)
