@@ -117,7 +117,12 @@ def apply_lines(summary, out) -> list[str]:
 
 
 def apply_warnings(summary) -> list[str]:
-    w = []
+    w, groups = [], {}
+    for d in getattr(summary, "dropped", ()):
+        groups.setdefault(d.reason, []).append(f"{d.column} '{d.name}'" if d.name else str(d.column))
+    if groups:
+        w.append("log columns not passed through (fit ignores them too): " + "; ".join(
+            f"{', '.join(cols)} ({reason})" for reason, cols in groups.items()))
     if summary.missing_rows:
         rows = ", ".join(map(str, summary.first_missing))
         more = ", ..." if summary.missing_rows > len(summary.first_missing) else ""
