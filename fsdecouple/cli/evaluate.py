@@ -138,15 +138,20 @@ def validate(
     output: Annotated[Path | None, typer.Option("--output", "-o", help="Write validation.json.")] = None,
     max_gamma: Annotated[float | None, typer.Option(
         help="Exit 1 if the interference error (eq. 12) on calibrated points exceeds this fraction.")] = None,
+    calib: Annotated[Path | None, typer.Option(
+        "--calib", help="The model's calibration (directory or CSV), to fit the least-squares "
+                        "matrix on when the model file holds none (fitted before it was kept).")] = None,
     force: ForceOpt = False, json_out: JsonOpt = False,
 ) -> None:
-    """Score a model on an independent single-axis set: gamma and force errors, per axis."""
+    """Score a model on an independent single-axis set: the model, the least-squares matrix
+    and initial side by side, gamma and force errors per axis."""
     from ..evaluation.validate import validate as validate_set
-    from ..reporting.tables import validation_renderables
+    from ..reporting.validate_table import validation_renderables
 
     with user_errors():
         doc = validate_set(model_file, set_path, load_config(config) if config else None,
-                           max_gamma=max_gamma, output=output, force=force, inputs=_given(config))
+                           max_gamma=max_gamma, output=output, force=force, inputs=_given(config),
+                           calib=calib)
     for to_stderr, r in validation_renderables(doc, output, as_json=json_out):
         (err_console if to_stderr else console).print(r, soft_wrap=True)
     raise typer.Exit(0 if doc["gate"] is None or doc["gate"]["passed"] else 1)

@@ -234,7 +234,9 @@ class CouplingErrorModel:
         (``fit --method linear|auto``; omega and chi are kept as the diagnostics of
         the sensor's coupling).
     matrix : ndarray, shape (N, N), optional
-        The calibration matrix C [load unit / output unit] of a ``linear`` model.
+        The least-squares calibration matrix C [load unit / output unit] of the same
+        calibration: how a ``linear`` model decouples; an ``svr`` model fitted by
+        ``fit`` keeps it for comparison (``validate``), never to decouple.
     provenance : dict
         Input files and digests, library versions.
     created : str
