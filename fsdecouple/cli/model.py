@@ -176,7 +176,7 @@ def export(
     force: ForceOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
-    """Export the model as one dependency-free C99 header (eq. 11 for embedded use)."""
+    """Export the model as one dependency-free C99 header (eq. 11, or a linear model's matrix)."""
     from ..export.header import export_header
 
     with user_errors():
