@@ -205,7 +205,8 @@ def _units(raw: Any, where: str, layout: Layout = DEFAULT) -> Units:
     """``{load: N, output: V}``, or per column: ``{load: {fx: N, mx: N·m}, output: {u1: V}}``."""
     raw = _mapping(raw, where)
     moments = tuple(MOMENT_UNITS) if not layout.is_default else ()
-    allowed = {"load": (*LOAD_UNITS, *moments), "output": OUTPUT_UNITS}
+    # a factory-calibrated sensor's readings are outputs in load units (N, N·m)
+    allowed = {"load": (*LOAD_UNITS, *moments), "output": (*OUTPUT_UNITS, *LOAD_UNITS, *moments)}
     columns = {"load": layout.loads, "output": layout.outputs}
     for key in raw:
         if key not in allowed:
