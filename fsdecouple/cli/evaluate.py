@@ -12,7 +12,7 @@ from rich.progress import MofNCompleteColumn
 
 from ..config import load_config
 from ..core.modelfile import load_model
-from ..errors import InputError
+from ..errors import InputError, printable
 from ..files import atomic_files, atomic_write, check_output, refuse_overwriting_input
 from .app import (
     ConfigOpt,
@@ -120,10 +120,10 @@ def cv(
         for r in cv_renderables(doc):
             console.print(r)
         if output is not None:
-            console.print(f"cv document written to {output}", highlight=False)
+            console.print(f"cv document written to {printable(output)}", highlight=False)
             console.print(
-                f"calibration report: fsdecouple report MODEL --cv {output} --calib {calib} "
-                "-o report.html", highlight=False,
+                f"calibration report: fsdecouple report MODEL --cv {printable(output)} "
+                f"--calib {printable(calib)} -o report.html", highlight=False,
             )
     warn(doc["warnings"])
     if doc["gate"] is not None and not doc["gate"]["passed"]:
@@ -209,7 +209,7 @@ def report(
             for name, data in result.figures.items() if png is not None else ():
                 with group.open(png / f"{name}.png", "wb") as fh:
                     fh.write(data)
-    console.print(f"report written to {output} ({len(result.figures)} figures)", highlight=False)
+    console.print(f"report written to {printable(output)} ({len(result.figures)} figures)", highlight=False)
     if png is not None:
-        console.print(f"figures written to {png}/: " + ", ".join(f"{n}.png" for n in result.figures),
-                      highlight=False)
+        console.print(f"figures written to {printable(png)}/: "
+                      + ", ".join(f"{n}.png" for n in result.figures), highlight=False)

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..core.model import RANGE_MARGIN
+from ..errors import printable
 
 
 @dataclass
@@ -111,7 +112,7 @@ class ExportResult:
                   if counts else "no tables (kernel sums only)")
         if self.method == "linear":
             tables = "the least-squares calibration matrix f = C u (no chi, no tables)"
-        lines = [f"wrote {self.path}: {self.n_components} components, {self.precision}, {tables}",
+        lines = [f"wrote {printable(self.path)}: {self.n_components} components, {self.precision}, {tables}",
                  f"table bytes {self.table_bytes}, support-vector bytes {self.kernel_bytes}",
                  f"table error <= {self.table_max_error:.3g} of full-scale load"]
         if self.float_max_error is not None:

@@ -18,6 +18,7 @@ from ..axes import labels_in, load_name
 from ..core.metrics import pct
 from ..data.columns import Guess
 from ..data.columns import shown as shown_name
+from ..errors import printable
 from ..evaluation.cv_results import gamma_index, test_name
 from ..units import Units, output_display
 
@@ -108,7 +109,7 @@ def fit_tables(model) -> list:
 
 def apply_lines(summary, out) -> list[str]:
     counts = ", ".join(f"{n} {name}" for name, n in summary.status_counts.items() if n)
-    lines = [f"decoupled {summary.rows} rows into {out} (forces in {summary.force_unit}; "
+    lines = [f"decoupled {summary.rows} rows into {printable(out)} (forces in {summary.force_unit}; "
              f"status: {counts})"]
     if np.any(summary.offsets):
         lines.append(f"zero removed [{summary.output_unit}]: " + ", ".join(
@@ -394,5 +395,5 @@ def guess_renderables(guess: Guess) -> list:
     for i in guess.ignored:
         t.add_row("(ignored)", Text(f"{i.column}: {shown_name(i.name)}"), Text(i.reason))
     notes = [Text.assemble(("note:", "yellow"), f" {n}") for n in guess.notes]
-    done = f"config written to {guess.config}; check every guessed value before fitting"
+    done = f"config written to {printable(guess.config)}; check every guessed value before fitting"
     return [t, *notes, Text(done)]

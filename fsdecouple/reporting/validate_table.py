@@ -12,6 +12,7 @@ from rich.table import Table
 from rich.text import Text
 
 from ..axes import labels_in
+from ..errors import printable
 
 NO_FIGURE = "-"  # a group without a loaded point has no figure (value null)
 
@@ -78,6 +79,6 @@ def validation_renderables(doc: dict[str, Any], output=None, *, as_json: bool = 
                     style="" if g["passed"] else "bold red")
         out.append((as_json or not g["passed"], line))
     if output is not None and not as_json:
-        out.append((False, Text(f"validation document written to {output}")))
+        out.append((False, Text(f"validation document written to {printable(output)}")))
     out += [(True, Text("warning: ", style="yellow") + Text(w)) for w in doc["warnings"]]
     return out
