@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from ..config import load_config
+from ..errors import printable
 from ..files import atomic_write, check_output, refuse_overwriting_input
 from ..reporting.tables import ingest_tables
 from .app import (
@@ -76,7 +77,7 @@ def simulate(
 
             files = write_rig(out_dir, seed=seed, gauges=gauges, levels=levels or 9, force=force,
                               kind=rig)
-            console.print(f"wrote {len(files)} files under {out_dir}")
+            console.print(f"wrote {len(files)} files under {printable(out_dir)}")
             return
         if components not in (3, 6):
             raise InputError(f"--components {components}: expected 3 or 6")
@@ -91,7 +92,7 @@ def simulate(
             files = simulate_sensor(out_dir, seed=seed, gross_error=ge, force=force,
                                     layout=layout, repetitions=repetitions, levels=levels,
                                     coupling=coupling)
-    console.print(f"wrote {len(files)} files under {out_dir}")
+    console.print(f"wrote {len(files)} files under {printable(out_dir)}")
 
 
 @app.command()

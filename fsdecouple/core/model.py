@@ -234,7 +234,9 @@ class CouplingErrorModel:
         (``fit --method linear|auto``; omega and chi are kept as the diagnostics of
         the sensor's coupling).
     matrix : ndarray, shape (N, N), optional
-        The calibration matrix C [load unit / output unit] of a ``linear`` model.
+        The least-squares calibration matrix C [load unit / output unit] of the same
+        calibration: how a ``linear`` model decouples; an ``svr`` model fitted by
+        ``fit`` keeps it for comparison (``validate``), never to decouple.
     own : dict of str to Chi
         Own-load chi_aa(u_a), keyed ``"fx:fx"``: the nonlinearity of each output in its
         own load, which a joint fit of rig rows adds (:mod:`fsdecouple.fitting.joint`);

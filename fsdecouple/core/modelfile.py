@@ -28,7 +28,10 @@ FORMAT_VERSION = 3
 # ``settings.units``, and ``report.verdict``.  Version 1 files read as svr models
 # in newtons and volts.  Version 3 adds ``settings.components`` and ``outputs``
 # (an N-component sensor, axes.Layout; chi keyed "fx:fy"), per-column units and
-# ``settings.frame``; a 3-axis model reads and writes as before otherwise.
+# ``settings.frame``; a 3-axis model reads and writes as before otherwise.  An svr
+# model may carry ``matrix`` too (the least-squares matrix of its calibration, which
+# ``validate`` sets beside it); readers that do not know it ignore it, and it is
+# covered by the digest as every key is, so the version stays 3.
 # Version 4 adds ``chi_own``: the own-load chi_aa of a joint fit of rig rows
 # (fitting/joint.py).  Only a model that has them is written as version 4, so that an
 # older fsdecouple refuses it instead of decoupling without them; others stay version 3.
@@ -228,14 +231,16 @@ def _method(doc: dict[str, Any], n: int, source: str) -> tuple[str, np.ndarray |
     if method not in METHODS:
         raise ModelFileError(f"{source}: malformed model file (method {method!r}, expected "
                              f"{' or '.join(METHODS)})")
-    if method == "svr":
+    if method == "svr" and "matrix" not in doc:  # svr files fitted before it was kept have none
         return method, None
     try:
         matrix = np.array(doc["matrix"], dtype=float)
     except (KeyError, TypeError, ValueError):
         matrix = None
     if matrix is None or matrix.shape != (n, n) or not np.isfinite(matrix).all():
-        raise ModelFileError(f"{source}: malformed model file (a linear model needs a finite "
+        raise ModelFileError(f"{source}: malformed model file (an svr model's matrix, kept for "
+                             f"validate, must be a finite {n}x{n} one)" if method == "svr" else
+                             f"{source}: malformed model file (a linear model needs a finite "
                              f"{n}x{n} matrix)")
     return method, matrix
 

@@ -196,9 +196,11 @@ def calibrate(calib: CalibrationSet, settings: Settings, *, method: str = "svr",
                                  ) from None
             model.report.warnings.append(f"no held-out verdict: {err}")
     chosen = choose(found, method) if found is not None else method
+    # the least-squares matrix on the same calibration, kept by an svr model too, so
+    # validate can set it beside the model (a linear model decouples by it)
+    model.matrix = fit_calibration_matrix(calib.voltages, calib.forces).C
     if chosen == "linear":
         model.method = "linear"
-        model.matrix = fit_calibration_matrix(calib.voltages, calib.forces).C
         model.report.gamma_after = interference_errors(
             calib.points, model.decouple(calib.voltages, rotate=False), settings.full_scale,
             settings.layout, settings.units.loads or None)

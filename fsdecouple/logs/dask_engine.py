@@ -43,7 +43,7 @@ from .apply import (
 )
 from .frame import frame_forces, frame_outputs
 from .jobs import ApplySpec, Job, apply_job, dataset_zero
-from .sinks import force_arrays
+from .sinks import force_arrays, pandas_metadata
 
 CONNECT_TIMEOUT = 5.0  # seconds to reach a --scheduler before giving up
 # Dask's nannies start workers with MALLOC_TRIM_THRESHOLD_=65536, so that freed memory
@@ -151,10 +151,12 @@ def _dataset_graph(spec: ApplySpec, job: Job, target):
     # as apply's ParquetSink: dictionary-encoding measured doubles, which seldom repeat,
     # is wasted work
     keep = [c for c, t in meta.dtypes.items() if not pd.api.types.is_float_dtype(t)]
-    write = out.to_parquet(str(target), write_index=False, name_function=names.__getitem__,
-                           write_metadata_file=False, compute=False, use_dictionary=keep,
-                           custom_metadata={FORCE_UNIT_KEY: unit,
-                                            OUTPUT_UNIT_KEY: model.settings.output_unit})
+    metadata = {FORCE_UNIT_KEY: unit, OUTPUT_UNIT_KEY: model.settings.output_unit}
+    # each part written here, not by to_parquet, whose pandas metadata says
+    # double[pyarrow] (and may not be replaced): the local engine's schema, metadata too
+    write = out.map_partitions(write_part, str(target), names, metadata, keep,
+                               meta=pd.DataFrame({"rows": pd.Series([], dtype="int64")}),
+                               align_dataframes=False)
     # the statuses are counted from the parts written (_count_written): a second
     # consumer of the partitions would keep them in memory and stop Dask fusing
     # read, decouple and write into one task per part.  That fusion is the
@@ -162,6 +164,22 @@ def _dataset_graph(spec: ApplySpec, job: Job, target):
     # unfused, every part is four tasks whose frames wait in the workers' memory
     # between them, 1.25x the time of the fused graph on the benchmark's 200 parts
     return write.optimize(fuse=True)
+
+
+def write_part(df, target: str, names: list[str], metadata: dict[str, str], keep: list[str],
+               partition_info=None):
+    """Write one decoupled partition as ``target/<its input part's name>``, as apply's
+    ParquetSink writes a log: the same types, units and pandas metadata."""
+    import pandas as pd
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table = pa.Table.from_pandas(df, preserve_index=False)
+    table = table.replace_schema_metadata({**metadata, b"pandas": pandas_metadata(table.schema)})
+    os.makedirs(target, exist_ok=True)
+    pq.write_table(table, os.path.join(target, names[partition_info["number"]]),
+                   use_dictionary=keep)
+    return pd.DataFrame({"rows": [len(df)]})
 
 
 def _same_columns(job: Job) -> None:
