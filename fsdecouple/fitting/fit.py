@@ -28,7 +28,7 @@ from ..core.surrogate import TOLERANCE, build_pair, table_interval
 from ..errors import InputError, printable
 from .joint import backfit, check_separable, multi_load
 from .linear import fit_omega
-from .noise import solved_to_the_noise
+from .noise import solver_tolerance
 from .threads import single_threaded_libraries, thread_pool
 
 if TYPE_CHECKING:
@@ -146,13 +146,13 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
                 f"omega_{axis}: R^2 = {omega.r2[a]:.5f} is below {settings.min_r2} "
                 "(assumption 1 of Section 2.1: prime force and voltage are linear)"
             )
-    settings = solved_to_the_noise(calib, settings, omega.k)  # N components, full_scale
     # Kernel scaling: "full_scale" divides inputs and targets by each axis's
     # full-scale output |k| F_FS [V], so Table 2's gamma suits mV or ADC counts too.
     if settings.scaling == "full_scale":
         scale = np.abs(omega.k) * np.asarray(settings.full_scale)
     else:
         scale = np.ones(layout.n)
+    settings = solver_tolerance(calib, settings, omega.k, scale)  # noise.py
     jobs = []
     for name, (o, i) in pairs.items():
         x, y = chi_training_data(calib, name)

@@ -19,7 +19,7 @@ def test_numpy_chi_equals_libsvm_prediction(calib, model, settings):
     """The saved chi, evaluated by numpy, is libsvm's own prediction to 1e-9 V."""
     for name in CHI_NAMES:
         x, y = chi_training_data(calib, name)
-        libsvm_model = train(x, y, settings.svr)  # same points, same order: same solution
+        libsvm_model = train(x, y, model.settings.svr)  # same points, order, tolerance
         lo, hi = model.chi[name].input_range
         grid = np.linspace(lo - 0.5, hi + 0.5, 2001)  # in range and beyond it
         np.testing.assert_allclose(model.chi[name].kernel(grid), predict(libsvm_model, grid),
