@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import replace
 
@@ -75,7 +76,10 @@ def test_calibration_sweeps_out_and_back_and_fits(tmp_path):
     assert z[0] == z[-1] == 0.0 and z.min() == -150.0  # two zero rows: before and after
     calib = load_calibration(tmp_path / "h" / "calibration", load_config())
     assert len(calib.points) == 6 * len(rep)
-    invoke(["fit", tmp_path / "h" / "calibration", "-o", tmp_path / "m.json"])
+    r = invoke(["fit", tmp_path / "h" / "calibration", "-o", tmp_path / "m.json"])
+    # out-and-back sweeps are zeroed from all points, and the model file says so
+    assert "out and back" in r.stderr
+    assert json.loads((tmp_path / "m.json").read_text())["settings"]["zero"] == "fit"
     # the task log lags too: against the same sensor and seed without the lag, by about
     # r = fraction / 2 of full-scale output; each output also moves with the other loads'
     # lags through its coupling functions (slopes up to ~0.2 at 5 % coupling)
