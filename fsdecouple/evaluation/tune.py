@@ -24,10 +24,11 @@ with fewer than three) and fits the model with the best.
   model's ``extrapolation``: with ``tangent`` (the default) every chi continues
   along its tangent at the edge of its range whatever its kernel width, so a
   narrow kernel no longer decays beyond it.  Measured (docs/design/tuning.md):
-  loads to 120 % of full scale are no worse than with Table 2 (2.75x the floor
-  against 2.89x for refinement alone), while an *edge check* (no candidate worse
-  than Table 2 one load step beyond the range, :func:`edge_round`) kept Table 2 on
-  sensors where every candidate was better inside the range (issue 24).  The edge
+  loads to 120 % of full scale are no worse than with Table 2 (2.34x the floor
+  against 2.47x for refinement alone, six sensors; single sensors go either way),
+  while an *edge check* (no candidate worse than Table 2 one load step beyond the
+  range, :func:`edge_round`) kept Table 2 on sensors where every candidate was
+  better inside the range (issue 24).  The edge
   figure is still measured and recorded; it decides only with
   ``extrapolation: kernel``, where beyond the range *is* the kernel sum.
 * The figure of a candidate is the worst axis's RMS force error over every
