@@ -41,6 +41,9 @@ class CalibrationSet:
         The sensor's components (axes.py): sweep labels, load and output columns.
     zero : str or None
         How the sweeps were zeroed: ``rows``, ``fit`` or ``before`` (data/zero.py).
+    zero_auto : bool
+        ``fit`` was chosen because the sweeps go out and back, not by the config: the
+        certificate's ISO 376 figures still take deflections from the zero rows.
     """
 
     points: pd.DataFrame
@@ -51,6 +54,7 @@ class CalibrationSet:
     excluded: tuple[str, ...] = ()
     layout: Layout = DEFAULT
     zero: str | None = None  # how the sweeps were zeroed (data/zero.py); None: not recorded
+    zero_auto: bool = False  # zero: fit chosen for out-and-back sweeps (zero.out_and_back)
 
     @property
     def source(self) -> str:
@@ -204,7 +208,7 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
                             "a repetition copied twice counts twice")
         seen.setdefault(digest, name)
     return CalibrationSet(points, offsets, tuple(files), tuple(skipped), tuple(warnings),
-                          layout=layout, zero=method)
+                          layout=layout, zero=method, zero_auto=back)
 
 
 def load_calibration(path: str | Path, settings: Settings, exclude=(),
