@@ -204,8 +204,8 @@ def _svr_settings(raw: Any, where: str, base: SVRSettings) -> SVRSettings:
 def _units(raw: Any, where: str, layout: Layout = DEFAULT) -> Units:
     """``{load: N, output: V}``, or per column: ``{load: {fx: N, mx: N·m}, output: {u1: V}}``."""
     raw = _mapping(raw, where)
-    moments = tuple(MOMENT_UNITS) if not layout.is_default else ()
-    allowed = {"load": (*LOAD_UNITS, *moments), "output": OUTPUT_UNITS}
+    loads = (*LOAD_UNITS, *(() if layout.is_default else MOMENT_UNITS))
+    allowed = {"load": loads, "output": (*OUTPUT_UNITS, *loads)}  # a factory-calibrated N, N·m
     columns = {"load": layout.loads, "output": layout.outputs}
     for key in raw:
         if key not in allowed:

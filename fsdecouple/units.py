@@ -18,8 +18,15 @@ OUTPUT_UNITS = ("V", "mV", "uV", "count", "mV/V")
 # Moments, for the components of a six-axis sensor (one N·m in N·m; display only:
 # ``apply --unit`` converts forces of one unit, never a wrench of mixed units).
 MOMENT_UNITS = {"N·m": 1.0, "Nm": 1.0, "N*m": 1.0, "N.m": 1.0, "N-m": 1.0, "N m": 1.0,
-                "N·mm": 1e-3, "Nmm": 1e-3, "kN·m": 1e3,
-                "kgf·m": 9.80665, "lbf·in": 0.1129848290276167, "lbf·ft": 1.3558179483314004}
+                "N·mm": 1e-3, "Nmm": 1e-3, "N·cm": 1e-2, "kN·m": 1e3,
+                "kgf·m": 9.80665, "kgf·cm": 9.80665e-2, "lbf·in": 0.1129848290276167,
+                "lbf·ft": 1.3558179483314004}
+
+
+def unit_key(text: str) -> str:
+    """A unit's spelling without case, spaces or product signs: ``N mm``, ``N·mm``, ``Nmm``
+    and ``N*mm`` all read ``nmm``."""
+    return "".join(c for c in text.lower() if c not in " ·⋅*.-_")
 
 
 @dataclass(frozen=True)

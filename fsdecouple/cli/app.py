@@ -27,6 +27,7 @@ from rich.progress import (
     TextColumn,
 )
 from rich.segment import Segment
+from rich.table import Table
 from rich.text import Text
 
 from .. import __version__
@@ -94,12 +95,35 @@ def _stdout_gone() -> None:
         os.close(devnull)
 
 
+def _literal(text, keep: str = ""):
+    """A table's text (str or Text) with control characters escaped, before rich measures
+    it: a newline in a sensor name stays in its cell, an ESC widens its column."""
+    plain = text.plain if isinstance(text, Text) else text
+    if not isinstance(plain, str) or plain.isprintable() or all(c in keep for c in plain
+                                                                if not c.isprintable()):
+        return text
+    shown = printable(plain, keep=keep, spaces=True)
+    return Text(shown, style=text.style, justify=text.justify) if isinstance(text, Text) else shown
+
+
+def _literal_table(table: Table) -> Table:
+    table.title, table.caption = _literal(table.title), _literal(table.caption)
+    for col in table.columns:
+        col.header = _literal(col.header, keep="\n")  # two-line headers are the table's own
+        col._cells = [_literal(c) for c in col._cells]  # rich's cell list (private)
+    return table
+
+
 class _Console(Console):
     """Every piece of text shown is literal: control characters that are not the console's
     own (ESC, a clear-screen in a sensor name) are shown escaped, by
     :func:`~fsdecouple.errors.printable`, in tables and titles too (rich itself drops a
-    carriage return or a bell).  The escape is made after rich measured the text, so a
-    row holding one is wider than its table: misaligned, never raw."""
+    carriage return or a bell).  A table's text is escaped before rich measures it, so a
+    newline in a name stays in its cell and the table stays aligned; any other text is
+    escaped as it is written (its own line breaks kept)."""
+
+    def print(self, *objects, **kw) -> None:
+        super().print(*(_literal_table(o) if isinstance(o, Table) else o for o in objects), **kw)
 
     def _render_buffer(self, buffer) -> str:  # rich's last step before writing (private)
         return super()._render_buffer(

@@ -9,6 +9,7 @@ import typer
 
 from ..config import load_config
 from ..core.modelfile import load_model
+from ..errors import printable
 from ..files import atomic_write, check_output, refuse_overwriting_input
 from .app import ConfigOpt, ForceOpt, JsonOpt, _given, _read, app, console, print_json, user_errors
 
@@ -49,4 +50,4 @@ def certificate(
         for n in doc["notes"]:
             console.print(f"note: {n}")
     if output is not None and not json_out:
-        console.print(f"certificate written to {output}")
+        console.print(f"certificate written to {printable(output)}")

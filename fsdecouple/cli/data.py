@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from ..config import load_config
+from ..errors import printable
 from ..files import atomic_write, check_output, refuse_overwriting_input
 from ..reporting.tables import ingest_tables
 from .app import (
@@ -59,7 +60,9 @@ def simulate(
     ] = 3,
     rig: Annotated[
         str | None, typer.Option(help="lever-arm: a six-axis rig's calibration.csv whose moments "
-                                      "come from a force on a lever arm (known_Fx.. headers).")
+                                      "come from a force on a lever arm (known_Fx.. headers); "
+                                      "quadratic: the same rig, its readings bending with the "
+                                      "squares of the loads (a few % F.S.).")
     ] = None,
     gauges: Annotated[
         int, typer.Option(help="--rig only: output channels (6: readings Fx..Mz; 8: gauges "
@@ -80,10 +83,9 @@ def simulate(
         if rig is not None:
             from ..sim.rig import write_rig
 
-            if rig != "lever-arm":
-                raise InputError(f"--rig {rig!r}: expected lever-arm")
-            files = write_rig(out_dir, seed=seed, gauges=gauges, levels=levels or 9, force=force)
-            console.print(f"wrote {len(files)} files under {out_dir}")
+            files = write_rig(out_dir, seed=seed, gauges=gauges, levels=levels or 9, force=force,
+                              kind=rig)
+            console.print(f"wrote {len(files)} files under {printable(out_dir)}")
             return
         if components not in (3, 6):
             raise InputError(f"--components {components}: expected 3 or 6")
@@ -98,7 +100,7 @@ def simulate(
             files = simulate_sensor(out_dir, seed=seed, gross_error=ge, force=force,
                                     layout=layout, repetitions=repetitions, levels=levels,
                                     coupling=coupling, hysteresis=hysteresis)
-    console.print(f"wrote {len(files)} files under {out_dir}")
+    console.print(f"wrote {len(files)} files under {printable(out_dir)}")
 
 
 @app.command()

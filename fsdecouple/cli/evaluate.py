@@ -12,7 +12,7 @@ from rich.progress import MofNCompleteColumn
 
 from ..config import load_config
 from ..core.modelfile import load_model
-from ..errors import InputError
+from ..errors import InputError, printable
 from ..files import atomic_files, atomic_write, check_output, refuse_overwriting_input
 from .app import (
     ConfigOpt,
@@ -120,10 +120,10 @@ def cv(
         for r in cv_renderables(doc):
             console.print(r)
         if output is not None:
-            console.print(f"cv document written to {output}", highlight=False)
+            console.print(f"cv document written to {printable(output)}", highlight=False)
             console.print(
-                f"calibration report: fsdecouple report MODEL --cv {output} --calib {calib} "
-                "-o report.html", highlight=False,
+                f"calibration report: fsdecouple report MODEL --cv {printable(output)} "
+                f"--calib {printable(calib)} -o report.html", highlight=False,
             )
     warn(doc["warnings"])
     if doc["gate"] is not None and not doc["gate"]["passed"]:
@@ -138,15 +138,20 @@ def validate(
     output: Annotated[Path | None, typer.Option("--output", "-o", help="Write validation.json.")] = None,
     max_gamma: Annotated[float | None, typer.Option(
         help="Exit 1 if the interference error (eq. 12) on calibrated points exceeds this fraction.")] = None,
+    calib: Annotated[Path | None, typer.Option(
+        "--calib", help="The model's calibration (directory or CSV), to fit the least-squares "
+                        "matrix on when the model file holds none (fitted before it was kept).")] = None,
     force: ForceOpt = False, json_out: JsonOpt = False,
 ) -> None:
-    """Score a model on an independent single-axis set: gamma and force errors, per axis."""
+    """Score a model on an independent single-axis set: the model, the least-squares matrix
+    and initial side by side, gamma and force errors per axis."""
     from ..evaluation.validate import validate as validate_set
-    from ..reporting.tables import validation_renderables
+    from ..reporting.validate_table import validation_renderables
 
     with user_errors():
         doc = validate_set(model_file, set_path, load_config(config) if config else None,
-                           max_gamma=max_gamma, output=output, force=force, inputs=_given(config))
+                           max_gamma=max_gamma, output=output, force=force, inputs=_given(config),
+                           calib=calib)
     for to_stderr, r in validation_renderables(doc, output, as_json=json_out):
         (err_console if to_stderr else console).print(r, soft_wrap=True)
     raise typer.Exit(0 if doc["gate"] is None or doc["gate"]["passed"] else 1)
@@ -204,7 +209,7 @@ def report(
             for name, data in result.figures.items() if png is not None else ():
                 with group.open(png / f"{name}.png", "wb") as fh:
                     fh.write(data)
-    console.print(f"report written to {output} ({len(result.figures)} figures)", highlight=False)
+    console.print(f"report written to {printable(output)} ({len(result.figures)} figures)", highlight=False)
     if png is not None:
-        console.print(f"figures written to {png}/: " + ", ".join(f"{n}.png" for n in result.figures),
-                      highlight=False)
+        console.print(f"figures written to {printable(png)}/: "
+                      + ", ".join(f"{n}.png" for n in result.figures), highlight=False)

@@ -12,6 +12,7 @@ from rich.text import Text
 from ..config import load_config
 from ..core.metrics import check_max_gamma
 from ..core.modelfile import load_model, save_model
+from ..errors import printable
 from ..files import check_output, refuse_overwriting_input
 from ..reporting.tables import fit_checks_table, fit_tables
 from .app import (
@@ -125,8 +126,8 @@ def fit(
         console.print(_refine_line(advice, settings.refine))
         if model.report.verdict is not None:
             console.print(verdict_line(model.report.verdict))
-        console.print(f"model written to {output} (decouples by {model.method})")
-        console.print(f"calibration report: fsdecouple report {output} -o report.html")
+        console.print(f"model written to {printable(output)} (decouples by {model.method})")
+        console.print(f"calibration report: fsdecouple report {printable(output)} -o report.html")
     warn(model.warnings)
     if max_gamma is not None:
         worst = max(model.report.gamma_after.values())
@@ -188,7 +189,7 @@ def export(
     force: ForceOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
-    """Export the model as one dependency-free C99 header (eq. 11 for embedded use)."""
+    """Export the model as one dependency-free C99 header (eq. 11, or a linear model's matrix)."""
     from ..export.header import export_header
 
     with user_errors():

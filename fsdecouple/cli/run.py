@@ -83,12 +83,8 @@ def apply(
     from ..logs.reader import is_parquet
 
     if is_batch(voltages, output):
-        if interval is not None:
-            with user_errors():
-                raise InputError("--interval: one log at a time for now (many logs do not add "
-                                 "the interval columns)")
         return _apply_many(model_file, voltages, Path(output), config, tare, zero, unit, refine,
-                           round_trip, engine, scheduler, workers, force, json_out)
+                           round_trip, engine, scheduler, workers, force, json_out, interval)
     with user_errors():
         if engine != "local" or scheduler is not None or workers is not None:
             raise InputError("--engine, --scheduler and --workers are for many logs: "
@@ -118,7 +114,7 @@ def apply(
 
 
 def _apply_many(model_file, inputs, output, config, tare, zero, unit, refine, round_trip, engine,
-                scheduler, workers, force, json_out) -> None:
+                scheduler, workers, force, json_out, interval) -> None:
     from rich.progress import MofNCompleteColumn
 
     from ..logs.many import apply_many
@@ -131,7 +127,7 @@ def _apply_many(model_file, inputs, output, config, tare, zero, unit, refine, ro
             result = apply_many(
                 model_file, inputs, output, engine=engine, scheduler=scheduler, workers=workers,
                 settings=settings, config=config, tare=tare, zero=offsets, unit=unit, refine=refine,
-                round_trip=round_trip, force=force, progress=progress)
+                round_trip=round_trip, force=force, interval=interval, progress=progress)
     doc = result.to_dict()
     show(doc, apply_many_table, json_out)
     say(apply_many_errors(doc))

@@ -3,7 +3,9 @@
     f_a = omega_a^-1 [u_a - sum_{b != a} chi_ab(u_b)]                    eq. (11)
 
 with omega_a^-1(v) = v / k_aa (eq. 13 form).  N is the number of components
-(len(k)); nothing here knows their names.
+(len(k)); nothing here knows their names.  A joint fit of rig rows may add an own-load
+chi_aa(u_a) (:mod:`fsdecouple.fitting.joint`): it is subtracted like the others, always at
+the measured u_a (it models the outputs as measured), and only the exact path has it.
 
 * :func:`decouple_exact` evaluates every chi as given (the SVR's kernel sum, or
   any other callable such as the RBF baseline's networks);
@@ -24,6 +26,8 @@ eq. (11) evaluated at estimates p of the prime outputs instead of u (eq. 5-6),
     p^0 = u,   p_b^(j+1) = u_b - sum_{c != b} chi_bc(p_c^j)   (j = 0 .. K - 1)
     f_a = [u_a - sum_{b != a} chi_ab(p_b^K)] / k_aa,  so k_a f_a = p_a^(K+1).
 
+A joint fit's own-load chi_aa (fitting/joint.py) is subtracted from u_a before these
+steps, at the measured u_a: p^(j+1) = u - chi_own(u) - sum chi(p^j).
 A contraction when (N - 1) max|chi'| < 1.  K = 0 is eq. (11), bit for bit, on
 every path.  A row whose last step k f - p^K is not finite or above
 REFINE_TOLERANCE F.S. gets NaN forces and converged = False, never silent forces.
@@ -92,10 +96,13 @@ def decouple_exact(u: np.ndarray, k: np.ndarray, chis: Iterable[ChiFunction],
     ``converged`` (n,), if given.  K = 0 is eq. (11) as written, every row converged.
     """
     chis = list(chis)
+    own = [c for c in chis if c.output_axis == c.input_axis]  # chi_aa of a joint fit (joint.py)
+    chis = [c for c in chis if c.output_axis != c.input_axis]
+    base = u - coupling_errors(u, own) if own else u  # the own-load chi always at the measured u_a
     p = u
     for _ in range(refine):
-        p = u - coupling_errors(p, chis)
-    kf = u - coupling_errors(p, chis)  # = p^(K+1)
+        p = base - coupling_errors(p, chis)
+    kf = base - coupling_errors(p, chis)  # = p^(K+1)
     f = kf / k
     ok = settled(kf - p, full_scale_output) if refine else np.ones(len(f), dtype=bool)
     f[~ok] = np.nan

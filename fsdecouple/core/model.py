@@ -258,7 +258,13 @@ class CouplingErrorModel:
         (``fit --method linear|auto``; omega and chi are kept as the diagnostics of
         the sensor's coupling).
     matrix : ndarray, shape (N, N), optional
-        The calibration matrix C [load unit / output unit] of a ``linear`` model.
+        The least-squares calibration matrix C [load unit / output unit] of the same
+        calibration: how a ``linear`` model decouples; an ``svr`` model fitted by
+        ``fit`` keeps it for comparison (``validate``), never to decouple.
+    own : dict of str to Chi
+        Own-load chi_aa(u_a), keyed ``"fx:fx"``: the nonlinearity of each output in its
+        own load, which a joint fit of rig rows adds (:mod:`fsdecouple.fitting.joint`);
+        empty for the paper's model.  Decoupled by the exact path only.
     provenance : dict
         Input files and digests, library versions.
     created : str
@@ -273,13 +279,15 @@ class CouplingErrorModel:
     created: str = ""
     method: str = "svr"
     matrix: np.ndarray | None = None
+    own: dict[str, Chi] = field(default_factory=dict)
     _tables: Any = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         # each chi evaluates itself: it takes the model's extrapolation mode
         mode = getattr(self.settings, "extrapolation", "kernel")
-        self.chi = {name: c if getattr(c, "extrapolation", mode) == mode else replace(c, extrapolation=mode)
-                    for name, c in self.chi.items()}
+        self.chi, self.own = ({name: c if getattr(c, "extrapolation", mode) == mode
+                               else replace(c, extrapolation=mode) for name, c in chis.items()}
+                              for chis in (self.chi, self.own))
 
     def __getstate__(self) -> dict:
         # the table evaluator holds thread-local scratch space: rebuilt where the
@@ -335,11 +343,12 @@ class CouplingErrorModel:
     def coupling_errors(self, u: np.ndarray) -> np.ndarray:
         """Measured coupling errors e_a = sum_b chi_ab(u_b) [V] (eq. 1 with eq. 4 at u_(t))."""
         return _coupling_errors(np.asarray(u, dtype=float).reshape(-1, self.n_components),
-                                self.chi.values())
+                                [*self.chi.values(), *self.own.values()])
 
     def _exact(self, u: np.ndarray, rotate: bool, refine: int = 0,
                converged: np.ndarray | None = None) -> np.ndarray:
-        return decouple_exact(u, self.k, self.chi.values(), self.rotation if rotate else None,
+        return decouple_exact(u, self.k, [*self.chi.values(), *self.own.values()],
+                              self.rotation if rotate else None,
                               refine=refine, full_scale_output=self.full_scale_output,
                               converged=converged)
 
@@ -403,8 +412,8 @@ class CouplingErrorModel:
 
     def fast_decoupler(self) -> TableDecoupler | None:
         """The table path of :mod:`fsdecouple.core.decouple`, or None without usable surrogates."""
-        if self.method == "linear":
-            return None
+        if self.method == "linear" or self.own:
+            return None  # the tables hold the N(N - 1) cross chi only
         if self._tables is None:
             self._tables = TableDecoupler.from_chis(
                 self.k, self.chi.values(), self._exact, self.rotation,

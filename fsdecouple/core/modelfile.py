@@ -28,7 +28,15 @@ FORMAT_VERSION = 3
 # ``settings.units``, and ``report.verdict``.  Version 1 files read as svr models
 # in newtons and volts.  Version 3 adds ``settings.components`` and ``outputs``
 # (an N-component sensor, axes.Layout; chi keyed "fx:fy"), per-column units and
-# ``settings.frame``; a 3-axis model reads and writes as before otherwise.
+# ``settings.frame``; a 3-axis model reads and writes as before otherwise.  An svr
+# model may carry ``matrix`` too (the least-squares matrix of its calibration, which
+# ``validate`` sets beside it); readers that do not know it ignore it, and it is
+# covered by the digest as every key is, so the version stays 3.
+# Version 4 adds ``chi_own``: the own-load chi_aa of a joint fit of rig rows
+# (fitting/joint.py).  Only a model that has them is written as version 4, so that an
+# older fsdecouple refuses it instead of decoupling without them; others stay version 3.
+OWN_FORMAT_VERSION = 4
+READS_UP_TO = max(FORMAT_VERSION, OWN_FORMAT_VERSION)
 METHODS = ("svr", "linear")
 
 
@@ -36,7 +44,7 @@ def model_to_dict(model: CouplingErrorModel) -> dict[str, Any]:
     """The model file's document, ``integrity`` digest included."""
     doc = {
         "format": FORMAT,
-        "format_version": FORMAT_VERSION,
+        "format_version": OWN_FORMAT_VERSION if model.own else FORMAT_VERSION,
         "fsdecouple_version": __version__,
         "created": model.created,
         "sensor": model.settings.sensor,
@@ -51,6 +59,8 @@ def model_to_dict(model: CouplingErrorModel) -> dict[str, Any]:
         "provenance": model.provenance,
         "report": model.report.to_dict() if model.report else {},
     }
+    if model.own:
+        doc["chi_own"] = {name: c.to_dict() for name, c in model.own.items()}
     if model.matrix is not None:
         doc["matrix"] = [[float(v) for v in row] for row in model.matrix]
     doc["integrity"] = {"algorithm": "sha256", "digest": content_digest(doc)}
@@ -85,10 +95,11 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
         )
     if version < 1:
         raise ModelFileError(f"{source}: format_version {version} is unknown (versions start at 1)")
-    if version > FORMAT_VERSION:
+    if version > max(FORMAT_VERSION, READS_UP_TO):
         raise ModelFileError(
             f"{source}: format_version {version} was written by a newer fsdecouple "
-            f"({doc.get('fsdecouple_version', '?')}); this one reads up to {FORMAT_VERSION}"
+            f"({doc.get('fsdecouple_version', '?')}); this one reads up to "
+            f"{max(FORMAT_VERSION, READS_UP_TO)}"
         )
     integrity = doc.get("integrity")
     digest = integrity.get("digest") if isinstance(integrity, dict) else None
@@ -124,6 +135,7 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
                 raise ModelFileError(
                     f"{source}: malformed model file (chi '{name}': {err})"
                 ) from None
+        own = _own_chis(doc.get("chi_own", {}), layout, version, source)
     except (KeyError, TypeError, ValueError) as err:
         raise ModelFileError(f"{source}: malformed model file ({type(err).__name__}: {err})") from None
     labels = settings.layout.labels
@@ -138,11 +150,32 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
     method, matrix = _method(doc, len(k), source)
     model = CouplingErrorModel(
         settings, k, chi, FitReport.from_dict(report), doc.get("provenance", {}),
-        doc.get("created", ""), method, matrix,
+        doc.get("created", ""), method, matrix, own,
     )
     _check_slopes(model, source)
     _check_tables(model, source)
     return model
+
+
+def _own_chis(raw: Any, layout, version: int, source: str) -> dict[str, Chi]:
+    """The own-load chi_aa of a version-4 file (``chi_own``), keyed ``"fx:fx"``."""
+    if not raw:
+        return {}
+    if version < OWN_FORMAT_VERSION or not isinstance(raw, dict):
+        raise ModelFileError(f"{source}: malformed model file (chi_own in a version {version} "
+                             "file)" if version < OWN_FORMAT_VERSION else
+                             f"{source}: malformed model file (chi_own is not a mapping)")
+    own = {}
+    for name, d in raw.items():
+        try:
+            a, b = layout.pair(name)
+            if a != b:
+                raise ValueError("not an own-load chi (output and input differ)")
+            own[name] = Chi.from_dict(name, d, (a, a))
+        except (KeyError, TypeError, ValueError) as err:
+            raise ModelFileError(
+                f"{source}: malformed model file (chi_own '{name}': {err})") from None
+    return own
 
 
 # A slope's full-scale output |k_b| F_FS,b and the prime-voltage span the chi were
@@ -198,14 +231,16 @@ def _method(doc: dict[str, Any], n: int, source: str) -> tuple[str, np.ndarray |
     if method not in METHODS:
         raise ModelFileError(f"{source}: malformed model file (method {method!r}, expected "
                              f"{' or '.join(METHODS)})")
-    if method == "svr":
+    if method == "svr" and "matrix" not in doc:  # svr files fitted before it was kept have none
         return method, None
     try:
         matrix = np.array(doc["matrix"], dtype=float)
     except (KeyError, TypeError, ValueError):
         matrix = None
     if matrix is None or matrix.shape != (n, n) or not np.isfinite(matrix).all():
-        raise ModelFileError(f"{source}: malformed model file (a linear model needs a finite "
+        raise ModelFileError(f"{source}: malformed model file (an svr model's matrix, kept for "
+                             f"validate, must be a finite {n}x{n} one)" if method == "svr" else
+                             f"{source}: malformed model file (a linear model needs a finite "
                              f"{n}x{n} matrix)")
     return method, matrix
 

@@ -20,6 +20,7 @@ import yaml
 
 from ..axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from ..errors import InputError
+from ..units import MOMENT_UNITS, unit_key
 from .csv_text import read_rows
 
 MAX_ROWS = 100_000  # enough for any calibration; bounds a wrong file's cost
@@ -35,6 +36,7 @@ _OUTPUT_HINTS = {"v": "V", "mv": "mV", "uv": "uV", "µv": "uV", "μv": "uV", "co
                  "counts": "count", "cnt": "count", "lsb": "count", "mv/v": "mV/V",
                  "mvv": "mV/V", "mv/v excitation": "mV/V"}
 _HINTS = {**_LOAD_HINTS, **_OUTPUT_HINTS}
+_MOMENT_WORDS = {unit_key(u) for u in MOMENT_UNITS}
 _UNIT_NAMES = {"N": "newton", "kN": "kilonewton", "gf": "gram-force", "kgf": "kilogram-force",
                "lbf": "pound-force", "V": "volt", "mV": "millivolt", "uV": "microvolt",
                "count": "ADC counts", "mV/V": "millivolt per volt of excitation"}
@@ -93,6 +95,7 @@ class Guess:
     components: tuple[str, ...] = ()  # a sensor with named components (guess_layout.py)
     outputs: tuple[str, ...] = ()
     load_units: dict[str, str] | None = None  # per component, where they differ
+    output_units: dict[str, str] | None = None  # per output, where they differ
 
     def to_dict(self) -> dict[str, Any]:
         """The ``--json`` document."""
@@ -105,7 +108,8 @@ class Guess:
             "ignored": [i.name for i in self.ignored],
             "ignored_columns": [vars(i) for i in self.ignored],
             **({"components": list(self.components), "outputs": list(self.outputs),
-                "load_units": self.load_units} if self.components else {}),
+                "load_units": self.load_units, "output_units": self.output_units}
+               if self.components else {}),
         }
 
     def settings(self) -> list[tuple[str, str, str]]:
@@ -113,10 +117,12 @@ class Guess:
         fs = ", ".join(f"{a}: {_num(v)}" for a, v in self.full_scale.items())
         load = self.units["load"] if not self.load_units else \
             "{" + ", ".join(f"{c}: {u}" for c, u in self.load_units.items()) + "}"
+        output = self.units["output"] if not self.output_units else \
+            "{" + ", ".join(f"{o}: {u}" for o, u in self.output_units.items()) + "}"
         values = {
             **({"components": f"[{', '.join(self.components)}]",
                 "outputs": f"[{', '.join(self.outputs)}]"} if self.components else {}),
-            "units": f"{{load: {load}, output: {self.units['output']}}}",
+            "units": f"{{load: {load}, output: {output}}}",
             "full_scale": f"{{{fs}}}", "min_repetitions": str(self.min_repetitions),
             "csv": f"{{sep: {json.dumps(self.sep)}, decimal: {json.dumps(self.decimal)}}}",
             "scaling": self.scaling,
@@ -187,8 +193,8 @@ def _parse_name(header: str) -> tuple[str, str | None]:
     hints = re.findall(r"[\[(]([^\])]*)[\])]", text)
     text = re.sub(r"[\[(][^\])]*[\])]", " ", text)
     tokens = [t for t in re.split(r"[\s_\-]+", text.strip()) if t]
-    if len(tokens) > 1 and tokens[-1] in _HINTS:
-        hints.append(tokens.pop())
+    if len(tokens) > 1 and (tokens[-1] in _HINTS or unit_key(tokens[-1]) in _MOMENT_WORDS):
+        hints.append(tokens.pop())  # Fx_gf, Mx_Nm: a unit after the name
     hint = next((h.strip() for h in hints if h.strip() in _HINTS), None)
     return re.sub(r"[^0-9a-zµμ]", "", "".join(tokens)), hint
 

@@ -23,7 +23,7 @@ import numpy as np
 from ..config import load_config
 from ..errors import ConfigError, InputError, printable
 from ..files import atomic_write, check_output, refuse_overwriting_input
-from ..units import MOMENT_UNITS
+from ..units import LOAD_UNITS, MOMENT_UNITS, unit_key
 from .columns import (
     _AXIS,
     _INTEGER,
@@ -52,6 +52,10 @@ _APPLIED = re.compile(r"(?:known|applied|reference|ref|true|load|nominal)(\w+)"
                       r"|(\w+?)(?:ref|reference|applied|known|true)")
 _TIMESTAMP = {"time", "timestamp", "datetime", "date", "t", "timesec", "elapsed", "elapsedtime"}
 _MOMENT_HINTS = {u.lower(): u for u in MOMENT_UNITS}
+# any other spelling of a known unit (N mm, n*m, KGF.CM): the first of its spellings
+_SPELLED = {}
+for _u in (*MOMENT_UNITS, *LOAD_UNITS):
+    _SPELLED.setdefault(unit_key(_u), _u)
 _BRACKETS = re.compile(r"[\[(]([^\])]*)[\])]")
 
 
@@ -106,10 +110,14 @@ def _check_loads(text: str, data: str | Path) -> None:
 
 
 def guess_layout(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
-    """:func:`guess_components` when the header names a moment, else the 3-axis guess."""
+    """:func:`guess_components` when the header names a moment or a rig's applied loads beside
+    the readings, else the 3-axis guess."""
     path = Path(path)
     names, rows, sep, truncated = read_rows(path, max_rows)
-    if not any((_component(n) or _applied(n) or " ")[0] == "m" for n in names):
+    # a moment, or applied loads named as such beside readings named like the components
+    # (Fx_ref and Fx: a rig's reference and the sensor's own reading) take the component path
+    rig = any(_applied(n) for n in names) and any(_component(n) and not _applied(n) for n in names)
+    if not rig and not any((_component(n) or _applied(n) or " ")[0] == "m" for n in names):
         return guess_rows(path, names, rows, sep, truncated)
     try:
         return guess_components(path, names, rows, sep, truncated)
@@ -210,8 +218,20 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
                    if i < len(row) and _NUMBER.fullmatch(row[i].strip()))
     peak_out = float(np.abs(u).max())
     hints = {f"c{j}": _parse_name(names[i])[1] for j, i in enumerate(channels)}
-    out_unit, out_why = _unit("output", hints, peak_out, integers, notes,
-                              {f"c{j}": shown(names[i]) for j, i in enumerate(channels)}, keys=list(hints))
+    out_units = None
+    if named_as is _applied and len(readings) == len(components):
+        # a sensor's own readings named like its components are factory-calibrated
+        # forces and moments: in load units (their header's, else their component's)
+        out_units = {o: header_unit(names[channels[j]], c[0] == "m")[0] or load_units[c]
+                     for o, j, c in zip(outputs, prime, components, strict=True)}
+        out_unit = next(iter(out_units.values())) if len(set(out_units.values())) == 1 else "mixed"
+        out_why = ("the sensor's own readings, named like the components (factory-calibrated "
+                   "forces and moments): each reading's header unit, else its component's")
+        out_units = out_units if out_unit == "mixed" else None
+    else:
+        out_unit, out_why = _unit("output", hints, peak_out, integers, notes,
+                                  {f"c{j}": shown(names[i]) for j, i in enumerate(channels)},
+                                  keys=list(hints))
     mixed = len(set(load_units.values())) > 1
     reasons["units"] = (f"load {', '.join(f'{c} {v}' for c, v in load_units.items())}: header hints, "
                         f"else N and N·m; output {out_unit}: {out_why}")
@@ -244,6 +264,7 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
         ignored=[Ignored(i + 1, names[i], r) for i, r in sorted(ignored.items())], notes=notes,
         rows=len(table), keys=("repetition", "axis", *components, *outputs),
         components=components, outputs=outputs, load_units=load_units if mixed else None,
+        output_units=out_units,
     )
 
 
@@ -297,19 +318,38 @@ def _pair(f: np.ndarray, u: np.ndarray, components: tuple[str, ...], channels: l
                                           for k, c in enumerate(components)}
 
 
+def header_unit(header: str, moment: bool) -> tuple[str | None, str | None]:
+    """(unit, None) from a header's unit word in any common spelling (``[N·m]``, ``(N mm)``,
+    ``_Nm``, ``[kgf]``), or (None, the word) when it names no unit fsdecouple knows, or
+    (None, None) without one.  ``moment``: a moment's header (a bare ``N`` is then no moment)."""
+    words = [h.strip() for h in _BRACKETS.findall(header)]
+    tail = re.split(r"[\s_]+", re.sub(r"[\[(][^\])]*[\])]", " ", header).strip())
+    table = _MOMENT_HINTS if moment else _LOAD_HINTS
+    # Mx_Nm, Fx_gf: a unit after the name (a word there that is no unit is part of the name)
+    for w in words + tail[-1:] * (len(tail) > 1):
+        unit = table.get(w.lower()) or _SPELLED.get(unit_key(w))
+        if unit is not None and (unit in MOMENT_UNITS) == moment:
+            return unit, None
+    return None, next((w for w in words if w), None)
+
+
 def _load_units(names: list[str], loads: dict[str, int], components: tuple[str, ...],
                 f: np.ndarray, notes: list[str]) -> dict[str, str]:
     """Each component's unit: the header's hint, else N for forces and N·m for moments."""
-    units = {}
+    units, unknown = {}, {}
     for c in components:
-        hints = [h.strip().lower() for h in _BRACKETS.findall(names[loads[c]])]
-        table = _MOMENT_HINTS if c[0] == "m" else _LOAD_HINTS
-        units[c] = next((table[h] for h in hints if h in table), None)
+        units[c], word = header_unit(names[loads[c]], c[0] == "m")
+        if units[c] is None and word is not None:
+            unknown[c] = word
     missing = [c for c in components if units[c] is None]
     for c in missing:
         units[c] = "N·m" if c[0] == "m" else "N"
-    if missing:
-        notes.append(f"no unit in the headers of {', '.join(missing)}: took N for forces and N·m "
-                     "for moments")
+    if unknown:
+        notes.append("no known unit in " + ", ".join(f"{shown(names[loads[c]])} ('{w}')"
+                                                     for c, w in unknown.items())
+                     + ": took N for forces and N·m for moments; set units: in the config")
+    if set(missing) - set(unknown):
+        notes.append(f"no unit in the headers of {', '.join(c for c in missing if c not in unknown)}"
+                     ": took N for forces and N·m for moments")
     return units
 

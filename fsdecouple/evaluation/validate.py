@@ -2,7 +2,9 @@
 
 The set is read exactly like a calibration set (sweeps, zero rows, known loads;
 each sweep zero-corrected by its own zero-load rows), decoupled by eq. (11)
-(``model``) and by omega^-1 alone (``initial``), and scored per loaded axis:
+(``model``), by the least-squares calibration matrix fitted on the model's own
+calibration (``linear``: the model file's ``matrix``, or one fitted on ``calib``)
+and by omega^-1 alone (``initial``), and scored per loaded axis:
 
 * ``gamma``: the interference error of eq. (12) on that axis's single-load sweep
   points (a combined-load point, which loads several components at once, has no
@@ -17,7 +19,10 @@ each sweep zero-corrected by its own zero-load rows), decoupled by eq. (11)
 Each figure is given apart for the points whose prime outputs all lie in the
 model's calibrated range (widened as ``apply`` widens it, by
 :data:`fsdecouple.core.model.RANGE_MARGIN` of the span) and for the others, which the
-model extrapolates.  Zero-load rows are points at 0 load, as in :mod:`metrics`.
+model extrapolates.  Zero-load rows are points at 0 load, as in :mod:`metrics`, but
+a group without a loaded point has no figure (``value`` None): zero rows alone
+would score a perfect 0.  Each record's ``n`` is the number of points its value
+is computed over (0 for None).
 """
 
 from __future__ import annotations
@@ -39,7 +44,7 @@ from ..files import atomic_write, check_output, refuse_overwriting_input
 
 FORMAT = "fsdecouple.validation"
 FORMAT_VERSION = 1
-METHODS = ("model", "initial")
+METHODS = ("model", "linear", "initial")
 METRICS = ("gamma", "max_error", "rms_error")
 RANGES = ("calibrated", "extrapolated")
 # calibration warnings that do not apply to a validation set, which may use other
@@ -68,6 +73,7 @@ def validate(
     output: str | Path | None = None,
     force: bool = False,
     inputs=(),
+    calib: str | Path | None = None,
 ) -> dict[str, Any]:
     """Score ``model`` on the independent single-axis set ``set_path``.
 
@@ -84,6 +90,10 @@ def validate(
     max_gamma : float, optional
         Gate: the model's worst gamma on calibrated points must not exceed this
         fraction (extrapolated points do not gate).
+    calib : path, optional
+        The model's calibration set, to fit the least-squares matrix of the
+        ``linear`` records on; needed only for a model file without a stored
+        ``matrix`` (those fitted before it was kept).
     output : path, optional
         Also write the document there, atomically; never over an input file
         (the model, the set's files, ``inputs``) and only with ``force`` over
@@ -115,13 +125,23 @@ def validate(
     points = cs.points
     u, loads = cs.voltages.astype(float), cs.forces.astype(float)
     single = (loads != 0.0).sum(axis=1) <= 1
-    forces = {"model": model.decouple(u, rotate=False), "initial": model.initial_forces(u)}
+    loaded = (loads != 0.0).any(axis=1)
+    warnings = [w for w in cs.warnings if not any(x in w for x in _NOT_FOR_VALIDATION)]
+    forces = {"model": model.decouple(u, rotate=False)}
+    matrix, calib_files = (model.matrix, []) if model.matrix is not None else \
+        _matrix_of(calib, model)
+    if matrix is not None:
+        forces["linear"] = u @ np.asarray(matrix).T
+    else:
+        warnings.append("the model file holds no least-squares matrix (fitted before "
+                        "fsdecouple kept it): give the calibration (--calib CALIB) to set the "
+                        "matrix fitted on it beside the model")
+    forces["initial"] = model.initial_forces(u)
     inside = in_calibrated_range(model, u)
     axis_of = points["axis"].to_numpy()
     fs = np.asarray(settings.full_scale, dtype=float)
     units = settings.units.loads or None
     records = []
-    warnings = [w for w in cs.warnings if not any(x in w for x in _NOT_FOR_VALIDATION)]
     if not single.all():
         warnings.append(f"{int((~single).sum())} combined-load points (several components "
                         "loaded at once): scored by max and RMS error, not gamma")
@@ -136,16 +156,26 @@ def validate(
         for rng, sel in (("calibrated", on_axis & inside), ("extrapolated", on_axis & ~inside)):
             if not sel.any():
                 continue
+            # no loaded point, no figure: zero rows alone would score a perfect 0
+            has_load = bool((sel & loaded).any())
+            gsel = sel & single
             for method in METHODS:
-                f = forces[method][sel]
+                if method not in forces:
+                    continue
                 key = {"method": method, "axis": axis, "range": rng}
-                if (sel & single).any():
-                    g = forces[method][sel & single]
-                    records.append({**key, "metric": "gamma",
-                                    "value": interference_error(g, a, fs if units else fs[a], units)})
-                for metric, value in force_errors(f, loads[sel], fs).items():
+                if gsel.any():
+                    scored = has_load and bool((gsel & loaded).any())
+                    value = (interference_error(forces[method][gsel], a, fs if units else fs[a],
+                                                units) if scored else None)
+                    records.append({**key, "metric": "gamma", "value": value,
+                                    "n": int(gsel.sum()) if scored else 0})
+                errors = force_errors(forces[method][sel], loads[sel], fs) if has_load else \
+                    dict.fromkeys(("max_error", "rms_error"))
+                for metric, value in errors.items():
                     records.append({**key, "metric": metric, "value": value,
-                                    "value_load_unit": value * float(fs.max())})
+                                    "value_load_unit": None if value is None else
+                                    value * float(fs.max()),
+                                    "n": int(sel.sum()) if has_load else 0})
     records.sort(key=lambda r: (r["axis"], METHODS.index(r["method"]),
                                 RANGES.index(r["range"]), METRICS.index(r["metric"])))
     doc = {
@@ -163,7 +193,8 @@ def validate(
         "warnings": warnings,
     }
     if output is not None:
-        used = [*([model_path] if model_path is not None else []), *(p for p, _ in cs.files), *inputs]
+        used = [*([model_path] if model_path is not None else []), *(p for p, _ in cs.files),
+                *calib_files, *inputs]
         refuse_overwriting_input(output, used)
         with atomic_write(output, force=force) as fh:
             fh.write(dumps(doc) + "\n")
@@ -174,11 +205,23 @@ def _gate(records, max_gamma: float | None) -> dict[str, Any] | None:
     """The --max-gamma gate: the model's worst gamma over calibrated points."""
     if max_gamma is None:
         return None
-    gammas = [r["value"] for r in records
-              if (r["method"], r["metric"], r["range"]) == ("model", "gamma", "calibrated")]
+    gammas = [r["value"] for r in records if r["value"] is not None
+              and (r["method"], r["metric"], r["range"]) == ("model", "gamma", "calibrated")]
     worst = max(gammas) if gammas else None
     # no calibrated point at all is nothing to pass on
     return {"max_gamma": max_gamma, "worst": worst, "passed": worst is not None and worst <= max_gamma}
+
+
+def _matrix_of(calib, model: CouplingErrorModel) -> tuple[np.ndarray | None, list[str]]:
+    """The least-squares matrix fitted on ``calib`` read with the model's settings (None
+    without ``calib``), and the files read."""
+    if calib is None:
+        return None, []
+    from ..data.calibration import load_calibration
+    from ..fitting.linear import fit_calibration_matrix
+
+    cs = load_calibration(calib, model.settings)
+    return fit_calibration_matrix(cs.voltages, cs.forces).C, [p for p, _ in cs.files]
 
 
 def dumps(doc: dict[str, Any]) -> str:

@@ -88,10 +88,11 @@ def _preamble(plan: ExportPlan) -> str:
              if plan.precision == "float" else "")
     mask = (1 << n) - 1
     precision_note = (
-        " * Float: tables and eq. (11) in float; a kernel sum (outside a table) in double,\n"
-        " * as its dual coefficients cancel too much for float.  Forces beyond float's\n"
-        " * range overflow (bit 18) where the double model would still be finite.\n"
-        if plan.precision == "float" else "")
+        (" * Float: f = C u in float." if plan.matrix is not None else
+         " * Float: tables and eq. (11) in float; a kernel sum (outside a table) in double,\n"
+         " * as its dual coefficients cancel too much for float.")
+        + "  Forces beyond float's\n * range overflow (bit 18) where the double model would "
+          "still be finite.\n" if plan.precision == "float" else "")
     limits = "\n".join(
         f" *   channel {b}: saturated at u[{b}] <= {num(lo)} or u[{b}] >= {num(hi)}"
         for b, (lo, hi) in enumerate(plan.limits) if lo is not None
@@ -102,13 +103,7 @@ def _preamble(plan: ExportPlan) -> str:
  * Do not edit: regenerate with `fsdecouple export`.  Model digest, sensor and
  * units are below as {P}MODEL_DIGEST, {P}SENSOR, {P}LOAD_UNIT, {P}OUTPUT_UNIT.
  *
- * Decoupling, eq. (11) of Ma et al. (Sensors 2012):
- *   f_a = (u_a - sum_(b != a) chi_ab(u_b)) / k_aa,   a = 0 .. {n - 1}
- * k_aa are the omega slopes (eq. 2); chi_ab the corrected coupling functions
- * (eq. 4), each an eps-SVR kernel sum (eq. 10).  Inside its table a chi is a
- * cubic Hermite interpolant of that kernel sum; outside it, or for a
- * non-finite input, the exact kernel sum over the embedded support vectors.
-{_extrapolation(plan)} * A rotation to the reference frame, if the model has one, follows eq. (11).
+{_method_note(plan)} * A rotation to the reference frame, if the model has one, follows.
  *
  * Use: in exactly one C file
  *     #define {P}IMPLEMENTATION
@@ -178,13 +173,11 @@ extern "C" {{
  * interval count; the rotation to the reference frame (identity if none). */
 #define {P}N_CHI {len(plan.chis)}
 #define {P}HAS_ROTATION {0 if plan.rotation is None else 1}
+#define {P}METHOD {c_string(plan.method)}
 extern const double {p}full_scale[{n}];
 extern const double {p}omega_k[{n}];
 extern const double {p}calibrated_range[{n}][2];
-extern const int {p}chi_axes[{len(plan.chis)}][2];
-extern const double {p}table_range[{len(plan.chis)}][2];
-extern const int {p}table_intervals[{len(plan.chis)}];
-extern const double {p}rotation[{n}][{n}];
+{_chi_declarations(plan)}extern const double {p}rotation[{n}][{n}];
 
 uint32_t {fn};
 int {p}selftest(void);
@@ -203,16 +196,49 @@ def _implementation_start(plan: ExportPlan) -> str:
 
     tables = [(c.lo, c.hi) if c.table is not None else (0.0, 0.0) for c in plan.chis]
     rotation = np.eye(n) if plan.rotation is None else plan.rotation
-    return "".join([
-        f"const double {p}full_scale[{n}] = {row(plan.full_scale)};\n",
-        f"const double {p}omega_k[{n}] = {row(plan.k)};\n",
-        f"const double {p}calibrated_range[{n}][2] = {{{', '.join(map(row, plan.calibrated_range))}}};\n",
+    chi = [  # C has no empty arrays: a linear model (no chi) declares none of them
         f"const int {p}chi_axes[{m}][2] = {{{', '.join(f'{{{c.out}, {c.inp}}}' for c in plan.chis)}}};\n",
         f"const double {p}table_range[{m}][2] = {{{', '.join(map(row, tables))}}};\n",
         f"const int {p}table_intervals[{m}] = "
         f"{{{', '.join(str(0 if c.table is None else c.table.shape[1]) for c in plan.chis)}}};\n",
+    ] if m else []
+    matrix = [] if plan.matrix is None else [
+        f"const double {p}matrix[{n}][{n}] = {{{', '.join(map(row, plan.matrix))}}};\n"]
+    return "".join([
+        f"const double {p}full_scale[{n}] = {row(plan.full_scale)};\n",
+        f"const double {p}omega_k[{n}] = {row(plan.k)};\n",
+        f"const double {p}calibrated_range[{n}][2] = {{{', '.join(map(row, plan.calibrated_range))}}};\n",
+        *chi, *matrix,
         f"const double {p}rotation[{n}][{n}] = {{{', '.join(map(row, rotation))}}};\n",
     ])
+
+
+def _chi_declarations(plan: ExportPlan) -> str:
+    p, m = plan.prefix, len(plan.chis)
+    out = "" if plan.matrix is None else \
+        f"extern const double {p}matrix[{plan.n}][{plan.n}]; /* f = C u, C[a][b] */\n"
+    if m:
+        out += (f"extern const int {p}chi_axes[{m}][2];\n"
+                f"extern const double {p}table_range[{m}][2];\n"
+                f"extern const int {p}table_intervals[{m}];\n")
+    return out
+
+
+def _method_note(plan: ExportPlan) -> str:
+    """The header's note on how it decouples: eq. (11), or a linear model's matrix."""
+    if plan.matrix is not None:
+        return (" * Decoupling by the model's least-squares calibration matrix (fit --method\n"
+                " * linear, or auto choosing it): f_a = sum_b C[a][b] u_b, a = 0 .. "
+                f"{plan.n - 1},\n * C as {plan.prefix}matrix.  No chi, no tables "
+                f"({plan.prefix.upper()}N_CHI 0: chi_axes, table_range and\n"
+                " * table_intervals are not declared); omega_k is the model's, for the record.\n")
+    return (" * Decoupling, eq. (11) of Ma et al. (Sensors 2012):\n"
+            f" *   f_a = (u_a - sum_(b != a) chi_ab(u_b)) / k_aa,   a = 0 .. {plan.n - 1}\n"
+            " * k_aa are the omega slopes (eq. 2); chi_ab the corrected coupling functions\n"
+            " * (eq. 4), each an eps-SVR kernel sum (eq. 10).  Inside its table a chi is a\n"
+            " * cubic Hermite interpolant of that kernel sum; outside it, or for a\n"
+            " * non-finite input, the exact kernel sum over the embedded support vectors.\n"
+            + _extrapolation(plan))
 
 
 def _extrapolation(plan: ExportPlan) -> str:
@@ -323,9 +349,13 @@ def _decouple(plan: ExportPlan, ctype: str) -> str:
         lines += [f"        q[{a}] = u[{a}] - ({_coupling(plan, a, ctype, 'p')});" for a in range(n)]
         lines += [f"        for (b = 0; b < {n}; ++b) p[b] = q[b];", "    }"]
         x = "p"
-    for a in range(n):  # eq. (11)
+    for a in range(n):
+        if plan.matrix is not None:  # f = C u, products added left to right
+            terms = " + ".join(f"{fmt(plan.matrix[a][b])} * u[{b}]" for b in range(n))
+            lines.append(f"    const {ctype} g{a} = {terms};")
+            continue
         lines.append(f"    const {ctype} g{a} = (u[{a}] - ({_coupling(plan, a, ctype, x)})) * "
-                     f"{fmt(1.0 / plan.k[a])};")
+                     f"{fmt(1.0 / plan.k[a])};")  # eq. (11)
     for i in range(n):
         if plan.rotation is None:
             expr = f"g{i}"

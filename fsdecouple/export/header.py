@@ -3,7 +3,9 @@
 The header evaluates eq. (11), f_a = (u_a - sum_(b != a) chi_ab(u_b)) / k_aa,
 with each chi (eq. 4) as a cubic Hermite table inside its interval and as the
 exact kernel sum (eq. 10) over the embedded support vectors outside it, so it
-agrees with ``model.decouple`` everywhere.  This module decides every number the
+agrees with ``model.decouple`` everywhere.  A ``linear`` model's header evaluates
+its least-squares calibration matrix, f = C u, with the same API, status bits
+and self-test.  This module decides every number the
 header holds and checks what it promises; :mod:`fsdecouple.export.c_source` writes the
 C text.
 
@@ -86,7 +88,7 @@ def export_header(
     names = {f"{c.out}{c.inp}": (None if c.table is None else c.table.shape[1]) for c in plan.chis}
     return ExportResult(Path(out), precision, prefix, plan.n, names, plan.table_bytes,
                         plan.kernel_bytes, plan.table_max_error,
-                        plan.float_max_error if precision == "float" else None)
+                        plan.float_max_error if precision == "float" else None, plan.method)
 
 
 def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",
@@ -98,9 +100,11 @@ def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",
         raise ConfigError(f"the model has {n} channels; the status word holds at most {MAX_CHANNELS}")
     settings = model.settings
     doc = _model_document(model)
-    if model.method != "svr":
-        raise ConfigError(f"the model decouples by the {model.method} calibration matrix; export "
-                          "writes the coupling error model (eq. 11) only: refit with --method svr")
+    linear = model.method == "linear"  # f = C u: the matrix, no chi and no tables
+    if getattr(model, "own", None):
+        raise ConfigError("the model has own-load chi (a joint fit of rig rows, chi "
+                          f"{', '.join(model.own)}); export writes the N(N - 1) cross chi of "
+                          "eq. (11) only, not yet these")
     rotation = None if settings.rotation is None else np.asarray(settings.rotation, dtype=float)
     fs = np.asarray(settings.full_scale, dtype=float)
     cal = np.asarray(model.calibrated_range, dtype=float)
@@ -112,18 +116,22 @@ def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",
         digest=str(doc["integrity"]["digest"]), format_version=int(doc["format_version"]),
         sensor=str(settings.sensor), load_unit=settings.load_unit,
         output_unit=settings.output_unit, version=version, model=model,
+        matrix=np.asarray(model.matrix, dtype=float) if linear else None,
     )
-    for c in model.chi.values():
+    if linear:
+        plan.refine = 0  # a linear model has no refinement (model.decouple ignores it)
+    chis = [] if linear else list(model.chi.values())
+    for c in chis:
         plan.chis.append(ChiPlan(c.output_axis, c.input_axis, float(c.gamma),
                                  np.asarray(c.support_vectors, float), np.asarray(c.dual_coef, float),
                                  float(c.rho), float(c.input_scale), float(c.output_scale), c))
     if max_error is None:
         u_fs = np.abs(k) * fs  # the promise is a fraction of each output's full scale
-        for cp, c in zip(plan.chis, model.chi.values(), strict=True):
+        for cp, c in zip(plan.chis, chis, strict=True):
             s = c.surrogate
             if s is not None and s.max_error <= PROMISE / (2 * max(n - 1, 1)) * u_fs[c.output_axis]:
                 cp.lo, cp.hi, cp.table, cp.table_error = s.lo, s.hi, s.coefficients(), s.max_error
-    else:
+    elif chis:
         # float: the measured bound is FLOAT_SAFETY x (table + rounding error), so the
         # tables get a quarter, leaving the rest of E for float rounding
         share = max_error / (2 * FLOAT_SAFETY) if precision == "float" else max_error
@@ -224,10 +232,19 @@ def emulate_float(plan: ExportPlan, u: np.ndarray) -> np.ndarray:
     def coupling(x):  # the C adds each output's chi left to right, in the model's order
         return _coupling(plan, x, chi, f32)
 
-    x = u
-    for _ in range(plan.refine):
-        x = u - coupling(x)
-    g = (u - coupling(x)) * (1.0 / plan.k).astype(f32)
+    if plan.matrix is not None:  # f = C u, each row's products added left to right, as the C
+        c = plan.matrix.astype(f32)
+        g = np.empty_like(u)
+        for a in range(plan.n):
+            acc = c[a, 0] * u[:, 0]
+            for b in range(1, plan.n):
+                acc = acc + c[a, b] * u[:, b]
+            g[:, a] = acc
+    else:
+        x = u
+        for _ in range(plan.refine):
+            x = u - coupling(x)
+        g = (u - coupling(x)) * (1.0 / plan.k).astype(f32)
     if plan.rotation is None:
         return g
     r = plan.rotation.astype(f32)

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..core.model import RANGE_MARGIN
+from ..errors import printable
 
 
 @dataclass
@@ -67,6 +68,11 @@ class ExportPlan:
     selftest_status: list = field(default_factory=list)
     selftest_note: str = ""
     model: Any = None  # the model exported: the reference of every check
+    matrix: np.ndarray | None = None  # a linear model's f = C u: no chi, no tables
+
+    @property
+    def method(self) -> str:
+        return "svr" if self.matrix is None else "linear"
 
     @property
     def table_bytes(self) -> int:
@@ -91,18 +97,22 @@ class ExportResult:
     kernel_bytes: int
     table_max_error: float  # fraction of full-scale load
     float_max_error: float | None
+    method: str = "svr"
 
     def to_dict(self) -> dict[str, Any]:
         return {"path": str(self.path), "precision": self.precision, "prefix": self.prefix,
                 "n_components": self.n_components, "intervals": self.intervals,
                 "table_bytes": self.table_bytes, "kernel_bytes": self.kernel_bytes,
-                "table_max_error": self.table_max_error, "float_max_error": self.float_max_error}
+                "table_max_error": self.table_max_error, "float_max_error": self.float_max_error,
+                "method": self.method}
 
     def summary_lines(self) -> list[str]:
         counts = [v for v in self.intervals.values() if v is not None]
         tables = (f"{len(counts)} tables of {min(counts)}-{max(counts)} intervals"
                   if counts else "no tables (kernel sums only)")
-        lines = [f"wrote {self.path}: {self.n_components} components, {self.precision}, {tables}",
+        if self.method == "linear":
+            tables = "the least-squares calibration matrix f = C u (no chi, no tables)"
+        lines = [f"wrote {printable(self.path)}: {self.n_components} components, {self.precision}, {tables}",
                  f"table bytes {self.table_bytes}, support-vector bytes {self.kernel_bytes}",
                  f"table error <= {self.table_max_error:.3g} of full-scale load"]
         if self.float_max_error is not None:

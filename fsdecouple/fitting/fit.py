@@ -26,7 +26,7 @@ from ..core.metrics import interference_errors
 from ..core.model import Chi, CouplingErrorModel, FitReport
 from ..core.surrogate import TOLERANCE, build_pair, table_interval
 from ..errors import InputError, printable
-from .joint import backfit, check_separable, multi_load
+from .joint import backfit, check_separable, joint_svr, multi_load
 from .linear import fit_omega
 from .noise import solver_tolerance
 from .threads import single_threaded_libraries, thread_pool
@@ -198,8 +198,9 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
     def output(a: int) -> tuple[float, list[Chi]]:
         # eq. (11) rearranged, fitted from multi-load rows by backfitting (joint.py)
         u, f = calib.voltages, calib.forces
-        k, fitted = backfit(f / np.asarray(settings.full_scale), u / scale, a,
-                            lambda x, y: _svr_chi(fit_svr(x, y, settings.svr)))
+        fn, un = f / np.asarray(settings.full_scale), u / scale
+        svr = joint_svr(settings.svr, fn, un, a)
+        k, fitted = backfit(fn, un, a, lambda x, y: _svr_chi(fit_svr(x, y, svr)), own=True)
         out = []
         for b, c in fitted.items():
             x = u[:, b]
@@ -211,11 +212,13 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         return k * scale[a] / settings.full_scale[a], out
 
     n_workers = workers or min(len(jobs), os.cpu_count() or 1)
+    own: dict[str, Chi] = {}
     if joint:
         with thread_pool(max(1, min(n_workers, layout.n))) as pool:
             per_output = list(pool.map(output, range(layout.n)))
         omega = replace(omega, k=np.array([k for k, _ in per_output]))
-        chis = [c for _, cs in per_output for c in cs]
+        chis = [c for _, cs in per_output for c in cs if c.output_axis != c.input_axis]
+        own = {c.name: c for _, cs in per_output for c in cs if c.output_axis == c.input_axis}
         if with_tables:
             with thread_pool(max(1, min(n_workers, layout.n))) as pool:
                 done = [c for pair in pool.map(tables, labels) for c in pair]
@@ -237,7 +240,8 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
                 f"the kernel sum (needs <= {MAX_SURROGATE_ERROR:g}); this model decouples by the "
                 "exact kernel sum, about 100x slower"
             )
-    model = CouplingErrorModel(settings, omega.k, {name: by_name[name] for name in pairs})
+    model = CouplingErrorModel(settings, omega.k, {name: by_name[name] for name in pairs},
+                               own=own)
     u = calib.voltages
     units = settings.units.loads or None
     before = interference_errors(calib.points, model.initial_forces(u), settings.full_scale,
@@ -249,7 +253,7 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
     model.report = FitReport(
         r2=dict(zip(labels, map(float, omega.r2), strict=True)),
         n_points=dict(zip(labels, map(int, omega.n), strict=True)),
-        n_support_vectors={c.name: int(c.support_vectors.size) for c in chis},
+        n_support_vectors={c.name: int(c.support_vectors.size) for c in [*chis, *own.values()]},
         surrogate_max_error={n: c.surrogate.max_error for n, c in model.chi.items()}
         if with_tables else None,
         gamma_before=before,

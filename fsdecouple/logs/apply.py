@@ -1,8 +1,9 @@
 """Decouple a logged voltage file into forces, in blocks (files larger than memory).
 
-Every input row is kept, in order, and every input column is passed through as
-text, unchanged; ``fx, fy, fz`` and ``status`` are appended.  Forces are in the
-calibration's load unit, or in the one asked for (``unit``); voltages are in
+Every input row is kept, in order, and every named input column is passed through
+as text, unchanged (unnamed columns, repeated names and a side table are dropped:
+:func:`~fsdecouple.logs.columns.passed_columns`); ``fx, fy, fz`` and ``status`` are
+appended.  Forces are in the calibration's load unit, or in the one asked for (``unit``); voltages are in
 the data's output unit (:mod:`fsdecouple.units`).  ``status`` says what the
 forces of the row are worth (:data:`STATUSES`); rows that cannot be decoupled
 keep empty forces and are counted.  CSV output uses the log's dialect (``sep``,
@@ -36,6 +37,7 @@ from ..data.zero import tare_offsets
 from ..errors import InputError, where
 from ..files import atomic_write, refuse_overwriting_input
 from ..units import LOAD_UNITS, load_factor
+from .columns import Dropped, kept_fields, passed_columns
 from .reader import Block, LogFile, is_parquet
 from .sinks import CsvSink, ParquetSink, force_decimals
 
@@ -84,12 +86,14 @@ class ApplySummary:
     output_unit: str = "V"
     outputs: tuple[str, ...] = VOLTAGE_COLUMNS  # the names of ``offsets``
     force_columns: tuple[str, ...] = FORCE_COLUMNS  # the columns written (force_columns)
+    dropped: list[Dropped] = field(default_factory=list)  # log columns not passed through
 
     def to_dict(self) -> dict:
         """The ``apply --json`` document of one log."""
         return {"rows": self.rows, "force_columns": list(self.force_columns),
                 "force_unit": self.force_unit, "output_unit": self.output_unit,
                 "status_counts": dict(self.status_counts),
+                "dropped_columns": [vars(d) for d in self.dropped],
                 "offsets": dict(zip(self.outputs, map(float, self.offsets), strict=True))}
 
 
@@ -288,10 +292,16 @@ def _limit_bounds(settings: Settings, model: CouplingErrorModel) -> tuple[np.nda
 
 def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit, force,
            chunk_rows, progress, workers, round_trip, interval=None) -> ApplySummary:
-    path, header = log.path, log.header
+    path = log.path
     layout = model.layout
     names = [settings.columns[c] for c in layout.outputs]
-    require_columns(header, dict(zip(layout.outputs, names, strict=True)), path)
+    require_columns(log.header, dict(zip(layout.outputs, names, strict=True)), path)
+    # unnamed columns, repeated names and a side table are not passed through
+    keep, dropped = passed_columns(log.header, names)
+    header = [log.header[i] for i in keep]
+    header_line = log.header_line
+    if dropped and not log.parquet:
+        header_line = kept_fields(header_line, keep, len(log.header), settings.sep)
     if STATUS_COLUMN in header:
         raise InputError(
             f"{where(path, HEADER_ROW, STATUS_COLUMN)}: the log already has a column named "
@@ -306,10 +316,10 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
                          f"'{clash[0]}', which the output would overwrite")
     scale = np.array([settings.scale[c] for c in layout.outputs])
     jobs: Iterator[Callable[[], Block]] = log.blocks(names, chunk_rows=chunk_rows,
-                                                     want_table=is_parquet(out))
+                                                     want_table=is_parquet(out), keep=keep)
     summary = ApplySummary(force_unit=unit, output_unit=model.settings.output_unit,
                            outputs=layout.outputs, offsets=np.zeros(layout.n),
-                           force_columns=forces)
+                           force_columns=forces, dropped=dropped)
     to_unit = load_factor(model.settings.load_unit, unit)
     sat_lo, sat_hi = _limit_bounds(settings, model)
     if tare is not None:
@@ -330,7 +340,7 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
         else:
             full_scale = np.asarray(model.settings.full_scale) * to_unit
             decimals = None if round_trip else force_decimals(full_scale)
-            sink = CsvSink(fh, header, None if log.parquet else log.header_line, decimals,
+            sink = CsvSink(fh, header, None if log.parquet else header_line, decimals,
                            sep=settings.sep, decimal=settings.decimal, extra=(STATUS_COLUMN,),
                            columns=columns)
 

@@ -30,12 +30,20 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..core.intervals import interval_names
 from ..errors import FsdecoupleError, InputError, excerpt, printable
 from ..units import load_factor
-from .apply import FORCE_UNIT_KEY, OUTPUT_UNIT_KEY, STATUS_COLUMN, STATUS_NAMES, check_options
+from .apply import (
+    FORCE_UNIT_KEY,
+    OUTPUT_UNIT_KEY,
+    STATUS_COLUMN,
+    STATUS_NAMES,
+    check_options,
+    force_columns,
+)
 from .frame import frame_forces, frame_outputs
 from .jobs import ApplySpec, Job, apply_job, dataset_zero
-from .sinks import force_arrays
+from .sinks import force_arrays, pandas_metadata
 
 CONNECT_TIMEOUT = 5.0  # seconds to reach a --scheduler before giving up
 # Dask's nannies start workers with MALLOC_TRIM_THRESHOLD_=65536, so that freed memory
@@ -134,7 +142,7 @@ def _dataset_graph(spec: ApplySpec, job: Job, target):
     except InputError as err:
         raise InputError(f"{printable(job.input)}: {err}") from None
     meta = frame._meta.copy()
-    for c in model.layout.loads:
+    for c in _columns(model, meta.columns, spec.interval):
         meta[c] = pd.Series([], dtype=pd.ArrowDtype(pa.float64()))
     meta[STATUS_COLUMN] = pd.Series([], dtype=pd.ArrowDtype(pa.string()))
     factor = load_factor(model.settings.load_unit, unit)
@@ -143,10 +151,12 @@ def _dataset_graph(spec: ApplySpec, job: Job, target):
     # as apply's ParquetSink: dictionary-encoding measured doubles, which seldom repeat,
     # is wasted work
     keep = [c for c, t in meta.dtypes.items() if not pd.api.types.is_float_dtype(t)]
-    write = out.to_parquet(str(target), write_index=False, name_function=names.__getitem__,
-                           write_metadata_file=False, compute=False, use_dictionary=keep,
-                           custom_metadata={FORCE_UNIT_KEY: unit,
-                                            OUTPUT_UNIT_KEY: model.settings.output_unit})
+    metadata = {FORCE_UNIT_KEY: unit, OUTPUT_UNIT_KEY: model.settings.output_unit}
+    # each part written here, not by to_parquet, whose pandas metadata says
+    # double[pyarrow] (and may not be replaced): the local engine's schema, metadata too
+    write = out.map_partitions(write_part, str(target), names, metadata, keep,
+                               meta=pd.DataFrame({"rows": pd.Series([], dtype="int64")}),
+                               align_dataframes=False)
     # the statuses are counted from the parts written (_count_written): a second
     # consumer of the partitions would keep them in memory and stop Dask fusing
     # read, decouple and write into one task per part.  That fusion is the
@@ -154,6 +164,22 @@ def _dataset_graph(spec: ApplySpec, job: Job, target):
     # unfused, every part is four tasks whose frames wait in the workers' memory
     # between them, 1.25x the time of the fused graph on the benchmark's 200 parts
     return write.optimize(fuse=True)
+
+
+def write_part(df, target: str, names: list[str], metadata: dict[str, str], keep: list[str],
+               partition_info=None):
+    """Write one decoupled partition as ``target/<its input part's name>``, as apply's
+    ParquetSink writes a log: the same types, units and pandas metadata."""
+    import pandas as pd
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table = pa.Table.from_pandas(df, preserve_index=False)
+    table = table.replace_schema_metadata({**metadata, b"pandas": pandas_metadata(table.schema)})
+    os.makedirs(target, exist_ok=True)
+    pq.write_table(table, os.path.join(target, names[partition_info["number"]]),
+                   use_dictionary=keep)
+    return pd.DataFrame({"rows": [len(df)]})
 
 
 def _same_columns(job: Job) -> None:
@@ -207,6 +233,12 @@ def _count_written(directory) -> tuple[int, dict[str, int]]:
     return sum(counts.values()), counts
 
 
+def _columns(model, header, interval: float | None) -> tuple[str, ...]:
+    """The columns a partition gains, named as single-file ``apply`` names them."""
+    forces = force_columns(model.layout.loads, header)
+    return forces + (interval_names(forces) if interval is not None else ())
+
+
 def decouple_partition(df, spec: ApplySpec, zero, factor: float = 1.0):
     """One partition of a dataset: ``decouple_frame``'s arrays, in ``apply``'s Parquet types.
 
@@ -219,11 +251,12 @@ def decouple_partition(df, spec: ApplySpec, zero, factor: float = 1.0):
     import pyarrow.compute as pc
 
     model = spec.model()
-    f, code = frame_forces(model, df, zero=zero, settings=spec.settings)
+    f, code = frame_forces(model, df, zero=zero, settings=spec.settings, interval=spec.interval)
     if factor != 1.0:
         f = f * factor
     empty = np.isnan(f[:, 0])  # the rows without forces have none at all
     cols = {c: pd.arrays.ArrowExtensionArray(a)
-            for c, a in zip(model.layout.loads, force_arrays(f, empty), strict=True)}
+            for c, a in zip(_columns(model, df.columns, spec.interval), force_arrays(f, empty),
+                            strict=True)}
     cols[STATUS_COLUMN] = pd.arrays.ArrowExtensionArray(pc.take(STATUS_NAMES, pa.array(code)))
     return df.assign(**cols)

@@ -46,6 +46,7 @@ class ApplySpec:
     unit: str | None = None
     round_trip: bool = False
     threads: int | None = None  # threads per log (apply_file's workers)
+    interval: float | None = None  # --interval P: the _lo/_hi columns (core/intervals.py)
 
     def model(self):
         return _load(self.model_path, self.refine)
@@ -71,7 +72,7 @@ def apply_job(spec: ApplySpec, job: Job, target: str | Path) -> tuple[int, dict[
 
     model, target = spec.model(), Path(target)
     kw = dict(settings=spec.settings, unit=spec.unit, round_trip=spec.round_trip,
-              workers=spec.threads)
+              workers=spec.threads, interval=spec.interval)
     if not job.dataset:
         s = apply_file(model, job.input, target, tare=spec.tare, zero=spec.zero, **kw)
         return s.rows, s.status_counts

@@ -225,6 +225,7 @@ def apply_many(model_path: str | Path, inputs, out_dir: str | Path, *, engine: s
                settings: Settings | None = None, config: str | Path | None = None,
                tare: int | None = None, zero=None, unit: str | None = None,
                refine: int | None = None, round_trip: bool = False, force: bool = False,
+               interval: float | None = None,
                progress: Callable[[int, int], None] | None = None) -> BatchResult:
     """Decouple every log named by ``inputs`` into ``out_dir``; per-log errors are recorded.
 
@@ -234,7 +235,7 @@ def apply_many(model_path: str | Path, inputs, out_dir: str | Path, *, engine: s
         ``local`` (``workers`` threads, as many logs at once) or ``dask``
         (``scheduler``: a Dask scheduler address; none starts a LocalCluster of
         ``workers`` processes).
-    settings, tare, zero, unit, refine, round_trip
+    settings, tare, zero, unit, refine, round_trip, interval
         As single-file ``apply`` (:func:`fsdecouple.logs.apply.apply_file`); ``tare`` per log.
     progress : callable, optional
         Called as ``progress(done, total)`` in logs.
@@ -244,6 +245,7 @@ def apply_many(model_path: str | Path, inputs, out_dir: str | Path, *, engine: s
     Only :class:`~fsdecouple.errors.FsdecoupleError` of a log is caught and
     recorded (a bug raises); bad arguments raise before any log is read.
     """
+    from ..core.intervals import half_widths
     from .apply import check_options
 
     if engine not in ENGINES:
@@ -254,12 +256,14 @@ def apply_many(model_path: str | Path, inputs, out_dir: str | Path, *, engine: s
         raise InputError("--scheduler is the address of a Dask cluster: give --engine dask too")
     model = ApplySpec(str(model_path), refine).model()  # a bad file or K refused here, once
     _, force_unit = check_options(model, settings, tare, zero, unit)
+    if interval is not None:
+        half_widths(model, interval)  # a bad P, or a model without held-out residuals
     jobs, dirs = find_jobs(inputs)
     out = Path(out_dir)
     check_out_dir(out, jobs, dirs, [model_path, *([config] if config is not None else [])])
     spec = ApplySpec(str(Path(model_path).resolve()), refine, settings, tare,
                      None if zero is None else tuple(float(v) for v in zero), unit, round_trip,
-                     1)
+                     1, interval)
     results = [FileResult(str(j.input), str(out / j.rel)) for j in jobs]
     todo = []
     for i, job in enumerate(jobs):

@@ -33,6 +33,7 @@ from ..config import Settings
 from ..data.csv_text import HEADER_ROW, MAX_HEADER_CHARS, MISSING_CELLS, read_header, require_utf8, to_numbers
 from ..errors import InputError, excerpt, printable, where
 from ..files import open_input, reading
+from .columns import kept_fields, kept_lines
 
 BLOCK_BYTES = 4 << 20  # ~100 K rows of a 4-column log; a block in flight costs ~15x this
 MAX_LINE_BYTES = 16 << 20  # a log line is tens of bytes
@@ -166,7 +167,8 @@ class LogFile:
                 more = bool(self._fh.peek(1)[:1]) if hasattr(self._fh, "peek") else False
                 if not self.stdin and stat.S_ISREG(os.fstat(self._fh.fileno()).st_mode):
                     self.total = max(1, os.fstat(self._fh.fileno()).st_size)
-            self.header = read_header(self.path, settings, line, more=more)
+            # unnamed and repeated names are dropped by passed_columns unless mapped
+            self.header = read_header(self.path, settings, line, more=more, strict=False)
         except BaseException:
             self.close()
             raise
@@ -185,19 +187,22 @@ class LogFile:
             self._fh.close()
         self._fh = None
 
-    def blocks(self, names: list[str], *, chunk_rows: int, want_table: bool):
+    def blocks(self, names: list[str], *, chunk_rows: int, want_table: bool,
+               keep: list[int] | None = None):
         """Jobs, in file order, each returning one :class:`Block` when called.
 
         CSV blocks are cut here and parsed when the job runs (on a worker thread);
         Parquet blocks are decoded here.  ``want_table``: the output is Parquet;
         otherwise it is CSV, and a Parquet log's columns must be writable as text.
+        ``keep``: the columns passed through (:func:`~fsdecouple.logs.columns.passed_columns`); default all.
         """
         if self.parquet:
             for b in parquet_blocks(self.path, names, self.settings, chunk_rows=chunk_rows,
-                                    to_csv=not want_table):
+                                    to_csv=not want_table, keep=keep):
                 yield lambda b=b: b
             return
-        parse = CsvParser(self.path, self.header, names, self.settings, self.eol, want_table)
+        parse = CsvParser(self.path, self.header, names, self.settings, self.eol, want_table,
+                          keep)
         for body in csv_bodies(self._fh, self.path, done=self._done, total=self.total,
                                chunk_rows=chunk_rows):
             yield partial(parse, body)
@@ -214,19 +219,27 @@ class CsvParser:
     """
 
     def __init__(self, path: Path, header: list[str], names: list[str], settings: Settings,
-                 eol: bytes, want_table: bool):
+                 eol: bytes, want_table: bool, keep: list[int] | None = None):
         self.path, self.header, self.names, self.settings = path, header, names, settings
         self.eol = eol
         self.want_table = want_table
+        width = len(header)
+        # columns are read by position: a header may have unnamed or repeated names
+        pos = [str(i) for i in range(width)]
+        self.index = [header.index(n) for n in names]
+        self.keep = list(range(width)) if keep is None else list(keep)
+        self.cut = len(self.keep) < width  # lines are re-written without the dropped fields
         self.float_opts = pcsv.ConvertOptions(
-            include_columns=names, column_types={n: pa.float64() for n in names},
+            include_columns=[pos[i] for i in self.index],
+            column_types={pos[i]: pa.float64() for i in self.index},
             null_values=list(MISSING_CELLS), decimal_point=settings.decimal, check_utf8=False,
         )
         self.text_opts = pcsv.ConvertOptions(
-            column_types={n: pa.string() for n in header}, strings_can_be_null=False,
+            include_columns=[pos[i] for i in self.keep],
+            column_types={pos[i]: pa.string() for i in self.keep}, strings_can_be_null=False,
         ) if want_table else None
         # one block is parsed per thread; the blocks themselves run in parallel
-        self.read_opts = pcsv.ReadOptions(column_names=header, use_threads=False)
+        self.read_opts = pcsv.ReadOptions(column_names=pos, use_threads=False)
         self.parse_opts = pcsv.ParseOptions(delimiter=settings.sep)
 
     def __call__(self, chunk: CsvBody) -> Block:
@@ -235,7 +248,7 @@ class CsvParser:
             require_utf8(body, self.path, row, self.header, self.settings.sep, NOT_UTF8_PARQUET)
         # A carriage return in an LF log could split a row for pyarrow and make up
         # for a blank line it skips; such blocks are read line by line.
-        if chunk.truncated or (self.eol == b"\n" and b"\r" in body):
+        if chunk.truncated or (self.eol == b"\n" and b"\r" in body) or (self.cut and b'"' in body):
             return self.exact(chunk)
         buffer = pa.py_buffer(body)
         try:
@@ -243,23 +256,27 @@ class CsvParser:
                                 convert_options=self.float_opts)
         except pa.ArrowInvalid:  # short or long rows, junk, an open quote: look closer
             return self.exact(chunk)
-        u = np.column_stack([_column_floats(tab.column(n)) for n in self.names])
+        u = np.column_stack([_column_floats(tab.column(k)) for k in range(len(self.index))])
         # pyarrow skips blank lines, but each is a row of the log: fewer rows than lines
         if u.shape[0] != chunk.rows or np.isinf(u).any():
             return self.exact(chunk)
-        if self.eol == b"\n":
+        if self.eol == b"\n" and not self.cut:
             lines, joined = _lines(body, buffer, chunk.rows), True
         else:
-            if body.count(b"\r") != chunk.rows:  # a lone CR: pyarrow's rows may not be the lines
+            if self.eol != b"\n" and body.count(b"\r") != chunk.rows:
+                # a lone CR: pyarrow's rows may not be the lines
                 return self.exact(chunk)
             lines, joined = pc.split_pattern(pa.array([body], pa.binary()), self.eol).flatten(), False
             if len(lines) != chunk.rows + 1:  # mixed line ends
                 return self.exact(chunk)
             lines = lines.slice(0, chunk.rows)
+            if self.cut:  # every line has the header's fields (pyarrow read them) and no quote
+                lines = kept_lines(lines, self.keep, self.settings.sep)
         table = None
         if self.text_opts is not None:
             table = pcsv.read_csv(buffer, read_options=self.read_opts,
                                   parse_options=self.parse_opts, convert_options=self.text_opts)
+            table = table.rename_columns([self.header[i] for i in self.keep])
         return Block(row, u, lines=lines, table=table, done=chunk.done, total=chunk.total,
                      joined=joined)
 
@@ -293,21 +310,23 @@ class CsvParser:
                     f"{where(self.path, row + i)}: {len(fields)} fields, expected {width} as in the header "
                     "(a decimal comma, or a separator inside a value?)"
                 )
-            lines.append(line + pad * (width - max(1, len(fields))))
+            if self.cut:
+                lines.append(kept_fields(line, self.keep, width, sep))
+            else:
+                lines.append(line + pad * (width - max(1, len(fields))))
             cells.append(fields + [""] * (width - len(fields)))
         cols = list(zip(*cells, strict=True))
         if chunk.truncated:  # no forces whatever it holds: the last number may be cut short
             u = np.full((len(lines), len(self.names)), np.nan)
         else:
             u = np.column_stack([
-                to_numbers(cols[self.header.index(n)], self.path, n, row, self.settings.decimal,
-                           allow_missing=True)
-                for n in self.names
+                to_numbers(cols[j], self.path, n, row, self.settings.decimal, allow_missing=True)
+                for j, n in zip(self.index, self.names, strict=True)
             ])
         table = None
         if self.want_table:
-            table = pa.table({n: pa.array(list(cols[j]), pa.string())
-                              for j, n in enumerate(self.header)})
+            table = pa.table([pa.array(list(cols[j]), pa.string()) for j in self.keep],
+                             names=[self.header[j] for j in self.keep])
         return Block(row, u, lines=pa.array(lines, pa.binary()), table=table, done=chunk.done,
                      total=chunk.total, truncated=chunk.truncated)
 
@@ -325,12 +344,12 @@ def _lines(body: bytes, buffer: pa.Buffer, rows: int) -> pa.Array:
     return pa.Array.from_buffers(pa.binary(), rows, [None, pa.py_buffer(offsets), buffer])
 
 
-def _csv_writable(schema: pa.Schema, path: Path) -> None:
+def _csv_writable(schema: pa.Schema, path: Path, keep: list[int]) -> None:
     """Refuse, before any row is read, a pass-through column CSV cannot hold as text.
 
     Lists, structs and maps have no CSV text; Parquet output passes them through.
     """
-    for fld in schema:
+    for fld in (schema.field(i) for i in keep):
         try:
             pcsv.write_csv(pa.table({"c": pa.array([], fld.type)}), pa.BufferOutputStream())
         except (pa.ArrowInvalid, pa.ArrowNotImplementedError, pa.ArrowTypeError):
@@ -362,12 +381,14 @@ def _binary_as_text(table: pa.Table, path: Path, first_row: int) -> pa.Table:
 
 
 def parquet_blocks(path: Path, names: list[str], settings: Settings, *,
-                   chunk_rows: int, to_csv: bool = False) -> Iterator[Block]:
+                   chunk_rows: int, to_csv: bool = False,
+                   keep: list[int] | None = None) -> Iterator[Block]:
     """The rows of a Parquet log in record batches of at most ``chunk_rows`` rows.
 
     ``to_csv``: the blocks go to a CSV output, so every column must have a text
     form: nested types are refused before the first row, and binary values must be
     UTF-8 (the row is named).  A list or struct voltage column is refused either way.
+    ``keep``: the columns passed through (:func:`~fsdecouple.logs.columns.passed_columns`); default all.
     """
     try:
         pf = pq.ParquetFile(path, pre_buffer=False, buffer_size=PARQUET_READ_BUFFER)
@@ -379,17 +400,22 @@ def parquet_blocks(path: Path, names: list[str], settings: Settings, *,
             if not (pa.types.is_string(typ) or pa.types.is_large_string(typ)
                     or pa.types.is_integer(typ) or pa.types.is_floating(typ)):
                 raise InputError(f"{where(path, None, n)}: type {typ}, expected numbers")
+    width = len(pf.schema_arrow)
+    keep = list(range(width)) if keep is None else list(keep)
     if to_csv:
-        _csv_writable(pf.schema_arrow, path)
+        _csv_writable(pf.schema_arrow, path, keep)
     total = max(1, pf.metadata.num_rows)
     row, done = HEADER_ROW + 1, 0
     for batch in pf.iter_batches(batch_size=min(chunk_rows, PARQUET_BATCH_ROWS)):
         table = pa.Table.from_batches([batch])
+        voltages = table.select([table.schema.get_field_index(n) for n in names])
+        if len(keep) < width:
+            table = table.select(keep)
         if to_csv:
             table = _binary_as_text(table, path, row)
         cols = []
-        for n in names:
-            col = table.column(n)
+        for k, n in enumerate(names):
+            col = voltages.column(k)
             if pa.types.is_string(col.type) or pa.types.is_large_string(col.type):
                 cols.append(to_numbers(col.fill_null("").to_pylist(), path, n, row, settings.decimal,
                                        allow_missing=True))

@@ -110,6 +110,14 @@ class CsvSink:
         pass
 
 
+def pandas_metadata(schema: pa.Schema) -> bytes:
+    """The ``pandas`` schema metadata of a table of ``schema`` read as pandas reads it by
+    default: the one every engine writes, so that a dataset's parts agree (Dask's own
+    said ``double[pyarrow]``, an input's listed only the input's columns)."""
+    plain = schema.remove_metadata().empty_table().to_pandas()
+    return pa.Schema.from_pandas(plain, preserve_index=False).metadata[b"pandas"]
+
+
 class ParquetSink:
     """Writes blocks as Parquet: the input columns, ``fx, fy, fz`` as doubles, extras.
 
@@ -136,7 +144,8 @@ class ParquetSink:
         if self.writer is None:
             # dictionary-encoding measured doubles, which seldom repeat, is wasted work
             keep = [f.name for f in table.schema if not pa.types.is_floating(f.type)]
-            schema = table.schema.with_metadata({**(table.schema.metadata or {}), **self.metadata})
+            schema = table.schema.with_metadata({**(table.schema.metadata or {}), **self.metadata,
+                                                 b"pandas": pandas_metadata(table.schema)})
             self.writer = pq.ParquetWriter(self.fh, schema, use_dictionary=keep)
         self.writer.write_table(table)
 

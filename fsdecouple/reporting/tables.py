@@ -18,6 +18,7 @@ from ..axes import labels_in, load_name
 from ..core.metrics import pct
 from ..data.columns import Guess
 from ..data.columns import shown as shown_name
+from ..errors import printable
 from ..evaluation.cv_results import gamma_index, test_name
 from ..units import Units, output_display
 
@@ -108,7 +109,7 @@ def fit_tables(model) -> list:
 
 def apply_lines(summary, out) -> list[str]:
     counts = ", ".join(f"{n} {name}" for name, n in summary.status_counts.items() if n)
-    lines = [f"decoupled {summary.rows} rows into {out} (forces in {summary.force_unit}; "
+    lines = [f"decoupled {summary.rows} rows into {printable(out)} (forces in {summary.force_unit}; "
              f"status: {counts})"]
     if np.any(summary.offsets):
         lines.append(f"zero removed [{summary.output_unit}]: " + ", ".join(
@@ -117,7 +118,12 @@ def apply_lines(summary, out) -> list[str]:
 
 
 def apply_warnings(summary) -> list[str]:
-    w = []
+    w, groups = [], {}
+    for d in getattr(summary, "dropped", ()):
+        groups.setdefault(d.reason, []).append(f"{d.column} '{d.name}'" if d.name else str(d.column))
+    if groups:
+        w.append("log columns not passed through (fit ignores them too): " + "; ".join(
+            f"{', '.join(cols)} ({reason})" for reason, cols in groups.items()))
     if summary.missing_rows:
         rows = ", ".join(map(str, summary.first_missing))
         more = ", ..." if summary.missing_rows > len(summary.first_missing) else ""
@@ -376,58 +382,6 @@ def cv_renderables(doc: dict[str, Any]) -> list:
     return out
 
 
-# --- validate -----------------------------------------------------------------------
-
-def validation_renderables(doc: dict[str, Any], output=None, *, as_json: bool = False) -> list:
-    """Everything ``fsdecouple validate`` prints, as (to_stderr, renderable) pairs.
-
-    Text from files (paths, unit names, warnings) is always a :class:`Text`, so
-    rich never reads it as markup.
-    """
-    from ..evaluation.validate import METHODS, RANGES, dumps
-
-    out: list = []
-    if as_json:
-        out.append((False, Text(dumps(doc))))
-    unit = doc["units"]["load"]
-    mixed = " / " in unit  # forces and moments: an error over every component has no one unit
-    by = {(r["range"], r["axis"], r["method"], r["metric"]): r for r in doc["records"]}
-    for rng in RANGES if not as_json else ():
-        axes = [a for a in labels_in(doc["records"]) if any((rng, a, m, "gamma") in by
-                                                          for m in METHODS)]
-        if not axes:
-            continue
-        t = Table(title=Text(f"{rng} points of {doc['set']['path']}, model {doc['model']}: "
-                             f"% F.S.{'' if mixed else f' and {unit}'}"))
-        absolute = () if mixed else (f"max [{unit}]", f"RMS [{unit}]")
-        for col in ("axis", "method", "γ % F.S.", "max % F.S.", "RMS % F.S.", *absolute):
-            t.add_column(Text(col), justify="right")
-        for a in axes:
-            for m in METHODS:
-                rec = [by[(rng, a, m, metric)] for metric in ("gamma", "max_error", "rms_error")]
-                t.add_row(a, m, *(_num(r["value"]) for r in rec),
-                          *(() if mixed else (f"{r['value_load_unit']:.4g}" for r in rec[1:])))
-        out.append((False, t))
-    if not as_json:
-        in_unit = (f"components in {unit} have no one unit, so the errors are in % F.S. only"
-                   if mixed else f"in {unit}: the same fraction of the largest full scale")
-        out.append((False, Text(
-            "gamma: eq. (12) on each loaded axis's points; max, RMS: |f_c - F_c| / F_c(FS) over "
-            f"those points and every component c; {in_unit}. calibrated: every output within "
-            "the calibrated range +/- 1 % of its span.")))
-    g = doc["gate"]
-    if g is not None:
-        worst = "no calibrated point" if g["worst"] is None else f"{_num(g['worst'])} % F.S."
-        line = Text(f"gate: worst model gamma on calibrated points {worst}, --max-gamma "
-                    f"{_num(g['max_gamma'])} % -> {'passed' if g['passed'] else 'FAILED'}",
-                    style="" if g["passed"] else "bold red")
-        out.append((as_json or not g["passed"], line))
-    if output is not None and not as_json:
-        out.append((False, Text(f"validation document written to {output}")))
-    out += [(True, Text("warning: ", style="yellow") + Text(w)) for w in doc["warnings"]]
-    return out
-
-
 # --- init -----------------------------------------------------------------------------
 
 def guess_renderables(guess: Guess) -> list:
@@ -441,5 +395,5 @@ def guess_renderables(guess: Guess) -> list:
     for i in guess.ignored:
         t.add_row("(ignored)", Text(f"{i.column}: {shown_name(i.name)}"), Text(i.reason))
     notes = [Text.assemble(("note:", "yellow"), f" {n}") for n in guess.notes]
-    done = f"config written to {guess.config}; check every guessed value before fitting"
+    done = f"config written to {printable(guess.config)}; check every guessed value before fitting"
     return [t, *notes, Text(done)]

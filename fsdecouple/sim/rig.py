@@ -9,6 +9,11 @@ kind a factory matrix leaves behind.  The applied loads are ``known_Fx ..
 Known_Mz`` (mixed case), six sweeps of :data:`LEVELS` levels, each after one zero
 row, a timestamp column and trailing empty rows.  ``gauges = 8`` writes eight
 strain-gauge channels ``g1 .. g8`` instead (M > N): a fixed 8 x 6 mix of the readings.
+
+``simulate --rig quadratic`` is the same rig with the nonlinearity of issue 22's public
+rig file: each reading bends with the square of its own load (1-3 % F.S. at full
+scale) and of the other loads (up to 1.5 %), with 0.1 % F.S. noise, so a least-squares
+fit with squared terms has about 0.6 x the matrix's held-out error, as it had there.
 """
 
 from __future__ import annotations
@@ -28,16 +33,27 @@ CROSS_TALK = 0.03  # largest linear cross-talk, fraction of full scale
 COUPLING = 0.01  # largest quadratic + cubic coupling term, fraction of full scale
 SELF = 0.002  # largest nonlinearity of a component in its own load, fraction of F.S.
 NOISE = 2e-4  # reading noise, fraction of full scale
+# ``quadratic``: own-load square 1-3 % F.S. (either sign), other loads' squares up to
+# 1.5 %, cubes up to 0.3 %, noise 0.1 % F.S.
+QUADRATIC = {"own": 0.03, "cross": 0.015, "cubic": 0.003, "noise": 1e-3}
+RIGS = ("lever-arm", "quadratic")
 # which force the lever arm loads with each moment, and its sign per N·m
 LEVER = {3: (1, -1.0 / ARM), 4: (0, 1.0 / ARM), 5: (0, 1.0 / ARM)}
 
 
-def rig_sensor(seed: int) -> dict[str, np.ndarray]:
+def rig_sensor(seed: int, kind: str = "lever-arm") -> dict[str, np.ndarray]:
     """The sensor's true coefficients, normalised: s = f / FS in, r / FS out."""
     rng = np.random.default_rng(seed)
     n = len(COMPONENTS)
     off = ~np.eye(n, dtype=bool)
     linear = np.eye(n) + off * rng.uniform(-CROSS_TALK, CROSS_TALK, (n, n))
+    if kind == "quadratic":
+        q = QUADRATIC
+        quad = off * rng.uniform(-q["cross"], q["cross"], (n, n))
+        cubic = off * rng.uniform(-q["cubic"], q["cubic"], (n, n))
+        quad[~off] = rng.choice([-1.0, 1.0], n) * rng.uniform(q["own"] / 3, q["own"], n)
+        cubic[~off] = rng.uniform(-q["cubic"], q["cubic"], n)
+        return {"linear": linear, "quad": quad, "cubic": cubic}
     quad = off * rng.uniform(-COUPLING, COUPLING, (n, n))
     cubic = off * rng.uniform(-COUPLING, COUPLING, (n, n))
     quad[~off] = rng.uniform(-SELF, SELF, n)
@@ -58,9 +74,11 @@ def gauge_mix(seed: int, gauges: int) -> np.ndarray:
     return q * rng.uniform(0.5, 1.5, len(COMPONENTS))
 
 
-def rig_rows(seed: int, levels: int = LEVELS) -> tuple[np.ndarray, np.ndarray]:
+def rig_rows(seed: int, levels: int = LEVELS, kind: str = "lever-arm"
+             ) -> tuple[np.ndarray, np.ndarray]:
     """(applied loads [N, N·m], outputs) of the six sweeps, each after one zero row."""
-    sensor = rig_sensor(seed)
+    sensor = rig_sensor(seed, kind)
+    noise = QUADRATIC["noise"] if kind == "quadratic" else NOISE
     rng = np.random.default_rng(seed + 1)
     loads = []
     for a in range(len(COMPONENTS)):
@@ -74,13 +92,18 @@ def rig_rows(seed: int, levels: int = LEVELS) -> tuple[np.ndarray, np.ndarray]:
             loads.append(row)
     f = np.array(loads)
     r = readings(f / FULL_SCALE, sensor)
-    r = (r + rng.normal(0.0, NOISE, r.shape)) * FULL_SCALE
+    r = (r + rng.normal(0.0, noise, r.shape)) * FULL_SCALE
     return f, r
 
 
 def write_rig(out: str | Path, *, seed: int = 0, gauges: int = 6, levels: int = LEVELS,
-              force: bool = False) -> list[Path]:
-    """Write ``calibration.csv`` of a lever-arm rig under ``out``; returns the file written."""
+              force: bool = False, kind: str = "lever-arm") -> list[Path]:
+    """Write ``calibration.csv`` of a lever-arm rig under ``out``; returns the file written.
+
+    ``kind``: ``lever-arm`` or ``quadratic`` (module docstring).
+    """
+    if kind not in RIGS:
+        raise InputError(f"--rig {kind!r}: expected {' or '.join(RIGS)}")
     if gauges < len(COMPONENTS):
         raise InputError(f"--gauges {gauges}: a six-axis rig needs at least 6 output channels")
     if levels < 2:
@@ -89,7 +112,7 @@ def write_rig(out: str | Path, *, seed: int = 0, gauges: int = 6, levels: int = 
     out.mkdir(parents=True, exist_ok=True)
     path = out / "calibration.csv"
     check_output(path, force=force)
-    f, r = rig_rows(seed, levels)
+    f, r = rig_rows(seed, levels, kind)
     if gauges == len(COMPONENTS):
         names, values = list(COMPONENTS), r
     else:

@@ -120,3 +120,50 @@ def test_the_console_keeps_unicode_spaces_and_escapes_controls(capsys):
     out = capsys.readouterr().out
     assert "Fx\u00a0[N]" in out and "x\u2009y" in out
     assert "a\\x1b[2Jb" in out and "\x1b" not in out
+
+
+def _tables(out: str) -> list[set[int]]:
+    """The widths of each table's lines (from its top edge to its bottom edge)."""
+    from rich.cells import cell_len
+
+    tables: list[set[int]] = []
+    for line in out.splitlines():
+        if line.startswith("┏"):
+            tables.append(set())
+        if tables and line[:1] in "┏┃┡│└":
+            tables[-1].add(cell_len(line))
+    return tables
+
+
+def test_a_table_holding_a_newline_or_an_escape_stays_aligned(capsys):
+    """A newline in a sensor name split its cell over two rows, and an escaped ESC made its
+    row wider than the table: the text is escaped before rich measures it (issue 25)."""
+    from rich.table import Table
+    from rich.text import Text
+
+    from fsdecouple.cli.app import console
+
+    table = Table("sensor", "γ", title="fleet\nof a\x1b[2Jb")
+    table.add_row("left\narm", "1")
+    table.add_row(Text("c\x1b[31md", style="bold"), "2")
+    table.add_row("plain", "3")
+    console.print(table)
+    out = capsys.readouterr().out
+    assert "\x1b" not in out
+    assert "left\\narm" in out and "c\\x1b[31md" in out
+    assert "fleet\\nof" in out and "a\\x1b[2Jb" in out  # the title wraps at a space only
+    assert [len(w) for w in _tables(out)] == [1], out  # every row as wide as the table
+    assert sum(line.startswith("│") for line in out.splitlines()) == 3  # one line a row
+
+
+def test_a_newline_in_an_output_or_sensor_name_never_splits_a_line(tmp_path):
+    out = tmp_path / "a\nb.json"
+    cfg = tmp_path / "cfg.yaml"
+    cfg.write_text('sensor: "left\\narm\\e[2J"\n')
+    r = invoke(["fit", SAMPLE / "calibration", "-c", cfg, "-o", out, "--no-verdict"])
+    lines = r.stdout.splitlines()
+    assert "model written to " + str(tmp_path / "a\\nb.json") + " (decouples by svr)" in lines
+    assert any(ln.endswith("report " + str(tmp_path / "a\\nb.json") + " -o report.html") for ln in lines)
+    title = next(ln for ln in lines if "sensor left" in ln)
+    assert "left\\narm\\x1b[2J" in title and "\x1b" not in r.stdout
+    assert all(len(w) == 1 for w in _tables(r.stdout)), r.stdout

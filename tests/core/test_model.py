@@ -153,3 +153,48 @@ def test_a_used_model_pickles_for_workers(model):
     before = model.decouple(u)  # builds the tables and their thread-local scratch
     again = pickle.loads(pickle.dumps(model))
     assert np.array_equal(again.decouple(u), before)
+
+
+def test_an_own_load_chi_is_saved_as_version_4_and_subtracted_at_the_measured_output(
+        model, tmp_path):
+    """A joint fit's own-load chi_aa(u_a) (issue 22, fitting/joint.py): written as format
+    version 4 under chi_own, read back, and subtracted in eq. (11) at the measured u_a,
+    with refinement too: p estimates k f = u - chi_aa(u_a) - sum chi_ab(p_b), the cross chi
+    take p, the own chi stays at u."""
+    from dataclasses import replace
+
+    from fsdecouple.core.modelfile import content_digest
+
+    own = {"xx": replace(model.chi["xy"], name="xx", surrogate=None)}  # any smooth function
+    path = tmp_path / "own.json"
+    save_model(replace(model, own=own), path)
+    doc = json.loads(path.read_text())
+    assert doc["format_version"] == 4 and set(doc["chi_own"]) == {"xx"}
+    back = load_model(path)
+    assert set(back.own) == {"xx"} and back.fast_decoupler() is None
+    rng = np.random.default_rng(0)
+    lo, hi = back.calibrated_range.T
+    u = lo + (hi - lo) * rng.uniform(0.0, 1.0, (50, 3))
+
+    def cross(p):  # sum_{b != a} chi_ab(p_b), re-derived from the chi objects
+        return np.column_stack([sum(back.chi[f"{a}{b}"](p[:, j]) for j, b in enumerate("xyz")
+                                    if b != a) for a in "xyz"])
+
+    own_x = np.column_stack([back.own["xx"](u[:, 0]), np.zeros(50), np.zeros(50)])
+    fs = back.full_scale_output
+    for k in (0, 1):
+        p = u if k == 0 else u - own_x - cross(u)
+        expect = (u - own_x - cross(p)) / back.k
+        np.testing.assert_allclose(back.decouple(u, rotate=False, refine=k), expect, rtol=0,
+                                   atol=1e-12 * fs.max(), err_msg=f"refine {k}")
+    # the own chi is no part of an older format: refused, not ignored
+    doc["format_version"] = 3
+    doc["integrity"]["digest"] = content_digest(doc)
+    with pytest.raises(ModelFileError, match=r"malformed model file \(chi_own in a version 3"):
+        model_from_dict(doc)
+    # and the C export refuses it in one line until it writes own chi
+    from fsdecouple.errors import ConfigError
+    from fsdecouple.export.header import plan_export
+
+    with pytest.raises(ConfigError, match=r"own-load chi .*chi xx\); export writes the N\(N - 1\)"):
+        plan_export(back)

@@ -94,11 +94,12 @@ def test_layout(doc, model_file, set_file):
     assert doc["units"] == {"load": "N", "output": "V"}
     assert doc["gate"] is None
     for r in doc["records"]:
-        keys = {"method", "axis", "metric", "range", "value"}
+        keys = {"method", "axis", "metric", "range", "value", "n"}
         assert set(r) == (keys if r["metric"] == "gamma" else keys | {"value_load_unit"})
-        assert r["method"] in ("model", "initial") and r["range"] in ("calibrated", "extrapolated")
+        assert r["method"] in ("model", "linear", "initial")
+        assert r["range"] in ("calibrated", "extrapolated")
     # one record per (method, axis, metric, range), both ranges present here
-    assert len(doc["records"]) == 2 * 3 * 3 * 2
+    assert len(doc["records"]) == 3 * 3 * 3 * 2
     json.dumps(doc, allow_nan=False)
     readme = (SAMPLE.parent / "docs" / "validate.md").read_text(encoding="utf-8")
     layout = re.search(r"<!-- validation-json-layout -->\n```json\n(.*?)```", readme, re.S).group(1)
@@ -146,6 +147,86 @@ def test_extrapolated_points_reported_apart(doc, truth):
         assert f"{outside} of {int((truth['axis'] == axis).sum())} {axis}-sweep points" in \
             " ".join(doc["warnings"])
         assert rec(doc, "model", axis, "gamma", "extrapolated") is not None
+
+
+def test_every_figure_carries_the_number_of_points_behind_it(doc, truth):
+    for axis in AXES:
+        for rng, sel in (("calibrated", truth["calibrated"]), ("extrapolated", ~truth["calibrated"])):
+            n = int((sel & (truth["axis"] == axis)).sum())
+            for method in ("model", "linear", "initial"):
+                for metric in ("gamma", "max_error", "rms_error"):
+                    assert rec(doc, method, axis, metric, rng)["n"] == n  # single loads only here
+
+
+def lstsq_matrix(calibration: pd.DataFrame) -> np.ndarray:
+    """C of f = C u by least squares over the zero-corrected points, derived by hand."""
+    t = calibration
+    zero = (t[list(FORCE_COLUMNS)] == 0).all(axis=1).to_numpy()
+    u = t[list(VOLTAGE_COLUMNS)].to_numpy().copy()
+    for _, idx in t.groupby(["repetition", "axis"]).indices.items():
+        u[idx] -= u[idx[zero[idx]]].mean(axis=0)
+    ct, *_ = np.linalg.lstsq(u, t[list(FORCE_COLUMNS)].to_numpy(), rcond=None)
+    return ct.T
+
+
+def test_linear_is_the_least_squares_matrix_of_the_same_calibration(doc, truth, model_file):
+    cal = pd.concat([pd.read_csv(f).assign(repetition=i)
+                     for i, f in enumerate(sorted((SAMPLE / "calibration").glob("*.csv")))])
+    C = lstsq_matrix(cal)
+    stored = np.array(json.loads(model_file.read_text())["matrix"])
+    assert stored == pytest.approx(C, rel=1e-9, abs=1e-9 * np.abs(C).max())
+    f = truth["u"] @ C.T
+    for a, axis in enumerate(AXES):
+        sel = (truth["axis"] == axis) & truth["calibrated"]
+        gamma = sum(np.abs(f[sel, b]).max() for b in range(3) if b != a) / FS[a]
+        assert rec(doc, "linear", axis, "gamma", "calibrated")["value"] == pytest.approx(gamma, rel=1e-9)
+        e = np.abs(f[sel] - truth["loads"][sel]) / FS
+        assert rec(doc, "linear", axis, "max_error", "calibrated")["value"] == pytest.approx(e.max())
+        # the simulated coupling is nonlinear: the matrix leaves more of it than eq. (11)
+        assert rec(doc, "linear", axis, "gamma", "calibrated")["value"] > \
+            rec(doc, "model", axis, "gamma", "calibrated")["value"]
+
+
+def test_a_model_file_without_a_matrix_takes_it_from_calib(doc, set_file, model_file):
+    old = ROOT / "tests" / "fixtures" / "golden" / "model-v3.json"
+    assert "matrix" not in json.loads(old.read_text())
+    without = validate(old, set_file)
+    assert {r["method"] for r in without["records"]} == {"model", "initial"}
+    assert any("--calib" in w for w in without["warnings"])
+    given = validate(old, set_file, calib=SAMPLE / "calibration")
+    linear = [r for r in given["records"] if r["method"] == "linear"]
+    assert linear and not any("--calib" in w for w in given["warnings"])
+    # the golden file was fitted on the sample calibration, as model_file was
+    assert linear == [r for r in doc["records"] if r["method"] == "linear"]
+
+
+def test_a_range_without_a_loaded_point_has_no_figure(model_file, tmp_path):
+    """Every loaded y point pushed past the range: the calibrated y group is its zero rows,
+    which scored a perfect 0.0 before; now no figure, and n = 0."""
+    t = validation_table()
+    y = t["axis"] == "y"
+    sensor = SimulatedSensor()
+    before = t.loc[y, list(FORCE_COLUMNS)].to_numpy()
+    t.loc[y, "fy"] += np.sign(t.loc[y, "fy"]) * 1.1 * FS[1]  # every loaded point past full scale
+    f = t.loc[y, list(FORCE_COLUMNS)].to_numpy()
+    t.loc[y, list(VOLTAGE_COLUMNS)] += sensor.voltages(f) - sensor.voltages(before)
+    path = tmp_path / "far.csv"
+    t.to_csv(path, index=False)
+    doc = validate(model_file, path, max_gamma=0.5)
+    for method in ("model", "linear", "initial"):
+        for metric in ("gamma", "max_error", "rms_error"):
+            r = rec(doc, method, "y", metric, "calibrated")
+            assert r["value"] is None and r["n"] == 0, r
+            assert rec(doc, method, "y", metric, "extrapolated")["value"] > 0
+    assert doc["gate"]["worst"] == max(r["value"] for r in doc["records"] if r["value"] is not None
+                                       and (r["method"], r["metric"], r["range"])
+                                       == ("model", "gamma", "calibrated"))
+    json.dumps(doc, allow_nan=False)
+    r = invoke(["validate", model_file, path])
+    cells = [[c.strip() for c in ln.split("│")[1:-1]] for ln in r.stdout.splitlines() if "│" in ln]
+    y_rows = [c for c in cells if c[0] == "y"]
+    assert len(y_rows) == 6  # three methods, two ranges
+    assert [c[2:] for c in y_rows[:3]] == [["0", "-", "-", "-", "-", "-"]] * 3
 
 
 def test_empty_range_is_absent(model_file, tmp_path):

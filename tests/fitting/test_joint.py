@@ -18,8 +18,8 @@ from fsdecouple.fitting.joint import check_separable, multi_load
 from fsdecouple.sim.rig import FULL_SCALE, NOISE, write_rig
 
 
-def rig(tmp_path: Path, seed: int = 0):
-    path = write_rig(tmp_path, seed=seed)[0]
+def rig(tmp_path: Path, seed: int = 0, kind: str = "lever-arm"):
+    path = write_rig(tmp_path, seed=seed, kind=kind)[0]
     init_config(path, tmp_path / "cfg.yaml")
     settings = load_config(tmp_path / "cfg.yaml")
     return path, settings, load_calibration(path, settings)
@@ -90,18 +90,31 @@ def _edit(path: Path, out: Path, change) -> Path:
     return out
 
 
-def test_two_swapped_loads_are_flagged_by_their_editor_lines(tmp_path):
-    path, settings, _ = rig(tmp_path)
-
-    def swap(rows):
-        col = rows[0].index("known_Fx")
-        rows[4][col], rows[5][col] = rows[5][col], rows[4][col]  # editor lines 5 and 6
-
-    bad = _edit(path, tmp_path / "swapped.csv", swap)
+@pytest.mark.parametrize("kind, column, lines", [
+    ("lever-arm", "known_Fx", (5, 6)),
+    pytest.param("quadratic", "known_Fx", (10, 11), marks=pytest.mark.slow),
+    pytest.param("quadratic", "Known_Mx", (33, 34), marks=pytest.mark.slow),
+    pytest.param("quadratic", "known_Fz", (23, 24), marks=pytest.mark.slow),
+])
+def test_two_swapped_loads_are_flagged_by_their_editor_lines(tmp_path, kind, column, lines):
+    """Two neighbouring levels typed into each other's rows: fit names exactly those two
+    editor lines (header = line 1), also where the quadratic stand-in bends most (its
+    last two Fx levels, lines 10-11) and on a lever-arm moment sweep."""
+    path, settings, whole = rig(tmp_path, kind=kind)
     from fsdecouple.evaluation.verdict import calibrate
 
+    if kind == "quadratic":  # its readings bend by up to 3 % F.S.: nothing flagged on the clean file
+        assert calibrate(whole, settings, verdict=False).report.outliers == []
+
+    def swap(rows):
+        col = rows[0].index(column)
+        a, b = (line - 1 for line in lines)
+        rows[a][col], rows[b][col] = rows[b][col], rows[a][col]
+
+    bad = _edit(path, tmp_path / "swapped.csv", swap)
     model = calibrate(load_calibration(bad, settings), settings, verdict=False)
-    assert sorted(o["row"] for o in model.report.outliers) == [5, 6]
+    assert sorted(o["row"] for o in model.report.outliers) == list(lines)
+    assert all(o["file"].endswith("swapped.csv") for o in model.report.outliers)
 
 
 def test_an_output_column_named_like_an_applied_load_is_refused(tmp_path):
@@ -144,3 +157,41 @@ def test_rows_with_blank_loads_are_skipped_with_their_lines_or_refused_with_stri
     with pytest.raises(InputError, match=r"blank.csv, row 14, column 'known_Fx': the applied "
                                          r"loads are blank \(lines 14, 30\); --strict"):
         load_calibration(bad, settings, strict=True)
+
+
+def test_rig_rows_get_an_own_load_chi_per_component_and_single_axis_sweeps_none(tmp_path, model):
+    """The joint fit adds chi_aa (a rig's readings bend with their own load); the paper's
+    single-axis model (the session's sample fit) has none, so it is today's model."""
+    _, settings, calib = rig(tmp_path, kind="quadratic")
+    fitted = fit(calib, settings, tables=False)
+    assert sorted(fitted.own) == sorted(f"{c}:{c}" for c in settings.layout.labels)
+    assert all(c.output_axis == c.input_axis for c in fitted.own.values())
+    assert model.own == {}
+
+
+@pytest.mark.slow  # about 12 s a seed: a fit with its held-out verdict per fold
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_auto_beats_the_matrix_on_the_quadratic_stand_in_by_the_issues_margin(tmp_path, seed):
+    """Issue 22's check on the stand-in for the public rig file (simulate --rig quadratic):
+    each load level of every sweep held out in turn, fit --method auto (calibrate) on the
+    rest, decoupled held-out rows against the applied loads; the worst component's RMS
+    must be at most 0.85 x the least-squares matrix's under the same folds.  Over seeds
+    0-19 the model alone (heldout_rms) was 0.53-0.72 x the matrix (docs/rigs.md); auto
+    must keep it in every fold, as its verdict now scores every component's error."""
+    from fsdecouple.evaluation.verdict import calibrate
+
+    _, settings, calib = rig(tmp_path, seed, kind="quadratic")
+    k, _ = level_index(calib)
+    fs = np.asarray(settings.full_scale)
+    err = {"auto": [], "matrix": []}
+    for level in range(1, k.max() + 1):
+        held = k == level
+        train = calib.select(~held)
+        model = calibrate(train, settings, method="auto")
+        assert model.method == "svr" and model.report.verdict["figure"] == "worst_rms"
+        u, f = calib.voltages[held], calib.forces[held]
+        ct, *_ = np.linalg.lstsq(train.voltages, train.forces, rcond=None)
+        err["auto"].append((model.decouple(u, rotate=False) - f) / fs)
+        err["matrix"].append((u @ ct - f) / fs)
+    rms = {m: np.sqrt((np.concatenate(e) ** 2).mean(axis=0)).max() for m, e in err.items()}
+    assert rms["auto"] <= 0.85 * rms["matrix"]

@@ -256,3 +256,19 @@ def test_an_output_directory_that_cannot_be_written_is_one_line(sample_model, tm
         args = ["fit-many", tmp_path / "sensors", "-o", out]
     assert_one_line_error(invoke(args, code=2), "ro", "cannot write into it", "Permission denied")
     assert list(out.iterdir()) == []
+
+
+def test_many_logs_take_interval_and_refuse_a_bad_one_before_reading(sample_model, tmp_path):
+    """Issue 23: many-log apply adds the interval columns as single-file apply does (it
+    refused --interval), and refuses P outside (0, 1) with one line, nothing written."""
+    logs = make_logs(tmp_path)
+    r = invoke(["apply", sample_model, logs, "-o", f"{tmp_path / 'bad'}/", "--interval", 1.5], 2)
+    assert_one_line_error(r, "--interval 1.5")
+    assert not (tmp_path / "bad").exists()
+    invoke(["apply", sample_model, logs, "-o", f"{tmp_path / 'out'}/", "--tare", 200,
+            "--interval", 0.95])
+    one = single(sample_model, logs / "a" / "one.csv", tmp_path / "one.csv", "--tare", 200,
+                 "--interval", 0.95)
+    assert one.read_bytes() == (tmp_path / "out" / "a" / "one.csv").read_bytes()
+    assert pq.read_table(tmp_path / "out" / "single.parquet").column_names[-7:] == [
+        "fx_lo", "fx_hi", "fy_lo", "fy_hi", "fz_lo", "fz_hi", "status"]

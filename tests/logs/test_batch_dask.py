@@ -40,8 +40,9 @@ def _tables_equal(a, b):
     ta, tb = pq.read_table(a), pq.read_table(b)
     assert ta.schema.equals(tb.schema, check_metadata=False), (ta.schema, tb.schema)
     assert ta.equals(tb)
-    for key in (b"fsdecouple.force_unit", b"fsdecouple.output_unit"):
-        assert ta.schema.metadata[key] == tb.schema.metadata[key]
+    # the pandas metadata too: Dask's said double[pyarrow], so pandas read other dtypes
+    for key in (b"fsdecouple.force_unit", b"fsdecouple.output_unit", b"pandas"):
+        assert ta.schema.metadata[key] == tb.schema.metadata[key], key
 
 
 def _same_outputs(local, dask):
@@ -269,7 +270,7 @@ def test_a_hive_partitioned_dataset_reads_back_whole_from_both_engines(sample_mo
     invoke([*args, "-o", f"{tmp_path / 'dask'}/", "--engine", "dask",
             "--scheduler", cluster.scheduler_address])
     _same_outputs(tmp_path / "local", tmp_path / "dask")
-    whole = {}
+    whole, dtypes = {}, {}
     for engine in ("local", "dask"):
         out = tmp_path / engine
         for part in out.rglob("*.parquet"):
@@ -282,6 +283,9 @@ def test_a_hive_partitioned_dataset_reads_back_whole_from_both_engines(sample_mo
             assert len(frame) == 2100 and sorted(set(frame["robot"].astype(str))) == ["A", "B", "C"]
             assert {"fx", "fy", "fz", "status"} <= set(frame.columns)
         whole[engine] = readings[1].sort_values(["robot", "t"]).reset_index(drop=True)
+        dtypes[engine] = [str(f.dtypes.drop("robot").to_dict()) for f in readings]
+    assert dtypes["local"] == dtypes["dask"]
+    assert "pyarrow" not in dtypes["local"][0]  # pandas' own types, as a CSV log reads
     for c in ("fx", "fy", "fz"):
         np.testing.assert_array_equal(whole["local"][c].to_numpy(float), whole["dask"][c].to_numpy(float))
 
@@ -295,3 +299,28 @@ def test_dask_lists_entries_named_like_logs_that_are_not_files(sample_model, tmp
     doc = json.loads(r.stdout)
     assert sorted(Path(p).name for p in doc["failed"]) == ["dangling.csv", "fifo.csv", "folder.csv"]
     assert (tmp_path / "out" / "good.csv").is_file()
+
+
+def test_interval_columns_from_both_engines_as_single_file_apply(sample_model, tmp_path, cluster):
+    """Issue 23: ``--interval`` on many logs adds the _lo/_hi columns in both engines, the
+    same bytes and Arrow tables as single-file apply; a log with the sensor's own ``FX``
+    reading gets ``decoupled_fx`` and ``decoupled_fx_lo`` from Dask too (it wrote ``fx``)."""
+    import pandas as pd
+
+    logs = make_logs(tmp_path)
+    for part in (logs / "ds").glob("*.parquet"):
+        t = pq.read_table(part)
+        pq.write_table(t.append_column("FX", t.column("ux")), part)
+    args = ["apply", sample_model, logs, "--tare", 200, "--interval", 0.9, "--json"]
+    invoke([*args, "-o", f"{tmp_path / 'local'}/"])
+    invoke([*args, "-o", f"{tmp_path / 'dask'}/", "--engine", "dask",
+            "--scheduler", cluster.scheduler_address])
+    _same_outputs(tmp_path / "local", tmp_path / "dask")
+    one = tmp_path / "one.csv"
+    invoke(["apply", sample_model, logs / "a" / "one.csv", "-o", one, "--tare", 200,
+            "--interval", 0.9])
+    assert one.read_bytes() == (tmp_path / "dask" / "a" / "one.csv").read_bytes()
+    ds = pd.read_parquet(tmp_path / "dask" / "ds")
+    assert {"decoupled_fx", "decoupled_fx_lo", "decoupled_fx_hi", "fz_hi"} <= set(ds.columns)
+    assert (ds["decoupled_fx_lo"] < ds["decoupled_fx"]).all()
+    assert (ds["decoupled_fx"] < ds["decoupled_fx_hi"]).all()

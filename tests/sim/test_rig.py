@@ -74,3 +74,55 @@ def test_validate_scores_a_rig_file_with_its_lever_arm_rows(tmp_path):
     doc = json.loads(invoke(["validate", str(model), str(cal), "-c", str(cfg), "--json"]).stdout)
     assert {r["axis"] for r in doc["records"]} == {"fx", "fy", "fz", "mx", "my", "mz"}
     assert any("27 combined-load points" in w for w in doc["warnings"])
+
+
+def test_the_quadratic_rig_bends_with_its_own_and_the_other_loads(tmp_path):
+    """simulate --rig quadratic, the stand-in for issue 22's public rig file: the same
+    headers and sweeps; each reading bends with its own load's square by 1-3 % F.S."""
+    from fsdecouple.sim.rig import readings, rig_sensor
+
+    invoke(["simulate", str(tmp_path), "--rig", "quadratic", "--seed", "3"])
+    with (tmp_path / "calibration.csv").open(newline="") as fh:
+        rows = [r for r in csv.reader(fh) if any(r)]
+    assert rows[0][1:7] == list(COMPONENTS) and "Known_Mz" in rows[0]
+    f, r = rig_rows(3, kind="quadratic")
+    assert len(rows) == 1 + len(f)
+    sensor = rig_sensor(3, "quadratic")
+    own = np.abs(np.diag(sensor["quad"]))
+    assert ((own >= 0.01) & (own <= 0.03)).all()
+    # at full scale alone the reading is off its straight line by the own square
+    s = np.eye(6)
+    bend = readings(s, sensor) - readings(s / 2, sensor) * 2  # linear parts cancel
+    np.testing.assert_allclose(np.diag(bend), np.diag(sensor["quad"]) / 2
+                               + 3 * np.diag(sensor["cubic"]) / 4, rtol=1e-12)
+
+
+def test_an_unknown_rig_is_refused_in_one_line(tmp_path):
+    res = invoke(["simulate", str(tmp_path), "--rig", "lever"], code=2)
+    assert "--rig 'lever': expected lever-arm or quadratic" in res.stderr
+    assert not (tmp_path / "calibration.csv").exists()
+
+
+@pytest.mark.slow  # over ~1 s: two fits
+def test_the_cli_fits_applies_and_refuses_to_export_a_model_with_own_load_chi(tmp_path):
+    invoke(["simulate", str(tmp_path), "--rig", "quadratic", "--seed", "2"])
+    cal, cfg, model = tmp_path / "calibration.csv", tmp_path / "cfg.yaml", tmp_path / "m.json"
+    invoke(["init", str(cal), "-o", str(cfg)])
+    invoke(["fit", str(cal), "-c", str(cfg), "-o", str(model), "--no-verdict"])
+    doc = json.loads(model.read_text())
+    assert doc["format_version"] == 4 and len(doc["chi_own"]) == 6
+    f, r = rig_rows(2, kind="quadratic")
+    zero = np.repeat(r[:: LEVELS + 1], LEVELS + 1, axis=0)
+    log = tmp_path / "log.csv"
+    with log.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(COMPONENTS)
+        w.writerows([repr(float(v)) for v in row] for row in r - zero)
+    out = tmp_path / "forces.csv"
+    invoke(["apply", str(model), str(log), "-o", str(out)])
+    with out.open(newline="") as fh:
+        got = np.array([[float(x) for x in row[6:12]] for row in list(csv.reader(fh))[1:]])
+    # its own calibration rows within a few noise sigmas (0.1 % F.S.), bends and all
+    assert (np.abs(got - f) / FULL_SCALE).max() < 0.006
+    res = invoke(["export", str(model), "-o", str(tmp_path / "d.h")], code=2)
+    assert "own-load chi" in res.stderr and not (tmp_path / "d.h").exists()
