@@ -48,6 +48,12 @@ def simulate(
         float | None, typer.Option(help="Peak of every coupling function, as a fraction of "
                                         "full-scale output (0 to 0.3; default: the sensor's own).")
     ] = None,
+    hysteresis: Annotated[
+        float | None, typer.Option(help="Sweep every axis out and back, with a sensor whose way "
+                                        "down reads this fraction of full-scale output above the "
+                                        "way up (0 to 0.05; paper layout only), in the task log "
+                                        "too.")
+    ] = None,
     components: Annotated[
         int, typer.Option(help="3: the paper's force sensor; 6: a six-axis force/torque sensor "
                                "(fx..mz, u1..u6) with its config sensor.yaml.")
@@ -72,6 +78,8 @@ def simulate(
     from ..sim.six_axis import COMPONENTS, OUTPUTS, write_six_axis
 
     with user_errors():
+        if hysteresis is not None and (components == 6 or rig is not None):
+            raise InputError("--hysteresis: only for the three-axis paper layout")
         if rig is not None:
             from ..sim.rig import write_rig
 
@@ -91,7 +99,7 @@ def simulate(
         else:
             files = simulate_sensor(out_dir, seed=seed, gross_error=ge, force=force,
                                     layout=layout, repetitions=repetitions, levels=levels,
-                                    coupling=coupling)
+                                    coupling=coupling, hysteresis=hysteresis)
     console.print(f"wrote {len(files)} files under {printable(out_dir)}")
 
 

@@ -87,7 +87,7 @@ def fit(
     json_out: JsonOpt = False,
 ) -> None:
     """Fit the coupling error model, judge it on held-out points, write one JSON model file."""
-    from ..core.model import refine_advice
+    from ..core.model import refine_advice, tune_advice
     from ..data.calibration import load_calibration
     from ..evaluation.checks import assumption_checks
     from ..evaluation.tune import grid_option
@@ -109,6 +109,7 @@ def fit(
                               tune_grid=grid, progress=progress)
         checks = assumption_checks(model)
         advice = refine_advice(checks, model.n_components)
+        advice["tune"] = tune_advice(advice, model.report.tune)
         save_model(model, output, force=force)
     if json_out:
         # the certificate's step data and scores are the model file's: fsdecouple certificate
@@ -139,7 +140,7 @@ def fit(
 
 
 def _refine_line(advice: dict, refine: int) -> str:
-    k = advice["recommended"]
+    k, tune = advice["recommended"], advice.get("tune") or {}
     line = (f"second-order coupling error (eq. 6): at most {100 * advice['second_order']:.3f} % "
             f"F.S. (chi_{advice['chi']}); model refine: K = {refine}")
     if k == 0:
@@ -147,9 +148,20 @@ def _refine_line(advice: dict, refine: int) -> str:
     if k is None:
         return (f"{line}; max |dchi/du| = {advice['slope']:.3f}: refinement is not known to "
                 "converge, check the sensor's coupling")
+    within = f"brings it within {100 * advice['target']:.2f} % F.S."
+    if tune.get("basis") == "coupling":  # untuned: tune_advice
+        why = "--tune chooses the SVR settings by held-out error"
+        if refine < k:
+            return f"{line}; recommended: --tune --refine {k} (refinement {within}; {why})"
+        return f"{line}; recommended: --tune ({why})"
+    if tune.get("basis") == "heldout":
+        held = (f"--tune's choice is {100 * tune['gain']:.0f} % below Table 2 on held-out points"
+                if tune["recommended"] and tune["gain"] is not None
+                else "--tune kept Table 2 (no setting clearly better on held-out points)")
+        return f"{line}; {held}" + (f"; recommended: --refine {k} ({within})" if refine < k else "")
     if refine >= k:
         return line
-    return f"{line}; recommended: --refine {k} (brings it within {100 * advice['target']:.2f} % F.S.)"
+    return f"{line}; recommended: --refine {k} ({within})"
 
 
 @app.command()

@@ -13,7 +13,7 @@ from ..axes import DEFAULT, Layout
 from ..config import Settings
 from ..errors import InputError
 from .calibration_csv import read_calibration_table
-from .zero import assign_sweeps, zero_correct
+from .zero import assign_sweeps, out_and_back, zero_correct
 
 
 @dataclass(frozen=True)
@@ -39,6 +39,11 @@ class CalibrationSet:
         Things a technician should look at; the data are still usable.
     layout : Layout
         The sensor's components (axes.py): sweep labels, load and output columns.
+    zero : str or None
+        How the sweeps were zeroed: ``rows``, ``fit`` or ``before`` (data/zero.py).
+    zero_auto : bool
+        ``fit`` was chosen because the sweeps go out and back, not by the config: the
+        certificate's ISO 376 figures still take deflections from the zero rows.
     """
 
     points: pd.DataFrame
@@ -48,6 +53,8 @@ class CalibrationSet:
     warnings: tuple[str, ...] = field(default=())
     excluded: tuple[str, ...] = ()
     layout: Layout = DEFAULT
+    zero: str | None = None  # how the sweeps were zeroed (data/zero.py); None: not recorded
+    zero_auto: bool = False  # zero: fit chosen for out-and-back sweeps (zero.out_and_back)
 
     @property
     def source(self) -> str:
@@ -153,9 +160,18 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
     # rows loading several components (a lever arm): each row is zeroed by the nearest
     # zero row before it (docs/rigs.md); the polynomial of zero: fit assumes one load a sweep
     several = not combined and ((table[list(layout.loads)].to_numpy() != 0.0).sum(axis=1) > 1).any()
-    method = settings.zero or ("before" if several else settings.zero_method)
+    # sweeps out and back: offsets from all points measured better than the zero rows
+    # (zero.out_and_back; zero: rows in the config keeps the rows)
+    back = not several and settings.zero is None and settings.zero_method == "rows" \
+        and out_and_back(table, layout)
+    method = settings.zero or ("before" if several else "fit" if back else settings.zero_method)
     points, offsets = zero_correct(table, layout, method)
     warnings = []
+    if back:
+        warnings.append("the sweeps visit their loads twice (out and back): zeroed by offsets "
+                        "fitted from all points (zero: fit), more accurate than the zero rows "
+                        "on such sweeps (docs/tuning.md); 'zero: rows' in the config keeps the "
+                        "zero rows")
     if several:  # a typo in a single-axis set reads the same: say where, once
         rows = table[(table[list(layout.loads)].to_numpy() != 0.0).sum(axis=1) > 1]
         first = ", ".join(f"{f}, row {r}" for f, r in zip(rows["file"][:3], rows["row"][:3],
@@ -192,7 +208,7 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
                             "a repetition copied twice counts twice")
         seen.setdefault(digest, name)
     return CalibrationSet(points, offsets, tuple(files), tuple(skipped), tuple(warnings),
-                          layout=layout)
+                          layout=layout, zero=method, zero_auto=back)
 
 
 def load_calibration(path: str | Path, settings: Settings, exclude=(),

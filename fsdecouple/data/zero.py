@@ -173,6 +173,31 @@ def zero_correct(table: pd.DataFrame, layout: Layout = DEFAULT,
     return points, offsets
 
 
+def out_and_back(table: pd.DataFrame, layout: Layout = DEFAULT) -> bool:
+    """True when a sweep goes out and back: its loads, in file order, turn once and
+    revisit loads of the way out (0 .. -150 .. 0 N; -100 .. 100 .. -100 N).
+
+    Such a sweep has twice the points of a one-way sweep for its offset fitted from all
+    points (``zero: fit``) and two zero rows taken at different points of its loop;
+    on simulated sensors swept out and back, with hysteresis or without, the fitted
+    offsets were more accurate (docs/design/tuning.md, "Sweeps out and back").  A
+    sweep pasted twice (-100 .. 100, -100 .. 100) turns twice and is not one.
+    """
+    forces = table[list(layout.loads)].to_numpy()
+    labels = table["axis"].to_numpy()
+    reps = table["repetition"].to_numpy()
+    for b, label in enumerate(layout.labels):
+        mine = labels == label
+        for rep in np.unique(reps[mine]):
+            f = forces[mine & (reps == rep), b]
+            steps = np.sign(np.diff(f))
+            steps = steps[steps != 0]
+            if steps.size and np.count_nonzero(np.diff(steps)) == 1 \
+                    and np.unique(f).size < f.size:
+                return True
+    return False
+
+
 def zero_before(repetition: np.ndarray, zero: np.ndarray) -> np.ndarray:
     """Each row's zero: the nearest zero-load row before it in its repetition (file order),
     or for rows before the first one, that first zero row."""

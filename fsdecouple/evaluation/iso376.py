@@ -98,6 +98,9 @@ def component_steps(calib: CalibrationSet, a: int) -> ComponentSteps:
         g = s[s["repetition"] == rep]
         f = g[load_col].to_numpy(dtype=float)
         u = g[list(layout.outputs)].to_numpy(dtype=float)
+        if getattr(calib, "zero_auto", False):  # out-and-back sweeps fitted with zero: fit:
+            raw = g[[f"{c}_raw" for c in layout.outputs]].to_numpy(dtype=float)
+            u = raw - raw[f == 0.0].mean(axis=0)  # ISO 376 deflections, from the zero rows
         first, again = _first_and_return(f)
         for load, i in first.items():
             if load != 0.0:

@@ -175,6 +175,8 @@ def calibrate(calib: CalibrationSet, settings: Settings, *, method: str = "svr",
         raise InputError(f"--method {method!r}: expected one of {', '.join(FIT_METHODS)}")
     if method == "auto" and not verdict:
         raise InputError("--method auto chooses by the held-out verdict; drop --no-verdict")
+    if settings.zero is None and getattr(calib, "zero", None) == "fit" != settings.zero_method:
+        settings = dataclasses.replace(settings, zero="fit")  # out-and-back sweeps (zero.py)
     record = None
     if tune:
         from .tune import tune_settings

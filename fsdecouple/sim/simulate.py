@@ -24,6 +24,7 @@ from ..axes import AXES, DEFAULT, FORCE_COLUMNS, VOLTAGE_COLUMNS, Layout
 from ..data.calibration import GrossError
 from ..errors import InputError
 from ..files import atomic_files, check_output
+from .hysteresis import check_hysteresis, lagged, up_and_down
 from .lab import write_lab_csv
 
 # Section 3 and eq. (13)
@@ -67,6 +68,9 @@ class SimulatedSensor:
     # Section 3: X and Y are loaded both ways, Z only in compression
     load_span: tuple[tuple[float, float], ...] = ((-1.0, 1.0), (-1.0, 1.0), (-1.0, 0.0))
     layout: Layout = DEFAULT  # components and chi names (six axes: simulate_six.py)
+    # None: one-way sweeps, no lag; a fraction (0 too): up-and-down sweeps and a lag whose
+    # way down reads that fraction of full-scale output above the way up (hysteresis.py)
+    hysteresis: float | None = None
 
     @property
     def k(self) -> np.ndarray:
@@ -95,6 +99,14 @@ class SimulatedSensor:
             u[:, a] += self.phi(name, f[:, b])
         return u
 
+    def outputs(self, f: np.ndarray) -> np.ndarray:
+        """Noise-free outputs along a load path f (rows in time order): :meth:`voltages`
+        of the loads the body feels, lagged by the sensor's hysteresis if it has one."""
+        if not self.hysteresis:
+            return self.voltages(f)
+        f = np.asarray(f, dtype=float).reshape(-1, self.layout.n)
+        return self.voltages(lagged(f, self.full_scale, self.hysteresis))
+
     def solve(self, u: np.ndarray, steps: int = 200) -> np.ndarray:
         """Loads whose noise-free outputs are ``u``: eq. (1) solved with the TRUE coupling.
 
@@ -122,17 +134,19 @@ def simulate_calibration(
 ) -> pd.DataFrame:
     """A six-repetition single-axis calibration on the paper's grid (Section 3).
 
-    Returns the long table with raw (not zero-corrected) voltages.
+    A sensor with ``hysteresis`` is swept out and back (:func:`up_and_down`), each
+    sweep from no load history.  Returns the long table with raw (not
+    zero-corrected) voltages.
     """
     rng = np.random.default_rng(seed)
     rows = []
     for rep in range(1, repetitions + 1):
         for a, axis in enumerate(AXES):
-            loads = PAPER_GRIDS[a]
+            loads = PAPER_GRIDS[a] if sensor.hysteresis is None else up_and_down(PAPER_GRIDS[a])
             f = np.zeros((loads.size, 3))
             f[:, a] = loads
             offset = rng.uniform(-0.05, 0.05, size=3)
-            u = sensor.voltages(f) + offset + rng.normal(0.0, sensor.noise, size=f.shape)
+            u = sensor.outputs(f) + offset + rng.normal(0.0, sensor.noise, size=f.shape)
             for i in range(loads.size):
                 rows.append((rep, axis, *f[i], *u[i]))
     return pd.DataFrame(rows, columns=["repetition", "axis", *FORCE_COLUMNS, *VOLTAGE_COLUMNS])
@@ -208,7 +222,7 @@ def simulate_task(
     if reach is not None:
         f *= reach * np.asarray(sensor.full_scale) / np.abs(f).max(axis=0, initial=0.0).clip(1e-300)
     offset = rng.uniform(-0.05, 0.05, size=3)
-    u = sensor.voltages(f) + offset + rng.normal(0.0, sensor.noise, size=f.shape)
+    u = sensor.outputs(f) + offset + rng.normal(0.0, sensor.noise, size=f.shape)
     volts = pd.DataFrame({"t": t, "ux": u[:, 0], "uy": u[:, 1], "uz": u[:, 2]})
     forces = pd.DataFrame({"t": t, "fx": f[:, 0], "fy": f[:, 1], "fz": f[:, 2]})
     return volts, forces
@@ -300,6 +314,7 @@ def simulate(
     repetitions: int | None = None,
     levels: int | None = None,
     coupling: float | None = None,
+    hysteresis: float | None = None,
 ) -> list[Path]:
     """Write a simulated calibration data set; all files or, on an error, none.
 
@@ -314,6 +329,9 @@ def simulate(
     loads up to 120 % of full scale.  ``gross_error`` moves a calibration point.
     ``coupling`` sets every coupling function's peak to that fraction of its
     output's full scale (:func:`with_coupling`); default: the sensor's own.
+    ``hysteresis`` (paper layout): sweeps out and back, and a lag whose way down
+    reads that fraction of full-scale output above the way up, in the calibration
+    and the task log (:mod:`fsdecouple.sim.hysteresis`).
 
     A six-axis sensor: :func:`fsdecouple.sim.six_axis.write_six_axis`.
     """
@@ -329,6 +347,10 @@ def simulate(
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: is a file, expected a directory to write into")
+    if hysteresis is not None:
+        if layout != "paper":
+            raise InputError("--hysteresis: only with --layout paper (its sweeps go out and back)")
+        check_hysteresis(hysteresis)
     if coupling is not None:
         sensor = with_coupling(sensor or (load_cell_sensor() if layout == "lab"
                                           else SimulatedSensor()), coupling)
@@ -337,6 +359,8 @@ def simulate(
             return _simulate_lab(out, seed=seed, gross_error=gross_error, sensor=sensor,
                                  force=force, repetitions=repetitions or 1, levels=levels or 4)
     sensor = sensor or SimulatedSensor()
+    if hysteresis is not None:
+        sensor = replace(sensor, hysteresis=float(hysteresis))
     n_reps = repetitions or 6
     with one_set(out, n_reps, force):
         return _simulate_paper(out, seed=seed, gross_error=gross_error, sensor=sensor, force=force,

@@ -298,3 +298,57 @@ def test_bad_refine_on_the_command_line_exits_2_and_writes_nothing(tmp_path, sam
     cfg.write_text(f"refine: {value}\n")
     r = invoke(["fit", SAMPLE / "calibration", "-o", m, "-c", cfg], code=2)
     assert "refine" in r.stderr and not m.exists()
+
+
+# --- which option when: --tune with refinement (issue 24) -----------------------------------
+
+
+def _record(figures, chosen):
+    return {"candidates": [{"figure": f} for f in figures], "chosen": chosen}
+
+
+def test_tune_advice_untuned_from_the_coupling_tuned_from_the_held_out_figures():
+    from fsdecouple.core.model import tune_advice
+
+    coupled, weak, diverging = ({"recommended": k} for k in (2, 0, None))
+    # untuned: --tune is advised wherever refinement is (eq. 6 above the target)
+    assert tune_advice(coupled, None) == {"recommended": True, "basis": "coupling", "gain": None}
+    assert not tune_advice(weak, None)["recommended"]
+    assert not tune_advice(diverging, None)["recommended"]
+    # tuned: the held-out figures decide; the gain is the chosen figure against Table 2's
+    t = tune_advice(coupled, _record([0.0026, 0.0021, 0.0020], 2))
+    assert t["recommended"] and t["basis"] == "heldout"
+    assert t["gain"] == pytest.approx(1 - 0.0020 / 0.0026)
+    kept = tune_advice(coupled, _record([0.0026, 0.0030], 0))
+    assert not kept["recommended"] and kept["gain"] == 0.0
+
+
+def test_fit_line_recommends_tune_with_refinement():
+    from fsdecouple.cli.model import _refine_line
+    from fsdecouple.core.model import tune_advice
+
+    base = {"second_order": 0.004, "chi": "yx", "slope": 0.1, "target": 5e-4, "recommended": 2}
+    untuned = {**base, "tune": tune_advice(base, None)}
+    assert "recommended: --tune --refine 2 (" in _refine_line(untuned, 0)
+    assert _refine_line(untuned, 3).endswith("recommended: --tune (--tune chooses the SVR "
+                                             "settings by held-out error)")
+    tuned = {**base, "tune": tune_advice(base, _record([0.0025, 0.0020], 1))}
+    line = _refine_line(tuned, 0)
+    assert "--tune's choice is 20 % below Table 2 on held-out points" in line
+    assert line.endswith("recommended: --refine 2 (brings it within 0.05 % F.S.)")
+    assert "recommended" not in _refine_line(tuned, 3)
+    kept = {**base, "tune": tune_advice(base, _record([0.0025, 0.0030], 0))}
+    assert "--tune kept Table 2" in _refine_line(kept, 3)
+    weak = {**base, "recommended": 0}
+    weak["tune"] = tune_advice(weak, None)
+    assert "--tune" not in _refine_line(weak, 0)  # eq. (11) as written is enough: no advice
+
+
+@pytest.mark.slow  # a fit of the sample: ~1-2 s
+def test_fit_prints_and_records_the_tune_advice(tmp_path):
+    res = invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "m.json", "--json"])
+    doc = json.loads(res.stdout)
+    assert doc["refine_advice"]["recommended"] >= 1  # the sample's coupling: 1.1-2.7 %
+    assert doc["refine_advice"]["tune"] == {"recommended": True, "basis": "coupling", "gain": None}
+    text = invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "m.json", "--force"]).stdout
+    assert "recommended: --tune --refine" in " ".join(text.split())

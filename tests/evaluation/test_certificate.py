@@ -229,3 +229,18 @@ def test_a_set_the_model_was_not_fitted_on_is_refused(certified, calib):
         check_matches(model, other, "m.json")
     with pytest.raises(InputError, match="the config's full_scale is not the model's"):
         check_matches(model, calib, "m.json", replace(model.settings, full_scale=(1.0, 2.0, 3.0)))
+
+
+def test_out_and_back_sets_zeroed_by_fit_keep_iso_deflections_from_the_zero_rows(hand_set):
+    """The hand set goes up and down: fit zeroes it from all points (issue 24), the
+    certificate's figures still take each deflection from its sweep's zero rows."""
+    table, calib = hand_set
+    assert calib.zero == "fit" and calib.zero_auto
+    rows = from_table(table, replace(load_config(), zero="rows", min_repetitions=1))
+    assert rows.zero == "rows" and not rows.zero_auto
+    for a in range(3):
+        auto, by_rows = component_steps(calib, a), component_steps(rows, a)
+        np.testing.assert_allclose(auto.X, by_rows.X, rtol=1e-12)
+        for name, values in auto.figures.items():
+            np.testing.assert_allclose(values, by_rows.figures[name], rtol=1e-9, atol=1e-12,
+                                       err_msg=name)

@@ -128,17 +128,60 @@ def test_edge_round_holds_out_each_sweeps_loads_beyond_its_others():
         assert not rnd.train.sweep(axis)["f" + axis].isin(loads).any()
 
 
-@pytest.mark.slow  # over ~0.6 s: the not-slow run stays under a minute
-def test_a_candidate_worse_than_table2_beyond_the_range_is_never_chosen():
+@pytest.mark.slow  # two tunes of ~0.6 s
+def test_the_calibrated_range_decides_and_the_edge_only_with_kernel_extrapolation():
     # gamma = 8 per F.S.^2: better than Table 2 on the held-out points inside the
-    # loads (figure), worse extrapolating one load step (edge): its kernel is narrow
+    # loads (figure), worse extrapolating one load step (edge): its kernel is narrow.
+    # With tangent extrapolation (the default) beyond the range is the tangent's, and
+    # the candidate is chosen; with the kernel sum beyond the range it is not (issue 24)
     settings = load_config()
+    assert settings.extrapolation == "tangent"
     calib = load_calibration(SAMPLE, settings)
-    chosen, record = tune_settings(calib, settings, grid=Grid(gamma=(8.0,), C=(10.0,),
-                                                              epsilon=(0.25,)), workers=2)
+    grid = Grid(gamma=(8.0,), C=(10.0,), epsilon=(0.25,))
+    chosen, record = tune_settings(calib, settings, grid=grid, workers=2)
     t2, narrow = record["candidates"]
     assert narrow["figure"] < t2["figure"] and narrow["edge"] > t2["edge"]
-    assert not narrow["clearly_better"] and record["chosen"] == 0 and chosen == settings
+    assert narrow["clearly_better"] and record["chosen"] == 1
+    assert record["beyond_range"] == "extrapolation" and chosen.svr.gamma == 8.0
+    kernel = replace(settings, extrapolation="kernel")
+    chosen, record = tune_settings(calib, kernel, grid=grid, workers=2)
+    t2, narrow = record["candidates"]
+    assert narrow["figure"] < t2["figure"] and narrow["edge"] > t2["edge"]
+    assert not narrow["clearly_better"] and record["chosen"] == 0 and chosen == kernel
+    assert record["beyond_range"] == "edge"
+
+
+def _scripted(monkeypatch, inside, edge):
+    """heldout_errors replaced: per candidate, these squared errors inside and at the edge."""
+    import fsdecouple.evaluation.tune as tune
+
+    def errors(calib, settings, cands, rounds, workers=None, progress=None):
+        return [np.concatenate([i, e]) for i, e in zip(inside, edge, strict=True)][:len(cands)]
+
+    monkeypatch.setattr(tune, "heldout_errors", errors)
+
+
+def test_every_candidate_better_inside_is_not_given_up_for_the_edge(monkeypatch):
+    """Issue 24's sensor in small: every candidate beat Table 2 on the held-out points and
+    lost one load step beyond the range; the old rule kept Table 2.  Now the best inside
+    is chosen (tangent extrapolation), and the edge figures are still recorded."""
+    settings = load_config()
+    calib = load_calibration(SAMPLE, settings)
+    n_in = sum(len(t.points) for r in rounds_for(calib, "repetitions") for _, t in r.tests)
+    n_edge = len(edge_round(calib).tests[0][1].points)
+    rng = np.random.default_rng(3)
+    base = rng.chisquare(1, size=(n_in, 3)) * 1e-6
+    grid = Grid(gamma=(2.0, 4.0), C=(10.0,), epsilon=(0.5,))
+    inside = [base, base * 0.64, base * 0.6]  # figures: 1, 0.8, 0.77 of Table 2's
+    edge = [np.full((n_edge, 3), 1e-6), np.full((n_edge, 3), 3e-6), np.full((n_edge, 3), 4e-6)]
+    _scripted(monkeypatch, inside, edge)
+    _, record = tune_settings(calib, settings, grid=grid, workers=1)
+    assert record["chosen"] == 2  # the lowest figure, though the worst at the edge
+    assert [c["edge"] for c in record["candidates"]] == pytest.approx([1e-3, 3 ** 0.5 * 1e-3,
+                                                                       2e-3])
+    _, record = tune_settings(calib, replace(settings, extrapolation="kernel"), grid=grid,
+                              workers=1)
+    assert record["chosen"] == 0  # kernel sum beyond the range: the edge still decides
 
 
 def test_a_candidate_worse_than_table2_on_any_axis_is_never_chosen(monkeypatch):
