@@ -232,29 +232,25 @@ def emulate_float(plan: ExportPlan, u: np.ndarray) -> np.ndarray:
     def coupling(x):  # the C adds each output's chi left to right, in the model's order
         return _coupling(plan, x, chi, f32)
 
-    if plan.matrix is not None:  # f = C u, each row's products added left to right, as the C
-        c = plan.matrix.astype(f32)
-        g = np.empty_like(u)
-        for a in range(plan.n):
-            acc = c[a, 0] * u[:, 0]
-            for b in range(1, plan.n):
-                acc = acc + c[a, b] * u[:, b]
-            g[:, a] = acc
+    if plan.matrix is not None:  # f = C u
+        g = _products(plan.matrix.astype(f32), u)
     else:
         x = u
         for _ in range(plan.refine):
             x = u - coupling(x)
         g = (u - coupling(x)) * (1.0 / plan.k).astype(f32)
-    if plan.rotation is None:
-        return g
-    r = plan.rotation.astype(f32)
-    f = np.empty_like(g)
-    for i in range(plan.n):
-        acc = r[i, 0] * g[:, 0]
-        for j in range(1, plan.n):
-            acc = acc + r[i, j] * g[:, j]
-        f[:, i] = acc
-    return f
+    return g if plan.rotation is None else _products(plan.rotation.astype(f32), g)
+
+
+def _products(m: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """m @ v for each row of ``v``, each row's products added left to right, as the C."""
+    out = np.empty_like(v)
+    for i in range(m.shape[0]):
+        acc = m[i, 0] * v[:, 0]
+        for j in range(1, m.shape[1]):
+            acc = acc + m[i, j] * v[:, j]
+        out[:, i] = acc
+    return out
 
 
 def float_bound(plan: ExportPlan, seed: int = 0) -> float:

@@ -12,6 +12,16 @@ from conftest import invoke
 from fsdecouple.sim.rig import COMPONENTS, FULL_SCALE, LEVELS, rig_rows
 
 
+def _zero_corrected_log(tmp_path, r):
+    """The rig's readings less each sweep's zero row, as a log of the components' names."""
+    zero = np.repeat(r[:: LEVELS + 1], LEVELS + 1, axis=0)
+    log = tmp_path / "log.csv"
+    with log.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(COMPONENTS)
+        w.writerows([repr(float(v)) for v in row] for row in r - zero)
+    return log
+
 def test_the_rig_file_has_lever_arm_sweeps_after_zero_rows_and_trailing_empty_rows(tmp_path):
     invoke(["simulate", str(tmp_path), "--rig", "lever-arm", "--seed", "4"])
     with (tmp_path / "calibration.csv").open(newline="") as fh:
@@ -36,12 +46,7 @@ def test_init_fit_and_apply_on_a_rig_file(tmp_path):
     invoke(["init", str(cal), "-o", str(cfg)])
     invoke(["fit", str(cal), "-c", str(cfg), "-o", str(model), "--no-verdict"])
     f, r = rig_rows(0)
-    zero = np.repeat(r[:: LEVELS + 1], LEVELS + 1, axis=0)
-    log = tmp_path / "log.csv"
-    with log.open("w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(COMPONENTS)
-        w.writerows([repr(float(v)) for v in row] for row in r - zero)
+    log = _zero_corrected_log(tmp_path, r)
     out = tmp_path / "forces.csv"
     doc = json.loads(invoke(["apply", str(model), str(log), "-o", str(out), "--json",
                              "--round-trip"]).stdout)
@@ -112,12 +117,7 @@ def test_the_cli_fits_applies_and_refuses_to_export_a_model_with_own_load_chi(tm
     doc = json.loads(model.read_text())
     assert doc["format_version"] == 4 and len(doc["chi_own"]) == 6
     f, r = rig_rows(2, kind="quadratic")
-    zero = np.repeat(r[:: LEVELS + 1], LEVELS + 1, axis=0)
-    log = tmp_path / "log.csv"
-    with log.open("w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(COMPONENTS)
-        w.writerows([repr(float(v)) for v in row] for row in r - zero)
+    log = _zero_corrected_log(tmp_path, r)
     out = tmp_path / "forces.csv"
     invoke(["apply", str(model), str(log), "-o", str(out)])
     with out.open(newline="") as fh:
