@@ -7,8 +7,8 @@ fraction of rows whose true force lies in [lo, hi].
 The limits come from the scatter of 40 seeds (docs/certificate.md): one log's
 coverage scatters from seed to seed (10th-90th percentile 0.92-0.99 at P = 0.95),
 since the log is one realisation of the model's own error.  Over seeds 0-19 the
-median per component was 0.944-0.971 at P = 0.95 and 0.889-0.925 at P = 0.9, the
-mean over components and seeds 0.954 and 0.905: the median must lie in
+median per component was 0.948-0.971 at P = 0.95 and 0.884-0.930 at P = 0.9, the
+mean over components and seeds 0.956 and 0.906: the median must lie in
 [P - 0.04, P + 0.05] and the mean at or above P - 0.03 (a few hundredths of margin
 over the scatter of a 20-seed median).
 """
