@@ -238,7 +238,7 @@ class CouplingErrorModel:
     own : dict of str to Chi
         Own-load chi_aa(u_a), keyed ``"fx:fx"``: the nonlinearity of each output in its
         own load, which a joint fit of rig rows adds (:mod:`fsdecouple.fitting.joint`);
-        empty for the paper's model.  Decoupled by the exact path only.
+        empty for the paper's model.  Tabled on their input's grid like the cross chi.
     provenance : dict
         Input files and digests, library versions.
     created : str
@@ -386,11 +386,11 @@ class CouplingErrorModel:
 
     def fast_decoupler(self) -> TableDecoupler | None:
         """The table path of :mod:`fsdecouple.core.decouple`, or None without usable surrogates."""
-        if self.method == "linear" or self.own:
-            return None  # the tables hold the N(N - 1) cross chi only
-        if self._tables is None:
+        if self.method == "linear":
+            return None
+        if self._tables is None:  # own-load chi (joint fit) on their input's grid, or none
             self._tables = TableDecoupler.from_chis(
-                self.k, self.chi.values(), self._exact, self.rotation,
+                self.k, [*self.chi.values(), *self.own.values()], self._exact, self.rotation,
                 self.full_scale_output) or False
         return self._tables or None
 

@@ -209,7 +209,7 @@ def _check_tables(model: CouplingErrorModel, source: str) -> None:
     (:func:`fsdecouple.core.decouple.usable`) is refused, never applied silently.
     """
     fs_out = model.full_scale_output
-    for c in model.chi.values():
+    for c in [*model.chi.values(), *model.own.values()]:
         gate = MAX_SURROGATE_ERROR * fs_out[c.output_axis]
         if not usable(c.surrogate, fs_out[c.output_axis]):
             continue  # the fast path leaves it to the exact kernel sum anyway

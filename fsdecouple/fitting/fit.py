@@ -185,9 +185,10 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
     u_fs = np.abs(omega.k) * np.asarray(settings.full_scale)
 
     def tables(axis: str) -> list[Chi]:
-        # the chi fed by one input axis share one grid (one index per input value);
-        # the tolerance is a fraction of the full-scale output of the chi's output
-        pair = [c for c in chis if labels[c.input_axis] == axis]
+        # the chi fed by one input axis share one grid (one index per input value), an
+        # own-load chi_aa of a joint fit included; the tolerance is a fraction of the
+        # full-scale output of the chi's output
+        pair = [c for c in [*chis, *own.values()] if labels[c.input_axis] == axis]
         # tangent tables have knots at the range's ends (extrapolation.table_interval)
         interval = tangent_interval if settings.extrapolation == "tangent" else table_interval
         lo, hi = interval(min(c.input_range[0] for c in pair), max(c.input_range[1] for c in pair))
@@ -221,7 +222,9 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         own = {c.name: c for _, cs in per_output for c in cs if c.output_axis == c.input_axis}
         if with_tables:
             with thread_pool(max(1, min(n_workers, layout.n))) as pool:
-                done = [c for pair in pool.map(tables, labels) for c in pair]
+                tabled = [c for pair in pool.map(tables, labels) for c in pair]
+            done = [c for c in tabled if c.output_axis != c.input_axis]
+            own = {c.name: c for c in tabled if c.output_axis == c.input_axis}
         else:
             done = chis
     elif n_workers > 1:
@@ -232,7 +235,7 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         chis = [one(j) for j in jobs]
         done = [c for axis in labels for c in tables(axis)] if with_tables else chis
     by_name = {c.name: c for c in done}
-    for c in done if with_tables else ():
+    for c in [*done, *own.values()] if with_tables else ():
         if not usable(c.surrogate, u_fs[c.output_axis]):
             warnings.append(
                 f"chi_{c.name}: its surrogate table reaches only "
@@ -254,7 +257,8 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         r2=dict(zip(labels, map(float, omega.r2), strict=True)),
         n_points=dict(zip(labels, map(int, omega.n), strict=True)),
         n_support_vectors={c.name: int(c.support_vectors.size) for c in [*chis, *own.values()]},
-        surrogate_max_error={n: c.surrogate.max_error for n, c in model.chi.items()}
+        surrogate_max_error={n: c.surrogate.max_error for n, c in [*model.chi.items(),
+                                                                   *model.own.items()]}
         if with_tables else None,
         gamma_before=before,
         gamma_after=after,
