@@ -108,7 +108,8 @@ def _preamble(plan: ExportPlan) -> str:
  * (eq. 4), each an eps-SVR kernel sum (eq. 10).  Inside its table a chi is a
  * cubic Hermite interpolant of that kernel sum; outside it, or for a
  * non-finite input, the exact kernel sum over the embedded support vectors.
-{_extrapolation(plan)} * A rotation to the reference frame, if the model has one, follows eq. (11).
+{_extrapolation(plan)}{_own_note(plan)}\
+ * A rotation to the reference frame, if the model has one, follows eq. (11).
  *
  * Use: in exactly one C file
  *     #define {P}IMPLEMENTATION
@@ -223,6 +224,15 @@ def _extrapolation(plan: ExportPlan) -> str:
     return ""  # extrapolation: kernel, the kernel sum everywhere
 
 
+def _own_note(plan: ExportPlan) -> str:
+    """The header's note on own-load chi_aa (a joint fit of rig rows), if the model has them."""
+    if not any(c.out == c.inp for c in plan.chis):
+        return ""
+    return (" * The model has own-load chi_aa(u_a) (a joint fit of rig rows that load several\n"
+            " * components): each output also subtracts chi_aa at its measured u_a, before\n"
+            " * dividing by k_aa, at every refinement step too; chi_axes lists them as {a, a}.\n")
+
+
 def _tangent(chi: ChiPlan) -> str:
     """C lines of chi's tangent continuation beyond its calibrated range, as the Python model."""
     e = getattr(chi.exact, "edges", None)
@@ -293,8 +303,10 @@ def _chi_call(plan: ExportPlan, j: int, ctype: str, arg: str) -> str:
 
 
 def _coupling(plan: ExportPlan, a: int, ctype: str, x: str) -> str:
-    """sum_(b != a) chi_ab(x_b), in the order of the model's chi."""
-    terms = [_chi_call(plan, j, ctype, f"{x}[{c.inp}]") for j, c in enumerate(plan.chis) if c.out == a]
+    """sum_(b != a) chi_ab(x_b), in the order of the model's chi; a joint fit's own-load
+    chi_aa (fitting/joint.py) always at the measured u_a."""
+    terms = [_chi_call(plan, j, ctype, f"{'u' if c.inp == c.out else x}[{c.inp}]")
+             for j, c in enumerate(plan.chis) if c.out == a]
     return " + ".join(terms) if terms else ("0.0f" if ctype == "float" else "0.0")
 
 

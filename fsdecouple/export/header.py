@@ -1,6 +1,7 @@
 """Export a model as one dependency-free C99 header (``fsdecouple export``).
 
-The header evaluates eq. (11), f_a = (u_a - sum_(b != a) chi_ab(u_b)) / k_aa,
+The header evaluates eq. (11), f_a = (u_a - sum_(b != a) chi_ab(u_b)) / k_aa (and a
+joint fit's own-load chi_aa(u_a), always at the measured u_a: fitting/joint.py),
 with each chi (eq. 4) as a cubic Hermite table inside its interval and as the
 exact kernel sum (eq. 10) over the embedded support vectors outside it, so it
 agrees with ``model.decouple`` everywhere.  This module decides every number the
@@ -101,10 +102,6 @@ def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",
     if model.method != "svr":
         raise ConfigError(f"the model decouples by the {model.method} calibration matrix; export "
                           "writes the coupling error model (eq. 11) only: refit with --method svr")
-    if getattr(model, "own", None):
-        raise ConfigError("the model has own-load chi (a joint fit of rig rows, chi "
-                          f"{', '.join(model.own)}); export writes the N(N - 1) cross chi of "
-                          "eq. (11) only, not yet these")
     rotation = None if settings.rotation is None else np.asarray(settings.rotation, dtype=float)
     fs = np.asarray(settings.full_scale, dtype=float)
     cal = np.asarray(model.calibrated_range, dtype=float)
@@ -117,15 +114,16 @@ def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",
         sensor=str(settings.sensor), load_unit=settings.load_unit,
         output_unit=settings.output_unit, version=version, model=model,
     )
-    for c in model.chi.values():
+    for c in [*model.chi.values(), *getattr(model, "own", {}).values()]:  # own chi_aa last
         plan.chis.append(ChiPlan(c.output_axis, c.input_axis, float(c.gamma),
                                  np.asarray(c.support_vectors, float), np.asarray(c.dual_coef, float),
                                  float(c.rho), float(c.input_scale), float(c.output_scale), c))
     if max_error is None:
         u_fs = np.abs(k) * fs  # the promise is a fraction of each output's full scale
-        for cp, c in zip(plan.chis, model.chi.values(), strict=True):
-            s = c.surrogate
-            if s is not None and s.max_error <= PROMISE / (2 * max(n - 1, 1)) * u_fs[c.output_axis]:
+        terms = plan.terms_per_output
+        for cp in plan.chis:
+            c, s = cp.exact, cp.exact.surrogate
+            if s is not None and s.max_error <= PROMISE / (2 * terms) * u_fs[c.output_axis]:
                 cp.lo, cp.hi, cp.table, cp.table_error = s.lo, s.hi, s.coefficients(), s.max_error
     else:
         # float: the measured bound is FLOAT_SAFETY x (table + rounding error), so the
@@ -195,16 +193,17 @@ def exact_forces(plan: ExportPlan, u: np.ndarray) -> np.ndarray:
     if plan.refine == 0:
         return plan.model.decouple(u, exact=True)
     x = u
-    for _ in range(plan.refine):  # p_b <- u_b - sum_(c != b) chi_bc(p_c)
-        x = u - _coupling(plan, x, lambda c, v: c.exact(v))
-    g = (u - _coupling(plan, x, lambda c, v: c.exact(v))) * (1.0 / plan.k)
+    for _ in range(plan.refine):  # p_b <- u_b - sum_(c != b) chi_bc(p_c) - chi_bb(u_b)
+        x = u - _coupling(plan, x, lambda c, v: c.exact(v), u=u)
+    g = (u - _coupling(plan, x, lambda c, v: c.exact(v), u=u)) * (1.0 / plan.k)
     return g if plan.rotation is None else g @ plan.rotation.T
 
 
-def _coupling(plan: ExportPlan, x: np.ndarray, chi, dtype=float) -> np.ndarray:
+def _coupling(plan: ExportPlan, x: np.ndarray, chi, dtype=float, u=None) -> np.ndarray:
+    """sum_b chi_ab(x_b) per output a; an own-load chi_aa at ``u`` (the measured outputs)."""
     e = np.zeros(x.shape, dtype=dtype)
     for c in plan.chis:
-        e[:, c.out] += chi(c, x[:, c.inp])
+        e[:, c.out] += chi(c, (x if u is None or c.out != c.inp else u)[:, c.inp])
     return e
 
 
@@ -226,7 +225,7 @@ def emulate_float(plan: ExportPlan, u: np.ndarray) -> np.ndarray:
         return np.where(inside, tab, out)
 
     def coupling(x):  # the C adds each output's chi left to right, in the model's order
-        return _coupling(plan, x, chi, f32)
+        return _coupling(plan, x, chi, f32, u=u)
 
     x = u
     for _ in range(plan.refine):

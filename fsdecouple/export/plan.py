@@ -69,6 +69,11 @@ class ExportPlan:
     model: Any = None  # the model exported: the reference of every check
 
     @property
+    def terms_per_output(self) -> int:
+        """Chi summed into one output: N - 1 cross chi, and an own-load chi_aa if any."""
+        return max([sum(c.out == a for c in self.chis) for a in range(self.n)] + [1])
+
+    @property
     def table_bytes(self) -> int:
         size = 4 if self.precision == "float" else 8
         return sum(c.table.size * size for c in self.chis if c.table is not None)
