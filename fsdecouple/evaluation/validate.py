@@ -103,6 +103,7 @@ def validate(
     if model_path is not None:
         model = load_model(model_path)
     settings = settings or model.settings
+    model.layout.one_output_each("validate")
     if settings.layout != model.layout:
         raise InputError(f"the config names components {', '.join(settings.layout.loads)}, the "
                          f"model {', '.join(model.layout.loads)}; use the calibration's config")

@@ -98,6 +98,7 @@ def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",
     if n > MAX_CHANNELS:
         raise ConfigError(f"the model has {n} channels; the status word holds at most {MAX_CHANNELS}")
     settings = model.settings
+    model.layout.one_output_each("export")
     doc = _model_document(model)
     if model.method != "svr":
         raise ConfigError(f"the model decouples by the {model.method} calibration matrix; export "

@@ -89,11 +89,13 @@ def fit_tables(model) -> list:
               caption=f"beyond the input range: {model.settings.extrapolation} (extrapolation); "
                       f"zero offsets: {model.settings.zero_method}; refinement steps K = "
                       f"{model.settings.refine}")
-    for col in ("chi", "input", "support vectors", f"input range [{units.output}]"):
+    gauges = getattr(model, "projection", None) is not None  # M > N: inputs v = P u (gauges.py)
+    for col in ("chi", "input", "support vectors", f"input range [{'load' if gauges else units.output}]"):
         c.add_column(col, justify="right")
     span = "{:+.4f} .. {:+.4f}" if volts else "{:+.6g} .. {:+.6g}"
     for name, chi in model.chi.items():
-        c.add_row(f"chi_{name}", layout.outputs[chi.input_axis],
+        c.add_row(f"chi_{name}", f"{layout.labels[chi.input_axis]}_ls" if gauges
+                  else layout.outputs[chi.input_axis],
                   f"{chi.support_vectors.size} / {chi.n_points}",
                   span.format(*chi.input_range))
     g = Table(title="Interference error gamma (eq. 12) on the calibration data, % F.S.")

@@ -55,14 +55,6 @@ def test_init_fit_and_apply_on_a_rig_file(tmp_path):
     assert (np.abs(got - f) / FULL_SCALE).max() < 0.005
 
 
-def test_eight_gauges_are_refused_in_one_line(tmp_path):
-    invoke(["simulate", str(tmp_path), "--rig", "lever-arm", "--gauges", "8"])
-    res = invoke(["init", str(tmp_path / "calibration.csv"), "-o", str(tmp_path / "c.yaml")],
-                 code=2)
-    assert "more outputs than components (M > N) is not supported yet" in res.stderr
-    assert not (tmp_path / "c.yaml").exists()
-
-
 @pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_validate_scores_a_rig_file_with_its_lever_arm_rows(tmp_path):
     """validate labels a lever-arm row by its moment, as fit does: every component keeps a
