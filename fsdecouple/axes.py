@@ -89,8 +89,8 @@ class Layout:
         if self.overdetermined:
             from .errors import InputError
 
-            raise InputError(f"{what}: {self.m} outputs for {self.n} components (M > N): fit and "
-                             f"apply handle them, {what} not yet (docs/rigs.md)")
+            raise InputError(f"{what}: {self.m} outputs for {self.n} components (M > N): fit, "
+                             f"apply, validate and export handle them, {what} not yet (docs/rigs.md)")
 
     @property
     def is_default(self) -> bool:

@@ -48,9 +48,11 @@ _NOT_FOR_VALIDATION = ("uses a different load grid than repetition", "loads reac
 
 
 def in_calibrated_range(model: CouplingErrorModel, u: np.ndarray) -> np.ndarray:
-    """Rows whose outputs all lie in the calibrated range, widened as ``apply`` widens it."""
+    """Rows whose outputs all lie in the calibrated range, widened as ``apply`` widens it
+    (M > N outputs: their least-squares loads v = P u, fitting/gauges.py)."""
     lo, hi = model.extrapolation_limits().T
-    return ((u >= lo) & (u <= hi)).all(axis=1)
+    v = model.project(u)
+    return ((v >= lo) & (v <= hi)).all(axis=1)
 
 
 def force_errors(forces: np.ndarray, loads: np.ndarray, full_scale) -> dict[str, float]:
@@ -103,7 +105,6 @@ def validate(
     if model_path is not None:
         model = load_model(model_path)
     settings = settings or model.settings
-    model.layout.one_output_each("validate")
     if settings.layout != model.layout:
         raise InputError(f"the config names components {', '.join(settings.layout.loads)}, the "
                          f"model {', '.join(model.layout.loads)}; use the calibration's config")

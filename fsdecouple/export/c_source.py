@@ -108,7 +108,7 @@ def _preamble(plan: ExportPlan) -> str:
  * (eq. 4), each an eps-SVR kernel sum (eq. 10).  Inside its table a chi is a
  * cubic Hermite interpolant of that kernel sum; outside it, or for a
  * non-finite input, the exact kernel sum over the embedded support vectors.
-{_extrapolation(plan)}{_own_note(plan)}\
+{_extrapolation(plan)}{_own_note(plan)}{_projection_note(plan)}\
  * A rotation to the reference frame, if the model has one, follows eq. (11).
  *
  * Use: in exactly one C file
@@ -118,7 +118,7 @@ def _preamble(plan: ExportPlan) -> str:
  * Do not compile with -ffast-math: the status bits rely on IEEE NaN and infinity.
 {precision_note} *
  * uint32_t {fn}
- *   u: {plan.n} zero-corrected prime voltages [{P}OUTPUT_UNIT] (tare/zero already removed,
+ *   u: {plan.m} zero-corrected outputs [{P}OUTPUT_UNIT] (tare/zero already removed,
  *      as model.decouple takes them); f: {n} forces [{P}LOAD_UNIT].  Returns a status
  *   bitmask, 0 when every chi came from its table and every input lies in the
  *   calibrated range:
@@ -150,7 +150,7 @@ extern "C" {{
 #endif
 
 #define {P}N_COMPONENTS {n}
-#define {P}N_OUTPUTS {n}
+#define {P}N_OUTPUTS {plan.m}
 #define {P}FORMAT_VERSION {plan.format_version}
 #define {P}MODEL_DIGEST {c_string(plan.digest)}
 #define {P}SENSOR {c_string(plan.sensor)}
@@ -186,6 +186,7 @@ extern const int {p}chi_axes[{len(plan.chis)}][2];
 extern const double {p}table_range[{len(plan.chis)}][2];
 extern const int {p}table_intervals[{len(plan.chis)}];
 extern const double {p}rotation[{n}][{n}];
+{f"extern const double {p}projection[{n}][{plan.m}];" + chr(10) if plan.projection is not None else ""}\
 
 uint32_t {fn};
 int {p}selftest(void);
@@ -213,6 +214,8 @@ def _implementation_start(plan: ExportPlan) -> str:
         f"const int {p}table_intervals[{m}] = "
         f"{{{', '.join(str(0 if c.table is None else c.table.shape[1]) for c in plan.chis)}}};\n",
         f"const double {p}rotation[{n}][{n}] = {{{', '.join(map(row, rotation))}}};\n",
+        "" if plan.projection is None else
+        f"const double {p}projection[{n}][{plan.m}] = {{{', '.join(map(row, plan.projection))}}};\n",
     ])
 
 
@@ -222,6 +225,15 @@ def _extrapolation(plan: ExportPlan) -> str:
         return (" * Beyond its calibrated input range a chi continues along its tangent at\n"
                 " * the range's edge (the model's `extrapolation: tangent`).\n")
     return ""  # extrapolation: kernel, the kernel sum everywhere
+
+
+def _projection_note(plan: ExportPlan) -> str:
+    """The header's note on M > N outputs (fitting/gauges.py), if the model has them."""
+    if plan.projection is None:
+        return ""
+    return (f" * The sensor has {plan.m} outputs for {plan.n} components: u holds all {plan.m}, and\n"
+            f" * eq. (11) acts on their least-squares loads v = P u ({plan.prefix}projection), the\n"
+            " * range bits b < N_COMPONENTS on v_b; the saturation limits on the raw u.\n")
 
 
 def _own_note(plan: ExportPlan) -> str:
@@ -313,17 +325,22 @@ def _coupling(plan: ExportPlan, a: int, ctype: str, x: str) -> str:
 def _decouple(plan: ExportPlan, ctype: str) -> str:
     p, n = plan.prefix, plan.n
     fmt = numf if ctype == "float" else num
-    name = f"{p}decouple_f(const float *u, float *f)" if ctype == "float" \
-        else f"{p}decouple(const double *u, double *f)"
+    y = "u" if plan.projection is None else "y"  # M > N: the raw outputs y, then u = v = P y
+    name = f"{p}decouple_f(const float *{y}, float *f)" if ctype == "float" \
+        else f"{p}decouple(const double *{y}, double *f)"
     lines = [f"uint32_t {name}", "{", "    uint32_t st = 0;"]
+    if plan.projection is not None:
+        lines.append(f"    {ctype} u[{n}];")
+        lines += [f"    u[{a}] = " + " + ".join(f"{fmt(plan.projection[a][j])} * y[{j}]"
+                                               for j in range(plan.m)) + ";" for a in range(n)]
     for b in range(n):
         lo, hi = plan.range_limits[b] if ctype == "double" else plan.range_limits_f[b]
         lines.append(f"    if (u[{b}] < {fmt(lo)} || u[{b}] > {fmt(hi)}) st |= (uint32_t)1 << {b};")
     for b, (lo, hi) in enumerate(plan.limits if ctype == "double" else plan.limits_f):
         if lo is not None:
-            lines.append(f"    if (u[{b}] <= {fmt(lo)} || u[{b}] >= {fmt(hi)}) "
+            lines.append(f"    if ({y}[{b}] <= {fmt(lo)} || {y}[{b}] >= {fmt(hi)}) "
                          f"st |= (uint32_t)1 << {BIT_SATURATED};")
-    finite = " || ".join(f"!isfinite(u[{b}])" for b in range(n))
+    finite = " || ".join(f"!isfinite({y}[{b}])" for b in range(plan.m))
     lines.append(f"    if ({finite}) st |= (uint32_t)1 << {BIT_INPUT_NOT_FINITE};")
     x = "u"
     if plan.refine > 0:
@@ -357,14 +374,14 @@ def _decouple(plan: ExportPlan, ctype: str) -> str:
 
 
 def _selftest(plan: ExportPlan) -> str:
-    p, n = plan.prefix, plan.n
+    p, n = plan.prefix, plan.n  # forces n; inputs plan.m (M > N: gauges)
     ctype = plan.precision
     fn = f"{p}decouple_f" if ctype == "float" else f"{p}decouple"
     m = len(plan.selftest_u)
     body = f"""/* Reference vectors: inputs, forces of the exact Python model (NaN rows are only
  * checked for their status), expected status, and the tolerance per component:
  * {plan.selftest_note} */
-{_array(f"{p}st_u", plan.selftest_u, _num_or_nan, n)}\
+{_array(f"{p}st_u", plan.selftest_u, _num_or_nan, plan.m)}\
 {_array(f"{p}st_f", plan.selftest_f, _num_or_nan, n)}\
 {_array(f"{p}st_tol", plan.selftest_tol, num, n)}\
 static const uint32_t {p}st_status[{m}] = {{{", ".join(f"{s}u" for s in plan.selftest_status)}}};
@@ -374,8 +391,8 @@ int {p}selftest(void)
     int bad = 0;
     size_t r, a;
     for (r = 0; r < {m}; ++r) {{
-        {ctype} u[{n}], f[{n}];
-        for (a = 0; a < {n}; ++a) u[a] = ({ctype}){p}st_u[{n} * r + a];
+        {ctype} u[{plan.m}], f[{n}];
+        for (a = 0; a < {plan.m}; ++a) u[a] = ({ctype}){p}st_u[{plan.m} * r + a];
         if ({fn}(u, f) != {p}st_status[r]) ++bad;
         for (a = 0; a < {n}; ++a) {{
             const double want = {p}st_f[{n} * r + a];

@@ -98,7 +98,6 @@ def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",
     if n > MAX_CHANNELS:
         raise ConfigError(f"the model has {n} channels; the status word holds at most {MAX_CHANNELS}")
     settings = model.settings
-    model.layout.one_output_each("export")
     doc = _model_document(model)
     if model.method != "svr":
         raise ConfigError(f"the model decouples by the {model.method} calibration matrix; export "
@@ -110,10 +109,13 @@ def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",
         prefix=prefix, precision=precision, n=n, k=k, chis=[], rotation=rotation,
         full_scale=fs, calibrated_range=cal,
         range_limits=np.asarray(model.extrapolation_limits()),  # exactly apply's "extrapolated"
-        limits=_limits(model, limits, n), refine=int(getattr(settings, "refine", 0) or 0),
+        limits=_limits(model, limits, n if getattr(model, "projection", None) is None
+                       else model.projection.shape[1]),
+        refine=int(getattr(settings, "refine", 0) or 0),
         digest=str(doc["integrity"]["digest"]), format_version=int(doc["format_version"]),
         sensor=str(settings.sensor), load_unit=settings.load_unit,
         output_unit=settings.output_unit, version=version, model=model,
+        projection=getattr(model, "projection", None),
     )
     for c in [*model.chi.values(), *getattr(model, "own", {}).values()]:  # own chi_aa last
         plan.chis.append(ChiPlan(c.output_axis, c.input_axis, float(c.gamma),
@@ -190,9 +192,10 @@ def exact_forces(plan: ExportPlan, u: np.ndarray) -> np.ndarray:
     Without refinement steps this is ``model.decouple(u, exact=True)`` itself;
     with them (``settings.refine``), the fixed point on the prime voltages first.
     """
-    u = np.asarray(u, dtype=float).reshape(-1, plan.n)
+    u = np.asarray(u, dtype=float).reshape(-1, plan.m)
     if plan.refine == 0:
         return plan.model.decouple(u, exact=True)
+    u = plan.project(u)  # M > N: v = P u, then eq. (11) on v
     x = u
     for _ in range(plan.refine):  # p_b <- u_b - sum_(c != b) chi_bc(p_c) - chi_bb(u_b)
         x = u - _coupling(plan, x, lambda c, v: c.exact(v), u=u)
@@ -211,7 +214,7 @@ def _coupling(plan: ExportPlan, x: np.ndarray, chi, dtype=float, u=None) -> np.n
 def emulate_float(plan: ExportPlan, u: np.ndarray) -> np.ndarray:
     """``fsd_decouple_f`` in numpy float32, operation for operation as export_c writes it."""
     f32 = np.float32
-    u = np.asarray(u, dtype=f32).reshape(-1, plan.n)
+    u = plan.project(np.asarray(u, dtype=f32).reshape(-1, plan.m), f32)  # v = P u in float
 
     def chi(c: ChiPlan, v: np.ndarray) -> np.ndarray:
         out = c.exact(v.astype(float)).astype(f32)  # kernel sum in double, as the C
@@ -259,7 +262,8 @@ def float_bound(plan: ExportPlan, seed: int = 0) -> float:
              for _ in range(2)]
     corners = np.array(np.meshgrid(*plan.calibrated_range)).reshape(plan.n, -1).T
     u = np.concatenate([*dense, lo + (hi - lo) * rng.random((FLOAT_RANDOM_POINTS, plan.n)), corners])
-    u32 = u.astype(np.float32)
+    u32 = plan.lift(u).astype(np.float32)  # M > N: outputs whose v = P u spans the range
+    u = u32.astype(float)
     err = np.abs(emulate_float(plan, u32).astype(float) - exact_forces(plan, u)) / plan.full_scale
     return FLOAT_SAFETY * float(err.max())
 
@@ -278,19 +282,20 @@ def expected_status(plan: ExportPlan, u: np.ndarray, f: np.ndarray) -> int:
     )
 
     st = 0
+    for b, (lo, hi) in enumerate(plan.limits):  # the raw channels
+        if lo is not None and (u[b] <= lo or u[b] >= hi):
+            st |= 1 << BIT_SATURATED
+    if not np.isfinite(u).all():
+        st |= 1 << BIT_INPUT_NOT_FINITE
+    u = plan.project(np.asarray(u, dtype=float).reshape(1, -1))[0]  # M > N: v = P u
     for b in range(plan.n):
         if u[b] < plan.range_limits[b, 0] or u[b] > plan.range_limits[b, 1]:
             st |= 1 << b
-        lo, hi = plan.limits[b]
-        if lo is not None and (u[b] <= lo or u[b] >= hi):
-            st |= 1 << BIT_SATURATED
     for c in plan.chis:
         if c.table is not None:
             t = (u[c.inp] - c.lo) * c.inv_step
             if not 0 <= t < c.table.shape[1]:
                 st |= 1 << BIT_OUTSIDE_TABLE
-    if not np.isfinite(u).all():
-        st |= 1 << BIT_INPUT_NOT_FINITE
     if not (np.abs(f) <= FORCE_LIMIT * np.abs(plan.full_scale).max()).all():
         st |= 1 << BIT_NOT_FINITE  # apply's not_finite: NaN, inf or beyond FORCE_LIMIT x F.S.
     if plan.refine > 0:  # the refinement's settle test, as decouple.settled decides it
@@ -314,8 +319,8 @@ def _selftest(plan: ExportPlan) -> None:
         far = [max([c.hi for c in plan.chis if c.table is not None and c.inp == b], default=-np.inf)
                for b in range(plan.n)]
         rows.append(np.maximum(hi + 0.6 * (hi - lo), np.asarray(far) + 0.1 * (hi - lo)))
-    rows.append(np.full(plan.n, np.nan))
-    u = np.array(rows).astype(np.float32).astype(float)  # exact in float too
+    u = plan.lift(np.array(rows))  # M > N: outputs whose v = P u are these rows
+    u = np.vstack([u, np.full(plan.m, np.nan)]).astype(np.float32).astype(float)  # float-exact
     with np.errstate(invalid="ignore"):
         f = exact_forces(plan, u)
     plan.selftest_u, plan.selftest_f = u, f

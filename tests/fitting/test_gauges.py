@@ -82,8 +82,8 @@ def test_decoupling_is_the_least_squares_solution_of_the_forward_models(tmp_path
     assert np.sqrt((resid ** 2).mean(axis=0)).max() < 3e-3  # noise 0.1 % F.S. per reading
 
 
-@pytest.mark.slow  # about 2 s: a fit through the CLI and six commands
-def test_fit_and_apply_through_the_cli_and_the_rest_refuses_in_one_line(tmp_path):
+@pytest.mark.slow  # about 3 s: a fit through the CLI and six commands
+def test_fit_apply_validate_and_export_through_the_cli_and_the_rest_refuse_in_one_line(tmp_path):
     invoke(["simulate", str(tmp_path), "--rig", "lever-arm", "--gauges", "8"])
     cal, cfg, model = tmp_path / "calibration.csv", tmp_path / "cfg.yaml", tmp_path / "m.json"
     invoke(["init", str(cal), "-o", str(cfg)])
@@ -100,15 +100,19 @@ def test_fit_and_apply_through_the_cli_and_the_rest_refuses_in_one_line(tmp_path
     got = np.array([[float(x) for x in row[GAUGES:GAUGES + 6]] for row in rows[1:]])
     assert (np.abs(got - f) / FULL_SCALE).max() < 0.005  # its own rows, within noise
     assert {row[-1] for row in rows[1:]} == {"ok"}
-    for args, what in ((["validate", model, cal, "-c", cfg], "validate"),
-                       (["cv", cal, "-c", cfg, "-o", tmp_path / "cv.json"], "cv"),
+    # validate scores it (here on its own calibration rows: within noise, none extrapolated)
+    doc = json.loads(invoke(["validate", str(model), str(cal), "-c", str(cfg), "--json"]).stdout)
+    worst = max(r["value"] for r in doc["records"] if r["method"] == "model"
+                and r["metric"] == "max_error")
+    assert worst < 0.005 and {r["range"] for r in doc["records"]} == {"calibrated"}
+    invoke(["export", str(model), "-o", str(tmp_path / "d.h")])  # tests/export: compiled
+    for args, what in ((["cv", cal, "-c", cfg, "-o", tmp_path / "cv.json"], "cv"),
                        (["report", model, "-o", tmp_path / "r.html"], "report"),
-                       (["export", model, "-o", tmp_path / "d.h"], "export"),
                        (["certificate", model, cal, "-o", tmp_path / "c.html"], "certificate")):
         res = invoke([str(a) for a in args], code=2)
         assert_one_line_error(res, f"{what}: 8 outputs for 6 components (M > N)")
     assert sorted(p.name for p in tmp_path.iterdir()) == [
-        "calibration.csv", "cfg.yaml", "forces.csv", "log.csv", "m.json"]
+        "calibration.csv", "cfg.yaml", "d.h", "forces.csv", "log.csv", "m.json"]
 
 
 def test_the_model_file_keeps_the_projection_and_refuses_a_wrong_one(tmp_path):
