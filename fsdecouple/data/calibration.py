@@ -39,6 +39,8 @@ class CalibrationSet:
         Things a technician should look at; the data are still usable.
     layout : Layout
         The sensor's components (axes.py): sweep labels, load and output columns.
+    noise : ndarray, optional
+        Pose logs (data/poses.py): sigma of each averaged output, from the samples' scatter.
     """
 
     points: pd.DataFrame
@@ -48,6 +50,7 @@ class CalibrationSet:
     warnings: tuple[str, ...] = field(default=())
     excluded: tuple[str, ...] = ()
     layout: Layout = DEFAULT
+    noise: np.ndarray | None = None  # pose logs: sigma of each averaged output (poses.py)
 
     @property
     def source(self) -> str:
@@ -207,7 +210,7 @@ def load_calibration(path: str | Path, settings: Settings, exclude=(),
     cs = from_table(table, settings, read.files, [*read.skipped, *dropped], combined)
     hidden = tuple(f"{f}: hidden file, not read as a repetition" for f in read.hidden)
     hidden += read.warnings
-    cs = replace(cs, excluded=tuple(dropped))
+    cs = replace(cs, excluded=tuple(dropped), noise=read.noise)
     return replace(cs, warnings=hidden + cs.warnings) if hidden else cs
 
 

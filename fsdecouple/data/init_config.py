@@ -42,6 +42,7 @@ from .columns import (
     read_rows,
     shown,
 )
+from .poses import TIMESTAMP_NAMES
 
 COMPONENTS = ("fx", "fy", "fz", "mx", "my", "mz")
 _LOAD = re.compile(r"(?:f|force|load)([xyz])|([xyz])(?:force|load)")
@@ -50,7 +51,7 @@ _NUMBERED = re.compile(r"([a-zµμ]+)(\d+)")
 # an applied (reference) load: a component's name after or before one of these words
 _APPLIED = re.compile(r"(?:known|applied|reference|ref|true|load|nominal)(\w+)"
                       r"|(\w+?)(?:ref|reference|applied|known|true)")
-_TIMESTAMP = {"time", "timestamp", "datetime", "date", "t", "timesec", "elapsed", "elapsedtime"}
+_TIMESTAMP = TIMESTAMP_NAMES  # poses.py: a timestamp column makes a file a pose log
 _MOMENT_HINTS = {u.lower(): u for u in MOMENT_UNITS}
 _BRACKETS = re.compile(r"[\[(]([^\])]*)[\])]")
 

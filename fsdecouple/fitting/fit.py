@@ -202,7 +202,8 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         # eq. (11) rearranged, fitted from multi-load rows by backfitting (joint.py)
         u, f = calib.voltages, calib.forces
         fn, un = f / np.asarray(settings.full_scale), u / scale
-        svr = joint_svr(settings.svr, fn, un, a)
+        sigma = None if calib.noise is None else float(calib.noise[a] / scale[a])  # pose logs
+        svr = joint_svr(settings.svr, fn, un, a, sigma)
         k, fitted = backfit(fn, un, a, lambda x, y: _svr_chi(fit_svr(x, y, svr)), own=True)
         out = []
         for b, c in fitted.items():
@@ -306,7 +307,7 @@ def _establish_gauges(calib: CalibrationSet, settings: Settings, workers: int | 
     svr = replace(settings.svr, tolerance=min(settings.svr.tolerance, SOLVE_FRACTION))
     n_workers = max(1, workers or min(layout.m, os.cpu_count() or 1))
     with thread_pool(n_workers) as pool:
-        v, merged, _ = fit_forward(f, u, fs, p, k_fwd, svr, fit_svr, pool.map)
+        v, merged, _ = fit_forward(f, u, fs, p, k_fwd, svr, fit_svr, pool.map, calib.noise)
     chis = [Chi(layout.chi_name(a, b), gamma, sv, coef, rho, float(fs[b]), float(fs[a]),
                 (float(v[:, b].min()), float(v[:, b].max())), len(v),
                 extrapolation=settings.extrapolation, pair=(a, b))

@@ -103,14 +103,14 @@ def backfit_output(residual: np.ndarray, x: np.ndarray, fit_chi, *, iterations: 
 
 
 def fit_forward(f: np.ndarray, u: np.ndarray, full_scale, p: np.ndarray, k: np.ndarray, svr,
-                fit_svr, map_=map) -> tuple[np.ndarray, dict[tuple[int, int], tuple], list]:
+                fit_svr, map_=map, noise=None) -> tuple[np.ndarray, dict[tuple[int, int], tuple], list]:
     """The chi of every output, merged by eq. (11): (v, {(a, b): (gamma, sv, coef, rho)},
     per-output chi).
 
     Merged in normalised units: chi'_ab(v_b) = F_FS,a (sum_i coef_i exp(-gamma (v_b / F_FS,b
     - sv_i)^2) - rho), the a-th row of K^+ chi_.b.  Per output j, chi_jb of v_b / F_FS,b in
     units of output j's full-scale output (:func:`gauge_scale`), as fitted.  ``map_``: a
-    pool's map, for threads.
+    pool's map, for threads; ``noise``: each output's sigma from a pose log, if measured.
     """
     fs = np.asarray(full_scale, dtype=float)
     v = np.asarray(u, dtype=float) @ p.T
@@ -120,7 +120,7 @@ def fit_forward(f: np.ndarray, u: np.ndarray, full_scale, p: np.ndarray, k: np.n
     kn = k * fs / ufs[:, None]
 
     def one(j: int) -> list:
-        s = joint_svr(svr, fn, un, j)
+        s = joint_svr(svr, fn, un, j, None if noise is None else float(noise[j] / ufs[j]))
         return backfit_output(un[:, j] - fn @ kn[j], x, lambda xb, y: _Svr(fit_svr(xb, y, s)))
 
     per_output = list(map_(one, range(u.shape[1])))
