@@ -424,6 +424,9 @@ class CouplingErrorModel:
         tables = self.fast_decoupler()
         if tables is not None and self.projection is None:
             return tables.one(refine=refine)
+        if tables is not None:  # M > N: v = P u in plain Python, then the tables
+            one, rows = tables.one(refine=refine), [tuple(r) for r in self.projection.tolist()]
+            return lambda *u: one(*(sum(p * x for p, x in zip(r, u, strict=True)) for r in rows))
 
         def exact_one(*u: float) -> tuple[float, ...]:
             return tuple(self.decouple(list(u), exact=True, refine=refine).tolist())

@@ -70,7 +70,9 @@ def fit_tables(model) -> list:
     rep = model.report
     units = model.settings.units
     volts = units == Units()  # the paper's figures keep their paper-like format
-    t = Table(title=f"Non-coupling functions omega (eq. 2), sensor {model.settings.sensor}")
+    t = Table(title=("Least-squares loads v = P u of M > N outputs (docs/rigs.md)" if getattr(
+        model, "projection", None) is not None else "Non-coupling functions omega (eq. 2)")
+        + f", sensor {model.settings.sensor}")
     mixed = bool(units.loads)  # forces and moments: each row says its load unit
     slope, inverse_slope = ((f"{units.output}/load", f"load/{units.output}") if mixed
                             else (units.slope(), units.inverse_slope()))
