@@ -17,6 +17,7 @@ nonlinear a file is.  ``--rig quadratic`` is the stand-in for that file.
 
     python benchmarks/rig_heldout.py --seeds 0 1 2
     python benchmarks/rig_heldout.py --rig quadratic --seeds 0 1 2 --limit 0.85
+    python benchmarks/rig_heldout.py --gauges 8 --seeds 0 1 2    # M > N: eight gauges
 """
 
 from __future__ import annotations
@@ -117,6 +118,7 @@ def main(argv=None) -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--file", type=Path, help="a rig file instead of simulated ones")
     ap.add_argument("--rig", default="lever-arm", help="simulate --rig: lever-arm or quadratic")
+    ap.add_argument("--gauges", type=int, default=6, help="simulate --gauges: 8 for M > N")
     ap.add_argument("--limit", type=float, help="exit 1 when any file's ratio is above this")
     args = ap.parse_args(argv)
     ratios = []
@@ -126,7 +128,8 @@ def main(argv=None) -> None:
             work.mkdir()
             path = args.file
             if path is None:
-                run("simulate", str(work), "--rig", args.rig, "--seed", str(seed))
+                run("simulate", str(work), "--rig", args.rig, "--seed", str(seed),
+                    "--gauges", str(args.gauges))
                 path = work / "calibration.csv"
             r = heldout(path, work)
             ratios.append(r["ratio"])

@@ -75,6 +75,24 @@ class Layout:
         return len(self.labels)
 
     @property
+    def m(self) -> int:
+        """Output channels: n, or more (M > N: gauges that no component owns, fitting/gauges.py)."""
+        return len(self.outputs)
+
+    @property
+    def overdetermined(self) -> bool:
+        """More outputs than components (M > N): decoupled in the least-squares sense."""
+        return len(self.outputs) > len(self.labels)
+
+    def one_output_each(self, what: str) -> None:
+        """Refuse, in one line, M > N outputs where ``what`` reads one output per component."""
+        if self.overdetermined:
+            from .errors import InputError
+
+            raise InputError(f"{what}: {self.m} outputs for {self.n} components (M > N): fit, "
+                             f"apply, validate and export handle them, {what} not yet (docs/rigs.md)")
+
+    @property
     def is_default(self) -> bool:
         return self == DEFAULT
 

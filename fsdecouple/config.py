@@ -257,7 +257,7 @@ def _names(raw: Any, where: str) -> tuple[str, ...]:
 
 
 def _layout(raw: dict, source: str) -> tuple[tuple[str, ...], tuple[str, ...]] | None:
-    """``components`` and ``outputs``: the sensor's N loads and each one's prime output."""
+    """``components`` and ``outputs``: N loads and each one's prime output, or M > N outputs."""
     if "components" not in raw and "outputs" not in raw:
         return None
     if "components" not in raw or "outputs" not in raw:
@@ -266,9 +266,9 @@ def _layout(raw: dict, source: str) -> tuple[tuple[str, ...], tuple[str, ...]] |
                           "in the same order")
     comps = _names(raw["components"], f"{source}: components")
     outs = _names(raw["outputs"], f"{source}: outputs")
-    if len(comps) != len(outs):
+    if len(outs) < len(comps):
         raise ConfigError(f"{source}: outputs: {len(outs)} names for {len(comps)} components; "
-                          "each component has one prime output, in the same order")
+                          "each component has one prime output, in the same order, or more")
     if len(comps) < 2:
         raise ConfigError(f"{source}: components: a coupling model needs at least 2 components")
     clash = sorted({c.lower() for c in comps} & {o.lower() for o in outs})

@@ -165,6 +165,19 @@ def sample_model(tmp_path_factory):
     return path
 
 
+@pytest.fixture(scope="session")
+def rig_model(tmp_path_factory):
+    """A joint fit with own-load chi and their tables: the quadratic rig stand-in (issue 22)."""
+    from fsdecouple.data.init_config import init_config
+    from fsdecouple.sim.rig import write_rig
+
+    out = tmp_path_factory.mktemp("rig")
+    path = write_rig(out, seed=0, kind="quadratic")[0]
+    init_config(path, out / "cfg.yaml")
+    rig_settings = load_config(out / "cfg.yaml")
+    return fit(load_calibration(path, rig_settings), rig_settings)
+
+
 def assert_one_line_error(r, *needles) -> str:
     """The error contract: one line on stderr starting 'error:', no traceback, the needles in it."""
     msg = r.stderr.strip()

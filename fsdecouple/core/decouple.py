@@ -5,7 +5,8 @@
 with omega_a^-1(v) = v / k_aa (eq. 13 form).  N is the number of components
 (len(k)); nothing here knows their names.  A joint fit of rig rows may add an own-load
 chi_aa(u_a) (:mod:`fsdecouple.fitting.joint`): it is subtracted like the others, always at
-the measured u_a (it models the outputs as measured), and only the exact path has it.
+the measured u_a (it models the outputs as measured), on every path; its table shares
+input a's grid, h_a = -chi_aa / k_a added to u_a / k_a before the cross terms.
 
 * :func:`decouple_exact` evaluates every chi as given (the SVR's kernel sum, or
   any other callable such as the RBF baseline's networks);
@@ -174,7 +175,8 @@ class TableDecoupler:
     k : ndarray, shape (N,)
         Slopes k_aa of eq. (2).
     surrogates : mapping of (a, b) to ChiSurrogate
-        The table of every chi_ab; the N - 1 tables of one input b share a grid.
+        The table of every chi_ab; the N - 1 tables of one input b share a grid.  With
+        an own-load chi_aa of a joint fit, (a, a) too, on input a's grid (every a or none).
     exact : callable
         ``exact(u, rotate, refine, converged) -> f`` for rows the tables do not
         cover (:func:`decouple_exact` with the same K).
@@ -214,6 +216,15 @@ class TableDecoupler:
         for b, per_input in enumerate(coefs):
             for m, c in enumerate(per_input):
                 self.tab[b, m, :len(c)] = c
+        # own-load chi_aa (joint.py): h_a = -chi_aa / k_a on input a's grid, at the measured u_a
+        self.has_own = (0, 0) in surrogates
+        self.own = np.zeros((n, max(count), 4))
+        self.own_rows: list[list[tuple[float, ...]]] = [[] for _ in range(n)]
+        if self.has_own:
+            for a in range(n):
+                c = surrogates[(a, a)].coefficients() * -self.inv_k[a]
+                self.own[a, :c.shape[1]] = c.T
+                self.own_rows[a] = [tuple(r) for r in c.T.tolist()]
         self.lo = np.array(lo)
         self.inv_step = np.array(inv)
         self.intervals = np.array(count, dtype=float)
@@ -226,14 +237,19 @@ class TableDecoupler:
                   ) -> TableDecoupler | None:
         """From chi objects with ``output_axis``, ``input_axis`` and ``surrogate``.
 
-        ``full_scale_output`` (N,): |k_a| F_FS,a, to which the gate is relative.
+        ``full_scale_output`` (N,): |k_a| F_FS,a, to which the gate is relative.  Own-load
+        chi_aa (output = input) are given for every a or for none.
         """
         tables = {(c.output_axis, c.input_axis): c.surrogate for c in chis}
         n = len(k)
         u_fs = np.ones(n) if full_scale_output is None else np.asarray(full_scale_output, float)
+        own = sum((a, a) in tables for a in range(n))
+        if own not in (0, n):
+            return None
         for b in range(n):
-            fed = [tables.get((a, b)) for a in range(n) if a != b]
-            if not all(usable(tables.get((a, b)), u_fs[a]) for a in range(n) if a != b):
+            feeds = [a for a in range(n) if a != b or own]  # the own chi_bb shares b's grid
+            fed = [tables.get((a, b)) for a in feeds]
+            if not all(usable(tables.get((a, b)), u_fs[a]) for a in feeds):
                 return None
             if len({(s.lo, s.hi, s.intervals) for s in fed}) != 1:
                 return None  # the evaluator shares one index per input
@@ -247,7 +263,8 @@ class TableDecoupler:
 
         inside, settled = np.empty(len(u), dtype=bool), np.empty(len(u), dtype=bool)
         eq11_rows(u, self.lo, self.inv_step, self.intervals, self.inv_k, self.k, self.step_tol,
-                  self.tab, self.sum_b, self.sum_m, int(refine), out, inside, settled)
+                  self.tab, self.sum_b, self.sum_m, int(refine), self.own, self.has_own, out,
+                  inside, settled)
         if rotate and self.rotation is not None:
             out[:] = out @ self.rotation.T
         if converged is not None:
@@ -322,6 +339,7 @@ class TableDecoupler:
         """
         rot = None if self.rotation is None or not rotate else \
             [tuple(map(float, r)) for r in self.rotation]
+        own = self.own_rows if self.has_own else None
         exact = self._exact
         env = {
             "rows": self.rows, "lo": [float(v) for v in self.lo],
@@ -331,27 +349,33 @@ class TableDecoupler:
             "kk": [float(v) for v in self.k], "tol": [float(v) for v in self.step_tol],
             "refine": int(refine), "nan": float("nan"),
         }
+        if own is not None:
+            env["own"] = own
         namespace: dict = {}
-        exec(compile(one_vector_source(self.n, rot is not None), "<fsdecouple.core.decouple.one>",
-                     "exec"), namespace)
+        exec(compile(one_vector_source(self.n, rot is not None, own is not None),
+                     "<fsdecouple.core.decouple.one>", "exec"), namespace)
         return namespace["make"](**env)
 
 
-def one_vector_source(n: int, rotate: bool) -> str:
+def one_vector_source(n: int, rotate: bool, own: bool = False) -> str:
     """Python source of the one-vector evaluator of :meth:`TableDecoupler.one` for N = n.
 
     The statements follow :meth:`TableDecoupler._block` step by step: the table
     index ``t = (x_b - lo_b) * inv_step_b``, a Horner step per chi, then
     ``f_a = u_a / k_a + sum g_ab`` in :func:`_sum_order`.  ``make`` returns
     ``decouple_one`` (x = u) for ``refine == 0``, else ``decouple_refined`` (x = p
-    after ``refine`` steps p_a = k_a f_a, then the settled test).
+    after ``refine`` steps p_a = k_a f_a, then the settled test).  With ``own``, the
+    own-load terms h_a = -chi_aa(u_a) / k_a at the measured u, first, from ``own[a]``.
     """
     u, p, f = ([f"{c}{b}" for b in range(n)] for c in "upf")
     inside = " and ".join(f"0.0 <= t{b} < n{b}" for b in range(n))
-    lines = ["def make(rows, lo, inv, cnt, ik, rot, exact, kk, tol, refine, nan):"]
+    lines = ["def make(rows, lo, inv, cnt, ik, rot, exact, kk, tol, refine, nan"
+             + (", own):" if own else "):")]
     for b in range(n):
         lines += [f"    r{b}, l{b}, i{b}, n{b}, k{b} = rows[{b}], lo[{b}], inv[{b}], cnt[{b}], ik[{b}]",
                   f"    K{b}, s{b} = kk[{b}], tol[{b}]"]
+        if own:
+            lines.append(f"    o{b} = own[{b}]")
     if rotate:
         lines.append(f"    ({', '.join(f'R{a}' for a in range(n))},) = rot")
 
@@ -365,10 +389,21 @@ def one_vector_source(n: int, rotate: bool) -> str:
             out += [f"{pad}i = int(t{b})", f"{pad}s = t{b} - i", f"{pad}{', '.join(coef)} = r{b}[i]"]
             out += [f"{pad}g{b}_{m} = ((c{m}_3 * s + c{m}_2) * s + c{m}_1) * s + c{m}_0"
                     for m in range(n - 1)]
-        sums = [f"{u[a]} * k{a}" + "".join(f" + g{b}_{m}" for b, m in _sum_order(n, a))
-                for a in range(n)]
+        sums = [f"{u[a]} * k{a}" + (f" + h{a}" if own else "")
+                + "".join(f" + g{b}_{m}" for b, m in _sum_order(n, a)) for a in range(n)]
         return out + [f"{pad}{into[a]} = ({sums[a]}) * K{a}" if k else f"{pad}{into[a]} = {sums[a]}"
                       for a in range(n)]
+
+    def own_terms(pad: str) -> list[str]:  # h_a at t_a of the measured u (index(u) before)
+        if not own:
+            return []
+        out = [f"{pad}if {inside}:"]
+        for a in range(n):
+            out += [f"{pad}    i = int(t{a})", f"{pad}    s = t{a} - i",
+                    f"{pad}    c0, c1, c2, c3 = o{a}[i]",
+                    f"{pad}    h{a} = ((c3 * s + c2) * s + c1) * s + c0"]
+        return out + [f"{pad}else:  # fails the test at u below: the exact path",
+                      f"{pad}    {' = '.join(f'h{a}' for a in range(n))} = nan"]
 
     rows = [" + ".join(f"R{a}[{b}] * {f[b]}" for b in range(n)) for a in range(n)]
     tail = ["        else:  # outside a table (at u or at a step), or NaN: the exact path",
@@ -376,10 +411,12 @@ def one_vector_source(n: int, rotate: bool) -> str:
             f"        return ({', '.join(rows if rotate else f)},)"]
     # eq. (11) at u
     lines += [f"    def decouple_one({', '.join(u)}):", *index(u, "        "),
-              f"        if {inside}:", *forces("            ", f), *tail]
+              *own_terms("        "), f"        if {inside}:", *forces("            ", f), *tail]
     # eq. (11) at p, after `refine` steps p_a <- k_a f_a (as TableDecoupler._block)
     settled = " and ".join(f"abs(f{a} * K{a} - p{a}) <= s{a}" for a in range(n))
-    lines += [f"    def decouple_refined({', '.join(u)}):", f"        {', '.join(p)} = {', '.join(u)}",
+    lines += [f"    def decouple_refined({', '.join(u)}):",
+              *(index(u, "        ") + own_terms("        ") if own else []),
+              f"        {', '.join(p)} = {', '.join(u)}",
               "        for _ in range(refine):", *index(p, "            "),
               f"            if not ({inside}):", "                break  # t fails again below",
               *forces("            ", p, "K"), "        else:", *index(p, "            "),

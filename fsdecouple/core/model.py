@@ -264,7 +264,10 @@ class CouplingErrorModel:
     own : dict of str to Chi
         Own-load chi_aa(u_a), keyed ``"fx:fx"``: the nonlinearity of each output in its
         own load, which a joint fit of rig rows adds (:mod:`fsdecouple.fitting.joint`);
-        empty for the paper's model.  Decoupled by the exact path only.
+        empty for the paper's model.  Tabled on their input's grid like the cross chi.
+    projection : ndarray, shape (N, M), optional
+        M > N outputs (fitting/gauges.py): P = K^+ of the linear forward model; eq. (11)
+        then acts on v = P u, in load units with k = 1.  None: one output per component.
     provenance : dict
         Input files and digests, library versions.
     created : str
@@ -280,6 +283,7 @@ class CouplingErrorModel:
     method: str = "svr"
     matrix: np.ndarray | None = None
     own: dict[str, Chi] = field(default_factory=dict)
+    projection: np.ndarray | None = None
     _tables: Any = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -297,6 +301,16 @@ class CouplingErrorModel:
     @property
     def n_components(self) -> int:
         return len(self.k)
+
+    @property
+    def n_outputs(self) -> int:
+        """M: the outputs decouple() takes (N, or more with a projection)."""
+        return self.n_components if self.projection is None else self.projection.shape[1]
+
+    def project(self, u: np.ndarray) -> np.ndarray:
+        """v = P u (n, N) of outputs (n, M) for a model with a projection; else u as it is."""
+        u = np.asarray(u, dtype=float).reshape(-1, self.n_outputs)
+        return u if self.projection is None else u @ self.projection.T
 
     @property
     def layout(self) -> Layout:
@@ -394,7 +408,8 @@ class CouplingErrorModel:
             forces are NaN.  All True for K = 0 and for linear models.
         """
         u_arr = np.asarray(u, dtype=float)
-        flat = u_arr.reshape(-1, self.n_components)
+        flat = u_arr.reshape(-1, self.n_outputs)
+        shape = (*u_arr.shape[:-1], self.n_components) if u_arr.ndim else u_arr.shape
         refine = self._refine(refine)
         tables = None if exact else self.fast_decoupler()
         if self.method == "linear":
@@ -404,19 +419,19 @@ class CouplingErrorModel:
             if converged is not None:
                 converged[:] = True
         elif tables is not None:
-            f = tables.decouple(flat, rotate=rotate, workers=workers, refine=refine,
+            f = tables.decouple(self.project(flat), rotate=rotate, workers=workers, refine=refine,
                                 converged=converged)
         else:
-            f = self._exact(flat, rotate, refine, converged)
-        return f.reshape(u_arr.shape)
+            f = self._exact(self.project(flat), rotate, refine, converged)
+        return f.reshape(shape)
 
     def fast_decoupler(self) -> TableDecoupler | None:
         """The table path of :mod:`fsdecouple.core.decouple`, or None without usable surrogates."""
-        if self.method == "linear" or self.own:
-            return None  # the tables hold the N(N - 1) cross chi only
-        if self._tables is None:
+        if self.method == "linear":
+            return None
+        if self._tables is None:  # own-load chi (joint fit) on their input's grid, or none
             self._tables = TableDecoupler.from_chis(
-                self.k, self.chi.values(), self._exact, self.rotation,
+                self.k, [*self.chi.values(), *self.own.values()], self._exact, self.rotation,
                 self.full_scale_output) or False
         return self._tables or None
 
@@ -433,8 +448,11 @@ class CouplingErrorModel:
         """
         refine = self._refine(refine)
         tables = self.fast_decoupler()
-        if tables is not None:
+        if tables is not None and self.projection is None:
             return tables.one(refine=refine)
+        if tables is not None:  # M > N: v = P u in plain Python, then the tables
+            one, rows = tables.one(refine=refine), [tuple(r) for r in self.projection.tolist()]
+            return lambda *u: one(*(sum(p * x for p, x in zip(r, u, strict=True)) for r in rows))
 
         def exact_one(*u: float) -> tuple[float, ...]:
             return tuple(self.decouple(list(u), exact=True, refine=refine).tolist())
@@ -446,5 +464,6 @@ class CouplingErrorModel:
         return self.decoupler()(*u)
 
     def initial_forces(self, u: np.ndarray) -> np.ndarray:
-        """Forces with no coupling correction, f = omega^-1(u) per axis (eq. 13 form)."""
-        return initial_forces(u, self.k)
+        """Forces with no coupling correction, f = omega^-1(u) per axis (eq. 13 form); M > N:
+        the linear forward model's least-squares forces P u."""
+        return initial_forces(self.project(u), self.k)

@@ -36,7 +36,10 @@ FORMAT_VERSION = 3
 # (fitting/joint.py).  Only a model that has them is written as version 4, so that an
 # older fsdecouple refuses it instead of decoupling without them; others stay version 3.
 OWN_FORMAT_VERSION = 4
-READS_UP_TO = max(FORMAT_VERSION, OWN_FORMAT_VERSION)
+# Version 5 adds ``projection``: P = K^+ (N x M) of a sensor with M > N outputs
+# (fitting/gauges.py), whose settings name M outputs; only such models are version 5.
+GAUGES_FORMAT_VERSION = 5
+READS_UP_TO = max(FORMAT_VERSION, OWN_FORMAT_VERSION, GAUGES_FORMAT_VERSION)
 METHODS = ("svr", "linear")
 
 
@@ -44,7 +47,8 @@ def model_to_dict(model: CouplingErrorModel) -> dict[str, Any]:
     """The model file's document, ``integrity`` digest included."""
     doc = {
         "format": FORMAT,
-        "format_version": OWN_FORMAT_VERSION if model.own else FORMAT_VERSION,
+        "format_version": GAUGES_FORMAT_VERSION if model.projection is not None
+        else OWN_FORMAT_VERSION if model.own else FORMAT_VERSION,
         "fsdecouple_version": __version__,
         "created": model.created,
         "sensor": model.settings.sensor,
@@ -63,6 +67,8 @@ def model_to_dict(model: CouplingErrorModel) -> dict[str, Any]:
         doc["chi_own"] = {name: c.to_dict() for name, c in model.own.items()}
     if model.matrix is not None:
         doc["matrix"] = [[float(v) for v in row] for row in model.matrix]
+    if model.projection is not None:
+        doc["projection"] = [[float(v) for v in row] for row in model.projection]
     doc["integrity"] = {"algorithm": "sha256", "digest": content_digest(doc)}
     return doc
 
@@ -136,6 +142,7 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
                     f"{source}: malformed model file (chi '{name}': {err})"
                 ) from None
         own = _own_chis(doc.get("chi_own", {}), layout, version, source)
+        projection = _projection(doc, layout, version, source)
     except (KeyError, TypeError, ValueError) as err:
         raise ModelFileError(f"{source}: malformed model file ({type(err).__name__}: {err})") from None
     labels = settings.layout.labels
@@ -147,14 +154,31 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
         )
     report = doc.get("report")
     _check_report(report, source, labels)
-    method, matrix = _method(doc, len(k), source)
+    method, matrix = _method(doc, len(k), source, layout.m)
     model = CouplingErrorModel(
         settings, k, chi, FitReport.from_dict(report), doc.get("provenance", {}),
-        doc.get("created", ""), method, matrix, own,
+        doc.get("created", ""), method, matrix, own, projection,
     )
     _check_slopes(model, source)
     _check_tables(model, source)
     return model
+
+
+def _projection(doc: dict, layout, version: int, source: str) -> np.ndarray | None:
+    """P (N x M) of a version-5 file whose settings name M > N outputs; None otherwise."""
+    if not layout.overdetermined:
+        if "projection" in doc:
+            raise ModelFileError(f"{source}: malformed model file (a projection, but one output "
+                                 "per component)")
+        return None
+    if version < GAUGES_FORMAT_VERSION or "projection" not in doc:
+        raise ModelFileError(f"{source}: malformed model file ({layout.m} outputs for {layout.n} "
+                             f"components need a projection, format version {GAUGES_FORMAT_VERSION})")
+    p = np.array(doc["projection"], dtype=float)
+    if p.shape != (layout.n, layout.m) or not np.isfinite(p).all():
+        raise ModelFileError(f"{source}: malformed model file (projection: expected a finite "
+                             f"{layout.n}x{layout.m} matrix)")
+    return p
 
 
 def _own_chis(raw: Any, layout, version: int, source: str) -> dict[str, Chi]:
@@ -212,7 +236,7 @@ def _check_tables(model: CouplingErrorModel, source: str) -> None:
     (:func:`fsdecouple.core.decouple.usable`) is refused, never applied silently.
     """
     fs_out = model.full_scale_output
-    for c in model.chi.values():
+    for c in [*model.chi.values(), *model.own.values()]:
         gate = MAX_SURROGATE_ERROR * fs_out[c.output_axis]
         if not usable(c.surrogate, fs_out[c.output_axis]):
             continue  # the fast path leaves it to the exact kernel sum anyway
@@ -225,8 +249,10 @@ def _check_tables(model: CouplingErrorModel, source: str) -> None:
             )
 
 
-def _method(doc: dict[str, Any], n: int, source: str) -> tuple[str, np.ndarray | None]:
-    """The decoupling method and, for ``linear``, its N x N finite calibration matrix."""
+def _method(doc: dict[str, Any], n: int, source: str, m: int | None = None
+            ) -> tuple[str, np.ndarray | None]:
+    """The decoupling method and, for ``linear``, its N x M finite calibration matrix."""
+    m = n if m is None else m
     method = doc.get("method", "svr")
     if method not in METHODS:
         raise ModelFileError(f"{source}: malformed model file (method {method!r}, expected "
@@ -237,11 +263,11 @@ def _method(doc: dict[str, Any], n: int, source: str) -> tuple[str, np.ndarray |
         matrix = np.array(doc["matrix"], dtype=float)
     except (KeyError, TypeError, ValueError):
         matrix = None
-    if matrix is None or matrix.shape != (n, n) or not np.isfinite(matrix).all():
+    if matrix is None or matrix.shape != (n, m) or not np.isfinite(matrix).all():
         raise ModelFileError(f"{source}: malformed model file (an svr model's matrix, kept for "
-                             f"validate, must be a finite {n}x{n} one)" if method == "svr" else
+                             f"validate, must be a finite {n}x{m} one)" if method == "svr" else
                              f"{source}: malformed model file (a linear model needs a finite "
-                             f"{n}x{n} matrix)")
+                             f"{n}x{m} matrix)")
     return method, matrix
 
 

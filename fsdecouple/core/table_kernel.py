@@ -1,11 +1,12 @@
 """Eq. (11) from the chi tables, compiled: one pass over the rows, everything in registers.
 
-    f_a = u_a / k_a + sum_{b != a} g_ab(p_b),   g_ab = -chi_ab / k_a,        eq. (11)
+    f_a = u_a / k_a + h_a(u_a) + sum_{b != a} g_ab(p_b),   g_ab = -chi_ab / k_a,   eq. (11)
 
-with p = u, or after K fixed-point steps p_a <- k_a f_a (second-order refinement,
-eqs. 5-6; :mod:`fsdecouple.core.decouple`).  A row's table index per input b is
-t_b = (p_b - lo_b) / step_b, its interval int(t_b) and its offset s_b = t_b - int(t_b);
-each g_ab is the cubic ((c3 s + c2) s + c1) s + c0 of that interval.
+with h_a = -chi_aa / k_a the own-load chi of a joint fit (0 without one; always at the
+measured u_a, :mod:`fsdecouple.fitting.joint`), p = u, or after K fixed-point steps
+p_a <- k_a f_a (second-order refinement, eqs. 5-6; :mod:`fsdecouple.core.decouple`).
+A row's table index per input b is t_b = (p_b - lo_b) / step_b, its interval int(t_b)
+and its offset s_b = t_b - int(t_b); each g_ab is the cubic ((c3 s + c2) s + c1) s + c0 of that interval.
 
 The arithmetic is the plain-Python evaluator's (:meth:`TableDecoupler.one`)
 operation for operation, in the same order and without fused multiply-adds
@@ -59,13 +60,14 @@ def _compiled(fn):
 
 
 @_compiled
-def eq11_rows(u, lo, inv_step, intervals, inv_k, k, step_tol, tab, sum_b, sum_m, refine,
-              out, inside, settled):  # pragma: no cover - compiled; tested through TableDecoupler
+def eq11_rows(u, lo, inv_step, intervals, inv_k, k, step_tol, tab, sum_b, sum_m, refine, own,
+              has_own, out, inside, settled):  # pragma: no cover - compiled; tested through TableDecoupler
     """Forces of eq. (11) for the rows of ``u`` (n, N) into ``out`` (n, N), before any rotation.
 
     ``tab`` (N, N - 1, intervals, 4): coefficients c0..c3 of g_ab, for input b and
     its m-th fed output; ``sum_b``/``sum_m`` (N, N - 1): the (b, m) added into
-    output a, in order.  ``inside[r]`` is False where row r left a table (or held a
+    output a, in order.  ``own`` (N, intervals, 4): coefficients of h_a = -chi_aa / k_a on
+    input a's grid, added at u when ``has_own``.  ``inside[r]`` is False where row r left a table (or held a
     NaN) at u or at a step: its ``out`` is then undefined, for the exact path to
     fill.  ``settled[r]`` is False where the last refinement step k f - p^K was not
     within ``step_tol``: its forces are NaN.
@@ -76,6 +78,7 @@ def eq11_rows(u, lo, inv_step, intervals, inv_k, k, step_tol, tab, sum_b, sum_m,
     index = np.empty(dim, np.intp)
     x = np.empty(dim)
     f = np.empty(dim)
+    base = np.empty(dim)
     for r in range(n):
         for b in range(dim):
             x[b] = u[r, b]
@@ -90,8 +93,15 @@ def eq11_rows(u, lo, inv_step, intervals, inv_k, k, step_tol, tab, sum_b, sum_m,
                 s[b] = t - index[b]
             if not ok:
                 break
+            if step == 0:  # x = u: u_a / k_a, and the own-load term at the measured u_a
+                for a in range(dim):
+                    base[a] = u[r, a] * inv_k[a]
+                    if has_own:
+                        i, sa = index[a], s[a]
+                        base[a] += ((own[a, i, 3] * sa + own[a, i, 2]) * sa + own[a, i, 1]) * sa \
+                            + own[a, i, 0]
             for a in range(dim):
-                fa = u[r, a] * inv_k[a]
+                fa = base[a]
                 for d in range(fed):
                     b, m = sum_b[a, d], sum_m[a, d]
                     i, sb = index[b], s[b]

@@ -44,6 +44,8 @@ class CalibrationSet:
     zero_auto : bool
         ``fit`` was chosen because the sweeps go out and back, not by the config: the
         certificate's ISO 376 figures still take deflections from the zero rows.
+    noise : ndarray, optional
+        Pose logs (data/poses.py): sigma of each averaged output, from the samples' scatter.
     """
 
     points: pd.DataFrame
@@ -55,6 +57,7 @@ class CalibrationSet:
     layout: Layout = DEFAULT
     zero: str | None = None  # how the sweeps were zeroed (data/zero.py); None: not recorded
     zero_auto: bool = False  # zero: fit chosen for out-and-back sweeps (zero.out_and_back)
+    noise: np.ndarray | None = None  # pose logs: sigma of each averaged output (poses.py)
 
     @property
     def source(self) -> str:
@@ -223,7 +226,7 @@ def load_calibration(path: str | Path, settings: Settings, exclude=(),
     cs = from_table(table, settings, read.files, [*read.skipped, *dropped], combined)
     hidden = tuple(f"{f}: hidden file, not read as a repetition" for f in read.hidden)
     hidden += read.warnings
-    cs = replace(cs, excluded=tuple(dropped))
+    cs = replace(cs, excluded=tuple(dropped), noise=read.noise)
     return replace(cs, warnings=hidden + cs.warnings) if hidden else cs
 
 

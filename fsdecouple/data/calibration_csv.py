@@ -17,6 +17,7 @@ from ..errors import InputError, excerpt, printable, where
 from ..files import CALIBRATION_LIMIT, TASK_LIMIT, natural_key, read_bounded, reading
 from .columns import applied_load
 from .csv_text import HEADER_ROW, read_csv_text, read_header, require_columns, to_numbers
+from .poses import average_poses, pose_note, timestamp_column
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -109,6 +110,7 @@ class CalibrationTable:
     files: tuple[tuple[str, str], ...]  # (path, SHA-256) of every file read
     hidden: list[Path]
     warnings: tuple[str, ...] = ()
+    noise: np.ndarray | None = None  # pose logs: sigma of each averaged output (poses.py)
 
 
 def read_calibration_table(path: str | Path, settings: Settings,
@@ -123,6 +125,7 @@ def read_calibration_table(path: str | Path, settings: Settings,
     files, hidden = list_calibration(path)
     single = len(files) == 1 and not Path(path).is_dir()
     frames, skipped, digests, warnings = [], [], [], []
+    pose_ss, pose_dof, pose_inv, pose_n = 0.0, 0, 0.0, 0  # pose logs (poses.py)
     cols = settings.columns
     layout = settings.layout
     numeric = {c: cols[c] for c in (*layout.loads, *layout.outputs)}
@@ -217,12 +220,20 @@ def read_calibration_table(path: str | Path, settings: Settings,
             values = to_numbers(raw[name], f, name, rows, settings.decimal)
             # check each cell before scaling so the message quotes the file's value
             out[canonical] = values * settings.scale[canonical]
+        if timestamp_column(header) is not None:  # a pose log: samples averaged per load
+            keys = [*layout.loads, "repetition", "axis"]
+            out, ss, dof, runs, inverse = average_poses(out, keys, list(layout.outputs))
+            if runs:
+                pose_ss, pose_dof = pose_ss + ss, pose_dof + dof
+                pose_inv, pose_n = pose_inv + inverse, pose_n + len(runs)
+                warnings.append(pose_note(f, runs, sum(c for *_, c in runs)))
         frames.append(out)
     table = pd.concat(frames, ignore_index=True)
     # training order is file order: repetition, then row (stable)
     table = table.sort_values(["repetition"], kind="stable").reset_index(drop=True)
     table = table[["repetition", "axis", "file", "row", *layout.loads, *layout.outputs]]
-    return CalibrationTable(table, skipped, tuple(digests), hidden, tuple(warnings))
+    noise = np.sqrt(pose_ss / pose_dof * pose_inv / pose_n) if pose_dof else None
+    return CalibrationTable(table, skipped, tuple(digests), hidden, tuple(warnings), noise)
 
 
 

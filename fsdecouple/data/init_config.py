@@ -42,6 +42,7 @@ from .columns import (
     read_rows,
     shown,
 )
+from .poses import TIMESTAMP_NAMES
 
 COMPONENTS = ("fx", "fy", "fz", "mx", "my", "mz")
 _LOAD = re.compile(r"(?:f|force|load)([xyz])|([xyz])(?:force|load)")
@@ -50,7 +51,7 @@ _NUMBERED = re.compile(r"([a-zµμ]+)(\d+)")
 # an applied (reference) load: a component's name after or before one of these words
 _APPLIED = re.compile(r"(?:known|applied|reference|ref|true|load|nominal)(\w+)"
                       r"|(\w+?)(?:ref|reference|applied|known|true)")
-_TIMESTAMP = {"time", "timestamp", "datetime", "date", "t", "timesec", "elapsed", "elapsedtime"}
+_TIMESTAMP = TIMESTAMP_NAMES  # poses.py: a timestamp column makes a file a pose log
 _MOMENT_HINTS = {u.lower(): u for u in MOMENT_UNITS}
 # any other spelling of a known unit (N mm, n*m, KGF.CM): the first of its spellings
 _SPELLED = {}
@@ -170,12 +171,10 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
     if len(components) < 2:
         raise InputError(f"{where}: the header names {len(components)} load component "
                          f"({', '.join(components)}); a coupling model needs at least 2; header: {header}")
-    more = [f for f in families.values() if len(f) > len(components)]
-    if not fits and len(more) == 1:
-        raise InputError(
-            f"{where}: {len(more[0])} output channels ({names[min(more[0])[1]]}..) for "
-            f"{len(components)} load components: more outputs than components (M > N) is not "
-            "supported yet; map one output per component under columns: and outputs: by hand")
+    more = [sorted(f) for f in families.values() if len(f) > len(components)]
+    gauges = not fits and len(more) == 1  # M > N: every channel kept (fitting/gauges.py)
+    if gauges:
+        fits = more
     if len(fits) != 1:
         raise InputError(
             f"{where}: a force/torque header needs one numbered output channel per load "
@@ -192,8 +191,13 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
     if (left := sum(any(c.strip() for c in row) for row in rows) - len(table)) > 0:
         notes.append(f"{left} rows without a finite number in every load and output column "
                      "were left out")
-    prime, why = _pair(f, u, components, [names[i] for i in channels], notes,
-                       named=len(readings) == len(components))
+    if gauges:
+        notes.append(f"{len(channels)} output channels for {len(components)} components (M > N): "
+                     "fit models every channel and decouples in the least-squares sense")
+        prime, why = list(range(len(channels))), {}
+    else:
+        prime, why = _pair(f, u, components, [names[i] for i in channels], notes,
+                           named=len(readings) == len(components))
     outputs = tuple(parsed[channels[j]] + ("_out" if named_as is _applied and readings else "")
                     for j in prime)
     if len({o.lower() for o in outputs}) < len(outputs):
@@ -207,12 +211,18 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
     reasons.update({c: f"{shown(names[loads[c]])}: header names the "
                     f"{'moment about' if c[0] == 'm' else 'force along'} {c[1]} ({c})"
                     for c in components})
-    reasons.update({o: f"{shown(columns[o])}: {why[c]}" for c, o in zip(components, outputs, strict=True)})
+    if gauges:
+        reasons.update({o: f"{shown(columns[o])}: output channel {j + 1} of {len(outputs)}, no "
+                        "component's own" for j, o in enumerate(outputs)})
+    else:
+        reasons.update({o: f"{shown(columns[o])}: {why[c]}"
+                        for c, o in zip(components, outputs, strict=True)})
     for key in ("axis", "repetition"):
         reasons.setdefault(key, f"no {key} column: " + (
             "sweeps are inferred from consecutive rows" if key == "axis" else "one repetition"))
     reasons["components"] = "load columns found in the header, forces then moments"
-    reasons["outputs"] = "the prime output of each component, in the same order"
+    reasons["outputs"] = ("every output channel, in header order (more than components)" if gauges
+                          else "the prime output of each component, in the same order")
     load_units = _load_units(names, loads, components, f, notes)
     integers = all(_INTEGER.fullmatch(row[i].strip()) for row in rows[:1000] for i in channels
                    if i < len(row) and _NUMBER.fullmatch(row[i].strip()))

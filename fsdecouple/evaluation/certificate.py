@@ -78,6 +78,7 @@ def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str
     environment; default: the model's own.  Refused if the set or the config do not
     match the model (:func:`check_matches`).
     """
+    model.layout.one_output_each("certificate")
     check_matches(model, calib, source, settings)
     s = settings or model.settings
     lab, layout = s.lab, calib.layout

@@ -186,6 +186,7 @@ def run_cv(
 def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, workers, repeats,
             progress, protocol, tune=False, tune_grid=None) -> dict[str, Any]:
     settings = settings or Settings()
+    settings.layout.one_output_each("cv")
     if not isinstance(calib, CalibrationSet):
         calib = load_calibration(calib, settings)
     tune_record = None

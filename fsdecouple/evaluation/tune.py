@@ -248,6 +248,7 @@ def tune_settings(
     The record lists every candidate with its held-out RMS per axis [load unit]
     and figure [fraction of F.S.], the grid, sigma, and the index chosen.
     """
+    settings.layout.one_output_each("fit --tune")
     grid = grid or Grid()
     protocol, rounds = _rounds(calib)
     sigma = noise(calib, settings)

@@ -53,9 +53,11 @@ _NOT_FOR_VALIDATION = ("uses a different load grid than repetition", "loads reac
 
 
 def in_calibrated_range(model: CouplingErrorModel, u: np.ndarray) -> np.ndarray:
-    """Rows whose outputs all lie in the calibrated range, widened as ``apply`` widens it."""
+    """Rows whose outputs all lie in the calibrated range, widened as ``apply`` widens it
+    (M > N outputs: their least-squares loads v = P u, fitting/gauges.py)."""
     lo, hi = model.extrapolation_limits().T
-    return ((u >= lo) & (u <= hi)).all(axis=1)
+    v = model.project(u)
+    return ((v >= lo) & (v <= hi)).all(axis=1)
 
 
 def force_errors(forces: np.ndarray, loads: np.ndarray, full_scale) -> dict[str, float]:

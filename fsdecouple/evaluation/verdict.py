@@ -184,7 +184,11 @@ def calibrate(calib: CalibrationSet, settings: Settings, *, method: str = "svr",
                                          progress=progress)
     model = fit(calib, settings, workers=workers)
     model.report.tune = record
-    outliers = gross_errors(calib.points, model.k, settings.full_scale, settings.layout)
+    points, layout = calib.points, settings.layout
+    if layout.overdetermined:  # M > N: each component's least-squares load v = P u (gauges.py)
+        from ..fitting.gauges import projected
+        points, layout = projected(points, model.projection, layout)
+    outliers = gross_errors(points, model.k, settings.full_scale, layout)
     model.report.outliers = [dataclasses.asdict(o) for o in outliers]
     model.report.warnings += [o.message(settings.units.load_of(settings.layout.index(o.axis)))
                               for o in outliers]
@@ -208,8 +212,9 @@ def calibrate(calib: CalibrationSet, settings: Settings, *, method: str = "svr",
             settings.layout, settings.units.loads or None)
     if found is not None:
         model.report.verdict = {**summary(found), "asked": method, "chosen": chosen}
-        model.report.certificate = certificate_data(calib, model, *found["predictions"][chosen],
-                                                    found["trained"])
+        if not settings.layout.overdetermined:  # per prime output: none with M > N outputs
+            model.report.certificate = certificate_data(calib, model,
+                                                        *found["predictions"][chosen], found["trained"])
         warning = verdict_warning(found, chosen)
         if warning:
             model.report.warnings.append(warning)

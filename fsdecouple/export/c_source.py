@@ -103,7 +103,8 @@ def _preamble(plan: ExportPlan) -> str:
  * Do not edit: regenerate with `fsdecouple export`.  Model digest, sensor and
  * units are below as {P}MODEL_DIGEST, {P}SENSOR, {P}LOAD_UNIT, {P}OUTPUT_UNIT.
  *
-{_method_note(plan)} * A rotation to the reference frame, if the model has one, follows.
+{_method_note(plan)}{_own_note(plan)}{_projection_note(plan)}\
+ * A rotation to the reference frame, if the model has one, follows.
  *
  * Use: in exactly one C file
  *     #define {P}IMPLEMENTATION
@@ -112,7 +113,7 @@ def _preamble(plan: ExportPlan) -> str:
  * Do not compile with -ffast-math: the status bits rely on IEEE NaN and infinity.
 {precision_note} *
  * uint32_t {fn}
- *   u: {plan.n} zero-corrected prime voltages [{P}OUTPUT_UNIT] (tare/zero already removed,
+ *   u: {plan.m} zero-corrected outputs [{P}OUTPUT_UNIT] (tare/zero already removed,
  *      as model.decouple takes them); f: {n} forces [{P}LOAD_UNIT].  Returns a status
  *   bitmask, 0 when every chi came from its table and every input lies in the
  *   calibrated range:
@@ -144,7 +145,7 @@ extern "C" {{
 #endif
 
 #define {P}N_COMPONENTS {n}
-#define {P}N_OUTPUTS {n}
+#define {P}N_OUTPUTS {plan.m}
 #define {P}FORMAT_VERSION {plan.format_version}
 #define {P}MODEL_DIGEST {c_string(plan.digest)}
 #define {P}SENSOR {c_string(plan.sensor)}
@@ -178,6 +179,7 @@ extern const double {p}full_scale[{n}];
 extern const double {p}omega_k[{n}];
 extern const double {p}calibrated_range[{n}][2];
 {_chi_declarations(plan)}extern const double {p}rotation[{n}][{n}];
+{f"extern const double {p}projection[{n}][{plan.m}];" + chr(10) if plan.projection is not None else ""}\
 
 uint32_t {fn};
 int {p}selftest(void);
@@ -210,6 +212,8 @@ def _implementation_start(plan: ExportPlan) -> str:
         f"const double {p}calibrated_range[{n}][2] = {{{', '.join(map(row, plan.calibrated_range))}}};\n",
         *chi, *matrix,
         f"const double {p}rotation[{n}][{n}] = {{{', '.join(map(row, rotation))}}};\n",
+        "" if plan.projection is None else
+        f"const double {p}projection[{n}][{plan.m}] = {{{', '.join(map(row, plan.projection))}}};\n",
     ])
 
 
@@ -247,6 +251,24 @@ def _extrapolation(plan: ExportPlan) -> str:
         return (" * Beyond its calibrated input range a chi continues along its tangent at\n"
                 " * the range's edge (the model's `extrapolation: tangent`).\n")
     return ""  # extrapolation: kernel, the kernel sum everywhere
+
+
+def _projection_note(plan: ExportPlan) -> str:
+    """The header's note on M > N outputs (fitting/gauges.py), if the model has them."""
+    if plan.projection is None:
+        return ""
+    return (f" * The sensor has {plan.m} outputs for {plan.n} components: u holds all {plan.m}, and\n"
+            f" * eq. (11) acts on their least-squares loads v = P u ({plan.prefix}projection), the\n"
+            " * range bits b < N_COMPONENTS on v_b; the saturation limits on the raw u.\n")
+
+
+def _own_note(plan: ExportPlan) -> str:
+    """The header's note on own-load chi_aa (a joint fit of rig rows), if the model has them."""
+    if not any(c.out == c.inp for c in plan.chis):
+        return ""
+    return (" * The model has own-load chi_aa(u_a) (a joint fit of rig rows that load several\n"
+            " * components): each output also subtracts chi_aa at its measured u_a, before\n"
+            " * dividing by k_aa, at every refinement step too; chi_axes lists them as {a, a}.\n")
 
 
 def _tangent(chi: ChiPlan) -> str:
@@ -319,25 +341,32 @@ def _chi_call(plan: ExportPlan, j: int, ctype: str, arg: str) -> str:
 
 
 def _coupling(plan: ExportPlan, a: int, ctype: str, x: str) -> str:
-    """sum_(b != a) chi_ab(x_b), in the order of the model's chi."""
-    terms = [_chi_call(plan, j, ctype, f"{x}[{c.inp}]") for j, c in enumerate(plan.chis) if c.out == a]
+    """sum_(b != a) chi_ab(x_b), in the order of the model's chi; a joint fit's own-load
+    chi_aa (fitting/joint.py) always at the measured u_a."""
+    terms = [_chi_call(plan, j, ctype, f"{'u' if c.inp == c.out else x}[{c.inp}]")
+             for j, c in enumerate(plan.chis) if c.out == a]
     return " + ".join(terms) if terms else ("0.0f" if ctype == "float" else "0.0")
 
 
 def _decouple(plan: ExportPlan, ctype: str) -> str:
     p, n = plan.prefix, plan.n
     fmt = numf if ctype == "float" else num
-    name = f"{p}decouple_f(const float *u, float *f)" if ctype == "float" \
-        else f"{p}decouple(const double *u, double *f)"
+    y = "u" if plan.projection is None else "y"  # M > N: the raw outputs y, then u = v = P y
+    name = f"{p}decouple_f(const float *{y}, float *f)" if ctype == "float" \
+        else f"{p}decouple(const double *{y}, double *f)"
     lines = [f"uint32_t {name}", "{", "    uint32_t st = 0;"]
+    if plan.projection is not None:
+        lines.append(f"    {ctype} u[{n}];")
+        lines += [f"    u[{a}] = " + " + ".join(f"{fmt(plan.projection[a][j])} * y[{j}]"
+                                               for j in range(plan.m)) + ";" for a in range(n)]
     for b in range(n):
         lo, hi = plan.range_limits[b] if ctype == "double" else plan.range_limits_f[b]
         lines.append(f"    if (u[{b}] < {fmt(lo)} || u[{b}] > {fmt(hi)}) st |= (uint32_t)1 << {b};")
     for b, (lo, hi) in enumerate(plan.limits if ctype == "double" else plan.limits_f):
         if lo is not None:
-            lines.append(f"    if (u[{b}] <= {fmt(lo)} || u[{b}] >= {fmt(hi)}) "
+            lines.append(f"    if ({y}[{b}] <= {fmt(lo)} || {y}[{b}] >= {fmt(hi)}) "
                          f"st |= (uint32_t)1 << {BIT_SATURATED};")
-    finite = " || ".join(f"!isfinite(u[{b}])" for b in range(n))
+    finite = " || ".join(f"!isfinite({y}[{b}])" for b in range(plan.m))
     lines.append(f"    if ({finite}) st |= (uint32_t)1 << {BIT_INPUT_NOT_FINITE};")
     x = "u"
     if plan.refine > 0:
@@ -375,14 +404,14 @@ def _decouple(plan: ExportPlan, ctype: str) -> str:
 
 
 def _selftest(plan: ExportPlan) -> str:
-    p, n = plan.prefix, plan.n
+    p, n = plan.prefix, plan.n  # forces n; inputs plan.m (M > N: gauges)
     ctype = plan.precision
     fn = f"{p}decouple_f" if ctype == "float" else f"{p}decouple"
     m = len(plan.selftest_u)
     body = f"""/* Reference vectors: inputs, forces of the exact Python model (NaN rows are only
  * checked for their status), expected status, and the tolerance per component:
  * {plan.selftest_note} */
-{_array(f"{p}st_u", plan.selftest_u, _num_or_nan, n)}\
+{_array(f"{p}st_u", plan.selftest_u, _num_or_nan, plan.m)}\
 {_array(f"{p}st_f", plan.selftest_f, _num_or_nan, n)}\
 {_array(f"{p}st_tol", plan.selftest_tol, num, n)}\
 static const uint32_t {p}st_status[{m}] = {{{", ".join(f"{s}u" for s in plan.selftest_status)}}};
@@ -392,8 +421,8 @@ int {p}selftest(void)
     int bad = 0;
     size_t r, a;
     for (r = 0; r < {m}; ++r) {{
-        {ctype} u[{n}], f[{n}];
-        for (a = 0; a < {n}; ++a) u[a] = ({ctype}){p}st_u[{n} * r + a];
+        {ctype} u[{plan.m}], f[{n}];
+        for (a = 0; a < {plan.m}; ++a) u[a] = ({ctype}){p}st_u[{plan.m} * r + a];
         if ({fn}(u, f) != {p}st_status[r]) ++bad;
         for (a = 0; a < {n}; ++a) {{
             const double want = {p}st_f[{n} * r + a];

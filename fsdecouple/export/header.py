@@ -1,6 +1,7 @@
 """Export a model as one dependency-free C99 header (``fsdecouple export``).
 
-The header evaluates eq. (11), f_a = (u_a - sum_(b != a) chi_ab(u_b)) / k_aa,
+The header evaluates eq. (11), f_a = (u_a - sum_(b != a) chi_ab(u_b)) / k_aa (and a
+joint fit's own-load chi_aa(u_a), always at the measured u_a: fitting/joint.py),
 with each chi (eq. 4) as a cubic Hermite table inside its interval and as the
 exact kernel sum (eq. 10) over the embedded support vectors outside it, so it
 agrees with ``model.decouple`` everywhere.  A ``linear`` model's header evaluates
@@ -101,10 +102,6 @@ def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",
     settings = model.settings
     doc = _model_document(model)
     linear = model.method == "linear"  # f = C u: the matrix, no chi and no tables
-    if getattr(model, "own", None):
-        raise ConfigError("the model has own-load chi (a joint fit of rig rows, chi "
-                          f"{', '.join(model.own)}); export writes the N(N - 1) cross chi of "
-                          "eq. (11) only, not yet these")
     rotation = None if settings.rotation is None else np.asarray(settings.rotation, dtype=float)
     fs = np.asarray(settings.full_scale, dtype=float)
     cal = np.asarray(model.calibrated_range, dtype=float)
@@ -112,24 +109,29 @@ def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",
         prefix=prefix, precision=precision, n=n, k=k, chis=[], rotation=rotation,
         full_scale=fs, calibrated_range=cal,
         range_limits=np.asarray(model.extrapolation_limits()),  # exactly apply's "extrapolated"
-        limits=_limits(model, limits, n), refine=int(getattr(settings, "refine", 0) or 0),
+        limits=_limits(model, limits, n if getattr(model, "projection", None) is None
+                       else model.projection.shape[1]),
+        refine=int(getattr(settings, "refine", 0) or 0),
         digest=str(doc["integrity"]["digest"]), format_version=int(doc["format_version"]),
         sensor=str(settings.sensor), load_unit=settings.load_unit,
         output_unit=settings.output_unit, version=version, model=model,
         matrix=np.asarray(model.matrix, dtype=float) if linear else None,
+        projection=getattr(model, "projection", None),
     )
     if linear:
         plan.refine = 0  # a linear model has no refinement (model.decouple ignores it)
-    chis = [] if linear else list(model.chi.values())
+    # own chi_aa last
+    chis = [] if linear else [*model.chi.values(), *getattr(model, "own", {}).values()]
     for c in chis:
         plan.chis.append(ChiPlan(c.output_axis, c.input_axis, float(c.gamma),
                                  np.asarray(c.support_vectors, float), np.asarray(c.dual_coef, float),
                                  float(c.rho), float(c.input_scale), float(c.output_scale), c))
     if max_error is None:
         u_fs = np.abs(k) * fs  # the promise is a fraction of each output's full scale
-        for cp, c in zip(plan.chis, chis, strict=True):
-            s = c.surrogate
-            if s is not None and s.max_error <= PROMISE / (2 * max(n - 1, 1)) * u_fs[c.output_axis]:
+        terms = plan.terms_per_output
+        for cp in plan.chis:
+            c, s = cp.exact, cp.exact.surrogate
+            if s is not None and s.max_error <= PROMISE / (2 * terms) * u_fs[c.output_axis]:
                 cp.lo, cp.hi, cp.table, cp.table_error = s.lo, s.hi, s.coefficients(), s.max_error
     elif chis:
         # float: the measured bound is FLOAT_SAFETY x (table + rounding error), so the
@@ -195,27 +197,29 @@ def exact_forces(plan: ExportPlan, u: np.ndarray) -> np.ndarray:
     Without refinement steps this is ``model.decouple(u, exact=True)`` itself;
     with them (``settings.refine``), the fixed point on the prime voltages first.
     """
-    u = np.asarray(u, dtype=float).reshape(-1, plan.n)
+    u = np.asarray(u, dtype=float).reshape(-1, plan.m)
     if plan.refine == 0:
         return plan.model.decouple(u, exact=True)
+    u = plan.project(u)  # M > N: v = P u, then eq. (11) on v
     x = u
-    for _ in range(plan.refine):  # p_b <- u_b - sum_(c != b) chi_bc(p_c)
-        x = u - _coupling(plan, x, lambda c, v: c.exact(v))
-    g = (u - _coupling(plan, x, lambda c, v: c.exact(v))) * (1.0 / plan.k)
+    for _ in range(plan.refine):  # p_b <- u_b - sum_(c != b) chi_bc(p_c) - chi_bb(u_b)
+        x = u - _coupling(plan, x, lambda c, v: c.exact(v), u=u)
+    g = (u - _coupling(plan, x, lambda c, v: c.exact(v), u=u)) * (1.0 / plan.k)
     return g if plan.rotation is None else g @ plan.rotation.T
 
 
-def _coupling(plan: ExportPlan, x: np.ndarray, chi, dtype=float) -> np.ndarray:
+def _coupling(plan: ExportPlan, x: np.ndarray, chi, dtype=float, u=None) -> np.ndarray:
+    """sum_b chi_ab(x_b) per output a; an own-load chi_aa at ``u`` (the measured outputs)."""
     e = np.zeros(x.shape, dtype=dtype)
     for c in plan.chis:
-        e[:, c.out] += chi(c, x[:, c.inp])
+        e[:, c.out] += chi(c, (x if u is None or c.out != c.inp else u)[:, c.inp])
     return e
 
 
 def emulate_float(plan: ExportPlan, u: np.ndarray) -> np.ndarray:
     """``fsd_decouple_f`` in numpy float32, operation for operation as export_c writes it."""
     f32 = np.float32
-    u = np.asarray(u, dtype=f32).reshape(-1, plan.n)
+    u = plan.project(np.asarray(u, dtype=f32).reshape(-1, plan.m), f32)  # v = P u in float
 
     def chi(c: ChiPlan, v: np.ndarray) -> np.ndarray:
         out = c.exact(v.astype(float)).astype(f32)  # kernel sum in double, as the C
@@ -230,7 +234,7 @@ def emulate_float(plan: ExportPlan, u: np.ndarray) -> np.ndarray:
         return np.where(inside, tab, out)
 
     def coupling(x):  # the C adds each output's chi left to right, in the model's order
-        return _coupling(plan, x, chi, f32)
+        return _coupling(plan, x, chi, f32, u=u)
 
     if plan.matrix is not None:  # f = C u
         g = _products(plan.matrix.astype(f32), u)
@@ -268,7 +272,8 @@ def float_bound(plan: ExportPlan, seed: int = 0) -> float:
              for _ in range(2)]
     corners = np.array(np.meshgrid(*plan.calibrated_range)).reshape(plan.n, -1).T
     u = np.concatenate([*dense, lo + (hi - lo) * rng.random((FLOAT_RANDOM_POINTS, plan.n)), corners])
-    u32 = u.astype(np.float32)
+    u32 = plan.lift(u).astype(np.float32)  # M > N: outputs whose v = P u spans the range
+    u = u32.astype(float)
     err = np.abs(emulate_float(plan, u32).astype(float) - exact_forces(plan, u)) / plan.full_scale
     return FLOAT_SAFETY * float(err.max())
 
@@ -287,19 +292,20 @@ def expected_status(plan: ExportPlan, u: np.ndarray, f: np.ndarray) -> int:
     )
 
     st = 0
+    for b, (lo, hi) in enumerate(plan.limits):  # the raw channels
+        if lo is not None and (u[b] <= lo or u[b] >= hi):
+            st |= 1 << BIT_SATURATED
+    if not np.isfinite(u).all():
+        st |= 1 << BIT_INPUT_NOT_FINITE
+    u = plan.project(np.asarray(u, dtype=float).reshape(1, -1))[0]  # M > N: v = P u
     for b in range(plan.n):
         if u[b] < plan.range_limits[b, 0] or u[b] > plan.range_limits[b, 1]:
             st |= 1 << b
-        lo, hi = plan.limits[b]
-        if lo is not None and (u[b] <= lo or u[b] >= hi):
-            st |= 1 << BIT_SATURATED
     for c in plan.chis:
         if c.table is not None:
             t = (u[c.inp] - c.lo) * c.inv_step
             if not 0 <= t < c.table.shape[1]:
                 st |= 1 << BIT_OUTSIDE_TABLE
-    if not np.isfinite(u).all():
-        st |= 1 << BIT_INPUT_NOT_FINITE
     if not (np.abs(f) <= FORCE_LIMIT * np.abs(plan.full_scale).max()).all():
         st |= 1 << BIT_NOT_FINITE  # apply's not_finite: NaN, inf or beyond FORCE_LIMIT x F.S.
     if plan.refine > 0:  # the refinement's settle test, as decouple.settled decides it
@@ -323,8 +329,8 @@ def _selftest(plan: ExportPlan) -> None:
         far = [max([c.hi for c in plan.chis if c.table is not None and c.inp == b], default=-np.inf)
                for b in range(plan.n)]
         rows.append(np.maximum(hi + 0.6 * (hi - lo), np.asarray(far) + 0.1 * (hi - lo)))
-    rows.append(np.full(plan.n, np.nan))
-    u = np.array(rows).astype(np.float32).astype(float)  # exact in float too
+    u = plan.lift(np.array(rows))  # M > N: outputs whose v = P u are these rows
+    u = np.vstack([u, np.full(plan.m, np.nan)]).astype(np.float32).astype(float)  # float-exact
     with np.errstate(invalid="ignore"):
         f = exact_forces(plan, u)
     plan.selftest_u, plan.selftest_f = u, f

@@ -68,11 +68,41 @@ class ExportPlan:
     selftest_status: list = field(default_factory=list)
     selftest_note: str = ""
     model: Any = None  # the model exported: the reference of every check
+    projection: np.ndarray | None = None  # M > N outputs: v = P u first (fitting/gauges.py)
     matrix: np.ndarray | None = None  # a linear model's f = C u: no chi, no tables
 
     @property
     def method(self) -> str:
         return "svr" if self.matrix is None else "linear"
+
+    @property
+    def m(self) -> int:
+        """Outputs the function takes: N, or M > N with a projection."""
+        return self.n if self.projection is None else self.projection.shape[1]
+
+    def lift(self, v: np.ndarray) -> np.ndarray:
+        """Outputs u (rows, M) whose v = P u is ``v`` (rows, N): u = P^+ v; v itself for M = N."""
+        v = np.asarray(v, dtype=float)
+        return v if self.projection is None else v @ np.linalg.pinv(self.projection).T
+
+    def project(self, u: np.ndarray, dtype=float) -> np.ndarray:
+        """v = P u as the C computes it: left to right, in ``dtype``; u itself for M = N."""
+        u = np.asarray(u, dtype=dtype)
+        if self.projection is None:
+            return u
+        p = self.projection.astype(dtype)
+        v = np.empty((len(u), self.n), dtype=dtype)
+        for a in range(self.n):
+            acc = p[a, 0] * u[:, 0]
+            for j in range(1, self.m):
+                acc = acc + p[a, j] * u[:, j]
+            v[:, a] = acc
+        return v
+
+    @property
+    def terms_per_output(self) -> int:
+        """Chi summed into one output: N - 1 cross chi, and an own-load chi_aa if any."""
+        return max([sum(c.out == a for c in self.chis) for a in range(self.n)] + [1])
 
     @property
     def table_bytes(self) -> int:

@@ -69,11 +69,12 @@ def resample(cp: ChiPlan, n: int) -> tuple[np.ndarray, float]:
 
 def coarsest_tables(plan: ExportPlan, model, fraction: float, requested: float) -> None:
     """Per chi, the fewest intervals whose error keeps the force bound <= ``fraction``."""
-    n, fs, k = plan.n, plan.full_scale, np.abs(plan.k)
+    fs, k = plan.full_scale, np.abs(plan.k)
     # sensor-frame share: a rotated component i sums |R_ij| times the errors of components j
     if plan.rotation is not None:
         fraction *= float(np.min(fs / (np.abs(plan.rotation) @ fs)))
-    for cp, c in zip(plan.chis, model.chi.values(), strict=True):
+    for cp in plan.chis:
+        c = cp.exact  # the model's Chi, cross or own-load
         a, b = c.input_range
         if c.surrogate is not None:
             cp.lo, cp.hi = float(c.surrogate.lo), float(c.surrogate.hi)
@@ -89,7 +90,7 @@ def coarsest_tables(plan: ExportPlan, model, fraction: float, requested: float) 
                 cp.lo, cp.hi, m = aligned_grid(a, b, m, TABLE_MARGIN)
             return m
 
-        target = fraction * fs[cp.out] * k[cp.out] / max(n - 1, 1)  # [V], eq. (11): / k_aa
+        target = fraction * fs[cp.out] * k[cp.out] / plan.terms_per_output  # [V], eq. (11): / k_aa
         m, last = 1, np.inf
         while True:
             coef, err = resample(cp, grid(m))

@@ -21,7 +21,7 @@ from ..config import Settings
 from ..core.decouple import initial_forces
 from ..data.calibration import CalibrationSet
 from .fit import chi_training_data, fit
-from .linear import fit_calibration_matrix, fit_omega
+from .linear import CalibrationMatrix, fit_calibration_matrix, fit_omega
 from .rbf import SPREAD, fit_mimo, fit_siso
 from .threads import single_threaded_libraries, thread_pool
 
@@ -52,6 +52,9 @@ def establish(method: str, train: CalibrationSet, settings: Settings, *, workers
 
     ``tables``: build the svr model's fast-path tables (not needed to score it).
     """
+    if method == "initial" and train.layout.overdetermined:  # M > N: P u (gauges.py)
+        from .gauges import forward_matrix
+        return CalibrationMatrix(np.linalg.pinv(forward_matrix(train.forces, train.voltages)))
     if method == "initial":
         return InitialMethod(fit_omega(train.points, train.layout).k)
     if method == "linear":

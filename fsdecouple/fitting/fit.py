@@ -135,6 +135,8 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
     if calib.layout != layout:
         raise InputError(f"{calib.source}: read for components {', '.join(calib.layout.loads)}, "
                          f"but the settings name {', '.join(layout.loads)}")
+    if layout.overdetermined:  # M > N: a forward model per output (gauges.py)
+        return _establish_gauges(calib, settings, workers, fit_svr, with_tables)
     labels, pairs = layout.labels, dict(zip(layout.chi_names, layout.pairs, strict=True))
     omega = fit_omega(calib.points, layout)
     warnings = list(calib.warnings)
@@ -185,9 +187,10 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
     u_fs = np.abs(omega.k) * np.asarray(settings.full_scale)
 
     def tables(axis: str) -> list[Chi]:
-        # the chi fed by one input axis share one grid (one index per input value);
-        # the tolerance is a fraction of the full-scale output of the chi's output
-        pair = [c for c in chis if labels[c.input_axis] == axis]
+        # the chi fed by one input axis share one grid (one index per input value), an
+        # own-load chi_aa of a joint fit included; the tolerance is a fraction of the
+        # full-scale output of the chi's output
+        pair = [c for c in [*chis, *own.values()] if labels[c.input_axis] == axis]
         # tangent tables have knots at the range's ends (extrapolation.table_interval)
         interval = tangent_interval if settings.extrapolation == "tangent" else table_interval
         lo, hi = interval(min(c.input_range[0] for c in pair), max(c.input_range[1] for c in pair))
@@ -199,7 +202,8 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         # eq. (11) rearranged, fitted from multi-load rows by backfitting (joint.py)
         u, f = calib.voltages, calib.forces
         fn, un = f / np.asarray(settings.full_scale), u / scale
-        svr = joint_svr(settings.svr, fn, un, a)
+        sigma = None if calib.noise is None else float(calib.noise[a] / scale[a])  # pose logs
+        svr = joint_svr(settings.svr, fn, un, a, sigma)
         k, fitted = backfit(fn, un, a, lambda x, y: _svr_chi(fit_svr(x, y, svr)), own=True)
         out = []
         for b, c in fitted.items():
@@ -221,7 +225,9 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         own = {c.name: c for _, cs in per_output for c in cs if c.output_axis == c.input_axis}
         if with_tables:
             with thread_pool(max(1, min(n_workers, layout.n))) as pool:
-                done = [c for pair in pool.map(tables, labels) for c in pair]
+                tabled = [c for pair in pool.map(tables, labels) for c in pair]
+            done = [c for c in tabled if c.output_axis != c.input_axis]
+            own = {c.name: c for c in tabled if c.output_axis == c.input_axis}
         else:
             done = chis
     elif n_workers > 1:
@@ -232,7 +238,7 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         chis = [one(j) for j in jobs]
         done = [c for axis in labels for c in tables(axis)] if with_tables else chis
     by_name = {c.name: c for c in done}
-    for c in done if with_tables else ():
+    for c in [*done, *own.values()] if with_tables else ():
         if not usable(c.surrogate, u_fs[c.output_axis]):
             warnings.append(
                 f"chi_{c.name}: its surrogate table reaches only "
@@ -254,7 +260,8 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         r2=dict(zip(labels, map(float, omega.r2), strict=True)),
         n_points=dict(zip(labels, map(int, omega.n), strict=True)),
         n_support_vectors={c.name: int(c.support_vectors.size) for c in [*chis, *own.values()]},
-        surrogate_max_error={n: c.surrogate.max_error for n, c in model.chi.items()}
+        surrogate_max_error={n: c.surrogate.max_error for n, c in [*model.chi.items(),
+                                                                   *model.own.items()]}
         if with_tables else None,
         gamma_before=before,
         gamma_after=after,
@@ -265,6 +272,75 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         "files": [{"path": p, "sha256": h} for p, h in calib.files],
         "libraries": _library_versions(),
     }
+    if calib.excluded:
+        model.provenance["excluded"] = list(calib.excluded)
+    model.created = datetime.now(UTC).replace(microsecond=0).isoformat()
+    return model
+
+
+def _tables_for(chis: list[Chi], settings: Settings, u_fs: np.ndarray, workers: int) -> list[Chi]:
+    """The surrogate tables of ``chis``: those fed by one input share one grid (fit's rule)."""
+    interval = tangent_interval if settings.extrapolation == "tangent" else table_interval
+    n = len(u_fs)
+
+    def one(b: int) -> list[Chi]:
+        group = [c for c in chis if c.input_axis == b]
+        lo, hi = interval(min(c.input_range[0] for c in group), max(c.input_range[1] for c in group))
+        tolerance = TOLERANCE * min(u_fs[c.output_axis] for c in group)
+        return [replace(c, surrogate=s)
+                for c, s in zip(group, build_pair(group, lo, hi, tolerance), strict=True)]
+
+    with thread_pool(max(1, min(workers, n))) as pool:
+        return [c for group in pool.map(one, range(n)) for c in group]
+
+
+def _establish_gauges(calib: CalibrationSet, settings: Settings, workers: int | None,
+                      fit_svr, with_tables: bool) -> CouplingErrorModel:
+    """M > N outputs: eq. (11) on v = K^+ u, each output's chi merged (gauges.py)."""
+    from .gauges import SOLVE_FRACTION, fit_forward, projection
+
+    layout = settings.layout
+    f, u = calib.forces, calib.voltages
+    fs = np.asarray(settings.full_scale, dtype=float)
+    check_separable(f, fs, layout.loads, calib.source)
+    k_fwd, p = projection(f, u, fs, layout.outputs, layout.loads, calib.source)
+    svr = replace(settings.svr, tolerance=min(settings.svr.tolerance, SOLVE_FRACTION))
+    n_workers = max(1, workers or min(layout.m, os.cpu_count() or 1))
+    with thread_pool(n_workers) as pool:
+        v, merged, _ = fit_forward(f, u, fs, p, k_fwd, svr, fit_svr, pool.map, calib.noise)
+    chis = [Chi(layout.chi_name(a, b), gamma, sv, coef, rho, float(fs[b]), float(fs[a]),
+                (float(v[:, b].min()), float(v[:, b].max())), len(v),
+                extrapolation=settings.extrapolation, pair=(a, b))
+            for (a, b), (gamma, sv, coef, rho) in merged.items()]
+    for c in chis:
+        if not all(np.isfinite(x).all() for x in (c.dual_coef, c.rho, c.support_vectors)):
+            raise _overflow(calib, f"the fit of chi_{c.name}")
+    warnings = list(calib.warnings)
+    if with_tables:
+        chis = _tables_for(chis, settings, fs, n_workers)
+        warnings += [f"chi_{c.name}: its surrogate table reaches only "
+                     f"{c.surrogate.max_error / fs[c.output_axis]:.2g} of full scale (needs <= "
+                     f"{MAX_SURROGATE_ERROR:g}); this model decouples by the exact kernel sum"
+                     for c in chis if not usable(c.surrogate, fs[c.output_axis])]
+    own = {c.name: c for c in chis if c.output_axis == c.input_axis}
+    cross = {c.name: c for c in chis if c.output_axis != c.input_axis}
+    model = CouplingErrorModel(settings, np.ones(layout.n), {n: cross[n] for n in layout.chi_names},
+                               own=own, projection=p)
+    units = settings.units.loads or None
+    exact = model.decouple(u, rotate=False, exact=True)
+    before = interference_errors(calib.points, v, fs, layout, units)
+    after = interference_errors(calib.points, exact, fs, layout, units)
+    r2 = 1.0 - ((v - f) ** 2).sum(axis=0) / ((v - v.mean(axis=0)) ** 2).sum(axis=0)
+    model.report = FitReport(
+        r2=dict(zip(layout.labels, map(float, r2), strict=True)),
+        n_points={a: int((f[:, i] != 0).sum()) for i, a in enumerate(layout.labels)},
+        gamma_before=before, gamma_after=after,
+        n_support_vectors={c.name: int(c.support_vectors.size) for c in chis},
+        surrogate_max_error={c.name: c.surrogate.max_error for c in chis} if with_tables else None,
+        repetitions=calib.repetitions, warnings=warnings,
+    )
+    model.provenance = {"files": [{"path": q, "sha256": h} for q, h in calib.files],
+                        "libraries": _library_versions()}
     if calib.excluded:
         model.provenance["excluded"] = list(calib.excluded)
     model.created = datetime.now(UTC).replace(microsecond=0).isoformat()

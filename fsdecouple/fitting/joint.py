@@ -64,15 +64,18 @@ JOINT_C = 1.0
 SEPARABLE = 1e-6
 
 
-def joint_svr(svr, f: np.ndarray, u: np.ndarray, a: int):
+def joint_svr(svr, f: np.ndarray, u: np.ndarray, a: int, sigma: float | None = None):
     """Table 2's SVR settings as the joint fit of output ``a`` uses them (normalised units).
 
-    C is JOINT_C, and epsilon the noise sigma of output a (at least Table 2's): the
-    residual scatter of a least-squares pilot fit of u_a, quadratic in every load,
-    sigma^2 = RSS / (n - p).  An epsilon-tube as wide as the noise (Cherkassky and Ma,
-    2004) and a C that bounds a chi's coefficients keep the SVRs from following the
-    noise of single readings, which a rig file of one reading per load is made of.
+    C is JOINT_C, and epsilon the noise sigma of output a (at least Table 2's): ``sigma``
+    when the samples of a pose log measured it (data/poses.py), else the residual scatter
+    of a least-squares pilot fit of u_a, quadratic in every load, sigma^2 = RSS / (n - p).
+    An epsilon-tube as wide as the noise (Cherkassky and Ma, 2004) and a C that bounds a
+    chi's coefficients keep the SVRs from following the noise of single readings, which a
+    rig file of one reading per load is made of.
     """
+    if sigma is not None and np.isfinite(sigma):
+        return replace(svr, C=JOINT_C, epsilon=max(svr.epsilon, float(sigma)))
     design = np.column_stack([f, f ** 2])
     coef, *_ = np.linalg.lstsq(design, u[:, a], rcond=None)
     dof = len(u) - np.linalg.matrix_rank(design)

@@ -81,6 +81,8 @@ def compare(old: CouplingErrorModel | str | Path, new: CouplingErrorModel | str 
         docs[-1].update(sensor=m.settings.sensor, created=m.created, method=m.method)
         models.append(m)
     old, new = models
+    for m in models:
+        m.layout.one_output_each("compare")
     _check_comparable(old, new, docs[0]["model"] or "old model", docs[1]["model"] or "new model")
 
     axes = old.layout.labels

@@ -198,8 +198,8 @@ def check_options(model: CouplingErrorModel, settings: Settings | None, tare, ze
         raise InputError(
             f"the config names outputs {', '.join(settings.layout.outputs)}, the model "
             f"{', '.join(model.layout.outputs)}; use the calibration's config")
-    if zero is not None and len(zero) != model.n_components:
-        raise InputError(f"--zero: {len(zero)} values for the model's {model.n_components} "
+    if zero is not None and len(zero) != model.n_outputs:
+        raise InputError(f"--zero: {len(zero)} values for the model's {model.n_outputs} "
                          f"outputs ({', '.join(model.layout.outputs)})")
     if unit is not None and model.settings.units.loads:
         raise InputError(f"--unit {unit}: the model's loads have mixed units "
@@ -273,7 +273,8 @@ def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarra
         huge = ~(np.abs(f) <= bound).all(axis=1) & ~empty
         code[huge] = NOT_FINITE_
         empty |= huge
-        outside = ((u < rules.lo) | (u > rules.hi)).any(axis=1) & ~empty
+        x = u if model.projection is None else model.project(u)  # M > N: the limits are v's
+        outside = ((x < rules.lo) | (x > rules.hi)).any(axis=1) & ~empty
         # the limits are the ADC's or amplifier's, so they bound the raw values
         saturated = ((raw <= rules.sat_lo) | (raw >= rules.sat_hi)).any(axis=1) & ~empty
     code[outside] = EXTRAPOLATED_
@@ -318,7 +319,7 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
     jobs: Iterator[Callable[[], Block]] = log.blocks(names, chunk_rows=chunk_rows,
                                                      want_table=is_parquet(out), keep=keep)
     summary = ApplySummary(force_unit=unit, output_unit=model.settings.output_unit,
-                           outputs=layout.outputs, offsets=np.zeros(layout.n),
+                           outputs=layout.outputs, offsets=np.zeros(layout.m),
                            force_columns=forces, dropped=dropped)
     to_unit = load_factor(model.settings.load_unit, unit)
     sat_lo, sat_hi = _limit_bounds(settings, model)

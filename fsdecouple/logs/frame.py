@@ -137,13 +137,13 @@ def frame_forces(model: CouplingErrorModel, frame: pd.DataFrame, *, tare: int | 
         raise InputError("give either tare or zero, not both")
     settings, _ = check_options(model, settings, None, None, None)  # its units: the model's
     raw = frame_outputs(model, frame, settings)
-    offsets = np.zeros(model.n_components)
+    offsets = np.zeros(model.n_outputs)
     if tare is not None:
         offsets = tare_offsets(raw, tare)
     elif zero is not None:
         offsets = np.asarray(zero, dtype=float)
-        if offsets.shape != (model.n_components,) or not np.isfinite(offsets).all():
-            raise InputError(f"zero {zero!r}: expected {model.n_components} finite outputs")
+        if offsets.shape != (model.n_outputs,) or not np.isfinite(offsets).all():
+            raise InputError(f"zero {zero!r}: expected {model.n_outputs} finite outputs")
     f, code, empty = decouple_rows(model, raw, offsets, RowRules.for_model(model, settings))
     if interval is not None:
         f = with_intervals(model, f, interval, raw - offsets)

@@ -275,6 +275,7 @@ def build_report(model, cv: dict | None = None, calib=None) -> Report:
     calib : CalibrationSet, optional
         The calibration set, to plot its points.
     """
+    model.layout.one_output_each("report")
     if cv is not None:
         _check_cv_fits(model, cv)
     figs: dict[str, bytes] = {}

@@ -71,7 +71,9 @@ def fit_tables(model) -> list:
     rep = model.report
     units = model.settings.units
     volts = units == Units()  # the paper's figures keep their paper-like format
-    t = Table(title=f"Non-coupling functions omega (eq. 2), sensor {model.settings.sensor}")
+    t = Table(title=("Least-squares loads v = P u of M > N outputs (docs/rigs.md)" if getattr(
+        model, "projection", None) is not None else "Non-coupling functions omega (eq. 2)")
+        + f", sensor {model.settings.sensor}")
     mixed = bool(units.loads)  # forces and moments: each row says its load unit
     slope, inverse_slope = ((f"{units.output}/load", f"load/{units.output}") if mixed
                             else (units.slope(), units.inverse_slope()))
@@ -90,11 +92,13 @@ def fit_tables(model) -> list:
               caption=f"beyond the input range: {model.settings.extrapolation} (extrapolation); "
                       f"zero offsets: {model.settings.zero_method}; refinement steps K = "
                       f"{model.settings.refine}")
-    for col in ("chi", "input", "support vectors", f"input range [{units.output}]"):
+    gauges = getattr(model, "projection", None) is not None  # M > N: inputs v = P u (gauges.py)
+    for col in ("chi", "input", "support vectors", f"input range [{'load' if gauges else units.output}]"):
         c.add_column(col, justify="right")
     span = "{:+.4f} .. {:+.4f}" if volts else "{:+.6g} .. {:+.6g}"
     for name, chi in model.chi.items():
-        c.add_row(f"chi_{name}", layout.outputs[chi.input_axis],
+        c.add_row(f"chi_{name}", f"{layout.labels[chi.input_axis]}_ls" if gauges
+                  else layout.outputs[chi.input_axis],
                   f"{chi.support_vectors.size} / {chi.n_points}",
                   span.format(*chi.input_range))
     g = Table(title="Interference error gamma (eq. 12) on the calibration data, % F.S.")

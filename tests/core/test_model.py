@@ -192,9 +192,12 @@ def test_an_own_load_chi_is_saved_as_version_4_and_subtracted_at_the_measured_ou
     doc["integrity"]["digest"] = content_digest(doc)
     with pytest.raises(ModelFileError, match=r"malformed model file \(chi_own in a version 3"):
         model_from_dict(doc)
-    # and the C export refuses it in one line until it writes own chi
-    from fsdecouple.errors import ConfigError
+    # the C export writes it beside the cross chi: here without a table, its kernel sum;
+    # with --max-error, a table of its own (tests/export: compiled against the model)
     from fsdecouple.export.header import plan_export
 
-    with pytest.raises(ConfigError, match=r"own-load chi .*chi xx\); export writes the N\(N - 1\)"):
-        plan_export(back)
+    plan = plan_export(back)
+    assert [(c.out, c.inp) for c in plan.chis][-1] == (0, 0) and plan.chis[-1].table is None
+    coarse = plan_export(back, max_error=1e-5)
+    assert coarse.chis[-1].table is not None and coarse.table_max_error <= 1e-5
+    assert coarse.terms_per_output == 3  # output x sums two cross chi and its own

@@ -47,7 +47,7 @@ HARNESS = r"""
 #include <stdio.h>
 int main(int argc, char **argv)
 {{
-    {real} u[{P}N_COMPONENTS], f[{P}N_COMPONENTS];
+    {real} u[{P}N_OUTPUTS], f[{P}N_COMPONENTS];
     uint32_t s;
     FILE *in, *out;
     if (argc != 3 || {p}selftest() != 0) return 3;
@@ -525,3 +525,103 @@ def test_cli_export_keeps_an_existing_file_without_force(tmp_path):
     shutil.copy(GOLDEN / "model-v1.json", model)
     invoke(["export", model, "-o", model, "--force"], code=2)  # never over its own input
     assert load_model(model)
+
+
+def _own_status_checks(model, u, status):
+    """Status bits of a six-output header against their definitions (apply reads ux..uz only)."""
+    lim = np.asarray(model.extrapolation_limits())
+    n = len(model.k)
+    with np.errstate(invalid="ignore"):
+        outside = (u < lim[:, 0]) | (u > lim[:, 1])
+    bits = (status[:, None] >> np.arange(n)) & 1
+    assert np.array_equal(bits == 1, outside)
+    assert np.array_equal((status & INPUT_NOT_FINITE) != 0, ~np.isfinite(u).all(axis=1))
+    covered = np.ones(len(u), bool)
+    with np.errstate(over="ignore", invalid="ignore"):
+        for c in [*model.chi.values(), *model.own.values()]:  # the own tables too
+            covered &= c.surrogate.covers(u[:, c.input_axis])
+    assert np.array_equal((status & OUTSIDE_TABLE) == 0, covered)
+
+
+@needs_cc
+def test_a_rig_model_with_own_load_chi_exports_and_matches_the_model(rig_model, tmp_path):
+    """Issue 22: the joint fit's own-load chi_aa are in the header (tables and kernel sums,
+    at the measured u_a), the forces within the promise of model.decouple everywhere, the
+    status bits as defined; with refinement steps too, and in float within its bound."""
+    model = rig_model
+    run, text = build(model, tmp_path)
+    n = len(model.k)
+    assert f"#define FSD_N_CHI {n * n}" in text and "own-load chi_aa(u_a)" in text
+    u = vectors(model, np.random.default_rng(11), 20_000)
+    f_c, status = run(u)
+    assert_close(f_c, decouple(model, u), model.settings.full_scale)
+    _own_status_checks(model, u, status)
+    # without the own chi the header's forces would be off by far more than the promise
+    bare = decouple(dataclasses.replace(model, own={}), u[:1000])
+    assert np.abs(bare - f_c[:1000]).max() > 1e3 * REL_FS * max(model.settings.full_scale)
+
+    refined = dataclasses.replace(model, settings=_Settings(model.settings, refine=2))
+    run, text = build(refined, tmp_path, name="refined.h")
+    assert "#define FSD_REFINE_STEPS 2" in text
+    lo, hi = np.asarray(model.calibrated_range).T
+    inside = lo + (hi - lo) * np.random.default_rng(12).random((20_000, n))
+    f_c, status = run(inside)
+    assert_close(f_c, decouple(refined, inside), model.settings.full_scale)
+    assert (status == 0).all()
+
+    run, text = build(model, tmp_path, name="float.h", precision="float")
+    bound = float(re.search(r"#define FSD_FLOAT_MAX_ERROR (\S+)", text).group(1))
+    f_c, _ = run(inside)
+    err = np.abs(f_c - decouple(model, inside.astype(np.float32).astype(float)))
+    assert (err / np.asarray(model.settings.full_scale)).max() <= bound
+
+
+@pytest.fixture(scope="module")
+def gauge_model(tmp_path_factory):
+    """Eight gauges for six components (M > N, fitting/gauges.py), with its tables."""
+    from fsdecouple.data.calibration import load_calibration
+    from fsdecouple.data.init_config import init_config
+    from fsdecouple.sim.rig import write_rig
+
+    out = tmp_path_factory.mktemp("gauges")
+    path = write_rig(out, seed=2, gauges=8)[0]
+    init_config(path, out / "cfg.yaml")
+    settings = load_config(out / "cfg.yaml")
+    return fit(load_calibration(path, settings), settings)
+
+
+@needs_cc
+def test_eight_gauges_export_the_projection_and_match_the_model(gauge_model, tmp_path):
+    """M > N: the header takes the eight outputs, forms v = P u and decouples it as the
+    model does, within the promise; range bits on v, the rest as defined; float too."""
+    model = gauge_model
+    run, text = build(model, tmp_path)
+    assert "#define FSD_N_OUTPUTS 8" in text and "#define FSD_N_COMPONENTS 6" in text
+    assert "fsd_projection[6][8]" in text
+    lo, hi = np.asarray(model.calibrated_range).T
+    rng = np.random.default_rng(13)
+    v = lo - 0.4 * (hi - lo) + 1.8 * (hi - lo) * rng.random((20_000, 6))
+    u = v @ np.linalg.pinv(model.projection).T  # outputs whose least-squares loads are v
+    u = np.concatenate([u, np.full((5, 8), np.nan)])
+    u[-10:-5, 3] = np.nan
+    f_c, status = run(u)
+    assert_close(f_c, decouple(model, u), model.settings.full_scale)
+    v = model.project(u)
+    lim = np.asarray(model.extrapolation_limits())
+    with np.errstate(invalid="ignore"):
+        outside = (v < lim[:, 0]) | (v > lim[:, 1])
+    assert np.array_equal(((status[:, None] >> np.arange(6)) & 1) == 1, outside)
+    assert outside.any() and not outside.all(axis=1).all()
+    assert np.array_equal((status & INPUT_NOT_FINITE) != 0, ~np.isfinite(u).all(axis=1))
+    covered = np.ones(len(u), bool)
+    with np.errstate(invalid="ignore"):
+        for c in [*model.chi.values(), *model.own.values()]:
+            covered &= c.surrogate.covers(v[:, c.input_axis])
+    assert np.array_equal((status & OUTSIDE_TABLE) == 0, covered)
+
+    run, text = build(model, tmp_path, name="float.h", precision="float")
+    bound = float(re.search(r"#define FSD_FLOAT_MAX_ERROR (\S+)", text).group(1))
+    inside = (lo + (hi - lo) * rng.random((20_000, 6))) @ np.linalg.pinv(model.projection).T
+    f_c, _ = run(inside)
+    err = np.abs(f_c - decouple(model, inside.astype(np.float32).astype(float)))
+    assert (err / np.asarray(model.settings.full_scale)).max() <= bound
