@@ -126,6 +126,11 @@ def natural_key(name: str) -> list:
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", name)]
 
 
+def names_a_directory(text: str) -> bool:
+    """An output as typed that can only be a directory: ``out/``, ``out/.``, ``..``
+    (pathlib drops the ``/`` and the ``.``, and a file ``out`` would be written)."""
+    return str(text).endswith(("/", os.sep)) or os.path.basename(str(text)) in (".", "..")
+
 
 def refuse_overwriting_input(out: str | Path, inputs) -> None:
     """Refuse an output path that is one of the inputs, even with ``--force``."""
@@ -133,8 +138,6 @@ def refuse_overwriting_input(out: str | Path, inputs) -> None:
     for f in inputs:
         if Path(f).resolve() == target:
             raise InputError(f"{out}: is also an input file; write the output somewhere else")
-
-
 
 
 # errors of a write that a user can act on (free space, permissions): not bugs

@@ -32,6 +32,7 @@ from rich.text import Text
 
 from .. import __version__
 from ..errors import FsdecoupleError, InputError, printable
+from ..files import names_a_directory
 
 # Each command imports what only it needs (pandas, libsvm, scipy, matplotlib),
 # so that `apply` and `show` start in a fraction of a second.
@@ -152,6 +153,19 @@ ConfigOpt = Annotated[
                  help="YAML config (default: the paper's sensor; for a model, its own settings)."),
 ]
 ForceOpt = Annotated[bool, typer.Option("--force", help="Overwrite existing output files.")]
+
+
+def _output_file(text: str) -> Path:
+    # typer's Path would turn 'report/' into a file named 'report'
+    if names_a_directory(text):
+        raise typer.BadParameter(f"{printable(text)!r} names a directory, not the file to write")
+    return Path(text)
+
+
+def output_file(help: str):
+    """The ``-o`` option of a command that writes one file: its name as typed, refused when it
+    can only name a directory (``-o out/``), never silently written as a file ``out``."""
+    return typer.Option("--output", "-o", help=help, parser=_output_file, metavar="<path>")
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print a JSON document on stdout.")]
 
 

@@ -19,6 +19,7 @@ from .app import (
     _read,
     app,
     console,
+    output_file,
     print_json,
     user_errors,
     warn,
@@ -100,7 +101,7 @@ def ingest(
     calib: Annotated[Path, typer.Argument(help="Calibration directory or CSV.")],
     config: ConfigOpt = None,
     output: Annotated[
-        Path | None, typer.Option("--output", "-o", help="Write the zero-corrected tidy CSV.")
+        Path | None, output_file("Write the zero-corrected tidy CSV.")
     ] = None,
     force: ForceOpt = False,
     json_out: JsonOpt = False,
@@ -130,7 +131,7 @@ def ingest(
 @app.command()
 def init(
     data_file: Annotated[Path, typer.Argument(help="A calibration CSV to guess the config from.")],
-    output: Annotated[Path, typer.Option("--output", "-o", help="Config file to write (YAML).")],
+    output: Annotated[Path, output_file("Config file to write (YAML).")],
     force: ForceOpt = False,
     json_out: JsonOpt = False,
 ) -> None:

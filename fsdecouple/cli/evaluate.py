@@ -23,6 +23,7 @@ from .app import (
     app,
     console,
     err_console,
+    output_file,
     progress_bar,
     user_errors,
     warn,
@@ -38,7 +39,7 @@ def cv(
         typer.Option(help='Held-out repetitions per round, e.g. "1,2;3,4;5,6" (the default).'),
     ] = None,
     output: Annotated[
-        Path | None, typer.Option("--output", "-o", help="Write the cv.json document.")
+        Path | None, output_file("Write the cv.json document.")
     ] = None,
     task: Annotated[
         Path | None, typer.Option(help="Combined-load voltage log (CSV) to validate on.")
@@ -135,7 +136,7 @@ def validate(
     model_file: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file (JSON).")],
     set_path: Annotated[Path, typer.Argument(metavar="SET", help="Independent set, calibration format.")],
     config: ConfigOpt = None,
-    output: Annotated[Path | None, typer.Option("--output", "-o", help="Write validation.json.")] = None,
+    output: Annotated[Path | None, output_file("Write validation.json.")] = None,
     max_gamma: Annotated[float | None, typer.Option(
         help="Exit 1 if the interference error (eq. 12) on calibrated points exceeds this fraction.")] = None,
     calib: Annotated[Path | None, typer.Option(
@@ -164,7 +165,7 @@ FILE_SUFFIXES = {".html", ".htm", ".png", ".svg", ".pdf", ".json", ".csv", ".txt
 @app.command()
 def report(
     model_file: Annotated[Path, typer.Argument(help="Model file (JSON).")],
-    output: Annotated[Path, typer.Option("--output", "-o", help="HTML report to write.")],
+    output: Annotated[Path, output_file("HTML report to write.")],
     cv: Annotated[
         Path | None, typer.Option("--cv", help="cv.json of `fsdecouple cv`: Tables 1, 3, 5, residuals.")
     ] = None,

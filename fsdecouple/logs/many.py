@@ -39,7 +39,7 @@ from typing import Any
 
 from ..config import Settings
 from ..errors import FsdecoupleError, InputError, printable
-from ..files import natural_key, output_directory, place, place_directory
+from ..files import names_a_directory, natural_key, output_directory, place, place_directory
 from .apply import MAX_WORKERS
 from .jobs import ApplySpec, Job, apply_job
 from .reader import PARQUET_SUFFIXES, is_parquet
@@ -86,7 +86,7 @@ def is_batch(inputs, output) -> bool:
     """Whether ``apply INPUT... -o OUTPUT`` is the many-log form (else single-file ``apply``).
 
     Many logs: more than one input, a directory or a glob as input, or an output
-    that is a directory or ends with ``/``.
+    that is a directory or ends with ``/`` (or ``/.``).
     """
     if len(inputs) != 1:
         return True
@@ -94,7 +94,7 @@ def is_batch(inputs, output) -> bool:
     if given == "-":
         return False
     return (Path(given).is_dir() or (not Path(given).exists() and glob.has_magic(given))
-            or out.endswith(("/", os.sep)) or Path(out).is_dir())
+            or names_a_directory(out) or Path(out).is_dir())
 
 
 def is_dataset(directory: Path) -> bool:
