@@ -299,6 +299,8 @@ def main() -> None:
         code = 128 + signal.SIGINT
     except SystemExit as stop:
         code = stop.code
+    except OSError as err:  # a usage error's or a gate's line on a full or closed stderr
+        code = _cannot_write(err)
     if code in (128 + signal.SIGINT, 128 + signal.SIGTERM):
         # stopped: every finally block has run (temporary files removed); threads still
         # inside libsvm or a thread pool's job are not waited for
@@ -335,10 +337,13 @@ def _run() -> int:
         # command) get one line like every other bad input, not a framed box
         if not (hasattr(err, "format_message") and hasattr(err, "exit_code")):
             raise
+        if type(err).__name__ == "NoArgsIsHelpError":  # a bare `fsdecouple`: its help, as is
+            sys.stderr.write(err.format_message() + "\n")
+            return err.exit_code
         ctx = getattr(err, "ctx", None)
         command = ctx.command_path if ctx is not None else "fsdecouple"
         message = " ".join(err.format_message().split())
-        if message:  # none when the help was printed for a bare `fsdecouple`
+        if message:
             err_console.print(Text("error: ", "red") + Text(f"{command}: {message} (see '{command} --help')"),
                               highlight=False, soft_wrap=True)
         code = err.exit_code
