@@ -60,9 +60,9 @@ def simulate(
                                       "squares of the loads (a few % F.S.).")
     ] = None,
     gauges: Annotated[
-        int, typer.Option(help="--rig only: output channels (6: readings Fx..Mz; 8: gauges "
-                               "g1..g8, more outputs than components).")
-    ] = 6,
+        int | None, typer.Option(help="--rig only: output channels, 6 to 64 (default 6: readings "
+                                      "Fx..Mz; 8: gauges g1..g8, more outputs than components).")
+    ] = None,
     force: ForceOpt = False,
 ) -> None:
     """Write a simulated calibration set: the paper's (with a combined-load task log) or a lab's."""
@@ -74,12 +74,20 @@ def simulate(
 
     with user_errors():
         if rig is not None:
-            from ..sim.rig import write_rig
+            from ..sim.rig import LEVELS, write_rig
 
-            files = write_rig(out_dir, seed=seed, gauges=gauges, levels=levels or 9, force=force,
-                              kind=rig)
+            given = [o for o, v in (("--repetitions", repetitions), ("--coupling", coupling),
+                                    ("--gross-error", gross_error)) if v is not None]
+            given += [o for o, v, d in (("--layout", layout, "paper"), ("--components", components, 3))
+                      if v != d]
+            if given:  # never ignored in silence
+                raise InputError(f"--rig: {', '.join(given)}: not with --rig (a rig file has its own layout)")
+            files = write_rig(out_dir, seed=seed, gauges=6 if gauges is None else gauges,
+                              levels=LEVELS if levels is None else levels, force=force, kind=rig)
             console.print(f"wrote {len(files)} files under {printable(out_dir)}")
             return
+        if gauges is not None:
+            raise InputError("--gauges: only with --rig (a rig's output channels)")
         if components not in (3, 6):
             raise InputError(f"--components {components}: expected 3 or 6")
         named = Layout.named(COMPONENTS, OUTPUTS) if components == 6 else DEFAULT

@@ -126,3 +126,18 @@ def test_the_cli_fits_applies_and_refuses_to_export_a_model_with_own_load_chi(tm
     assert (np.abs(got - f) / FULL_SCALE).max() < 0.006
     res = invoke(["export", str(model), "-o", str(tmp_path / "d.h")], code=2)
     assert "own-load chi" in res.stderr and not (tmp_path / "d.h").exists()
+
+
+def test_a_rig_write_that_fails_leaves_no_directory(tmp_path, monkeypatch):
+    """write_rig made its directory before anything could fail, and left it behind."""
+    import errno
+
+    from fsdecouple import files
+
+    def full(*a, **k):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(files, "place", full)
+    res = invoke(["simulate", str(tmp_path / "new" / "rig"), "--rig", "lever-arm"], code=2)
+    assert "No space left" in res.stderr
+    assert list(tmp_path.iterdir()) == []
