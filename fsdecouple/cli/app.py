@@ -293,6 +293,9 @@ def _cannot_write(err: OSError) -> int:
 
 def main() -> None:
     signal.signal(signal.SIGTERM, _terminate)
+    # for the whole process, not only inside user_errors(): a pool's threads still running
+    # after an error (cv --workers 2) warned on stderr once the error had restored the filters
+    warnings.simplefilter("ignore", RuntimeWarning)
     try:
         code = _run()
     except KeyboardInterrupt:
