@@ -180,11 +180,13 @@ def report(
     """Write a self-contained HTML calibration report (figures, gamma tables, checks)."""
     from ..data.calibration import load_calibration
     from ..evaluation.cv_results import load_cv_results
-    from ..reporting.report import build_report
+    from ..reporting.report import build_report, check_cv_fits
 
     with user_errors():
         model = load_model(model_file)
         cv_doc = load_cv_results(cv) if cv is not None else None
+        if cv_doc is not None:
+            check_cv_fits(model, cv_doc, printable(cv))  # before any figure is drawn
         cs = load_calibration(calib, model.settings) if calib is not None else None
         targets = [output]
         if png is not None:
