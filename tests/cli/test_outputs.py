@@ -123,3 +123,18 @@ def test_apply_output_ending_in_slash_dot_is_the_many_log_form(tmp_path, model):
     """`apply M LOG -o forces/.` wrote a regular file `forces`, like `-o forces/` did once."""
     invoke(["apply", model, SAMPLE / "task_voltages.csv", "-o", f"{tmp_path / 'forces'}/."])
     assert (tmp_path / "forces" / "task_voltages.csv").is_file()
+
+
+@pytest.mark.parametrize("command, suffix", [
+    (["export", "{model}"], ".h"), (["init", SAMPLE / "loadcell" / "calibration.csv"], ".yaml"),
+    (["apply", "{model}", SAMPLE / "task_voltages.csv"], ".parquet"),
+])
+def test_a_legal_255_byte_output_name_is_written(tmp_path, model, command, suffix):
+    """`.NAME.XXXXXXXX.tmp` beside a 255-byte NAME is longer than a name may be: the
+    output was refused ("File name too long").  The temporary's NAME is cut instead."""
+    out = tmp_path / ("é" * 100 + "x" * (55 - len(suffix)) + suffix)  # 255 bytes in UTF-8
+    assert len(out.name.encode()) == 255
+    args = [str(model) if a == "{model}" else a for a in command]
+    invoke([*args, "-o", out])
+    invoke([*args, "-o", out, "--force"])  # over the first: the same temporary, cut
+    assert out.is_file() and [p.name for p in tmp_path.iterdir()] == [out.name]
