@@ -180,6 +180,7 @@ def report(
     """Write a self-contained HTML calibration report (figures, gamma tables, checks)."""
     from ..data.calibration import load_calibration
     from ..evaluation.cv_results import load_cv_results
+    from ..evaluation.validate import refuse_meaningless
     from ..reporting.report import build_report, check_cv_fits
 
     with user_errors():
@@ -188,6 +189,8 @@ def report(
         if cv_doc is not None:
             check_cv_fits(model, cv_doc, printable(cv))  # before any figure is drawn
         cs = load_calibration(calib, model.settings) if calib is not None else None
+        if cs is not None:
+            refuse_meaningless(cs, model)  # a 1e308 cell: no axis of a figure can hold it
         targets = [output]
         if png is not None:
             if png.exists() and not png.is_dir():

@@ -122,7 +122,7 @@ def validate(
                          f"{set_u.output}; the model was calibrated with loads in {model_u.load}, "
                          f"outputs in {model_u.output}: use the calibration's config")
     cs = load_calibration(set_path, replace(settings, min_repetitions=1), combined=True)
-    _refuse_meaningless(cs, model)
+    refuse_meaningless(cs, model)
     points = cs.points
     u, loads = cs.voltages.astype(float), cs.forces.astype(float)
     single = (loads != 0.0).sum(axis=1) <= 1
@@ -202,7 +202,7 @@ def validate(
     return doc
 
 
-def _refuse_meaningless(cs, model: CouplingErrorModel) -> None:
+def refuse_meaningless(cs, model: CouplingErrorModel) -> None:
     """A load or output beyond FORCE_LIMIT x the model's full scale is no measurement (1e308
     in a cell, loads in the wrong unit): its errors would overflow to inf, which no JSON
     holds.  Refused, naming its file, row and column, as apply gives it no forces."""
