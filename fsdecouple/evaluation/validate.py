@@ -39,7 +39,7 @@ from ..config import Settings
 from ..core.metrics import check_max_gamma, interference_error
 from ..core.model import FORCE_LIMIT, CouplingErrorModel
 from ..core.modelfile import content_digest, load_model, model_to_dict
-from ..errors import InputError, where
+from ..errors import InputError, printable, where
 from ..files import atomic_write, check_output, refuse_overwriting_input
 
 FORMAT = "fsdecouple.validation"
@@ -131,6 +131,9 @@ def validate(
     forces = {"model": model.decouple(u, rotate=False)}
     matrix, calib_files = (model.matrix, []) if model.matrix is not None else \
         _matrix_of(calib, model)
+    if model.matrix is not None and calib is not None:  # never ignored in silence
+        warnings.append(f"--calib {printable(calib)}: not read; the model file holds the "
+                        "least-squares matrix of its own calibration")
     if matrix is not None:
         forces["linear"] = u @ np.asarray(matrix).T
     else:
