@@ -146,7 +146,7 @@ def _unknown(key: str, allowed: set[str], where: str) -> ConfigError:
     return ConfigError(f"{where}: unknown key '{key}'{did_you_mean}; allowed: {', '.join(sorted(allowed))}")
 
 
-def _number(value: Any, where: str, *, positive: bool = False) -> float:
+def _number(value: Any, where: str, *, positive: bool = False, within: tuple | None = None) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise ConfigError(f"{where}: expected a number, found {value!r}")
     v = float(value)
@@ -154,6 +154,8 @@ def _number(value: Any, where: str, *, positive: bool = False) -> float:
         raise ConfigError(f"{where}: expected a finite number, found {value!r}")
     if positive and v <= 0:
         raise ConfigError(f"{where}: must be greater than 0, found {value!r}")
+    if within and not within[0] <= v <= within[1]:
+        raise ConfigError(f"{where}: expected {within[0]:g} .. {within[1]:g}, found {value!r}")
     return v
 
 
@@ -194,10 +196,10 @@ def _svr_settings(raw: Any, where: str, base: SVRSettings) -> SVRSettings:
             raise _unknown(key, _SVR_KEYS, where)
     if "gamma" in raw and "delta2" in raw:
         raise ConfigError(f"{where}: give either 'gamma' or 'delta2' (gamma = 1/(2 delta2)), not both")
-    kw = {key: _number(raw[key], f"{where}: {key}", positive=True)
-          for key in ("C", "epsilon", "tolerance", "gamma") if key in raw}
-    if "delta2" in raw:
-        kw["gamma"] = 1.0 / (2.0 * _number(raw["delta2"], f"{where}: delta2", positive=True))
+    # within 1e-12 .. 1e12 (docs/errors.md): a gamma of 1e308 overflowed the kernel's sums
+    kw = {k: _number(raw[k], f"{where}: {k}", within=(1e-12, 1e12)) for k in _SVR_KEYS if k in raw}
+    if "delta2" in kw:
+        kw["gamma"] = 1.0 / (2.0 * kw.pop("delta2"))
     return replace(base, **kw)
 
 
@@ -438,9 +440,7 @@ def apply_overrides(settings: Settings, **overrides: Any) -> Settings:
     given = {k: v for k, v in overrides.items() if v is not None}
     svr_raw = {k: given.pop(k) for k in list(given) if k in _SVR_KEYS}
     if svr_raw:
-        settings = replace(
-            settings, svr=_svr_settings(svr_raw, "command-line SVR setting", settings.svr)
-        )
+        settings = replace(settings, svr=_svr_settings(svr_raw, "command-line SVR setting", settings.svr))
     if "scaling" in given and given["scaling"] not in SCALINGS:
         raise ConfigError(f"--scaling: expected one of {', '.join(SCALINGS)}, found {given['scaling']!r}")
     if "refine" in given:

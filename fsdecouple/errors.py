@@ -38,6 +38,8 @@ def printable(text: object, keep: str = "", *, spaces: bool = False) -> str:
     escaped = ("C",) if spaces else ("C", "Z")
     return "".join(
         c if c == " " or c in keep or not unicodedata.category(c).startswith(escaped)
+        # a file name's byte that is not UTF-8 (os.fsdecode's U+DC80..U+DCFF): as that byte
+        else f"\\x{ord(c) - 0xDC00:02x}" if 0xDC80 <= ord(c) <= 0xDCFF
         else repr(c)[1:-1]
         for c in text
     )

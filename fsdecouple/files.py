@@ -23,10 +23,8 @@ def reading(path: str | Path, what: str = "a CSV file", *, noun: str = "",
             error: type = InputError) -> Iterator[None]:
     """Turn the OS errors of opening and reading ``path`` into one-line ``error``s.
 
-    ``noun`` names the kind of input in the messages ("config": "config file not
-    found", "cannot read config (...)"); the path is printed with its control
-    characters escaped, so the message stays one line.
-    """
+    ``noun`` names the kind of input ("config": "config file not found", "cannot read
+    config (...)"); the path's control characters are escaped: the message is one line."""
     name, kind = printable(path), f"{noun} " if noun else ""
     try:
         yield
@@ -91,10 +89,9 @@ def _size(n: int) -> str:
 def read_bounded(path: str | Path, limit: int, what: str, error: type = InputError) -> bytes:
     """The bytes of ``path``, refused with one line if there are more than ``limit``.
 
-    A regular file is measured (``fstat``) before anything is read, so a 1 GB
-    sparse file costs nothing; anything else (``/dev/zero``, a pipe) is read to at
-    most ``limit + 1`` bytes.  OS errors (not found, a directory) are the caller's.
-    """
+    A regular file is measured (``fstat``) before anything is read, so a 1 GB sparse file
+    costs nothing; anything else (``/dev/zero``, a pipe) is read to at most ``limit + 1``
+    bytes.  OS errors (not found, a directory) are the caller's."""
     with open_input(path) as fh:
         st = os.fstat(fh.fileno())
         if stat.S_ISREG(st.st_mode) and st.st_size > limit:
@@ -126,6 +123,11 @@ def natural_key(name: str) -> list:
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", name)]
 
 
+def names_a_directory(text: str) -> bool:
+    """An output as typed that can only be a directory: ``out/``, ``out/.``, ``..``
+    (pathlib drops the ``/`` and the ``.``, and a file ``out`` would be written)."""
+    return str(text).endswith(("/", os.sep)) or os.path.basename(str(text)) in (".", "..")
+
 
 def refuse_overwriting_input(out: str | Path, inputs) -> None:
     """Refuse an output path that is one of the inputs, even with ``--force``."""
@@ -133,8 +135,6 @@ def refuse_overwriting_input(out: str | Path, inputs) -> None:
     for f in inputs:
         if Path(f).resolve() == target:
             raise InputError(f"{out}: is also an input file; write the output somewhere else")
-
-
 
 
 # errors of a write that a user can act on (free space, permissions): not bugs
@@ -215,13 +215,12 @@ def _link_noreplace(tmp: str, path: Path) -> bool:
 def _placeholder_noreplace(tmp: str, path: Path) -> None:
     """For filesystems without renameat2 and hard links (FAT, some network shares).
 
-    Claim ``path`` with an exclusive create (O_EXCL is atomic on every local
-    filesystem), then rename the finished file over our own empty placeholder.
-    A file that exists before the claim is never replaced, and of two exclusive
-    writers exactly one gets the claim.  What this cannot give: for the moment
-    between the claim and the rename an empty ``path`` is visible, and a SIGKILL
-    exactly then leaves it behind (empty, never partial); a writer that does not
-    create exclusively may write into the placeholder and be replaced.
+    Claim ``path`` with an exclusive create (O_EXCL is atomic on every local filesystem),
+    then rename the finished file over our own empty placeholder.  A file that exists
+    before the claim is never replaced, and of two exclusive writers exactly one gets the
+    claim.  What this cannot give: for the moment between the claim and the rename an
+    empty ``path`` is visible, and a SIGKILL exactly then leaves it behind (empty, never
+    partial); a writer that does not create exclusively may write into the placeholder.
     """
     try:
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
@@ -271,7 +270,7 @@ def place_directory(tmp: str | Path, path: Path, *, force: bool) -> None:
         return
     old = None
     if path.exists():
-        old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=_directory(path)))
+        old = Path(tempfile.mkdtemp(prefix=_hidden(path), suffix=".old", dir=_directory(path)))
         os.replace(path, old / path.name)
     try:
         os.replace(tmp, path)
@@ -282,6 +281,11 @@ def place_directory(tmp: str | Path, path: Path, *, force: bool) -> None:
     finally:
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
+
+
+def _hidden(path: Path) -> str:
+    """``.NAME.``, NAME cut to leave room for 8 random characters and ``.tmp.old`` in 255 bytes."""
+    return "." + os.fsencode(path.name)[:255 - 18].decode(errors="ignore") + "."
 
 
 def _write_error(path: Path, err: OSError) -> InputError:
@@ -295,7 +299,7 @@ class _Pending:
         self.path = path
         directory = _directory(path)
         try:
-            fd, self.tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
+            fd, self.tmp = tempfile.mkstemp(prefix=_hidden(path), suffix=".tmp", dir=directory)
         except OSError as err:
             raise InputError(f"{path}: cannot write in {directory} ({err.strerror})") from None
         try:
@@ -326,13 +330,12 @@ class _Pending:
 class atomic_files:  # noqa: N801 (used as a context manager, like open)
     """Several outputs that appear together or not at all.
 
-    ``with atomic_files(force=...) as group:`` then ``with group.open(path) as fh``
-    for each output (directories it needs are created, and removed again on
-    failure if they were created here).  Nothing is placed until the ``with``
-    block ends without an error; then every file is placed (see :func:`place`).
-    If one cannot be placed (it appeared meanwhile), those placed before it are
-    taken back (with ``force``, the previous files are restored) and nothing of
-    the group remains.  An interruption or error removes every temporary file.
+    ``with atomic_files(force=...) as group:`` then ``with group.open(path) as fh`` for
+    each output (directories it needs are created, and removed again on failure if they
+    were created here).  Nothing is placed until the ``with`` block ends without an error;
+    then every file is placed (see :func:`place`).  If one cannot be placed (it appeared
+    meanwhile), those placed before it are taken back (with ``force``, the previous files
+    are restored) and nothing of the group remains.  An error removes every temporary.
     """
 
     def __init__(self, *, force: bool):
@@ -431,12 +434,12 @@ class atomic_files:  # noqa: N801 (used as a context manager, like open)
 def atomic_write(path: str | Path, mode: str = "w", *, force: bool = True) -> Iterator:
     """Write to a temporary file beside ``path`` and put it in place on success.
 
-    The temporary file is hidden (``.NAME.XXXX.tmp``) in the same directory, so the
-    final step is atomic.  An exception, Ctrl-C or SIGTERM leaves any previous file
-    untouched and removes the temporary file; a full disk is reported as an
-    :class:`InputError`.  Only SIGKILL (or a power cut) can leave the hidden
-    temporary file behind, never a partial ``path``.  Without ``force``, a file
-    that appears at ``path`` while writing is not replaced (see :func:`place`).
+    The temporary file is hidden (``.NAME.XXXX.tmp``, NAME cut for a name near 255 bytes)
+    in the same directory, so the final step is atomic.  An exception, Ctrl-C or SIGTERM
+    leaves any previous file untouched and removes the temporary file; a full disk is an
+    :class:`InputError`.  Only SIGKILL (or a power cut) can leave the hidden temporary
+    file, never a partial ``path``.  Without ``force``, a file that appears at ``path``
+    while writing is not replaced (see :func:`place`).
     """
     path = Path(path)
     check_output(path, force=force)

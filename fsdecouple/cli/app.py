@@ -32,6 +32,7 @@ from rich.text import Text
 
 from .. import __version__
 from ..errors import FsdecoupleError, InputError, printable
+from ..files import names_a_directory
 
 # Each command imports what only it needs (pandas, libsvm, scipy, matplotlib),
 # so that `apply` and `show` start in a fraction of a second.
@@ -152,6 +153,19 @@ ConfigOpt = Annotated[
                  help="YAML config (default: the paper's sensor; for a model, its own settings)."),
 ]
 ForceOpt = Annotated[bool, typer.Option("--force", help="Overwrite existing output files.")]
+
+
+def _output_file(text: str) -> Path:
+    # typer's Path would turn 'report/' into a file named 'report'
+    if names_a_directory(text):
+        raise typer.BadParameter(f"{printable(text)!r} names a directory, not the file to write")
+    return Path(text)
+
+
+def output_file(help: str):
+    """The ``-o`` option of a command that writes one file: its name as typed, refused when it
+    can only name a directory (``-o out/``), never silently written as a file ``out``."""
+    return typer.Option("--output", "-o", help=help, parser=_output_file, metavar="<path>")
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print a JSON document on stdout.")]
 
 
@@ -279,12 +293,17 @@ def _cannot_write(err: OSError) -> int:
 
 def main() -> None:
     signal.signal(signal.SIGTERM, _terminate)
+    # for the whole process, not only inside user_errors(): a pool's threads still running
+    # after an error (cv --workers 2) warned on stderr once the error had restored the filters
+    warnings.simplefilter("ignore", RuntimeWarning)
     try:
         code = _run()
     except KeyboardInterrupt:
         code = 128 + signal.SIGINT
     except SystemExit as stop:
         code = stop.code
+    except OSError as err:  # a usage error's or a gate's line on a full or closed stderr
+        code = _cannot_write(err)
     if code in (128 + signal.SIGINT, 128 + signal.SIGTERM):
         # stopped: every finally block has run (temporary files removed); threads still
         # inside libsvm or a thread pool's job are not waited for
@@ -321,10 +340,13 @@ def _run() -> int:
         # command) get one line like every other bad input, not a framed box
         if not (hasattr(err, "format_message") and hasattr(err, "exit_code")):
             raise
+        if type(err).__name__ == "NoArgsIsHelpError":  # a bare `fsdecouple`: its help, as is
+            sys.stderr.write(err.format_message() + "\n")
+            return err.exit_code
         ctx = getattr(err, "ctx", None)
         command = ctx.command_path if ctx is not None else "fsdecouple"
         message = " ".join(err.format_message().split())
-        if message:  # none when the help was printed for a bare `fsdecouple`
+        if message:
             err_console.print(Text("error: ", "red") + Text(f"{command}: {message} (see '{command} --help')"),
                               highlight=False, soft_wrap=True)
         code = err.exit_code

@@ -11,7 +11,18 @@ from ..config import load_config
 from ..core.modelfile import load_model
 from ..errors import printable
 from ..files import atomic_write, check_output, refuse_overwriting_input
-from .app import ConfigOpt, ForceOpt, JsonOpt, _given, _read, app, console, print_json, user_errors
+from .app import (
+    ConfigOpt,
+    ForceOpt,
+    JsonOpt,
+    _given,
+    _read,
+    app,
+    console,
+    output_file,
+    print_json,
+    user_errors,
+)
 
 
 @app.command()
@@ -20,7 +31,7 @@ def certificate(
     calib: Annotated[Path, typer.Argument(help="The calibration directory or CSV it was fitted on.")],
     config: ConfigOpt = None,
     output: Annotated[
-        Path | None, typer.Option("--output", "-o", help="HTML certificate to write (prints on A4).")
+        Path | None, output_file("HTML certificate to write (prints on A4).")
     ] = None,
     force: ForceOpt = False,
     json_out: JsonOpt = False,

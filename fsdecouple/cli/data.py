@@ -19,6 +19,7 @@ from .app import (
     _read,
     app,
     console,
+    output_file,
     print_json,
     user_errors,
     warn,
@@ -65,9 +66,9 @@ def simulate(
                                       "squares of the loads (a few % F.S.).")
     ] = None,
     gauges: Annotated[
-        int, typer.Option(help="--rig only: output channels (6: readings Fx..Mz; 8: gauges "
-                               "g1..g8, more outputs than components).")
-    ] = 6,
+        int | None, typer.Option(help="--rig only: output channels, 6 to 64 (default 6: readings "
+                                      "Fx..Mz; 8: gauges g1..g8, more outputs than components).")
+    ] = None,
     force: ForceOpt = False,
 ) -> None:
     """Write a simulated calibration set: the paper's (with a combined-load task log) or a lab's."""
@@ -81,12 +82,20 @@ def simulate(
         if hysteresis is not None and (components == 6 or rig is not None):
             raise InputError("--hysteresis: only for the three-axis paper layout")
         if rig is not None:
-            from ..sim.rig import write_rig
+            from ..sim.rig import LEVELS, write_rig
 
-            files = write_rig(out_dir, seed=seed, gauges=gauges, levels=levels or 9, force=force,
-                              kind=rig)
+            given = [o for o, v in (("--repetitions", repetitions), ("--coupling", coupling),
+                                    ("--gross-error", gross_error)) if v is not None]
+            given += [o for o, v, d in (("--layout", layout, "paper"), ("--components", components, 3))
+                      if v != d]
+            if given:  # never ignored in silence
+                raise InputError(f"--rig: {', '.join(given)}: not with --rig (a rig file has its own layout)")
+            files = write_rig(out_dir, seed=seed, gauges=6 if gauges is None else gauges,
+                              levels=LEVELS if levels is None else levels, force=force, kind=rig)
             console.print(f"wrote {len(files)} files under {printable(out_dir)}")
             return
+        if gauges is not None:
+            raise InputError("--gauges: only with --rig (a rig's output channels)")
         if components not in (3, 6):
             raise InputError(f"--components {components}: expected 3 or 6")
         named = Layout.named(COMPONENTS, OUTPUTS) if components == 6 else DEFAULT
@@ -108,7 +117,7 @@ def ingest(
     calib: Annotated[Path, typer.Argument(help="Calibration directory or CSV.")],
     config: ConfigOpt = None,
     output: Annotated[
-        Path | None, typer.Option("--output", "-o", help="Write the zero-corrected tidy CSV.")
+        Path | None, output_file("Write the zero-corrected tidy CSV.")
     ] = None,
     force: ForceOpt = False,
     json_out: JsonOpt = False,
@@ -138,7 +147,7 @@ def ingest(
 @app.command()
 def init(
     data_file: Annotated[Path, typer.Argument(help="A calibration CSV to guess the config from.")],
-    output: Annotated[Path, typer.Option("--output", "-o", help="Config file to write (YAML).")],
+    output: Annotated[Path, output_file("Config file to write (YAML).")],
     force: ForceOpt = False,
     json_out: JsonOpt = False,
 ) -> None:

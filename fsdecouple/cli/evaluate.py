@@ -23,6 +23,7 @@ from .app import (
     app,
     console,
     err_console,
+    output_file,
     progress_bar,
     user_errors,
     warn,
@@ -38,7 +39,7 @@ def cv(
         typer.Option(help='Held-out repetitions per round, e.g. "1,2;3,4;5,6" (the default).'),
     ] = None,
     output: Annotated[
-        Path | None, typer.Option("--output", "-o", help="Write the cv.json document.")
+        Path | None, output_file("Write the cv.json document.")
     ] = None,
     task: Annotated[
         Path | None, typer.Option(help="Combined-load voltage log (CSV) to validate on.")
@@ -135,7 +136,7 @@ def validate(
     model_file: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file (JSON).")],
     set_path: Annotated[Path, typer.Argument(metavar="SET", help="Independent set, calibration format.")],
     config: ConfigOpt = None,
-    output: Annotated[Path | None, typer.Option("--output", "-o", help="Write validation.json.")] = None,
+    output: Annotated[Path | None, output_file("Write validation.json.")] = None,
     max_gamma: Annotated[float | None, typer.Option(
         help="Exit 1 if the interference error (eq. 12) on calibrated points exceeds this fraction.")] = None,
     calib: Annotated[Path | None, typer.Option(
@@ -164,7 +165,7 @@ FILE_SUFFIXES = {".html", ".htm", ".png", ".svg", ".pdf", ".json", ".csv", ".txt
 @app.command()
 def report(
     model_file: Annotated[Path, typer.Argument(help="Model file (JSON).")],
-    output: Annotated[Path, typer.Option("--output", "-o", help="HTML report to write.")],
+    output: Annotated[Path, output_file("HTML report to write.")],
     cv: Annotated[
         Path | None, typer.Option("--cv", help="cv.json of `fsdecouple cv`: Tables 1, 3, 5, residuals.")
     ] = None,
@@ -179,12 +180,17 @@ def report(
     """Write a self-contained HTML calibration report (figures, gamma tables, checks)."""
     from ..data.calibration import load_calibration
     from ..evaluation.cv_results import load_cv_results
-    from ..reporting.report import build_report
+    from ..evaluation.validate import refuse_meaningless
+    from ..reporting.report import build_report, check_cv_fits
 
     with user_errors():
         model = load_model(model_file)
         cv_doc = load_cv_results(cv) if cv is not None else None
+        if cv_doc is not None:
+            check_cv_fits(model, cv_doc, printable(cv))  # before any figure is drawn
         cs = load_calibration(calib, model.settings) if calib is not None else None
+        if cs is not None:
+            refuse_meaningless(cs, model)  # a 1e308 cell: no axis of a figure can hold it
         targets = [output]
         if png is not None:
             if png.exists() and not png.is_dir():

@@ -24,6 +24,7 @@ from .app import (
     app,
     console,
     err_console,
+    output_file,
     print_json,
     progress_bar,
     user_errors,
@@ -34,7 +35,7 @@ from .app import (
 @app.command()
 def fit(
     calib: Annotated[Path, typer.Argument(help="Calibration directory or CSV.")],
-    output: Annotated[Path, typer.Option("--output", "-o", help="Model file to write (JSON).")],
+    output: Annotated[Path, output_file("Model file to write (JSON).")],
     config: ConfigOpt = None,
     C: Annotated[float | None, typer.Option("--C", help="SVR regularisation C.")] = None,
     epsilon: Annotated[float | None, typer.Option(
@@ -177,7 +178,7 @@ def show(model_file: Annotated[Path, typer.Argument(help="Model file (JSON).")])
 @app.command()
 def export(
     model_file: Annotated[Path, typer.Argument(help="Model file (JSON).")],
-    output: Annotated[Path, typer.Option("--output", "-o", help="C header to write, e.g. decoupler.h.")],
+    output: Annotated[Path, output_file("C header to write, e.g. decoupler.h.")],
     precision: Annotated[
         str, typer.Option(help="double: fsd_decouple; float: fsd_decouple_f with float tables.")
     ] = "double",

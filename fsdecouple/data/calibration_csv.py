@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import io
 import os
+import re
 from dataclasses import dataclass
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
@@ -53,6 +54,7 @@ def list_calibration(path: str | Path) -> tuple[list[Path], list[Path]]:
 # Repetition labels are whole numbers 1 .. 2**53, read exactly from their text: a
 # label through a float would merge 2**53 and 2**53 + 1, and 1e20 would wrap.
 MAX_REPETITION = 2**53
+LABEL_TEXT = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?", re.ASCII)  # a number, ASCII only
 
 
 def _repetition_labels(cells, path: Path, column: str, rows, decimal: str) -> np.ndarray:
@@ -62,8 +64,8 @@ def _repetition_labels(cells, path: Path, column: str, rows, decimal: str) -> np
     values, bad = np.zeros(len(uniq), dtype=np.int64), np.zeros(len(uniq), dtype=bool)
     for j, t in enumerate(uniq):
         try:
-            if "_" in t:  # Python reads 1_0 as 10; a spreadsheet does not
-                raise InvalidOperation
+            if not LABEL_TEXT.fullmatch(t):  # Python reads 1_0 as 10 and '٣' (Arabic) as 3;
+                raise InvalidOperation       # a spreadsheet reads neither
             value = Decimal(t)
         except InvalidOperation:
             bad[j] = True

@@ -22,10 +22,11 @@ import numpy as np
 from .. import __version__
 from ..config import Settings
 from ..core.metrics import check_max_gamma, interference_error
+from ..core.model import FORCE_LIMIT
 from ..data.calibration import CalibrationSet, GrossError, load_calibration
 from ..data.calibration_csv import read_task_log
 from ..data.zero import tare_offsets
-from ..errors import InputError
+from ..errors import InputError, where
 from ..fitting import svr as _svr
 from ..fitting.baselines import METHODS, establish, train_all
 from ..fitting.linear import fit_omega
@@ -183,6 +184,16 @@ def run_cv(
                        tune_grid=tune_grid)
 
 
+def _refuse_beyond(values: np.ndarray, scale: float, path, columns) -> None:
+    """A task log's cell beyond FORCE_LIMIT x ``scale`` (the full scale, or the calibration's
+    largest output), refused naming its file, row and column, as apply gives it no forces."""
+    bad = np.argwhere(~(np.abs(values) <= FORCE_LIMIT * scale))
+    if len(bad):
+        i, j = bad[0]
+        raise InputError(f"{where(path, int(i) + 2, columns[j])}: {values[i, j]:.6g} is beyond "
+                         f"{FORCE_LIMIT:g} x the calibration's full scale ({scale:.6g}): check its units")
+
+
 def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, workers, repeats,
             progress, protocol, tune=False, tune_grid=None) -> dict[str, Any]:
     settings = settings or Settings()
@@ -211,6 +222,12 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
     task_data = None
     if task is not None:
         u_task, f_task = read_task_log(task[0], task[1], settings)
+        # a 1e308 cell is no measurement: its errors would overflow to inf in cv.json
+        names = settings.columns  # the files' own column names
+        _refuse_beyond(u_task, float(np.abs(calib.voltages).max()), task[0],
+                       [names[c] for c in settings.layout.outputs])
+        _refuse_beyond(f_task, float(np.max(settings.full_scale)), task[1],
+                       [names[c] for c in settings.layout.loads])
         if task_tare is not None:
             u_task = u_task - tare_offsets(u_task, task_tare)
         task_data = (u_task, f_task)

@@ -37,9 +37,9 @@ import numpy as np
 from .. import __version__
 from ..config import Settings
 from ..core.metrics import check_max_gamma, interference_error
-from ..core.model import CouplingErrorModel
+from ..core.model import FORCE_LIMIT, CouplingErrorModel
 from ..core.modelfile import content_digest, load_model, model_to_dict
-from ..errors import InputError
+from ..errors import InputError, printable, where
 from ..files import atomic_write, check_output, refuse_overwriting_input
 
 FORMAT = "fsdecouple.validation"
@@ -124,6 +124,7 @@ def validate(
                          f"{set_u.output}; the model was calibrated with loads in {model_u.load}, "
                          f"outputs in {model_u.output}: use the calibration's config")
     cs = load_calibration(set_path, replace(settings, min_repetitions=1), combined=True)
+    refuse_meaningless(cs, model)
     points = cs.points
     u, loads = cs.voltages.astype(float), cs.forces.astype(float)
     single = (loads != 0.0).sum(axis=1) <= 1
@@ -132,6 +133,9 @@ def validate(
     forces = {"model": model.decouple(u, rotate=False)}
     matrix, calib_files = (model.matrix, []) if model.matrix is not None else \
         _matrix_of(calib, model)
+    if model.matrix is not None and calib is not None:  # never ignored in silence
+        warnings.append(f"--calib {printable(calib)}: not read; the model file holds the "
+                        "least-squares matrix of its own calibration")
     if matrix is not None:
         forces["linear"] = u @ np.asarray(matrix).T
     else:
@@ -201,6 +205,23 @@ def validate(
         with atomic_write(output, force=force) as fh:
             fh.write(dumps(doc) + "\n")
     return doc
+
+
+def refuse_meaningless(cs, model: CouplingErrorModel) -> None:
+    """A load or output beyond FORCE_LIMIT x the model's full scale is no measurement (1e308
+    in a cell, loads in the wrong unit): its errors would overflow to inf, which no JSON
+    holds.  Refused, naming its file, row and column, as apply gives it no forces."""
+    layout, p = model.layout, cs.points
+    for cols, scale in ((layout.loads, model.settings.full_scale),
+                        (layout.outputs, model.full_scale_output)):
+        values = p[list(cols)].to_numpy(dtype=float)
+        bound = FORCE_LIMIT * float(np.max(np.abs(scale)))
+        bad = np.argwhere(~(np.abs(values) <= bound))
+        if len(bad):
+            i, j = bad[0]
+            raise InputError(f"{where(p['file'].iat[i], int(p['row'].iat[i]), cols[j])}: "
+                             f"{values[i, j]:.6g} is beyond {FORCE_LIMIT:g} x the model's full "
+                             f"scale ({np.max(np.abs(scale)):.6g}): check the set's units")
 
 
 def _gate(records, max_gamma: float | None) -> dict[str, Any] | None:

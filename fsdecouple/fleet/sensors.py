@@ -211,6 +211,7 @@ def fit_many(sensors_dir: str | Path, models_dir: str | Path, *, method: str = "
         raise InputError(f"{out}: is a file, expected a directory for the models")
     if not out.parent.is_dir():
         raise InputError(f"{out}: directory {out.parent} does not exist")
+    made = not out.exists()
     output_directory(out)
 
     workers = min(workers or os.cpu_count() or 1, len(dirs))
@@ -228,6 +229,9 @@ def fit_many(sensors_dir: str | Path, models_dir: str | Path, *, method: str = "
                 progress(n, len(dirs))
     except BaseException:  # SIGTERM, Ctrl-C, a bug: stop the workers too, now
         _stop(ex)
+        if made:  # the directory this run made, if no model was written into it
+            with contextlib.suppress(OSError):
+                out.rmdir()
         raise
     ex.shutdown()
     return FleetResult(str(sensors_dir), str(models_dir), [results[d.name] for d in dirs],

@@ -82,8 +82,12 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
 
     n = workers or os.cpu_count() or 1
     with dask.config.set(WORKER_CONFIG):  # read as the nannies start the workers
-        cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                           dashboard_address=":0", silence_logs=logging.CRITICAL)
+        try:
+            cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                               dashboard_address=":0", silence_logs=logging.CRITICAL)
+        except (RuntimeError, OSError, TimeoutError) as err:  # no process may be started here
+            raise InputError(f"--engine dask: cannot start a local cluster of {n} worker processes "
+                             f"({excerpt(err, 200)}); try --engine local") from None
     with cluster, distributed.Client(cluster, set_as_default=False) as client:
         yield client
 

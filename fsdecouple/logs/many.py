@@ -39,7 +39,7 @@ from typing import Any
 
 from ..config import Settings
 from ..errors import FsdecoupleError, InputError, printable
-from ..files import natural_key, output_directory, place, place_directory
+from ..files import names_a_directory, natural_key, output_directory, place, place_directory
 from .apply import MAX_WORKERS
 from .jobs import ApplySpec, Job, apply_job
 from .reader import PARQUET_SUFFIXES, is_parquet
@@ -86,7 +86,7 @@ def is_batch(inputs, output) -> bool:
     """Whether ``apply INPUT... -o OUTPUT`` is the many-log form (else single-file ``apply``).
 
     Many logs: more than one input, a directory or a glob as input, or an output
-    that is a directory or ends with ``/``.
+    that is a directory or ends with ``/`` (or ``/.``).
     """
     if len(inputs) != 1:
         return True
@@ -94,7 +94,7 @@ def is_batch(inputs, output) -> bool:
     if given == "-":
         return False
     return (Path(given).is_dir() or (not Path(given).exists() and glob.has_magic(given))
-            or out.endswith(("/", os.sep)) or Path(out).is_dir())
+            or names_a_directory(out) or Path(out).is_dir())
 
 
 def is_dataset(directory: Path) -> bool:
@@ -147,6 +147,12 @@ def _not_a_log(p: Path) -> str | None:
     return f"{kind}, not a regular file (a directory's logs must be files)"
 
 
+def _real(path) -> Path:
+    """``path`` resolved; a symbolic link loop (``loop.csv -> loop.csv``) stays as it is,
+    where Path.resolve raised RuntimeError (a traceback) before the log could be listed."""
+    return Path(os.path.realpath(path))
+
+
 def find_jobs(inputs) -> tuple[list[Job], list[Path]]:
     """The logs named by ``inputs`` and where their outputs go; and the directories given.
 
@@ -176,15 +182,15 @@ def find_jobs(inputs) -> tuple[list[Job], list[Path]]:
         else:
             raise InputError(f"{printable(given)}: file not found")
     if loose:
-        base = Path(os.path.commonpath([p.resolve().parent for p in loose]))
+        base = Path(os.path.commonpath([_real(p).parent for p in loose]))
         for p in loose:
-            found = _walk(p, base) if p.is_dir() else [Job(p, p.resolve().relative_to(base))]
+            found = _walk(p, base) if p.is_dir() else [Job(p, _real(p).relative_to(base))]
             if p.is_dir() and not found:
                 raise InputError(f"{printable(p)}: a directory with no .csv or .parquet log")
             jobs += found
     unique: dict[Path, Job] = {}
     for job in jobs:
-        unique.setdefault(job.input.resolve(), job)
+        unique.setdefault(_real(job.input), job)
     jobs = list(unique.values())
     seen: dict[Path, Job] = {}
     for job in jobs:
@@ -197,17 +203,16 @@ def find_jobs(inputs) -> tuple[list[Job], list[Path]]:
 
 def check_out_dir(out_dir: Path, jobs: list[Job], dirs: list[Path], others=()) -> None:
     """Refuse an output directory that is, or lies inside, an input; and outputs onto inputs."""
-    out = out_dir.resolve()
+    out = _real(out_dir)
     for d in [*dirs, *(j.input for j in jobs if j.dataset)]:
-        if out == d.resolve() or d.resolve() in out.parents:
+        if out == _real(d) or _real(d) in out.parents:
             raise InputError(f"{printable(out_dir)}: is the input directory {printable(d)} or inside "
                              "it; write the outputs elsewhere")
-    inputs = {p.resolve() for j in jobs for p in (j.input, *j.parts)} | {
-        Path(p).resolve() for p in others}
+    inputs = {_real(p) for j in jobs for p in (j.input, *j.parts)} | {_real(p) for p in others}
     if out in inputs:
         raise InputError(f"{printable(out_dir)}: is one of the inputs; write the outputs elsewhere")
     for job in jobs:
-        if (out / job.rel).resolve() in inputs:
+        if _real(out / job.rel) in inputs:
             raise InputError(f"{printable(out_dir / job.rel)}: is also an input file; write the "
                              "outputs elsewhere")
     if out_dir.exists() and not out_dir.is_dir():

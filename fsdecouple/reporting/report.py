@@ -253,15 +253,27 @@ def _checks(model, cv) -> str:
     return out
 
 
+def _unit_words(units) -> str:
+    """``{load: gf, output: count}`` (a settings document's units; None: the paper's) as words."""
+    units = units if isinstance(units, dict) else {"load": "N", "output": "V"}
+    def words(u):
+        return "/".join(sorted({str(v) for v in u.values()})) if isinstance(u, dict) else str(u)
+    return f"{printable(words(units.get('load')))} and {printable(words(units.get('output')))}"
 
 
-def _check_cv_fits(model, cv: dict) -> None:
-    """A cv.json of another sensor's layout (a six-axis cv for a 3-axis model) is refused."""
+def check_cv_fits(model, cv: dict, source: str = "cv.json") -> None:
+    """A cv.json of another sensor (a six-axis cv for a 3-axis model, a gram-force and count
+    cv for a model in N and V) is refused: its tables would sit under the model's units."""
     axes = sorted({str(r.get("axis")) for r in cv.get("records") or [] if isinstance(r, dict)})
     unknown = [str(a) for a in axes if a not in model.layout.labels]
     if unknown:
-        raise InputError(f"cv.json scores components {', '.join(map(printable, axes))}; the model's "
+        raise InputError(f"{source}: scores components {', '.join(map(printable, axes))}; the model's "
                          f"are {', '.join(model.layout.labels)}: give the cv.json of its calibration")
+    settings = cv.get("settings") if isinstance(cv.get("settings"), dict) else {}
+    own = model.settings.to_dict().get("units")
+    if settings.get("units") != own:
+        raise InputError(f"{source}: is in {_unit_words(settings.get('units'))}, the model in "
+                         f"{_unit_words(own)}: give the cv.json of its calibration")
 
 
 def build_report(model, cv: dict | None = None, calib=None) -> Report:
@@ -277,7 +289,7 @@ def build_report(model, cv: dict | None = None, calib=None) -> Report:
     """
     model.layout.one_output_each("report")
     if cv is not None:
-        _check_cv_fits(model, cv)
+        check_cv_fits(model, cv)
     figs: dict[str, bytes] = {}
     body = [f"<h1>Calibration report: {escape(model.settings.sensor)}</h1>\n",
             _header(model, cv),

@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..files import atomic_write, check_output
+from ..files import atomic_files, check_output
+from .simulate import MAX_LEVELS, check_count
 
 COMPONENTS = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
 FULL_SCALE = np.array([100.0, 100.0, 200.0, 5.0, 5.0, 5.0])  # [N], [N·m]
@@ -37,6 +38,7 @@ NOISE = 2e-4  # reading noise, fraction of full scale
 # 1.5 %, cubes up to 0.3 %, noise 0.1 % F.S.
 QUADRATIC = {"own": 0.03, "cross": 0.015, "cubic": 0.003, "noise": 1e-3}
 RIGS = ("lever-arm", "quadratic")
+MAX_GAUGES = 64  # output channels of a rig: --gauges 100000000 would fill the memory
 # which force the lever arm loads with each moment, and its sign per N·m
 LEVER = {3: (1, -1.0 / ARM), 4: (0, 1.0 / ARM), 5: (0, 1.0 / ARM)}
 
@@ -104,14 +106,19 @@ def write_rig(out: str | Path, *, seed: int = 0, gauges: int = 6, levels: int = 
     """
     if kind not in RIGS:
         raise InputError(f"--rig {kind!r}: expected {' or '.join(RIGS)}")
-    if gauges < len(COMPONENTS):
+    check_count(seed, "seed", 0)
+    if isinstance(gauges, int) and gauges < len(COMPONENTS):
         raise InputError(f"--gauges {gauges}: a six-axis rig needs at least 6 output channels")
-    if levels < 2:
+    check_count(gauges, "gauges", len(COMPONENTS), MAX_GAUGES)
+    if isinstance(levels, int) and levels < 2:
         raise InputError(f"--levels {levels}: a sweep needs at least 2 load levels")
+    check_count(levels, "levels", 2, MAX_LEVELS)
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out}: is a file, expected a directory to write into")
     path = out / "calibration.csv"
-    check_output(path, force=force)
+    if out.is_dir():
+        check_output(path, force=force)
     f, r = rig_rows(seed, levels, kind)
     if gauges == len(COMPONENTS):
         names, values = list(COMPONENTS), r
@@ -124,6 +131,8 @@ def write_rig(out: str | Path, *, seed: int = 0, gauges: int = 6, levels: int = 
         stamp = f"2026-01-01T00:{i // 60:02d}:{i % 60:02d}"
         lines.append(",".join([stamp, *(f"{v:.6f}" for v in ri), *(f"{v:.10g}" for v in fi)]))
     lines += ["," * (len(names) + len(loads))] * 2  # trailing empty rows, as spreadsheets leave
-    with atomic_write(path, force=force) as fh:
-        fh.write("\n".join(lines) + "\n")
+    with atomic_files(force=force) as group:  # a directory it made is removed on failure
+        group.mkdir(out)
+        with group.open(path) as fh:
+            fh.write("\n".join(lines) + "\n")
     return [path]

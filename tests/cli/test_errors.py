@@ -6,7 +6,7 @@ import json
 import shutil
 
 import pytest
-from conftest import SAMPLE, invoke
+from conftest import ROOT, SAMPLE, invoke
 
 CAL = SAMPLE / "calibration"
 
@@ -123,3 +123,20 @@ def test_existing_output_not_overwritten_without_force(tmp_path):
     out.write_text("precious")
     r = invoke(["fit", CAL, "-o", out], code=2)
     assert "--force" in r.stderr and out.read_text() == "precious"
+
+
+@pytest.mark.slow  # a cv in a subprocess, through the CLI's main
+def test_no_numpy_warning_from_a_pool_thread_after_the_error(tmp_path):
+    """cv --workers 2 with a gross error of 1e308: the error restored the warning filters
+    while the pool's other threads were still summing, and they printed numpy's overflow
+    warnings under the error line.  Now the filter holds for the whole process."""
+    import os
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-m", "fsdecouple", "cv", str(SAMPLE / "calibration"),
+                        "--gross-error", "x:1:1:1e308", "--workers", "2", "-o", str(tmp_path / "cv.json")],
+                       capture_output=True, text=True, timeout=300,
+                       env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert r.returncode == 2 and len(r.stderr.splitlines()) == 1, r.stderr
+    assert "RuntimeWarning" not in r.stderr and "too large" in r.stderr

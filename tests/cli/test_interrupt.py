@@ -123,4 +123,4 @@ def test_sigterm_stops_fit_many_and_its_worker_processes(tmp_path):
     assert proc.returncode == 143 and time.monotonic() - sent < 10, err.decode()[-2000:]
     alive = subprocess.run(["pgrep", "-f", str(sensors)], capture_output=True, text=True).stdout
     assert alive == "", alive
-    assert not models.exists() or list(models.iterdir()) == []
+    assert not models.exists()  # the directory it made is not left behind, empty

@@ -149,6 +149,8 @@ def test_excerpt_and_printable():
     assert excerpt("short") == "short"
     assert printable("a\nb\tc\x1bd é") == "a\\nb\\tc\\x1bd é"
     assert where("r\n.csv", 3, "u\ny") == "r\\n.csv, row 3, column 'u\\ny'"
+    # a name's non-UTF-8 byte is shown as that byte, as a path's is: s\xff, not s\udcff
+    assert printable(os.fsdecode(b"s\xff")) == "s\\xff"
 
 
 def test_numpy_warnings_are_not_printed_before_an_error(tmp_path, good_model):

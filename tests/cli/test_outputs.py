@@ -98,3 +98,43 @@ def test_read_only_directory_refused_before_work(tmp_path, monkeypatch):
                         lambda p, mode, **k: p != tmp_path and real(p, mode, **k))
     assert_one_line_error(invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "m.json"], code=2),
               "m.json", "read-only filesystem or no permission")
+
+
+@pytest.mark.parametrize("command", [
+    ["fit", SAMPLE / "calibration"], ["export", "{model}"], ["report", "{model}"],
+    ["validate", "{model}", SAMPLE / "calibration"], ["cv", SAMPLE / "calibration"],
+    ["certificate", "{model}", SAMPLE / "calibration"], ["ingest", SAMPLE / "calibration"],
+    ["init", SAMPLE / "loadcell" / "calibration.csv"],
+])
+def test_a_file_output_named_as_a_directory_is_refused(tmp_path, model, monkeypatch, command):
+    """`-o report/` was written as a file named `report` (pathlib drops the slash, and a
+    `/.`): every command that writes one file refuses a name that can only be a
+    directory, before any work, and creates nothing (a usage error: one line and exit 2
+    from the CLI's main, test_cli.py)."""
+    monkeypatch.chdir(tmp_path)
+    args = [str(model) if a == "{model}" else a for a in command]
+    for name in ("out/", "out/.", "out/..", "."):
+        r = invoke([*args, "-o", name], code=2)
+        assert "'--output'" in r.stderr and f"'{name}' names a directory" in r.stderr, r.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_apply_output_ending_in_slash_dot_is_the_many_log_form(tmp_path, model):
+    """`apply M LOG -o forces/.` wrote a regular file `forces`, like `-o forces/` did once."""
+    invoke(["apply", model, SAMPLE / "task_voltages.csv", "-o", f"{tmp_path / 'forces'}/."])
+    assert (tmp_path / "forces" / "task_voltages.csv").is_file()
+
+
+@pytest.mark.parametrize("command, suffix", [
+    (["export", "{model}"], ".h"), (["init", SAMPLE / "loadcell" / "calibration.csv"], ".yaml"),
+    (["apply", "{model}", SAMPLE / "task_voltages.csv"], ".parquet"),
+])
+def test_a_legal_255_byte_output_name_is_written(tmp_path, model, command, suffix):
+    """`.NAME.XXXXXXXX.tmp` beside a 255-byte NAME is longer than a name may be: the
+    output was refused ("File name too long").  The temporary's NAME is cut instead."""
+    out = tmp_path / ("é" * 100 + "x" * (55 - len(suffix)) + suffix)  # 255 bytes in UTF-8
+    assert len(out.name.encode()) == 255
+    args = [str(model) if a == "{model}" else a for a in command]
+    invoke([*args, "-o", out])
+    invoke([*args, "-o", out, "--force"])  # over the first: the same temporary, cut
+    assert out.is_file() and [p.name for p in tmp_path.iterdir()] == [out.name]

@@ -71,3 +71,16 @@ def test_an_ascii_locale_gets_tables_and_errors_not_a_traceback(sample_model, tm
     missing = tmp_path / "n\u00f6pe.json"
     r = _run(["show", missing], env=env, capture_output=True)
     assert r.returncode == 2 and r.stderr.startswith(b"error: ") and b"Traceback" not in r.stderr
+
+
+@pytest.mark.slow  # interpreters starting up
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full")
+def test_a_usage_error_or_a_bare_command_on_a_full_stderr_is_exit_2():
+    """The usage error's line was written outside the handler of unwritable streams: exit
+    1, the failed-gate code.  A bare ``fsdecouple`` printed its whole help as one error line."""
+    with open("/dev/full", "w") as full:
+        for args in (["show"], ["show", "--bogus"], ["aply"], [], ["export", "m.json", "-o", "x/"]):
+            r = _run(args, stdout=subprocess.PIPE, stderr=full)
+            assert r.returncode == 2, args
+    r = _run([], capture_output=True, text=True)
+    assert r.returncode == 2 and r.stderr.startswith("Usage: ") and "\n  fit " in r.stderr

@@ -200,6 +200,13 @@ def test_a_model_file_without_a_matrix_takes_it_from_calib(doc, set_file, model_
     assert linear == [r for r in doc["records"] if r["method"] == "linear"]
 
 
+def test_calib_beside_a_model_that_holds_its_matrix_is_not_ignored_in_silence(set_file, model_file):
+    """--calib is read only for a model file without a matrix; beside one that holds it,
+    it was ignored without a word (even /dev/zero)."""
+    doc = validate(model_file, set_file, calib="/dev/zero")
+    assert any("--calib /dev/zero: not read" in w for w in doc["warnings"]), doc["warnings"]
+
+
 def test_a_range_without_a_loaded_point_has_no_figure(model_file, tmp_path):
     """Every loaded y point pushed past the range: the calibrated y group is its zero rows,
     which scored a perfect 0.0 before; now no figure, and n = 0."""

@@ -231,6 +231,19 @@ def test_entries_named_like_logs_that_are_not_files_are_listed_as_failed(sample_
     assert sorted(Path(p).name for p in doc["failed"]) == ["dangling.csv", "fifo.csv", "folder.csv"]
 
 
+def test_a_symbolic_link_loop_named_like_a_log_is_listed_as_failed(sample_model, tmp_path):
+    """`loop.csv -> loop.csv` in a directory of logs: Path.resolve raised RuntimeError, a
+    traceback before any log was decoupled.  Now it is a failed log like a dangling link."""
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    (logs / "good.csv").write_text((SAMPLE / "task_voltages.csv").read_text())
+    (logs / "loop.csv").symlink_to("loop.csv")
+    r = invoke(["apply", sample_model, logs, "-o", f"{tmp_path / 'out'}/", "--json"], code=2)
+    doc = json.loads(r.stdout)
+    assert [Path(p).name for p in doc["failed"]] == ["loop.csv"]
+    assert (tmp_path / "out" / "good.csv").is_file()
+
+
 @pytest.mark.parametrize("command", ["apply", "fit-many"])
 def test_an_output_directory_that_cannot_be_written_is_one_line(sample_model, tmp_path, monkeypatch,
                                                                 command):

@@ -324,3 +324,16 @@ def test_interval_columns_from_both_engines_as_single_file_apply(sample_model, t
     assert {"decoupled_fx", "decoupled_fx_lo", "decoupled_fx_hi", "fz_hi"} <= set(ds.columns)
     assert (ds["decoupled_fx_lo"] < ds["decoupled_fx"]).all()
     assert (ds["decoupled_fx"] < ds["decoupled_fx_hi"]).all()
+
+
+def test_a_local_cluster_that_cannot_start_is_one_line(sample_model, tmp_path, monkeypatch):
+    """A LocalCluster whose worker processes cannot start (no process may be spawned, a
+    scratch directory of another user) raised "Nanny failed to start": a traceback."""
+    def no_cluster(*a, **k):
+        raise RuntimeError("Nanny failed to start.")
+
+    monkeypatch.setattr(distributed, "LocalCluster", no_cluster)
+    r = invoke(["apply", sample_model, SAMPLE / "task_voltages.csv", "-o", f"{tmp_path / 'out'}/",
+                "--engine", "dask"], code=2)
+    assert_one_line_error(r, "--engine dask", "cannot start a local cluster", "--engine local")
+    assert not (tmp_path / "out").exists() or list((tmp_path / "out").iterdir()) == []

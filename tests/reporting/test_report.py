@@ -9,7 +9,7 @@ from html.parser import HTMLParser
 
 import numpy as np
 import pytest
-from conftest import ROOT, SAMPLE, invoke
+from conftest import ROOT, SAMPLE, assert_one_line_error, invoke
 from matplotlib.image import imread
 
 pytestmark = pytest.mark.slow  # renders every figure of the report with matplotlib
@@ -418,6 +418,18 @@ def test_a_cv_json_of_another_layout_is_refused(tmp_path, sample_model, cv_json)
     cv.write_text(json.dumps(doc))
     r = invoke(["report", sample_model, "--cv", cv, "-o", tmp_path / "r.html"], code=2)
     assert "fx" in r.stderr and "x, y, z" in r.stderr and not (tmp_path / "r.html").exists()
+
+
+def test_a_cv_json_in_other_units_is_refused(tmp_path, sample_model, cv_json):
+    """The cv.json of a lab's load cell (gram-force, counts) under a model in N and V: the
+    components match, so it was accepted and its tables shown under the model's units."""
+    doc = json.loads(cv_json.read_text())
+    doc["settings"]["units"] = {"load": "gf", "output": "count"}
+    cv = tmp_path / "lab-cv.json"
+    cv.write_text(json.dumps(doc))
+    r = invoke(["report", sample_model, "--cv", cv, "-o", tmp_path / "r.html"], code=2)
+    assert_one_line_error(r, "lab-cv.json", "gf and count", "N and V")
+    assert not (tmp_path / "r.html").exists()
 
 
 def _report_text(html_text: str) -> str:

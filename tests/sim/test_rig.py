@@ -122,3 +122,18 @@ def test_the_cli_fits_applies_and_exports_a_model_with_own_load_chi(tmp_path):
     assert load_model(model).fast_decoupler() is not None
     invoke(["export", str(model), "-o", str(tmp_path / "d.h")])
     assert "own-load chi_aa(u_a)" in (tmp_path / "d.h").read_text()
+
+
+def test_a_rig_write_that_fails_leaves_no_directory(tmp_path, monkeypatch):
+    """write_rig made its directory before anything could fail, and left it behind."""
+    import errno
+
+    from fsdecouple import files
+
+    def full(*a, **k):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(files, "place", full)
+    res = invoke(["simulate", str(tmp_path / "new" / "rig"), "--rig", "lever-arm"], code=2)
+    assert "No space left" in res.stderr
+    assert list(tmp_path.iterdir()) == []
