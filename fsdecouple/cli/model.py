@@ -90,9 +90,11 @@ def fit(
     """Fit the coupling error model, judge it on held-out points, write one JSON model file."""
     from ..core.model import refine_advice, tune_advice
     from ..data.calibration import load_calibration
+    from ..evaluation.calibrate import fit as fit_model
+    from ..evaluation.calibrate import fit_document
     from ..evaluation.checks import assumption_checks
     from ..evaluation.tune import grid_option
-    from ..evaluation.verdict import calibrate, verdict_line
+    from ..evaluation.verdict import verdict_line
     from ..reporting.tune_table import tune_table
 
     with user_errors():
@@ -106,19 +108,14 @@ def fit(
         cs = load_calibration(calib, settings, exclude=exclude or (), strict=strict)
         refuse_overwriting_input(output, [*_read(cs), *_given(config)])
         with progress_bar("tuning" if tune else "fitting", MofNCompleteColumn()) as progress:
-            model = calibrate(cs, settings, method=method, verdict=not no_verdict, tune=tune,
+            model = fit_model(cs, settings, method=method, verdict=not no_verdict, tune=tune,
                               tune_grid=grid, progress=progress)
         checks = assumption_checks(model)
         advice = refine_advice(checks, model.n_components)
         advice["tune"] = tune_advice(advice, model.report.tune)
         save_model(model, output, force=force)
     if json_out:
-        # the certificate's step data and scores are the model file's: fsdecouple certificate
-        report = {k: v for k, v in model.report.to_dict().items() if k != "certificate"}
-        print_json({"model": str(output), "method": model.method, **report,
-                    "checks": [c.to_dict() for c in checks], "refine": settings.refine,
-                    "extrapolation": settings.extrapolation,
-                    "refine_advice": advice, "tune": model.report.tune})
+        print_json(fit_document(model, output, checks, advice))
     else:
         if model.report.tune is not None:
             console.print(tune_table(model.report.tune, model.settings.load_unit))

@@ -20,7 +20,6 @@ where a rig's readings bend most (issue 22).
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
 import numpy as np
@@ -28,15 +27,12 @@ import numpy as np
 from ..config import Settings
 from ..core.metrics import interference_error, pct
 from ..data.calibration import CalibrationSet
-from ..errors import InputError
 from ..fitting.baselines import train_all
 from ..fitting.joint import multi_load
-from ..fitting.outliers import gross_errors
-from .budget import certificate_data, heldout_predictions
+from .budget import heldout_predictions
 from .heldout import HeldOutRound, choose_protocol, rounds_for
 
 VERDICT_METHODS = ("initial", "linear", "svr")
-FIT_METHODS = ("svr", "linear", "auto")
 
 
 def gamma_records(rounds: list[HeldOutRound], models: dict, settings: Settings,
@@ -152,70 +148,3 @@ def verdict_warning(verdict: dict[str, Any], method: str) -> str | None:
 def summary(verdict: dict[str, Any]) -> dict[str, Any]:
     """The verdict without its records: what the model file and ``fit --json`` keep."""
     return {k: v for k, v in verdict.items() if k not in ("records", "predictions", "trained")}
-
-
-def calibrate(calib: CalibrationSet, settings: Settings, *, method: str = "svr",
-              verdict: bool = True, workers: int | None = None, tune: bool = False,
-              tune_grid=None, progress=None):
-    """``fit`` as the command runs it: the model, its held-out verdict, and the method chosen.
-
-    ``method``: ``svr`` (the paper's), ``linear`` (the calibration matrix) or ``auto``
-    (the lower held-out worst gamma of the two; on rig rows, fitting/joint.py, the lower
-    worst component's RMS error).  The verdict is recorded in the
-    model's report; when the protocol cannot run (e.g. a sweep with a single loaded
-    point) the model is still written, with a warning, unless ``auto`` needs it.
-    ``tune``: choose the SVR settings first (:func:`fsdecouple.evaluation.tune.tune_settings`,
-    over ``tune_grid``); the grid and the choice go into ``report.tune``.
-    """
-    from ..core.metrics import interference_errors
-    from ..fitting.fit import fit
-    from ..fitting.linear import fit_calibration_matrix
-
-    if method not in FIT_METHODS:
-        raise InputError(f"--method {method!r}: expected one of {', '.join(FIT_METHODS)}")
-    if method == "auto" and not verdict:
-        raise InputError("--method auto chooses by the held-out verdict; drop --no-verdict")
-    if settings.zero is None and getattr(calib, "zero", None) == "fit" != settings.zero_method:
-        settings = dataclasses.replace(settings, zero="fit")  # out-and-back sweeps (zero.py)
-    record = None
-    if tune:
-        from .tune import tune_settings
-        settings, record = tune_settings(calib, settings, grid=tune_grid, workers=workers,
-                                         progress=progress)
-    model = fit(calib, settings, workers=workers)
-    model.report.tune = record
-    points, layout = calib.points, settings.layout
-    if layout.overdetermined:  # M > N: each component's least-squares load v = P u (gauges.py)
-        from ..fitting.gauges import projected
-        points, layout = projected(points, model.projection, layout)
-    outliers = gross_errors(points, model.k, settings.full_scale, layout)
-    model.report.outliers = [dataclasses.asdict(o) for o in outliers]
-    model.report.warnings += [o.message(settings.units.load_of(settings.layout.index(o.axis)))
-                              for o in outliers]
-    found = None
-    if verdict:
-        try:
-            found = heldout_verdict(calib, settings, workers=workers)
-        except InputError as err:
-            if method == "auto":
-                raise InputError(f"--method auto needs a held-out verdict, which cannot run: {err}"
-                                 ) from None
-            model.report.warnings.append(f"no held-out verdict: {err}")
-    chosen = choose(found, method) if found is not None else method
-    # the least-squares matrix on the same calibration, kept by an svr model too, so
-    # validate can set it beside the model (a linear model decouples by it)
-    model.matrix = fit_calibration_matrix(calib.voltages, calib.forces).C
-    if chosen == "linear":
-        model.method = "linear"
-        model.report.gamma_after = interference_errors(
-            calib.points, model.decouple(calib.voltages, rotate=False), settings.full_scale,
-            settings.layout, settings.units.loads or None)
-    if found is not None:
-        model.report.verdict = {**summary(found), "asked": method, "chosen": chosen}
-        if not settings.layout.overdetermined:  # per prime output: none with M > N outputs
-            model.report.certificate = certificate_data(calib, model,
-                                                        *found["predictions"][chosen], found["trained"])
-        warning = verdict_warning(found, chosen)
-        if warning:
-            model.report.warnings.append(warning)
-    return model

@@ -6,7 +6,7 @@
 * its calibration: the subdirectory's ``calibration/`` folder if there is one,
   else the ``.csv`` files of the subdirectory itself.
 
-Each sensor is fitted as ``fit`` fits it (:func:`fsdecouple.evaluation.verdict.calibrate`:
+Each sensor is fitted as ``fit`` fits it (:func:`fsdecouple.evaluation.calibrate.fit`:
 the model and its held-out verdict) in a pool of worker processes, and its model
 is written atomically to ``MODELS_DIR/<sensor>.json``.  A sensor that cannot be
 fitted (no config, bad data) is reported with its one-line error and does not
@@ -116,7 +116,7 @@ def fit_sensor(sensor_dir: str | Path, models_dir: str | Path, *, method: str = 
     from ..config import load_config
     from ..core.modelfile import load_model, save_model
     from ..data.calibration import load_calibration
-    from ..evaluation.verdict import calibrate
+    from ..evaluation.calibrate import fit as calibrate
     from ..files import check_output
     from .drift import compare
 
@@ -187,7 +187,7 @@ def fit_many(sensors_dir: str | Path, models_dir: str | Path, *, method: str = "
         Called as ``progress(done, total)`` in sensors.
     """
     from ..core.metrics import check_max_gamma
-    from ..evaluation.verdict import FIT_METHODS
+    from ..evaluation.calibrate import FIT_METHODS
     from .drift import check_max_drift
 
     check_max_gamma(max_gamma)

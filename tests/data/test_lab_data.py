@@ -17,8 +17,9 @@ from fsdecouple import load_calibration, load_config
 from fsdecouple.core.metrics import interference_error
 from fsdecouple.data.calibration import GrossError
 from fsdecouple.errors import InputError
+from fsdecouple.evaluation.calibrate import fit as calibrate
 from fsdecouple.evaluation.heldout import level_rounds
-from fsdecouple.evaluation.verdict import calibrate, heldout_verdict
+from fsdecouple.evaluation.verdict import heldout_verdict
 from fsdecouple.fitting.linear import fit_calibration_matrix
 from fsdecouple.fitting.outliers import FLOOR, gross_errors
 

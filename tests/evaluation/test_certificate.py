@@ -18,9 +18,9 @@ from fsdecouple.config import load_config
 from fsdecouple.data.calibration import from_table
 from fsdecouple.errors import InputError
 from fsdecouple.evaluation.budget import budget, reading_noise
+from fsdecouple.evaluation.calibrate import fit as calibrate
 from fsdecouple.evaluation.certificate import certificate, check_matches
 from fsdecouple.evaluation.iso376 import classify, component_steps, interpolation_errors, resolution
-from fsdecouple.evaluation.verdict import calibrate
 
 LOADS = [0.0, 20.0, 40.0, 60.0, 80.0, 100.0, 60.0, 20.0, 0.0]  # up, then down, zero at both ends
 

@@ -28,7 +28,7 @@ from test_export import (
 
 from fsdecouple import load_config
 from fsdecouple.data.calibration import load_calibration
-from fsdecouple.evaluation.verdict import calibrate
+from fsdecouple.evaluation.calibrate import fit as calibrate
 from fsdecouple.export.header import emulate_float, export_header, plan_export
 
 

@@ -166,7 +166,7 @@ def test_the_model_beats_the_least_squares_matrix_on_held_out_levels(tmp_path, k
 
 @pytest.mark.slow  # a fit with its held-out verdict: about 3 s
 def test_fit_method_auto_keeps_the_model_and_flags_two_swapped_loads(tmp_path):
-    from fsdecouple.evaluation.verdict import calibrate
+    from fsdecouple.evaluation.calibrate import fit as calibrate
 
     path, settings, calib = gauge_rig(tmp_path)
     model = calibrate(calib, settings, method="auto")

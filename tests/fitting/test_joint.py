@@ -101,7 +101,7 @@ def test_two_swapped_loads_are_flagged_by_their_editor_lines(tmp_path, kind, col
     editor lines (header = line 1), also where the quadratic stand-in bends most (its
     last two Fx levels, lines 10-11) and on a lever-arm moment sweep."""
     path, settings, whole = rig(tmp_path, kind=kind)
-    from fsdecouple.evaluation.verdict import calibrate
+    from fsdecouple.evaluation.calibrate import fit as calibrate
 
     if kind == "quadratic":  # its readings bend by up to 3 % F.S.: nothing flagged on the clean file
         assert calibrate(whole, settings, verdict=False).report.outliers == []
@@ -178,7 +178,7 @@ def test_auto_beats_the_matrix_on_the_quadratic_stand_in_by_the_issues_margin(tm
     must be at most 0.85 x the least-squares matrix's under the same folds.  Over seeds
     0-19 the model alone (heldout_rms) was 0.53-0.72 x the matrix (docs/rigs.md); auto
     must keep it in every fold, as its verdict now scores every component's error."""
-    from fsdecouple.evaluation.verdict import calibrate
+    from fsdecouple.evaluation.calibrate import fit as calibrate
 
     _, settings, calib = rig(tmp_path, seed, kind="quadratic")
     k, _ = level_index(calib)

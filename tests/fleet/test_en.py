@@ -10,7 +10,7 @@ import pytest
 from conftest import invoke
 
 from fsdecouple import save_model
-from fsdecouple.evaluation.verdict import calibrate
+from fsdecouple.evaluation.calibrate import fit as calibrate
 from fsdecouple.fleet.drift import compare
 from fsdecouple.fleet.en import en_figures
 

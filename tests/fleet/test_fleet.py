@@ -12,7 +12,7 @@ from conftest import SAMPLE, invoke
 
 from fsdecouple import load_calibration, load_config, load_model, save_model
 from fsdecouple.errors import InputError
-from fsdecouple.evaluation.verdict import calibrate
+from fsdecouple.evaluation.calibrate import fit as calibrate
 from fsdecouple.fleet.drift import compare, largest
 from fsdecouple.sim.simulate import SimulatedSensor, simulate
 from fsdecouple.units import Units

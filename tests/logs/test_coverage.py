@@ -21,7 +21,7 @@ import pytest
 
 from fsdecouple import load_calibration, load_config
 from fsdecouple.core.intervals import with_intervals
-from fsdecouple.evaluation.verdict import calibrate
+from fsdecouple.evaluation.calibrate import fit as calibrate
 from fsdecouple.sim.simulate import simulate
 
 pytestmark = pytest.mark.slow

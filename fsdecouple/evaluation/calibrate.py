@@ -1,0 +1,162 @@
+"""One fit: the model ``fsdecouple fit`` writes, as one Python call (``fsdecouple.fit``).
+
+:func:`fit` does what the command does and the command only renders it: the
+SVR settings chosen by held-out error (``tune``), the coupling error model
+(:mod:`fsdecouple.fitting.fit`, Section 2.3), the gross errors flagged
+(:mod:`fsdecouple.fitting.outliers`), the held-out verdict against the calibration
+matrix (:mod:`fsdecouple.evaluation.verdict`), the least-squares matrix kept beside
+the model, the method it decouples by, and the held-out data of the certificate and
+of ``apply --interval`` (:mod:`fsdecouple.evaluation.budget`).
+
+This module imports the fitting stack only when :func:`fit` runs: ``fsdecouple.fit``
+is a public name, and loading a model must not pay for libsvm or pandas.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from ..config import Settings
+    from ..core.model import CouplingErrorModel
+    from ..data.calibration import CalibrationSet
+    from .tune import Grid
+
+FIT_METHODS = ("svr", "linear", "auto")
+
+
+def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
+        method: str = "svr", verdict: bool = True, tune: bool = False,
+        tune_grid: Grid | str | None = None, workers: int | None = None,
+        progress: Callable[[int, int], None] | None = None) -> CouplingErrorModel:
+    """Fit the coupling error model as ``fsdecouple fit`` does; the model it writes.
+
+    Parameters
+    ----------
+    calib : CalibrationSet or path
+        The calibration (:func:`fsdecouple.load_calibration`), or a path to read it from.
+    settings : Settings, optional
+        The configuration (:func:`fsdecouple.load_config`); default: the built-in one.
+    method : {'svr', 'linear', 'auto'}
+        What the model decouples by (``--method``): the coupling error model (eq. 11,
+        the paper's), the least-squares calibration matrix, or whichever has the lower
+        held-out figure of the verdict (worst gamma, eq. 12; on rig rows the worst
+        component's RMS error).
+    verdict : bool
+        Judge the model on held-out points against the calibration matrix
+        (``verdict=False`` is ``--no-verdict``).  When the protocol cannot run (e.g. a
+        sweep with a single loaded point) the model comes back with a warning, unless
+        ``auto`` needs it.
+    tune : bool
+        Choose gamma, C and epsilon by held-out error first (``--tune``); the grid and
+        the choice go into ``model.report.tune``.
+    tune_grid : Grid or str, optional
+        The grid of ``tune`` (``--tune-grid``), e.g. ``"gamma=1,2,4;C=10,1000"``.
+    workers : int, optional
+        Threads training the SVRs (default: the cores).  The model does not depend on it.
+    progress : callable, optional
+        ``progress(done, total)``, called while tuning.
+
+    Returns
+    -------
+    CouplingErrorModel
+        With its report (verdict, tune, outliers, gamma after), the least-squares
+        matrix, the method and the held-out data of ``apply --interval``.
+    """
+    from ..config import Settings
+    from ..data.calibration import CalibrationSet, load_calibration
+    from ..errors import InputError
+
+    settings = settings or Settings()
+    if method not in FIT_METHODS:
+        raise InputError(f"--method {method!r}: expected one of {', '.join(FIT_METHODS)}")
+    if method == "auto" and not verdict:
+        raise InputError("--method auto chooses by the held-out verdict; drop --no-verdict")
+    if isinstance(tune_grid, str):
+        from .tune import grid_option
+        tune_grid = grid_option(tune, tune_grid)
+    elif tune_grid is not None and not tune:
+        raise InputError("--tune-grid is the grid of --tune: add --tune")
+    if not isinstance(calib, CalibrationSet):
+        calib = load_calibration(calib, settings)
+    if settings.zero is None and getattr(calib, "zero", None) == "fit" != settings.zero_method:
+        settings = dataclasses.replace(settings, zero="fit")  # out-and-back sweeps (zero.py)
+    from ..fitting.threads import single_threaded_libraries
+    with single_threaded_libraries():
+        return _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress)
+
+
+def _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress):
+    from ..core.metrics import interference_errors
+    from ..errors import InputError
+    from ..fitting.fit import fit as establish
+    from ..fitting.linear import fit_calibration_matrix
+    from ..fitting.outliers import gross_errors
+    from ..fitting.threads import thread_pool
+    from .budget import certificate_data
+    from .verdict import choose, heldout_verdict, summary, verdict_warning
+
+    record = None
+    if tune:
+        from .tune import tune_settings
+        settings, record = tune_settings(calib, settings, grid=tune_grid, workers=workers,
+                                         progress=progress)
+    cores = workers or os.cpu_count() or 1
+    found, failed = None, None
+    # the held-out rounds train beside the model: both are SVRs, which libsvm trains
+    # without the GIL, and the model does not wait for the verdict
+    with thread_pool(1) as pool:
+        pending = pool.submit(heldout_verdict, calib, settings, workers=cores) if verdict else None
+        model = establish(calib, settings, workers=workers)
+        if pending is not None:
+            try:
+                found = pending.result()
+            except InputError as err:
+                failed = err
+    model.report.tune = record
+    points, layout = calib.points, settings.layout
+    if layout.overdetermined:  # M > N: each component's least-squares load v = P u (gauges.py)
+        from ..fitting.gauges import projected
+        points, layout = projected(points, model.projection, layout)
+    outliers = gross_errors(points, model.k, settings.full_scale, layout)
+    model.report.outliers = [dataclasses.asdict(o) for o in outliers]
+    model.report.warnings += [o.message(settings.units.load_of(settings.layout.index(o.axis)))
+                              for o in outliers]
+    if failed is not None:
+        if method == "auto":
+            raise InputError(f"--method auto needs a held-out verdict, which cannot run: {failed}"
+                             ) from None
+        model.report.warnings.append(f"no held-out verdict: {failed}")
+    chosen = choose(found, method) if found is not None else method
+    # the least-squares matrix on the same calibration, kept by an svr model too, so
+    # validate can set it beside the model (a linear model decouples by it)
+    model.matrix = fit_calibration_matrix(calib.voltages, calib.forces).C
+    if chosen == "linear":
+        model.method = "linear"
+        model.report.gamma_after = interference_errors(
+            calib.points, model.decouple(calib.voltages, rotate=False), settings.full_scale,
+            settings.layout, settings.units.loads or None)
+    if found is not None:
+        model.report.verdict = {**summary(found), "asked": method, "chosen": chosen}
+        if not settings.layout.overdetermined:  # per prime output: none with M > N outputs
+            model.report.certificate = certificate_data(calib, model,
+                                                        *found["predictions"][chosen], found["trained"])
+        warning = verdict_warning(found, chosen)
+        if warning:
+            model.report.warnings.append(warning)
+    return model
+
+
+def fit_document(model: CouplingErrorModel, output: str | Path, checks: list,
+                 advice: dict[str, Any]) -> dict[str, Any]:
+    """``fit --json``: the model file's report without the certificate's step data (that is
+    ``fsdecouple certificate``'s), the checks of Section 2.1 and the advice."""
+    report = {k: v for k, v in model.report.to_dict().items() if k != "certificate"}
+    return {"model": str(output), "method": model.method, **report,
+            "checks": [c.to_dict() for c in checks], "refine": model.settings.refine,
+            "extrapolation": model.settings.extrapolation,
+            "refine_advice": advice, "tune": model.report.tune}

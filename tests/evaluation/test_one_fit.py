@@ -1,0 +1,87 @@
+"""One fit (issue 30): ``fsdecouple.fit`` makes the model ``fsdecouple fit`` writes.
+
+Before, the API returned the bare coupling error model of ``fitting.fit``: no verdict,
+no tune record, no outliers, no least-squares matrix and no held-out data, so
+``apply --interval`` refused a model saved through the API.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+from conftest import ROOT, SAMPLE, invoke
+
+import fsdecouple
+
+# the file's own time and the digest over it: everything else is the fit's
+STAMPS = ("created", "digest", "sha256")
+
+
+def _model_keys(path) -> dict:
+    doc = json.loads(path.read_text())
+    return {k: v for k, v in doc.items() if k not in STAMPS}
+
+
+def test_the_api_fit_writes_the_command_s_model_file(sample_model, tmp_path):
+    """``fsdecouple.fit(fsdecouple.load_calibration(path, fsdecouple.load_config()))``,
+    called exactly as the docs show it, saved by ``save_model``: the same file as
+    ``fsdecouple fit path`` apart from the creation time and digest, key by key (the
+    verdict, the outliers, the matrix, the method and the interval data included)."""
+    model = fsdecouple.fit(fsdecouple.load_calibration(str(SAMPLE / "calibration"),
+                                                       fsdecouple.load_config()))
+    fsdecouple.save_model(model, tmp_path / "api.json")
+    api, cli = _model_keys(tmp_path / "api.json"), _model_keys(sample_model)
+    assert sorted(api) == sorted(cli)
+    for key in cli:
+        assert api[key] == cli[key], key
+    # what the bare fitting.fit left out is there, not equal by being absent in both
+    report = api["report"]
+    assert report["verdict"]["chosen"] == "svr" and report["certificate"]
+    assert api["matrix"] is not None and report["outliers"] == []
+
+
+def test_apply_interval_takes_the_model_the_api_saved(tmp_path):
+    """``apply --interval`` on a model fitted and saved through the API: bounds on every
+    row (it was refused as "fitted by an older fsdecouple, or with --no-verdict")."""
+    calib = fsdecouple.load_calibration(SAMPLE / "calibration", fsdecouple.load_config())
+    fsdecouple.save_model(fsdecouple.fit(calib), tmp_path / "api.json")
+    out = tmp_path / "forces.csv"
+    invoke(["apply", tmp_path / "api.json", SAMPLE / "task_voltages.csv", "-o", out,
+            "--tare", 200, "--interval", 0.9])
+    forces = pd.read_csv(out)
+    for name in ("fx", "fy", "fz"):  # finite bounds of positive width on every row
+        lo, hi = forces[f"{name}_lo"].to_numpy(), forces[f"{name}_hi"].to_numpy()
+        assert np.isfinite(lo).all() and (lo < hi).all(), name
+
+
+def test_no_verdict_and_method_are_keywords():
+    """``verdict=False`` is ``--no-verdict`` (no verdict, no interval data) and ``method``
+    is ``--method``: a linear model decouples by the least-squares matrix it keeps."""
+    calib = fsdecouple.load_calibration(SAMPLE / "calibration", fsdecouple.load_config())
+    bare = fsdecouple.fit(calib, verdict=False)
+    assert bare.report.verdict is None and not bare.report.certificate
+    assert bare.matrix is not None
+    linear = fsdecouple.fit(calib, method="linear", verdict=False)
+    u = calib.voltages[:5]
+    assert linear.method == "linear"
+    np.testing.assert_allclose(linear.decouple(u, rotate=False), u @ linear.matrix.T, rtol=1e-12)
+    with pytest.raises(fsdecouple.FsdecoupleError, match="auto chooses by the held-out verdict"):
+        fsdecouple.fit(calib, method="auto", verdict=False)
+    with pytest.raises(fsdecouple.FsdecoupleError, match="expected one of svr, linear, auto"):
+        fsdecouple.fit(calib, method="best")
+
+
+def test_fsdecouple_fit_loads_no_fitting_module_until_called():
+    """``fsdecouple.fit`` is the full fit, but naming it imports neither the fitting stack
+    nor libsvm: a control loop that only loads a model never pays for them."""
+    code = ("import sys, fsdecouple; f = fsdecouple.fit; "
+            "print(sorted(m for m in sys.modules if m.startswith('fsdecouple.fitting') "
+            "or m in ('libsvm', 'pandas')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=ROOT, env={"PYTHONPATH": str(ROOT), "PATH": ""}).stdout
+    assert out.strip() == "[]"
