@@ -29,6 +29,7 @@ from ..core.metrics import interference_error, pct
 from ..data.calibration import CalibrationSet
 from ..fitting.baselines import train_all
 from ..fitting.joint import multi_load
+from ..fitting.noise import VERDICT_NOISE_FRACTION
 from .budget import heldout_predictions
 from .heldout import HeldOutRound, choose_protocol, rounds_for
 
@@ -79,7 +80,9 @@ def heldout_verdict(calib: CalibrationSet, settings: Settings, *, protocol: str 
     protocol = choose_protocol(calib, protocol)
     rounds = rounds_for(calib, protocol)
     jobs = [((r.index, m), m, r.train) for r in rounds for m in VERDICT_METHODS]
-    models, _ = train_all(jobs, settings, workers or 1, None, tables=False)
+    # the rounds only judge: their SVRs are solved to the noise, not half of it (noise.py)
+    models, _ = train_all(jobs, settings, workers or 1, None, tables=False,
+                          noise_fraction=VERDICT_NOISE_FRACTION)
     records = gamma_records(rounds, models, settings)
     heldout = {}
     for m in VERDICT_METHODS:

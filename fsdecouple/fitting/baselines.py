@@ -22,7 +22,6 @@ from ..core.decouple import initial_forces
 from ..data.calibration import CalibrationSet
 from .fit import chi_training_data, fit
 from .linear import CalibrationMatrix, fit_calibration_matrix, fit_omega
-from .rbf import SPREAD, fit_mimo, fit_siso
 from .threads import single_threaded_libraries, thread_pool
 
 METHODS = ("initial", "linear", "rbf-mimo", "rbf-siso", "svr")
@@ -47,10 +46,11 @@ def input_scale(train: CalibrationSet, settings: Settings) -> np.ndarray | None:
 
 
 def establish(method: str, train: CalibrationSet, settings: Settings, *, workers: int = 1,
-              tables: bool = True):
+              tables: bool = True, noise_fraction: float | None = None):
     """Fit one method on a training set; the result has ``decouple(u, rotate=False)``.
 
-    ``tables``: build the svr model's fast-path tables (not needed to score it).
+    ``tables``: build the svr model's fast-path tables (not needed to score it);
+    ``noise_fraction``: the svr's built-in solver tolerance (:func:`fit`).
     """
     if method == "initial" and train.layout.overdetermined:  # M > N: P u (gauges.py)
         from .gauges import forward_matrix
@@ -59,6 +59,8 @@ def establish(method: str, train: CalibrationSet, settings: Settings, *, workers
         return InitialMethod(fit_omega(train.points, train.layout).k)
     if method == "linear":
         return fit_calibration_matrix(train.voltages, train.forces)
+    if method in ("rbf-mimo", "rbf-siso"):  # scipy.linalg: cv's baselines only, not fit's
+        from .rbf import SPREAD, fit_mimo, fit_siso
     if method == "rbf-mimo":
         return fit_mimo(train.voltages, train.forces, spread=SPREAD,
                         input_scale=input_scale(train, settings))
@@ -67,35 +69,51 @@ def establish(method: str, train: CalibrationSet, settings: Settings, *, workers
         return fit_siso(fit_omega(train.points, train.layout).k, data, spread=SPREAD,
                         input_scale=input_scale(train, settings), layout=train.layout)
     if method == "svr":
-        return fit(train, settings, workers=workers, tables=tables)
+        return fit(train, settings, workers=workers, tables=tables, noise_fraction=noise_fraction)
     raise ValueError(f"unknown method {method!r}")
 
 
-def train_all(jobs, settings, workers, progress, *, tables: bool = True) -> tuple[dict, float]:
+def train_all(jobs, settings, workers, progress, *, tables: bool = True,
+              noise_fraction: float | None = None,
+              seconds: dict | None = None) -> tuple[dict, float]:
     """Fit every (key, method, train) job on a thread pool; (models, wall seconds).
 
     libsvm and LAPACK release the GIL, so threads train in parallel; each model
     depends only on its own job, so the results equal sequential training.
+    ``seconds``, if given, gets each key's time to fit alone: its wall time when
+    sequential, else the CPU time of its pool thread (each job runs on one thread,
+    with BLAS and OpenMP at one thread, so that is its time alone on an idle core).
     """
     with single_threaded_libraries():
-        return _train_all(jobs, settings, workers, progress, tables)
+        return _train_all(jobs, settings, workers, progress, tables, noise_fraction,
+                          {} if seconds is None else seconds)
 
 
-def _train_all(jobs, settings, workers, progress, tables) -> tuple[dict, float]:
+def _train_all(jobs, settings, workers, progress, tables, noise_fraction,
+               seconds) -> tuple[dict, float]:
     models = {}
     t0 = time.perf_counter()
     if workers <= 1:
         for i, (key, method, train) in enumerate(jobs, start=1):
-            models[key] = establish(method, train, settings, workers=1, tables=tables)
+            start = time.perf_counter()
+            models[key] = establish(method, train, settings, workers=1, tables=tables,
+                                    noise_fraction=noise_fraction)
+            seconds[key] = time.perf_counter() - start
             if progress:
                 progress(i, len(jobs))
     else:
+        def timed(key, method, train):
+            start = time.thread_time()
+            model = establish(method, train, settings, workers=1, tables=tables,
+                              noise_fraction=noise_fraction)
+            seconds[key] = time.thread_time() - start
+            return model
+
         # the SVR jobs are the long ones: start them first
         order = sorted(jobs, key=lambda j: j[1] != "svr")
         with thread_pool(workers) as pool:
             # one thread per model: a fit's own pool on top would only oversubscribe
-            futures = {pool.submit(establish, m, tr, settings, workers=1, tables=tables): key
-                       for key, m, tr in order}
+            futures = {pool.submit(timed, key, m, tr): key for key, m, tr in order}
             for i, fut in enumerate(as_completed(futures), start=1):
                 models[futures[fut]] = fut.result()
                 if progress:

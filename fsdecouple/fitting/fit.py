@@ -75,6 +75,7 @@ def fit(
     *,
     workers: int | None = None,
     tables: bool = True,
+    noise_fraction: float | None = None,
 ) -> CouplingErrorModel:
     """Establish the coupling error model (Section 2.3, steps 1-4).
 
@@ -90,6 +91,9 @@ def fit(
     tables : bool
         Build the chi tables of the fast path.  A model fitted only to be scored
         on held-out points (the verdict, cv) decouples exactly without them.
+    noise_fraction : float, optional
+        The built-in solver tolerance's fraction of the noise sigma
+        (:func:`fsdecouple.fitting.noise.solver_tolerance`); default: its own.
     """
     # fitting needs pandas (calibration) and libsvm; loading and applying a model do not
     from ..data.calibration import CalibrationSet, load_calibration
@@ -99,7 +103,7 @@ def fit(
     if not isinstance(calib, CalibrationSet):
         calib = load_calibration(calib, settings)
     with single_threaded_libraries():
-        return _establish(calib, settings, workers, fit_svr, tables)
+        return _establish(calib, settings, workers, fit_svr, tables, noise_fraction)
 
 
 def _svr_chi(s) -> Chi:
@@ -130,7 +134,8 @@ def _omega_failure(calib: CalibrationSet, a: int) -> str:
 
 
 def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
-               fit_svr, with_tables: bool) -> CouplingErrorModel:
+               fit_svr, with_tables: bool, noise_fraction: float | None = None
+               ) -> CouplingErrorModel:
     layout = settings.layout
     if calib.layout != layout:
         raise InputError(f"{calib.source}: read for components {', '.join(calib.layout.loads)}, "
@@ -154,7 +159,9 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         scale = np.abs(omega.k) * np.asarray(settings.full_scale)
     else:
         scale = np.ones(layout.n)
-    settings = solver_tolerance(calib, settings, omega.k, scale)  # noise.py
+    settings = solver_tolerance(calib, settings, omega.k, scale,  # noise.py
+                                **({} if noise_fraction is None
+                                   else {"noise_fraction": noise_fraction}))
     jobs = []
     for name, (o, i) in pairs.items():
         x, y = chi_training_data(calib, name)
