@@ -61,6 +61,35 @@ with pq.ParquetWriter(sys.argv[2], f.schema_arrow, use_dictionary=False) as w:
     for b in f.iter_batches():
         w.write_batch(b)
 """
+# "The paper's algorithm" (issue 30): Section 2-3 on the sample repetition files, in a
+# process of its own, as plainly as it can be written: zero-correct each sweep by its
+# zero-load rows (Section 3), the omega slopes (eq. 2) and the six chi as libsvm
+# eps-SVRs with Table 2's settings (-s 3 -t 2, C = 1000, eps = 1e-4, gamma = 0.5,
+# tolerance 1e-3).  fit and cv are timed against it.
+PAPER_SIX_SVRS = """
+import csv, glob, sys
+import numpy as np
+from libsvm import svmutil
+axes, outputs = "xyz", ("ux", "uy", "uz")
+sweeps = []
+for path in sorted(glob.glob(sys.argv[1] + "/rep*.csv")):
+    with open(path) as fh:
+        rows = list(csv.DictReader(fh))
+    for a, axis in enumerate(axes):
+        s = [r for r in rows if r["axis"] == axis]
+        f = np.array([float(r["f" + axis]) for r in s])
+        u = np.array([[float(r[c]) for c in outputs] for r in s])
+        sweeps.append((a, f, u - u[f == 0].mean(axis=0)))
+k = [sum(f @ u[:, a] for b, f, u in sweeps if b == a) / sum(f @ f for b, f, u in sweeps if b == a)
+     for a in range(3)]
+for b in range(3):
+    x = np.concatenate([u[:, b] for c, f, u in sweeps if c == b])
+    for a in range(3):
+        if a != b:
+            y = np.concatenate([u[:, a] for c, f, u in sweeps if c == b])
+            svmutil.svm_train(y.tolist(), [[v] for v in x],
+                              "-s 3 -t 2 -c 1000 -p 0.0001 -g 0.5 -e 0.001 -q")
+"""
 PYARROW_PARQUET_COPY = """
 import sys, pyarrow.parquet as pq
 f = pq.ParquetFile(sys.argv[1])
@@ -297,6 +326,25 @@ def main() -> int:
         without = median_child([*fit_args, "--no-verdict"], repeats)[0]
     row("4d. fsdecouple fit with the verdict, sample data", with_verdict, "s wall", without,
         "fit --no-verdict [s]", with_verdict / without, "<= 3 s", with_verdict <= 3.0)
+
+    # --- 4f/4g. fit and cv against the paper's algorithm (issue 30) ---------------------
+    # each command and the baseline alternate, so a change of the machine's load
+    # falls on both; medians of `repeats` runs of each
+    print("fit and cv against the paper's six Table 2 SVRs in a process of their own")
+    paper_args = [py, "-c", PAPER_SIX_SVRS, ROOT / "sample_data" / "calibration"]
+    with tempfile.TemporaryDirectory(prefix="fsdecouple-bench-paper-") as tmp:
+        fit_args = [py, "-m", "fsdecouple", "fit", ROOT / "sample_data" / "calibration", "-o",
+                    Path(tmp) / "m.json", "--force"]
+        cv_args = [py, "-m", "fsdecouple", "cv", ROOT / "sample_data" / "calibration"]
+        walls = {"paper": [], "fit": [], "cv": []}
+        for _ in range(repeats):
+            for name, args_ in (("paper", paper_args), ("fit", fit_args), ("cv", cv_args)):
+                walls[name].append(run_child(args_)[0])
+    paper, fit_wall, cv_wall = (statistics.median(walls[n]) for n in ("paper", "fit", "cv"))
+    row("4f. fit with the verdict vs the paper's algorithm", fit_wall, "s wall", paper,
+        "six Table 2 SVRs, own process [s]", fit_wall / paper, "<= 4", fit_wall / paper <= 4.0)
+    row("4g. cv vs the paper's algorithm", cv_wall, "s wall", paper,
+        "six Table 2 SVRs, own process [s]", cv_wall / paper, "<= 4", cv_wall / paper <= 4.0)
 
     # --- 4e. the same calibration in counts and in volts ---------------------------------
     print("fit: the sample calibration in ADC counts vs in volts (scaling: full_scale)")

@@ -10,7 +10,7 @@ import typer
 from ..config import load_config
 from ..core.modelfile import load_model
 from ..errors import printable
-from ..files import atomic_write, check_output, refuse_overwriting_input
+from ..files import check_output, refuse_overwriting_input
 from .app import (
     ConfigOpt,
     ForceOpt,
@@ -39,7 +39,7 @@ def certificate(
     """ISO 376 figures (b, b', f_c, f_0, v), class and uncertainty budget (U, k = 2) per step."""
     from ..data.calibration import load_calibration
     from ..evaluation.certificate import certificate as build
-    from ..reporting.certificate import certificate_html, certificate_tables
+    from ..reporting.certificate import certificate_tables, write_certificate
 
     with user_errors():
         model = load_model(model_file)
@@ -50,9 +50,7 @@ def certificate(
         doc = build(model, cs, source=str(model_file), settings=settings)
         if output is not None:
             refuse_overwriting_input(output, [model_file, *_read(cs), *_given(config)])
-            html = certificate_html(doc)
-            with atomic_write(output, force=force) as fh:
-                fh.write(html)
+            write_certificate(doc, output, force=force)
     if json_out:
         print_json(doc)
     else:

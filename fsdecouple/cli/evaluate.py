@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -13,7 +12,7 @@ from rich.progress import MofNCompleteColumn
 from ..config import load_config
 from ..core.modelfile import load_model
 from ..errors import InputError, printable
-from ..files import atomic_files, atomic_write, check_output, refuse_overwriting_input
+from ..files import atomic_files, check_output, refuse_overwriting_input
 from .app import (
     ConfigOpt,
     ForceOpt,
@@ -81,6 +80,7 @@ def cv(
     """Cross-validate the model against the baselines of Section 4 (Tables 1, 3, 4, 5)."""
     from ..data.calibration import GrossError, load_calibration
     from ..evaluation.cv import run_cv
+    from ..evaluation.cv_results import cv_text, save_cv_results
     from ..evaluation.heldout import parse_folds
     from ..evaluation.tune import grid_option
     from ..reporting.tables import cv_renderables
@@ -109,12 +109,10 @@ def cv(
                 tune=tune, tune_grid=grid,
                 progress=progress,
             )
-        text = json.dumps(doc, indent=1, sort_keys=True, allow_nan=False)
         if output is not None:
-            with atomic_write(output, force=force) as fh:
-                fh.write(text + "\n")
+            save_cv_results(doc, output, force=force)
     if json_out:
-        sys.stdout.write(text + "\n")
+        sys.stdout.write(cv_text(doc))
     else:
         if "tune" in doc:
             console.print(tune_table(doc["tune"], settings.load_unit))

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError, excerpt, printable, where
-from ..files import CV_LIMIT, read_bounded
+from ..files import CV_LIMIT, atomic_write, read_bounded
 
 FORMAT = "fsdecouple.cv"
 FORMAT_VERSION = 1
@@ -28,6 +28,17 @@ def gamma_index(records) -> dict[tuple, float]:
     """(round, test_set, method, axis) -> gamma of eq. (12), from cv.json records."""
     return {(r["round"], r["test_set"], r["method"], r["axis"]): r["value"]
             for r in records or [] if r.get("metric", "gamma") == "gamma"}
+
+
+def cv_text(doc: dict[str, Any]) -> str:
+    """The cv.json text of a document (what ``cv -o`` writes and ``cv --json`` prints)."""
+    return json.dumps(doc, indent=1, sort_keys=True, allow_nan=False) + "\n"
+
+
+def save_cv_results(doc: dict[str, Any], path: str | Path, *, force: bool = False) -> None:
+    """Write a cv.json document, atomically (never half a file)."""
+    with atomic_write(Path(path), force=force) as fh:
+        fh.write(cv_text(doc))
 
 
 def load_cv_results(path: str | Path) -> dict[str, Any]:

@@ -147,3 +147,14 @@ def certificate_tables(doc: dict) -> list[Table]:
             t.add_row(f"{load:g}", *[_fmt(s.get(m)) for m in metrics], _fmt(s.get("U")))
         out.append(t)
     return out
+
+
+def write_certificate(doc: dict, path, *, force: bool = False) -> None:
+    """Write the certificate of ``doc`` as one HTML file, atomically."""
+    from pathlib import Path
+
+    from ..files import atomic_write
+
+    html = certificate_html(doc)
+    with atomic_write(Path(path), force=force) as fh:
+        fh.write(html)
