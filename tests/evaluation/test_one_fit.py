@@ -85,3 +85,39 @@ def test_fsdecouple_fit_loads_no_fitting_module_until_called():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          cwd=ROOT, env={"PYTHONPATH": str(ROOT), "PATH": ""}).stdout
     assert out.strip() == "[]"
+
+
+def _tolerances(monkeypatch, calib, settings) -> tuple[list[float], float]:
+    """libsvm's stopping tolerance of every SVR one full fit trains (model and verdict, in
+    the order they start), and the model's own."""
+    import threading
+
+    from fsdecouple.fitting import svr
+
+    seen, lock, train = [], threading.Lock(), svr.fit_svr
+
+    def spy(x, y, params):
+        with lock:
+            seen.append(params.tolerance)
+        return train(x, y, params)
+
+    monkeypatch.setattr(svr, "fit_svr", spy)
+    model = fsdecouple.fit(calib, settings, workers=1)
+    return seen, model.settings.svr.tolerance
+
+
+def test_a_stated_solver_tolerance_is_obeyed_in_the_verdict_too(monkeypatch):
+    """Issue 34: a tolerance the user writes is obeyed exactly.  The verdict's rounds are
+    solved more loosely than the model only by the built-in rule (fitting/noise.py):
+    with ``tolerance`` stated, all 24 SVRs (6 of the model, 18 of three rounds) use it."""
+    from fsdecouple.fitting.noise import NOISE_FRACTION, VERDICT_NOISE_FRACTION
+
+    calib = fsdecouple.load_calibration(SAMPLE / "calibration", fsdecouple.load_config())
+    stated, own = _tolerances(monkeypatch, calib, fsdecouple.load_config(tolerance=1e-4))
+    assert stated == [1e-4] * 24 and own == 1e-4
+    # by the built-in rule the rounds (sigma of four repetitions) stop later than the model
+    # (sigma/2 of six), and more loosely the larger the fraction of sigma
+    assert VERDICT_NOISE_FRACTION > NOISE_FRACTION
+    rule, own = _tolerances(monkeypatch, calib, fsdecouple.load_config())
+    assert len(rule) == 24 and rule.count(own) == 6
+    assert all(t > own for t in rule if t != own)
