@@ -57,7 +57,8 @@ def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
     tune_grid : Grid or str, optional
         The grid of ``tune`` (``--tune-grid``), e.g. ``"gamma=1,2,4;C=10,1000"``.
     workers : int, optional
-        Threads training the SVRs (default: the cores).  The model does not depend on it.
+        Threads training the SVRs, the model's and the verdict's at once (default: the
+        cores; 1: one after the other).  The model does not depend on it.
     progress : callable, optional
         ``progress(done, total)``, called while tuning.
 
@@ -107,16 +108,19 @@ def _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress):
                                          progress=progress)
     cores = workers or os.cpu_count() or 1
     found, failed = None, None
-    # the held-out rounds train beside the model: both are SVRs, which libsvm trains
-    # without the GIL, and the model does not wait for the verdict
+    # the held-out rounds train beside the model (libsvm trains without the GIL), unless
+    # one thread was asked for
     with thread_pool(1) as pool:
-        pending = pool.submit(heldout_verdict, calib, settings, workers=cores) if verdict else None
+        pending = (pool.submit(heldout_verdict, calib, settings, workers=cores)
+                   if verdict and cores > 1 else None)
         model = establish(calib, settings, workers=workers)
-        if pending is not None:
-            try:
+        try:
+            if pending is not None:
                 found = pending.result()
-            except InputError as err:
-                failed = err
+            elif verdict:
+                found = heldout_verdict(calib, settings, workers=1)
+        except InputError as err:
+            failed = err
     model.report.tune = record
     points, layout = calib.points, settings.layout
     if layout.overdetermined:  # M > N: each component's least-squares load v = P u (gauges.py)
