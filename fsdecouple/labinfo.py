@@ -69,9 +69,9 @@ def lab_from_dict(raw: dict, source: str) -> dict[str, LabInfo]:
         where = f"{source}: reference_uncertainty"
         if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
             raise ConfigError(f"{where}: expected a number [% at k = 2], found {v!r}")
-        if not 0 <= v < 100:
-            raise ConfigError(f"{where}: expected a relative expanded uncertainty from 0 to 100 "
-                              f"[% at k = 2], found {v!r}")
+        if not 0 < v < 100:  # no reference force is known exactly (ISO 376, Table 3)
+            raise ConfigError(f"{where}: expected a relative expanded uncertainty greater than 0 "
+                              f"and below 100 [% at k = 2], found {v!r}")
         kw["reference_uncertainty"] = float(v)
     if "environment" in raw:
         env = raw["environment"]

@@ -34,22 +34,55 @@ READING_KEYS = ("sensor", "full_scale", "columns", "scale", "csv", "units", "com
 
 def check_matches(model: CouplingErrorModel, calib: CalibrationSet, source: str,
                   settings: Settings | None = None) -> None:
-    """Refuse a calibration set, or a config, that is not the one the model was fitted on."""
-    fitted = {f["sha256"]: f["path"] for f in model.provenance.get("files", [])}
-    given = {digest: path for path, digest in calib.files}
-    if fitted and set(fitted) != set(given):
-        extra = sorted(p for d, p in given.items() if d not in fitted)
-        missing = sorted(p for d, p in fitted.items() if d not in given)
-        what = (f"{Path(extra[0]).name} is not a file the model was fitted on (SHA-256 differs)"
-                if extra else f"the model was fitted on {Path(missing[0]).name} too, which it lacks")
+    """Refuse a calibration set, or a config, that is not the one the model was fitted on.
+
+    The set must hold the very files of the model's provenance, by name *and* by
+    SHA-256 (a copy of ``rep1.csv`` saved as ``rep7.csv`` has rep1's digest but is
+    a seventh repetition), and the same repetition labels.  A config must read the
+    set as the model did (:data:`READING_KEYS`); a key it leaves unsaid that fit
+    chose itself (``zero: fit`` on sweeps out and back) is the model's choice.
+    """
+    fitted = [(Path(f["path"]).name, f["sha256"]) for f in model.provenance.get("files", [])]
+    given = [(Path(path).name, digest) for path, digest in calib.files]
+    if fitted and sorted(fitted) != sorted(given):
+        raise InputError(f"{calib.source}: does not match the model file {source}: "
+                         f"{_first_difference(fitted, given)}")
+    reps = model.report.repetitions if model.report is not None else []
+    if reps and sorted(reps) != sorted(calib.repetitions):
+        extra = sorted(set(calib.repetitions) - set(reps))
+        missing = sorted(set(reps) - set(calib.repetitions))
+        what = (f"it has repetition {extra[0]}, which the model was not fitted on" if extra
+                else f"it lacks repetition {missing[0]}, which the model was fitted on")
         raise InputError(f"{calib.source}: does not match the model file {source}: {what}")
     if settings is not None:
         mine, theirs = settings.to_dict(), model.settings.to_dict()
         for key in READING_KEYS:
+            if key == "zero" and settings.zero is None:
+                continue  # unsaid: fit's own choice (rows, or fit on sweeps out and back)
             if mine.get(key) != theirs.get(key):
                 raise InputError(f"the config's {key} is not the model's ({source}): the set would "
                                  "be read otherwise than it was fitted; use the model's own "
                                  "settings (no -c) or the config it was fitted with")
+
+
+def _first_difference(fitted: list[tuple[str, str]], given: list[tuple[str, str]]) -> str:
+    """The first file of the set that is not the model's, said by name and digest."""
+    by_name = dict(fitted)
+    names_of = {}
+    for name, digest in fitted:
+        names_of.setdefault(digest, name)
+    for name, digest in sorted(given):
+        if by_name.get(name) == digest:
+            continue
+        if name in by_name:
+            return f"{name} is not the file the model was fitted on under that name (SHA-256 differs)"
+        if digest in names_of:
+            return (f"{name} is not a file the model was fitted on: its content is "
+                    f"{names_of[digest]}'s, under another name")
+        return f"{name} is not a file the model was fitted on"
+    seen = {n for n, _ in given}
+    missing = sorted(n for n, _ in fitted if n not in seen) or sorted(n for n, _ in fitted)
+    return f"the model was fitted on {missing[0]} too, which it lacks"
 
 
 def _model_errors(model: CouplingErrorModel, axis: str, loads: np.ndarray, source: str) -> np.ndarray:

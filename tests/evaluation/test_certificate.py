@@ -19,7 +19,13 @@ from fsdecouple.data.calibration import from_table
 from fsdecouple.errors import InputError
 from fsdecouple.evaluation.budget import budget, reading_noise
 from fsdecouple.evaluation.certificate import certificate, check_matches
-from fsdecouple.evaluation.iso376 import classify, component_steps, interpolation_errors, resolution
+from fsdecouple.evaluation.iso376 import (
+    classify,
+    classing,
+    component_steps,
+    interpolation_errors,
+    resolution,
+)
 from fsdecouple.evaluation.verdict import calibrate
 
 LOADS = [0.0, 20.0, 40.0, 60.0, 80.0, 100.0, 60.0, 20.0, 0.0]  # up, then down, zero at both ends
@@ -89,10 +95,11 @@ def test_b_b_prime_f_c_f_0_v_equal_their_definitions(hand_set):
             assert st.figures["b"][j] == pytest.approx(100 * (max(xs) - min(xs)) / abs(mean), abs=1e-9)
             bp = 100 * abs(xs[1] - xs[0]) / abs((xs[0] + xs[1]) / 2)
             assert st.figures["b_prime"][j] == pytest.approx(bp, abs=1e-9)
-            back = [down[r][f] - up[r][f] for r in sorted(up) if f in down[r]]
+            # ISO 376's reversibility is absolute: |X' - X| / X, per returning repetition
+            back = [abs(down[r][f] - up[r][f]) / abs(up[r][f]) for r in sorted(up) if f in down[r]]
             if back:
-                assert st.figures["v"][j] == pytest.approx(100 * sum(back) / len(back) / abs(mean),
-                                                           abs=1e-9)
+                assert st.figures["v"][j] == pytest.approx(100 * sum(back) / len(back), abs=1e-9)
+                assert st.figures["v"][j] >= 0
             else:
                 assert np.isnan(st.figures["v"][j])
         # X_a: normal equations of the cubic without constant term, in plain sums
@@ -121,23 +128,119 @@ def test_interpolation_of_exact_cubic_is_zero_and_of_few_steps_is_not_exact():
     assert got == pytest.approx(100 * (x3 - xa) / xa)
 
 
-def test_class_from_the_iso_376_limits_at_steps_from_ten_percent(hand_set):
+# ISO 376:2011 Table 2, written out here apart from the module's table [%]:
+# class: b, b', |f_c|, |f_0|, v, c
+TABLE_2 = {"00": (0.05, 0.025, 0.025, 0.012, 0.07, 0.025), "0.5": (0.10, 0.05, 0.05, 0.025, 0.15, 0.05),
+           "1": (0.20, 0.10, 0.10, 0.050, 0.30, 0.10), "2": (0.40, 0.20, 0.20, 0.10, 0.50, 0.20)}
+TABLE_3 = {"00": 0.01, "0.5": 0.02, "1": 0.05, "2": 0.10}  # reference forces, % at k = 2
+ORDER = ("00", "0.5", "1", "2")
+
+
+def _expected_class(fig: dict, ref: float | None = None) -> tuple[str, list[str]]:
+    """The class and its limiting criteria by a plain loop over the tables above."""
+    names = ("b", "b_prime", "f_c", "f_0", "v", "c")
+    fails = {}
+    for cls in ORDER:
+        bad = [m for m, lim in zip(names, TABLE_2[cls], strict=True)
+               if m in fig and abs(fig[m]) > lim]
+        if ref is not None and ref > TABLE_3[cls]:
+            bad = ["reference", *bad]
+        fails[cls] = bad
+    for i, cls in enumerate(ORDER):
+        if not fails[cls]:
+            return cls, (fails[ORDER[i - 1]] if i else [])
+    return "none", fails["2"]
+
+
+def _set_figures(st, **fig):
+    n = st.loads.size
+    st.figures = {m: np.full(n, fig[m]) if m in fig else np.full(n, np.nan)
+                  for m in ("b", "b_prime", "f_c", "f_0", "v", "c")}
+
+
+def test_class_from_every_criterion_of_iso_376_table_2(hand_set):
     _, calib = hand_set
     st = component_steps(calib, 0)
-    n = st.loads.size
-    # ISO 376:2011 Table 2: b 0.05/0.10/0.20/0.40, b' 0.025/0.05/0.10/0.20, |f_c| 0.025/0.05/0.10/0.20
-    for name, b, bp, fc, want in (("00", 0.05, 0.025, -0.025, "00"), ("0.5", 0.06, 0.01, 0.0, "0.5"),
-                                  ("0.5 by b'", 0.0, 0.03, 0.0, "0.5"), ("1", 0.2, 0.05, -0.1, "1"),
-                                  ("2 by f_c", 0.0, 0.0, 0.15, "2"), ("none", 0.41, 0.0, 0.0, "none"),
-                                  ("none by f_c", 0.0, 0.0, -0.21, "none")):
-        st.figures = {**st.figures, "b": np.full(n, b), "b_prime": np.full(n, bp),
-                      "f_c": np.full(n, fc)}
-        assert classify(st, 100.0) == {"+": want}, name
-    # a bad step below 10 % of full scale does not count; at 10 % it does
-    st.figures = {**st.figures, "b": np.where(st.loads < 21.0, 5.0, 0.02),
-                  "b_prime": np.zeros(n), "f_c": np.zeros(n)}
+    cases = [dict(b=0.05, b_prime=0.025, f_c=-0.025), dict(b=0.06, b_prime=0.01, f_c=0.0),
+             dict(b=0.0, b_prime=0.03, f_c=0.0), dict(b=0.2, b_prime=0.05, f_c=-0.1),
+             dict(b=0.0, b_prime=0.0, f_c=0.15), dict(b=0.41, b_prime=0.0, f_c=0.0),
+             dict(b=0.0, b_prime=0.0, f_c=-0.21),
+             # b, b', f_c would allow 00, reversibility does not
+             dict(b=0.01, b_prime=0.01, f_c=0.01, v=0.08), dict(b=0.01, b_prime=0.01, f_c=0.01, v=0.31),
+             dict(b=0.01, b_prime=0.01, f_c=0.01, v=0.6),
+             dict(b=0.01, b_prime=0.01, f_c=0.01, f_0=-0.03), dict(b=0.01, b_prime=0.01, f_c=0.01, c=0.06),
+             dict(b=0.15, b_prime=0.01, f_c=0.01, v=0.2, f_0=0.02)]
+    for fig in cases:
+        _set_figures(st, **fig)
+        want, why = _expected_class(fig)
+        got = classing(st, 100.0)["+"]
+        assert (got["class"], sorted(got["limited_by"])) == (want, sorted(why)), fig
+        assert classify(st, 100.0) == {"+": want}
+    # a bad step below 10 % of full scale (resolution unknown) does not count; at 10 % it does
+    _set_figures(st, b_prime=0.0, f_c=0.0)
+    st.figures["b"] = np.where(st.loads < 21.0, 5.0, 0.02)
     assert classify(st, 250.0) == {"+": "00"}  # 20 < 25 = 10 % of 250
     assert classify(st, 200.0) == {"+": "none"}  # 20 = 10 % of 200
+
+
+def test_table_3_caps_the_class_by_the_reference_uncertainty(hand_set):
+    _, calib = hand_set
+    st = component_steps(calib, 0)
+    _set_figures(st, b=0.01, b_prime=0.01, f_c=0.01)
+    for ref in (0.002, 0.01, 0.015, 0.02, 0.05, 0.08, 0.1, 0.2):
+        want, why = _expected_class({}, ref)
+        got = classing(st, 100.0, reference_uncertainty=ref)["+"]
+        assert (got["class"], got["limited_by"]) == (want, why), ref
+    assert classify(st, 100.0, reference_uncertainty=0.05) == {"+": "1"}
+    assert classify(st, 100.0, reference_uncertainty=0.002) == {"+": "00"}
+
+
+def test_class_range_starts_at_the_resolution_limit(hand_set):
+    _, calib = hand_set
+    st = component_steps(calib, 0)
+    # deflections grow ~0.0133 per unit load: the 20 step deflects ~0.27 output units
+    slope = float(np.mean(np.abs(st.mean) / np.abs(st.loads)))
+    _set_figures(st, b_prime=0.0, f_c=0.0)
+    st.figures["b"] = np.where(st.loads < 21.0, 0.3, 0.01)  # class 1 at the 20 step, 00 above
+    # r such that 4000 r lies between the 20 and 40 steps' deflections, 1000 r below 20's:
+    # class 00's range starts above the bad step, and 00 holds there
+    r = 30.0 * slope / 4000.0
+    got = classing(st, 100.0, r)["+"]
+    assert got["class"] == "00" and got["from"] == pytest.approx(4000 * r / slope)
+    # a finer resolution puts the 20 step into every class's range: b = 0.3 % there is class 2
+    got = classing(st, 100.0, 10.0 * slope / 4000.0)["+"]
+    assert got["class"] == "2" and got["limited_by"] == ["b"]
+    # a resolution so coarse no step reaches 500 r: no class, for want of resolution
+    got = classing(st, 100.0, 1000.0 * slope / 500.0)["+"]
+    assert got == {"class": "none", "limited_by": ["resolution"], "from": pytest.approx(1000.0)}
+
+
+def test_a_timed_hold_gives_creep_and_is_not_a_return(hand_set):
+    table, _ = hand_set
+    rows = []
+    for rep in (1, 2):
+        for axis, gain in zip("xyz", (0.0133, -0.0128, 0.008), strict=True):
+            # 0, 50, 100 (held: read at 30 s and 300 s), 50, 0; times in seconds, monotonic
+            loads, times = [0, 50, 100, 100, 50, 0], [0, 60, 120, 390, 450, 510]
+            creep = 3e-4 * rep * np.sign(gain)
+            for i, f in enumerate(loads):
+                u = [0.01, 0.02, 0.03]
+                a = "xyz".index(axis)
+                u[a] += gain * f + (creep if i == 3 else 0.0) + (1e-4 if i == 4 else 0.0)
+                rows.append((rep, axis, *(f if b == axis else 0.0 for b in "xyz"), *u, times[i]))
+    t = pd.DataFrame(rows, columns=["repetition", "axis", "fx", "fy", "fz", "ux", "uy", "uz", "t"])
+    calib = from_table(t.drop(columns="t"), replace(load_config(), min_repetitions=1, zero="rows"))
+    times = pd.Series(t["t"].to_numpy(), index=calib.points.index)
+    for a, gain in enumerate((0.0133, -0.0128, 0.008)):
+        st = component_steps(calib, a, times)
+        top = list(st.loads).index(100.0)
+        # c = 100 (i_300 - i_30) / X_N, the largest over repetitions (rep 2's)
+        assert st.figures["c"][top] == pytest.approx(100 * 6e-4 * np.sign(gain) / abs(gain * 100),
+                                                    rel=1e-9)
+        # the hold is not a way back: v only at 50, from the 1e-4 lift on the way down
+        assert np.isnan(st.figures["v"][top])
+        assert st.figures["v"][list(st.loads).index(50.0)] == pytest.approx(100 * 1e-4 / abs(gain * 50))
+    assert np.isnan(component_steps(calib, 0).figures["c"]).all()  # no times, no creep
 
 
 def test_budget_adds_the_contributions_in_quadrature(hand_set):
