@@ -244,25 +244,62 @@ def test_a_timed_hold_gives_creep_and_is_not_a_return(hand_set):
 
 
 def test_budget_adds_the_contributions_in_quadrature(hand_set):
-    _, calib = hand_set
+    table, calib = hand_set
     st = component_steps(calib, 1)
     r = resolution(calib, 1)
     u_model = np.linspace(0.01, 0.05, st.loads.size)
-    b = budget(st, u_model, 0.04, r)
+    drift = np.linspace(1e-4, 3e-4, st.loads.size)
+    b = budget(st, u_model, 0.04, r, 2e-5, drift)
+    up, down, zero = _readings(table, "y")
+    # the zero drift of the sweep: the largest |i_f - i_0| over repetitions, in volts
+    i_drift = max(abs(i_f - i_0) for i_0, i_f, _ in zero.values())
     for j, f in enumerate(st.loads):
-        xs = st.X[j]
-        mean = xs.mean()
+        xs = [up[rep][f] for rep in sorted(up)]
+        mean = sum(xs) / len(xs)
         s = math.sqrt(sum((x - mean) ** 2 for x in xs) / (len(xs) - 1))
+        back = [abs(down[rep][f] - up[rep][f]) / abs(up[rep][f]) for rep in sorted(up) if f in down[rep]]
         w = {"reference": 0.04 / 100 / 2,
              "reproducibility": s / math.sqrt(len(xs)) / abs(mean),
+             "repeatability": abs(xs[1] - xs[0]) / abs((xs[0] + xs[1]) / 2) / (2 * math.sqrt(3)),
              "resolution": math.sqrt(2 * (r / (2 * math.sqrt(3))) ** 2) / abs(mean),
+             "reversibility": (sum(back) / len(back) if back else 0.0) / math.sqrt(3),
              "interpolation": abs(st.figures["f_c"][j]) / 100 / math.sqrt(3),
-             "zero": np.nanmax(np.abs(st.figures["f_0"])) / 100 / math.sqrt(3),
+             # per step: the drift of the zero relative to this step's deflection
+             "zero": i_drift / abs(mean) / math.sqrt(3),
+             "temperature": 2e-5,
+             "drift": drift[j] / math.sqrt(3),
              "model": u_model[j] / abs(f)}
         for k, v in w.items():
             assert b[k][j] == pytest.approx(v, rel=1e-9), k
         wc = math.sqrt(sum(v * v for v in w.values()))
         assert b["U"][j] == pytest.approx(2 * wc * abs(f), rel=1e-9)
+    # the zero term at the smallest step is the top step's times X_N / X_small (~5 here)
+    assert b["zero"][0] / b["zero"][-1] == pytest.approx(abs(st.mean[-1] / st.mean[0]), rel=1e-12)
+    assert b["zero"][0] > 4 * b["zero"][-1]
+
+
+def test_temperature_term_from_a_temperature_column():
+    from fsdecouple.evaluation.budget import temperature_term
+    # every deflection is (1 + K_T (T - 21.5)) times its own, K_T = 2e-4 per kelvin; the
+    # temperature runs from 20 to 23 °C over the calibration, and the readings scatter
+    # by 1e-6 V (~1e-5 of a deflection): K_T comes back within a few percent
+    rng = np.random.default_rng(5)
+    rows, temps = [], []
+    for rep in (1, 2, 3):
+        for axis, gain in zip("xyz", (0.0133, -0.0128, 0.008), strict=True):
+            for f in LOADS:
+                t = 20.0 + 3.0 * len(rows) / (3 * 3 * len(LOADS) - 1)
+                u = [0.01 + rng.normal(0, 1e-6) for _ in range(3)]
+                u["xyz".index(axis)] += gain * f * (1 + 2e-4 * (t - 21.5))
+                rows.append((rep, axis, *(f if b == axis else 0.0 for b in "xyz"), *u))
+                temps.append(t)
+    table = pd.DataFrame(rows, columns=["repetition", "axis", "fx", "fy", "fz", "ux", "uy", "uz"])
+    calib = from_table(table, replace(load_config(), min_repetitions=1, zero="rows"))
+    assert temperature_term(calib, component_steps(calib, 0)) is None  # no column: no term
+    calib = replace(calib, points=calib.points.assign(temperature=temps))
+    for a in range(3):
+        got = temperature_term(calib, component_steps(calib, a))
+        assert got == pytest.approx(2e-4 * 3.0 / (2 * math.sqrt(3)), rel=0.05)
 
 
 def test_resolution_is_the_step_readings_are_recorded_in(hand_set):
