@@ -157,6 +157,23 @@ def check_drift_document(doc, source: str) -> dict:
     return doc
 
 
+def read_drift(path: str | Path) -> dict:
+    """The ``compare --json`` output in file ``path`` (``certificate --drift``)."""
+    import json
+
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise InputError(f"{path}: cannot read ({err.__class__.__name__}): expected the output of "
+                         "'fsdecouple compare --json'") from None
+    try:
+        doc = json.loads(text)
+    except ValueError as err:
+        raise InputError(f"{path}: not JSON ({err}): expected the output of "
+                         "'fsdecouple compare --json'") from None
+    return check_drift_document(doc, str(path))
+
+
 def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str = "model",
                 settings: Settings | None = None, drift: dict | None = None) -> dict[str, Any]:
     """The certificate document of ``calib`` and the model fitted on it.
