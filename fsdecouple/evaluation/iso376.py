@@ -2,7 +2,8 @@
 
 For each component and each non-zero load step of its own sweeps, X_i is the
 deflection of repetition i at that step: its prime output less the mean of its
-sweep's zero rows, the first time the sweep reaches that load.  In percent, as
+sweep's zero rows, the first time the sweep reaches that load with |load| rising
+(ISO 376's increasing series; :func:`_out_and_back`).  In percent, as
 ISO 376:2011 (Section 7.5) states them:
 
 * ``b``, reproducibility: 100 (max_i X_i - min_i X_i) / |mean_i X_i|, over all
@@ -16,9 +17,9 @@ ISO 376:2011 (Section 7.5) states them:
 * ``f_0``, zero error: 100 (i_f - i_0) / X_N for a sweep with zero rows at its start
   and its end (i_0, i_f the first and last zero reading, X_N the deflection at the
   sweep's largest load); stated at that largest step, the largest over repetitions;
-* ``v``, reversibility: 100 |X'_i - X_i| / |X_i| where sweep i loads up and then
-  down and reads the step again (X'_i on the way back), averaged over the
-  repetitions that return; absolute, so never negative;
+* ``v``, reversibility: 100 |X'_i - X_i| / |X_i| where sweep i reads the step with
+  |load| rising and with |load| falling (X'_i), averaged over the repetitions that
+  do; absolute, so never negative;
 * ``c``, creep: 100 (i_300 - i_30) / X_N where the sweep holds its largest load and
   a time column (config ``creep: {column: ...}``) dates the readings 30 s and
   300 s after it was applied (:mod:`fsdecouple.evaluation.creep`).
@@ -83,20 +84,31 @@ class ComponentSteps:
         return np.nanmean(self.X, axis=1)
 
 
-def _first_and_return(loads: np.ndarray) -> tuple[dict[float, int], dict[float, int]]:
-    """Row of each load on the way out (first reading) and on the way back (a later one).
+def _out_and_back(loads: np.ndarray) -> tuple[dict[float, int], dict[float, int]]:
+    """Row of each load on its way out (X) and on its way back (X'), if it has one.
 
-    A reading right after one at the same load is a hold (creep), not a return.
+    A visit is *out* when |load| rises into it (from a smaller load, from zero, or
+    from the other sign; a sweep's first row counts as out: the load was applied
+    from zero), *back* when |load| falls into it.  X is a load's first visit out,
+    or its first visit when it has none (a sweep from -100 to +100 reads the
+    negative steps only on their way back); X' its first visit back where X is a
+    visit out.  A reading right after one at the same load is a hold (creep), not
+    a visit.
     """
     first: dict[float, int] = {}
+    out: dict[float, int] = {}
     back: dict[float, int] = {}
-    peak = int(np.argmax(np.abs(loads))) if loads.size else 0
+    prev = 0.0
     for i, f in enumerate(loads):
-        if f not in first:
-            first[f] = i
-        elif i > peak and f != 0.0 and loads[i - 1] != f:
-            back.setdefault(f, i)
-    return first, back
+        if i and loads[i - 1] == f:
+            continue
+        if f != 0.0:
+            rising = abs(f) > abs(prev) or np.sign(f) != np.sign(prev)
+            first.setdefault(f, i)
+            (out if rising else back).setdefault(f, i)
+        prev = f
+    return ({f: out.get(f, i) for f, i in first.items()},
+            {f: i for f, i in back.items() if f in out})
 
 
 def _creep(f: np.ndarray, u: np.ndarray, t: np.ndarray, tol: float = 15.0) -> float:
@@ -143,12 +155,11 @@ def component_steps(calib: CalibrationSet, a: int, times=None) -> ComponentSteps
             # start from the sweep's own zero rows
             raw = g[[f"{c}_raw" for c in layout.outputs]].to_numpy(dtype=float)
             u = raw - raw[f == 0.0].mean(axis=0)
-        first, again = _first_and_return(f)
+        first, again = _out_and_back(f)
         for load, i in first.items():
-            if load != 0.0:
-                X[where[load], r] = u[i, a]
-                outputs[where[load]] += u[i]
-                counts[where[load]] += 1
+            X[where[load], r] = u[i, a]
+            outputs[where[load]] += u[i]
+            counts[where[load]] += 1
         for load, i in again.items():
             back[where[load], r] = u[i, a]
         if f.size and (f != 0.0).any():
