@@ -384,3 +384,125 @@ def test_out_and_back_sets_zeroed_by_fit_keep_iso_deflections_from_the_zero_rows
         for name, values in auto.figures.items():
             np.testing.assert_allclose(values, by_rows.figures[name], rtol=1e-9, atol=1e-12,
                                        err_msg=name)
+
+
+@pytest.fixture(scope="module")
+def quiet_sensor(tmp_path_factory):
+    """The paper's sensor with 1 uV noise, swept out and back with a 0.02 % lag, and
+    without: b, b' and f_c near class 00 (Table 2), so v and Table 3 decide."""
+    from fsdecouple.data.calibration import load_calibration
+    from fsdecouple.sim.simulate import SimulatedSensor, simulate
+
+    out = {}
+    for name, hysteresis in (("back", 0.0002), ("plain", None)):
+        path = tmp_path_factory.mktemp(name)
+        simulate(path, seed=1, sensor=SimulatedSensor(noise=1e-6), hysteresis=hysteresis)
+        calib = load_calibration(path / "calibration", load_config())
+        out[name] = (calib, calibrate(calib, load_config()))
+    return out
+
+
+def _best_by(metric: str, values) -> str:
+    """The best class of TABLE_2 whose ``metric`` limit every value keeps."""
+    col = ("b", "b_prime", "f_c", "f_0", "v", "c").index(metric)
+    for cls in ORDER:
+        if all(abs(v) <= TABLE_2[cls][col] for v in values):
+            return cls
+    return "none"
+
+
+@pytest.mark.slow  # two simulated calibrations, fitted with their verdicts
+def test_reversibility_limits_the_class_of_a_sensor_swept_out_and_back(quiet_sensor):
+    calib, model = quiet_sensor["back"]
+    doc = certificate(model, calib, settings=replace(
+        model.settings, lab=replace(model.settings.lab, reference_uncertainty=0.002)))
+    recs = pd.DataFrame(doc["records"])
+    v = recs[recs["metric"] == "v"]
+    assert len(v) and (v["value"] >= 0).all()  # ISO 376's |X' - X| / X
+    rank = {c: i for i, c in enumerate((*ORDER, "none"))}
+    limited = 0
+    for c in doc["classes"]:
+        sign = 1 if c["sign"] == "+" else -1
+        mine = v[(v["axis"] == c["axis"]) & (np.sign(v["load"]) == sign)
+                 & (v["load"].abs() >= c["from"] * (1 - 1e-12))]
+        allowed = _best_by("v", mine["value"])
+        assert rank[c["class"]] >= rank[allowed], c  # no better than v allows
+        # b, b' and f_c alone would allow a better class: v is what limits it
+        others = recs[(recs["axis"] == c["axis"]) & (np.sign(recs["load"]) == sign)]
+        by_rest = max((_best_by(m, others[others["metric"] == m]["value"])
+                       for m in ("b", "b_prime", "f_c")), key=rank.get)
+        if rank[by_rest] < rank[c["class"]]:
+            assert "v" in c["limited_by"], c
+            limited += 1
+    assert limited  # the lag of 0.02 % of full scale costs some component its class
+
+
+@pytest.mark.slow
+def test_table_3_caps_the_sensor_without_hysteresis_at_class_1_by_default(quiet_sensor):
+    calib, model = quiet_sensor["plain"]
+    doc = certificate(model, calib)  # reference_uncertainty 0.05 % (the default)
+    assert not any(r["metric"] == "v" for r in doc["records"])
+    assert {c["class"] for c in doc["classes"]} == {"1"}
+    assert all(c["limited_by"] == ["reference"] for c in doc["classes"])
+    fine = replace(model.settings, lab=replace(model.settings.lab, reference_uncertainty=0.002))
+    assert {c["class"] for c in certificate(model, calib, settings=fine)["classes"]} == {"00"}
+
+
+@pytest.mark.slow
+def test_a_config_silent_on_zero_is_the_one_fit_was_given(quiet_sensor):
+    """fit zeroes sweeps out and back by zero: fit on its own; the same config (no
+    zero key) is then the model's, and only a zero the config states is compared."""
+    calib, model = quiet_sensor["back"]
+    assert model.settings.zero == "fit" and load_config().zero is None
+    certificate(model, calib, settings=load_config())  # not refused
+    with pytest.raises(InputError, match="the config's zero is not the model's"):
+        check_matches(model, calib, "m.json", replace(load_config(), zero="rows"))
+
+
+def test_the_set_must_be_the_fitted_one_by_name_and_repetition(certified, calib):
+    model, _ = certified
+    files = list(calib.files)
+    (p1, h1), (p6, h6) = files[0], files[-1]
+    folder = str(p1).rsplit("/", 1)[0]
+    cases = {
+        # a copy of rep1.csv saved as rep7.csv: every digest is the model's
+        "rep7.csv is not a file the model was fitted on: its content is rep1.csv's":
+            [*files, (f"{folder}/rep7.csv", h1)],
+        "rep9.csv is not a file the model was fitted on: its content is rep6.csv's":
+            [*files[:-1], (f"{folder}/rep9.csv", h6)],
+        "the model was fitted on rep6.csv too, which it lacks": files[:-1],
+        "rep6.csv is not the file the model was fitted on under that name":
+            [*files[:-1], (p6, "0" * 64)],
+    }
+    for message, given in cases.items():
+        with pytest.raises(InputError, match=message.replace(".", r"\.")):
+            check_matches(model, replace(calib, files=tuple(given)), "m.json")
+    # the same files, but a repetition fewer or more: the labels differ
+    with pytest.raises(InputError, match="it lacks repetition 6"):
+        check_matches(model, calib.subset([1, 2, 3, 4, 5]), "m.json")
+    more = replace(calib, points=calib.points.assign(
+        repetition=calib.points["repetition"].replace({6: 7})))
+    with pytest.raises(InputError, match="it has repetition 7"):
+        check_matches(model, more, "m.json")
+    check_matches(model, calib, "m.json")  # the fitted set itself passes
+
+
+def test_drift_between_calibrations_from_compare_json_or_the_config():
+    from fsdecouple.evaluation.certificate import check_drift_document, drift_fractions
+    loads = np.array([-100.0, -50.0, 50.0, 100.0])
+    doc = {"format": "fsdecouple.drift", "components": {"x": {"force_max_pct": 0.2}},
+           "en_steps": [{"axis": "x", "load": -100.0, "F_old": -100.0, "F_new": -100.3},
+                        {"axis": "x", "load": 100.0, "F_old": 100.1, "F_new": 100.0},
+                        {"axis": "y", "load": 100.0, "F_old": 0.0, "F_new": 9.0}]}
+    d, source = drift_fractions(check_drift_document(doc, "c.json"), None, "x", loads, 100.0)
+    # |F_old - F_new| / |L|, straight between the two steps compare gives: 0.3 at -100, 0.1 at 100
+    assert d == pytest.approx([0.3 / 100, 0.25 / 50, 0.15 / 50, 0.1 / 100])
+    assert "compare" in source
+    no_steps = {**doc, "en_steps": None}
+    d, _ = drift_fractions(no_steps, None, "x", loads, 100.0)  # 0.2 % of 100 = 0.2 at every step
+    assert d == pytest.approx(0.2 / np.abs(loads))
+    d, source = drift_fractions(None, 0.03, "x", loads, 100.0)
+    assert d == pytest.approx(np.full(4, 3e-4)) and source == "config drift"
+    assert drift_fractions(None, None, "x", loads, 100.0)[1] is None
+    with pytest.raises(InputError, match="c.json: not the output of 'fsdecouple compare --json'"):
+        check_drift_document({"format": "fsdecouple.certificate"}, "c.json")
