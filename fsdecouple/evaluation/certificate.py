@@ -121,16 +121,19 @@ def drift_fractions(drift: dict | None, percent: float | None, axis: str, loads:
 
     ``drift``: a ``compare --json`` document (``fsdecouple.drift``): |F_old - F_new| /
     |L| at its calibrated steps of this component (interpolated over load between
-    them), or without steps its ``force_max_pct`` of full scale; ``percent``: the
+    them; the larger where both calibrations have the load), or without steps its
+    ``force_max_pct`` of full scale; ``percent``: the
     config's ``drift`` [%], for every step.  Neither: zeros and None.
     """
     if drift is not None:
         steps = [s for s in drift.get("en_steps") or [] if s.get("axis") == axis]
         if steps:
-            at = np.array([s["load"] for s in steps], dtype=float)
-            change = np.array([abs(s["F_old"] - s["F_new"]) for s in steps], dtype=float)
-            order = np.argsort(at)
-            moved = np.interp(loads, at[order], change[order])
+            largest: dict[float, float] = {}  # a load both calibrations have: the larger
+            for s in steps:
+                f = float(s["load"])
+                largest[f] = max(largest.get(f, 0.0), abs(float(s["F_old"]) - float(s["F_new"])))
+            at = np.array(sorted(largest))
+            moved = np.interp(loads, at, [largest[f] for f in at])
             return moved / np.abs(loads), "compare --json (|F_old - F_new| at each step)"
         comp = (drift.get("components") or {}).get(axis) or {}
         if comp.get("force_max_pct") is not None:

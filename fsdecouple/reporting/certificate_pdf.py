@@ -105,7 +105,7 @@ def certificate_pdf(doc: dict) -> bytes:
         elif b.kind == "note":
             story.append(Paragraph(escape(b.text), styles["note"]))
         elif b.kind == "figure":
-            png = to_png(u_figure(doc, b.ident), dpi=150)
+            png = to_png(u_figure(doc, b.ident))  # the HTML's own PNG
             story += [Image(io.BytesIO(png), width=width, height=width * 2.6 / 6.0),
                       Paragraph(escape(b.text), styles["note"]), Spacer(1, 6)]
         else:
