@@ -44,7 +44,8 @@ def certificate(
     from ..data.calibration import load_calibration
     from ..evaluation.certificate import certificate as build
     from ..evaluation.certificate import read_drift
-    from ..reporting.certificate import certificate_bytes, certificate_tables, check_certificate_path
+    from ..reporting.certificate import certificate_tables
+    from ..reporting.certificate_file import certificate_bytes, check_certificate_path
 
     with user_errors():
         model = load_model(model_file)
