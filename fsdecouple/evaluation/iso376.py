@@ -18,8 +18,8 @@ ISO 376:2011 (Section 7.5) states them:
   and its end (i_0, i_f the first and last zero reading, X_N the deflection at the
   sweep's largest load); stated at that largest step, the largest over repetitions;
 * ``v``, reversibility: 100 |X'_i - X_i| / |X_i| where sweep i reads the step with
-  |load| rising and with |load| falling (X'_i), averaged over the repetitions that
-  do; absolute, so never negative;
+  |load| rising and with |load| falling (X'_i), the largest over the repetitions
+  that do (as f_0 and c); absolute, so never negative;
 * ``c``, creep: 100 (i_300 - i_30) / X_N where the sweep holds its largest load and
   a time column (config ``creep: {column: ...}``) dates the readings 30 s and
   300 s after it was applied (:mod:`fsdecouple.evaluation.creep`).
@@ -193,7 +193,7 @@ def _figures(st: ComponentSteps, back: np.ndarray, f0: np.ndarray,
             out["b_prime"] = 100.0 * np.abs(x2 - x1) / np.abs((x1 + x2) / 2.0)
         both = np.isfinite(back) & np.isfinite(X)
         returned = both.any(axis=1)
-        v = np.where(both, np.abs(back - X) / np.abs(X), 0.0).sum(axis=1) / both.sum(axis=1).clip(1)
+        v = np.where(both, np.abs(back - X) / np.abs(X), 0.0).max(axis=1)  # the worst repetition
         out["v"][returned] = 100.0 * v[returned]
     for sign in (-1.0, 1.0):
         idx = np.flatnonzero(np.sign(st.loads) == sign)
