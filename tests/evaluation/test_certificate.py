@@ -506,3 +506,45 @@ def test_drift_between_calibrations_from_compare_json_or_the_config():
     assert drift_fractions(None, None, "x", loads, 100.0)[1] is None
     with pytest.raises(InputError, match="c.json: not the output of 'fsdecouple compare --json'"):
         check_drift_document({"format": "fsdecouple.certificate"}, "c.json")
+
+
+def test_creep_times_are_read_from_the_files_row_by_row(tmp_path):
+    """A set on disk whose sweeps hold their top load, read 30 s and 300 s after it was
+    applied, dated by a column the config names; blank lines keep their row numbers."""
+    from fsdecouple.data.calibration import load_calibration
+    from fsdecouple.evaluation.creep import creep_times
+
+    folder = tmp_path / "calibration"
+    folder.mkdir()
+    loads, times = [0, 50, 100, 100, 50, 0], [0.0, 60.0, 120.0, 390.0, 450.0, 510.0]
+    lift = {1: 2e-4, 2: 5e-4}  # i_300 - i_30 of each repetition's sweeps [V]
+    for rep in (1, 2):
+        lines = ["axis,fx,fy,fz,ux,uy,uz,seconds"]
+        t0 = 0.0
+        for axis, gain in zip("xyz", (0.0133, -0.0128, 0.008), strict=True):
+            for i, f in enumerate(loads):
+                u = [0.01, 0.02, 0.03]
+                u["xyz".index(axis)] += gain * f + (lift[rep] if i == 3 else 0.0)
+                fs = [f if b == axis else 0 for b in "xyz"]
+                lines.append(f"{axis},{fs[0]},{fs[1]},{fs[2]},{u[0]!r},{u[1]!r},{u[2]!r},"
+                             f"{t0 + times[i]}")
+            t0 += 600.0
+            lines.append("")  # a blank line between sweeps: rows still count it
+        (folder / f"rep{rep}.csv").write_text("\n".join(lines) + "\n")
+    config = tmp_path / "c.yaml"
+    config.write_text("min_repetitions: 1\nzero: rows\ncreep: {column: seconds}\n")
+    settings = load_config(config)
+    calib = load_calibration(folder, settings)
+    times = creep_times(calib, settings)
+    assert times is not None and np.isfinite(times).all()
+    for a, gain in enumerate((0.0133, -0.0128, 0.008)):
+        st = component_steps(calib, a, times)
+        top = list(st.loads).index(100.0)
+        # c = 100 (i_300 - i_30) / |X_N|, the larger repetition's (rep 2)
+        assert st.figures["c"][top] == pytest.approx(100 * 5e-4 / abs(gain * 100), rel=1e-6)
+    # the same readings dated 200 s apart are no 30 s / 300 s pair: no creep
+    for f in folder.glob("*.csv"):
+        f.write_text(f.read_text().replace(",390.0\n", ",320.0\n").replace(",990.0\n", ",920.0\n")
+                     .replace(",1590.0\n", ",1520.0\n"))
+    calib = load_calibration(folder, settings)
+    assert np.isnan(component_steps(calib, 0, creep_times(calib, settings)).figures["c"]).all()
