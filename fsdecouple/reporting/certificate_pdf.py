@@ -41,7 +41,9 @@ def _table(b: Block, width: float, styles) -> list:
     n = max([1, len(b.head), *[len(r) for r in b.rows]])
     size = 8.0 if n <= 5 else 6.5 if n <= 9 else 5.6
     cell = styles["cell"].clone("c", fontSize=size, leading=size * 1.2)
-    head = styles["cell"].clone("h", fontName=BOLD, fontSize=size, leading=size * 1.2)
+    wide = n > 9  # the budget: a regular-weight header so its longest word fits a column
+    head = styles["cell"].clone("h", fontName=FONT if wide else BOLD, fontSize=min(size, 5.0)
+                                if wide else size, leading=size * 1.2)
     big = styles["cell"].clone("b", fontName=BOLD, fontSize=size + 2, leading=(size + 2) * 1.2)
     data = []
     if b.head:
@@ -54,12 +56,15 @@ def _table(b: Block, width: float, styles) -> list:
         widths = [0.22 * width, 0.78 * width]
     elif b.ident == "classes":
         widths = [w * width for w in (0.12, 0.12, 0.1, 0.44, 0.22)]
+    elif wide:  # the load column needs less than the contributions
+        widths = [0.05 * width, *[0.95 * width / (n - 1)] * (n - 1)]
     else:
         widths = [width / n] * n
     t = Table(data, colWidths=widths, repeatRows=1 if b.head else 0, hAlign="LEFT")
     style = [("GRID", (0, 0), (-1, -1), 0.4, colors.grey), ("FONTNAME", (0, 0), (-1, -1), FONT),
              ("VALIGN", (0, 0), (-1, -1), "TOP"),
-             ("LEFTPADDING", (0, 0), (-1, -1), 2), ("RIGHTPADDING", (0, 0), (-1, -1), 2)]
+             ("LEFTPADDING", (0, 0), (-1, -1), 1 if wide else 2),
+             ("RIGHTPADDING", (0, 0), (-1, -1), 1 if wide else 2)]
     if b.head:
         style.append(("BACKGROUND", (0, 0), (-1, 0), colors.HexColor("#eeeeee")))
     t.setStyle(TableStyle(style))
