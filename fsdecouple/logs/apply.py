@@ -252,7 +252,7 @@ def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarra
     The one place that decides a row's status (:data:`STATUSES`), for ``apply``'s
     blocks and for :func:`fsdecouple.logs.frame.decouple_frame` alike.
     """
-    u = raw - offsets
+    u = model.zero_corrected(raw, offsets)  # temperature terms first, if any
     code = np.zeros(len(u), dtype=np.int8)  # index into STATUSES
     empty = np.isnan(u).any(axis=1)
     code[empty] = MISSING_
