@@ -32,6 +32,7 @@ from ..axes import FORCE_COLUMNS, VOLTAGE_COLUMNS
 from ..config import Settings
 from ..core.intervals import half_widths, interval_names, with_intervals
 from ..core.model import FORCE_LIMIT, CouplingErrorModel
+from ..data.ati_cal import check_log_gauges
 from ..data.csv_text import HEADER_ROW, require_columns
 from ..data.zero import tare_offsets
 from ..errors import InputError, where
@@ -297,6 +298,7 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
     layout = model.layout
     names = [settings.columns[c] for c in layout.outputs]
     require_columns(log.header, dict(zip(layout.outputs, names, strict=True)), path)
+    check_log_gauges(model, log.header, path)  # an imported factory matrix: NumGages columns
     # unnamed columns, repeated names and a side table are not passed through
     keep, dropped = passed_columns(log.header, names)
     header = [log.header[i] for i in keep]
