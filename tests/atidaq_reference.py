@@ -51,8 +51,9 @@ class Atidaq:
                 self.gs, self.tc = [float(v) for v in child.get("values").split()], True
             elif child.tag == "Thermistor":
                 self.therm = float(child.get("value"))
-        b = np.array(basic)
-        self.working = self._ttm(tt, dist, angle) @ b if len(basic) == 6 else b
+        self.basic = np.array(basic)
+        self.basic_ttm = self._ttm(tt, dist, angle) if len(basic) == 6 else None
+        self.working = self.basic_ttm @ self.basic if len(basic) == 6 else self.basic
         self.bias_vector = [0.0] * (self.n + 1)
         self.tc_bias = [0.0] * self.n
 
@@ -74,6 +75,10 @@ class Atidaq:
             t[3 + i][1] = r[i][0] * dz - r[i][2] * dx
             t[3 + i][2] = r[i][1] * dx - r[i][0] * dy
         return np.array(t)
+
+    def set_tool_transform(self, vector, dist_units, angle_units="degrees"):
+        """SetToolTransform: W = TTM(user) TTM(basic) B (GetMatrix)."""
+        self.working = self._ttm(vector, dist_units, angle_units) @ self.basic_ttm @ self.basic
 
     def _temp_comp(self, g, t, i):
         return (g + self.bs[i] * (t - self.therm)) / (1 - self.gs[i] * (t - self.therm))

@@ -18,16 +18,20 @@ def import_(
     output: Annotated[Path, output_file("Model file to write (JSON).")],
     index: Annotated[int, typer.Option(help="Which Calibration element, counted from 1 "
                                              "(ATIDAQ's index).")] = 1,
+    config: Annotated[Path | None, typer.Option(
+        "--config", "-c", help="YAML holding frame: only (the tool transform, docs/six-axis.md); "
+                               "everything else comes from the .cal file.")] = None,
     force: ForceOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
     """Import an ATI calibration file as a linear model (decoupled as ATIDAQ does)."""
-    from ..data.ati_cal import import_cal, summary
+    from ..data.ati_cal import import_cal, read_frame_config, summary
 
     with user_errors():
         check_output(output, force=force)
-        refuse_overwriting_input(output, [cal_file])
-        model = import_cal(cal_file, index)
+        refuse_overwriting_input(output, [cal_file, *([config] if config else [])])
+        frame = read_frame_config(config) if config is not None else None
+        model = import_cal(cal_file, index, frame, str(config))
         save_model(model, output, force=force)
     doc = summary(model, output)
     if json_out:

@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError, excerpt, printable
+from ..wrench import ati_rotation, wrench_transform
 
 CAL_LIMIT = 1 << 20  # bytes: a .cal file is a few kB
 MAX_GAUGES = 8  # ATIDAQ's MAX_GAUGES
@@ -116,30 +117,12 @@ def tool_transform(tt, force_units: str, torque_units: str, dist_units: str,
     """ATIDAQ's 6 x 6 tool transform of (Dx, Dy, Dz, Rx, Ry, Rz): F' = R F, T' = R (T - d x F).
 
     d [DistUnits] is converted to torque unit per force unit; R is built from the
-    angles as ATIDAQ builds it (ftconfig.c, TTM): rows
-    (cy cz, sx sy cz + cx sz, sx sz - cx sy cz), (-cy sz, cx cz - sx sy sz,
-    sx cz + cx sy sz), (sy, -sx cy, cx cy).
+    angles as ATIDAQ builds it (:func:`fsdecouple.wrench.ati_rotation`), the config's
+    ``frame: {angles, displacement}`` being the same transform after the decoupling.
     """
     lever = TORQUE_PER_LBF_IN[torque_units] / (FORCE_PER_LBF[force_units] * DIST_PER_IN[dist_units])
     d = np.asarray(tt[:3], dtype=float) * lever
-    rx, ry, rz = (math.radians(float(a) * ANGLE_DEGREES[angle_units]) for a in tt[3:])
-    sx, cx, sy, cy, sz, cz = math.sin(rx), math.cos(rx), math.sin(ry), math.cos(ry), \
-        math.sin(rz), math.cos(rz)
-    r = np.array([[cy * cz, sx * sy * cz + cx * sz, sx * sz - cx * sy * cz],
-                  [-cy * sz, cx * cz - sx * sy * sz, sx * cz + cx * sy * sz],
-                  [sy, -sx * cy, cx * cy]])
-    return wrench_transform(r, d)
-
-
-def wrench_transform(r: np.ndarray, d) -> np.ndarray:
-    """[[R, 0], [-R [d]x, R]]: F' = R F, T' = R (T - d x F) on (F, T)."""
-    dx, dy, dz = (float(v) for v in d)
-    cross = np.array([[0.0, -dz, dy], [dz, 0.0, -dx], [-dy, dx, 0.0]])  # [d]x F = d x F
-    t = np.zeros((6, 6))
-    t[:3, :3] = r
-    t[3:, 3:] = r
-    t[3:, :3] = -np.asarray(r) @ cross
-    return t
+    return wrench_transform(ati_rotation([float(a) * ANGLE_DEGREES[angle_units] for a in tt[3:]]), d)
 
 
 # --- reading -------------------------------------------------------------------------
@@ -291,8 +274,11 @@ def read_cal(path: str | Path, index: int = 1) -> AtiCalibration:
 
 # --- the model -------------------------------------------------------------------------
 
-def import_cal(path: str | Path, index: int = 1):
+def import_cal(path: str | Path, index: int = 1, frame: Any = None, frame_source: str = "config"):
     """The linear model of an ATI calibration file (module docstring).
+
+    ``frame``: the config's ``frame:`` mapping (docs/six-axis.md), ATIDAQ's user tool
+    transform: applied after the file's working matrix, as ``SetToolTransform`` does.
 
     Returns
     -------
@@ -330,12 +316,22 @@ def import_cal(path: str | Path, index: int = 1):
     loads = {c: FORCE_UNITS[cal.force_units] if a.name[:1] == "F" else TORQUE_UNITS[cal.torque_units]
              for c, a in zip(comps, cal.axes, strict=True)}
     serial = cal.sensor.get("Serial", "")
-    settings = settings_from_dict({
+    raw = {
         "sensor": " ".join(x for x in ("ATI", cal.sensor.get("BodyStyle", ""), serial) if x) or "ATI",
         "components": comps, "outputs": outputs,
         "full_scale": {c: a.max for c, a in zip(comps, cal.axes, strict=True)},
         "units": {"load": loads, "output": "V"},
-    }, name)
+    }
+    if frame is not None:
+        from ..config import ConfigError
+        from ..wrench import parse_frame
+
+        try:
+            parse_frame(frame, f"{frame_source}: frame", len(comps))
+        except ConfigError as err:
+            raise InputError(str(err)) from None
+        raw["frame"] = frame
+    settings = settings_from_dict(raw, name)
     w = cal.working_matrix()
     m = np.zeros((len(comps), len(outputs)))
     m[:, :cal.num_gages] = w
@@ -424,3 +420,19 @@ def summary(model, output) -> dict[str, Any]:
             "temperature_compensation": t is not None,
             "user_axis_max_difference": ati.get("user_axis_max_difference"),
             "warnings": model.warnings, "lines": lines}
+
+
+def read_frame_config(path: str | Path) -> Any:
+    """``import -c``: a YAML config holding ``frame:`` and nothing else."""
+    from ..errors import ConfigError
+    from ..yamlfile import read_yaml
+
+    name = printable(path)
+    raw = read_yaml(Path(path), name)
+    if not isinstance(raw, dict) or "frame" not in raw:
+        raise ConfigError(f"{name}: expected a mapping with frame: (the tool transform)")
+    other = [k for k in raw if k != "frame"]
+    if other:
+        raise ConfigError(f"{name}: {excerpt(other[0])}: import reads only frame: from a config; "
+                          "the sensor, units and full scale come from the .cal file")
+    return raw["frame"]
