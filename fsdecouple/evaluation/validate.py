@@ -143,6 +143,8 @@ def validate(
                         "fsdecouple kept it): give the calibration (--calib CALIB) to set the "
                         "matrix fitted on it beside the model")
     forces["initial"] = model.initial_forces(u)
+    if getattr(model, "imported", False):  # a factory matrix: its own f = C u, nothing beside
+        forces = {"model": forces["model"]}
     inside = in_calibrated_range(model, u)
     axis_of = points["axis"].to_numpy()
     fs = np.asarray(settings.full_scale, dtype=float)
