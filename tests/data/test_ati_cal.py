@@ -236,3 +236,11 @@ def test_a_log_without_the_thermistor_column(tmp_path):
     log.write_text("g0,g1,g2,g3,g4,g5\n0.1,0.2,0.3,0.4,0.5,0.6\n")
     r = invoke(["apply", out, log, "-o", tmp_path / "f.csv"], code=2)
     assert "thermistor" in r.stderr and not (tmp_path / "f.csv").exists()
+
+
+def test_report_and_certificate_refuse_a_factory_matrix_in_one_line(tmp_path):
+    out = tmp_path / "model.json"
+    invoke(["import", FIXTURES / "FT_gamma_like.cal", "-o", out])
+    r = invoke(["report", out, "-o", tmp_path / "r.html"], code=2)
+    assert "imported factory matrix" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "r.html").exists()
