@@ -25,7 +25,7 @@ def import_(
     json_out: JsonOpt = False,
 ) -> None:
     """Import an ATI calibration file as a linear model (decoupled as ATIDAQ does)."""
-    from ..data.ati_cal import import_cal, read_frame_config, summary
+    from ..data.ati_model import import_cal, read_frame_config, summary
 
     with user_errors():
         check_output(output, force=force)

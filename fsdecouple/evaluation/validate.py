@@ -115,6 +115,9 @@ def validate(
     if model_path is not None:
         model = load_model(model_path)
     settings = settings or model.settings
+    if getattr(model, "temperature", None) is not None:  # core/temperature.py
+        raise InputError("validate: the model corrects its outputs for temperature, which a set "
+                         "zero-corrected sweep by sweep does not carry; apply it to a log instead")
     if settings.layout != model.layout:
         raise InputError(f"the config names components {', '.join(settings.layout.loads)}, the "
                          f"model {', '.join(model.layout.loads)}; use the calibration's config")

@@ -32,7 +32,7 @@ from ..axes import FORCE_COLUMNS, VOLTAGE_COLUMNS
 from ..config import Settings
 from ..core.intervals import half_widths, interval_names, with_intervals
 from ..core.model import FORCE_LIMIT, CouplingErrorModel
-from ..data.ati_cal import check_log_gauges
+from ..data.ati_model import check_log_gauges
 from ..data.csv_text import HEADER_ROW, require_columns
 from ..data.zero import tare_offsets
 from ..errors import InputError, where

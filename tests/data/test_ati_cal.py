@@ -21,7 +21,7 @@ from atidaq_reference import Atidaq
 from conftest import invoke
 
 from fsdecouple.core.modelfile import load_model
-from fsdecouple.data.ati_cal import import_cal
+from fsdecouple.data.ati_model import import_cal
 from fsdecouple.errors import InputError
 
 FIXTURES = Path(__file__).resolve().parent.parent / "fixtures" / "ati"
@@ -244,3 +244,12 @@ def test_report_and_certificate_refuse_a_factory_matrix_in_one_line(tmp_path):
     r = invoke(["report", out, "-o", tmp_path / "r.html"], code=2)
     assert "imported factory matrix" in r.stderr and len(r.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "r.html").exists()
+
+
+def test_validate_refuses_a_temperature_model(tmp_path):
+    """A set zero-corrected sweep by sweep carries no absolute thermistor reading: refused
+    in one line, never scored without its compensation."""
+    out = tmp_path / "model.json"
+    invoke(["import", FIXTURES / "FT_tc.cal", "-o", out])
+    r = invoke(["validate", out, FIXTURES], code=2)
+    assert "corrects its outputs for temperature" in r.stderr

@@ -20,7 +20,7 @@ from test_export import build, decouple, needs_cc
 
 from fsdecouple import load_config
 from fsdecouple.core.modelfile import load_model, save_model
-from fsdecouple.data.ati_cal import import_cal
+from fsdecouple.data.ati_model import import_cal
 from fsdecouple.data.calibration import load_calibration
 from fsdecouple.evaluation.verdict import calibrate
 from fsdecouple.wrench import Frame

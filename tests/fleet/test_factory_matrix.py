@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from conftest import invoke
 
-from fsdecouple.data.ati_cal import import_cal
+from fsdecouple.data.ati_model import import_cal
 
 FIXTURES = Path(__file__).resolve().parent.parent / "fixtures" / "ati"
 CONFIG = """sensor: recalibrated
