@@ -14,6 +14,7 @@ keep empty forces and are counted.  CSV output uses the log's dialect (``sep``,
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import itertools
 import os
 import queue
@@ -131,6 +132,7 @@ def apply_file(
     workers: int | None = None,
     round_trip: bool = False,
     interval: float | None = None,
+    temperature: float | None = None,
 ) -> ApplySummary:
     """Decouple the voltage log ``voltages`` into ``out`` by eq. (11).
 
@@ -158,6 +160,9 @@ def apply_file(
         (:func:`~fsdecouple.logs.sinks.force_decimals`, 8 decimals for the
         paper's sensor in N), a tenth of the fast path's 1e-9.  Parquet output
         always stores the doubles.
+    temperature : float, optional
+        A model with temperature terms (core/temperature.py) whose log has no column
+        for the temperature: this reading [its unit] for every row, instead of refusing.
     interval : float, optional
         Add ``<component>_lo`` and ``<component>_hi``: bounds holding the true force
         with probability ``interval`` (0 < P < 1), by conformal prediction on the
@@ -177,9 +182,12 @@ def apply_file(
     if interval is not None:
         half_widths(model, interval)  # refused before the log is read
     refuse_overwriting_input(out, [path])
+    if temperature is not None and model.temperature is None:
+        raise InputError("--temperature: the model has no temperature terms; nothing would "
+                         "use it")
     with LogFile(path, settings) as log:
         return _apply(model, log, out, settings, tare, zero, unit, force, chunk_rows, progress,
-                      workers, round_trip, interval)
+                      workers, round_trip, interval, temperature)
 
 
 def check_options(model: CouplingErrorModel, settings: Settings | None, tare, zero,
@@ -293,11 +301,26 @@ def _limit_bounds(settings: Settings, model: CouplingErrorModel) -> tuple[np.nda
 
 
 def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit, force,
-           chunk_rows, progress, workers, round_trip, interval=None) -> ApplySummary:
+           chunk_rows, progress, workers, round_trip, interval=None,
+           temperature=None) -> ApplySummary:
     path = log.path
     layout = model.layout
     names = [settings.columns[c] for c in layout.outputs]
-    require_columns(log.header, dict(zip(layout.outputs, names, strict=True)), path)
+    read = dict(zip(layout.outputs, names, strict=True))
+    if temperature is not None:  # the temperature output, given instead of read
+        t_out = layout.outputs[model.temperature.channel]
+        if read[t_out] in log.header:
+            raise InputError(f"{where(path, HEADER_ROW, read[t_out])}: --temperature: the log "
+                             "has this column, which it would replace; give one or the other")
+        del read[t_out]
+        names = list(read.values())
+    elif model.temperature is not None:
+        t_name = read[layout.outputs[model.temperature.channel]]
+        if t_name not in log.header:
+            raise InputError(f"{where(path, HEADER_ROW)}: no column '{t_name}', the temperature "
+                             "the model corrects for (core/temperature.py); give its reading for "
+                             "every row with --temperature VALUE")
+    require_columns(log.header, read, path)
     check_log_gauges(model, log.header, path)  # an imported factory matrix: NumGages columns
     # unnamed columns, repeated names and a side table are not passed through
     keep, dropped = passed_columns(log.header, names)
@@ -320,6 +343,8 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
     scale = np.array([settings.scale[c] for c in layout.outputs])
     jobs: Iterator[Callable[[], Block]] = log.blocks(names, chunk_rows=chunk_rows,
                                                      want_table=is_parquet(out), keep=keep)
+    if temperature is not None:
+        jobs = (_with_column(job, model.temperature.channel, float(temperature)) for job in jobs)
     summary = ApplySummary(force_unit=unit, output_unit=model.settings.output_unit,
                            outputs=layout.outputs, offsets=np.zeros(layout.m),
                            force_columns=forces, dropped=dropped)
@@ -383,6 +408,15 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
         if summary.rows == 0:
             raise InputError(f"{path}: header only, no data rows")
     return summary
+
+
+def _with_column(job: Callable[[], Block], at: int, value: float) -> Callable[[], Block]:
+    """``job`` whose block has a constant column ``value`` inserted at ``at`` (--temperature)."""
+    def with_column() -> Block:
+        block = job()
+        return dataclasses.replace(block, u=np.insert(block.u, at, value, axis=1))
+
+    return with_column
 
 
 def _prefetch(items: Iterator, depth: int) -> Iterator:

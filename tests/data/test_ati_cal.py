@@ -235,7 +235,8 @@ def test_a_log_without_the_thermistor_column(tmp_path):
     log = tmp_path / "log.csv"
     log.write_text("g0,g1,g2,g3,g4,g5\n0.1,0.2,0.3,0.4,0.5,0.6\n")
     r = invoke(["apply", out, log, "-o", tmp_path / "f.csv"], code=2)
-    assert "thermistor" in r.stderr and not (tmp_path / "f.csv").exists()
+    assert "thermistor" in r.stderr and "--temperature VALUE" in r.stderr
+    assert not (tmp_path / "f.csv").exists()
 
 
 def test_report_and_certificate_refuse_a_factory_matrix_in_one_line(tmp_path):
@@ -253,3 +254,29 @@ def test_validate_refuses_a_temperature_model(tmp_path):
     invoke(["import", FIXTURES / "FT_tc.cal", "-o", out])
     r = invoke(["validate", out, FIXTURES], code=2)
     assert "corrects its outputs for temperature" in r.stderr
+
+
+def test_temperature_option_for_a_log_without_the_thermistor(tmp_path):
+    """--temperature V: the log's rows decoupled as ATIDAQ does with the thermistor at V;
+    refused where the log has the column or the model has no temperature terms."""
+    ref = Atidaq(FIXTURES / "FT_tc.cal")
+    out = tmp_path / "model.json"
+    invoke(["import", FIXTURES / "FT_tc.cal", "-o", out])
+    g = gauge_log(tmp_path / "full.csv", ref, 60, seed=9)
+    lines = (tmp_path / "full.csv").read_text().splitlines()
+    (tmp_path / "log.csv").write_text("\n".join(",".join(x.split(",")[:-1]) for x in lines) + "\n")
+    t = ref.therm + 0.2
+    invoke(["apply", out, tmp_path / "log.csv", "-o", tmp_path / "f.csv", "--tare", "20",
+            "--temperature", repr(t)])
+    g[:, -1] = t
+    ref.bias(list(g[:20].mean(axis=0)))
+    expected = np.array([ref.convert(list(row)) for row in g])
+    assert np.all(np.abs(read_forces(tmp_path / "f.csv", 6) - expected) <= 1e-9 * np.asarray(ref.max))
+    r = invoke(["apply", out, tmp_path / "full.csv", "-o", tmp_path / "x.csv", "--temperature",
+                "1.0"], code=2)
+    assert "would replace" in r.stderr and not (tmp_path / "x.csv").exists()
+    plain = tmp_path / "plain.json"
+    invoke(["import", FIXTURES / "FT_gamma_like.cal", "-o", plain])
+    r = invoke(["apply", plain, tmp_path / "log.csv", "-o", tmp_path / "x.csv", "--temperature",
+                "1.0"], code=2)
+    assert "no temperature terms" in r.stderr
