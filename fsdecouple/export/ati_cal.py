@@ -191,7 +191,8 @@ def export_cal(model, path: str | Path, *, source: str = "model", linear_part: b
                force: bool = False) -> dict[str, Any]:
     """Write ``model`` as an ATI calibration file at ``path``, atomically.
 
-    Returns ``{"path", "num_gages", "temperature", "lost_pct", "notes"}``; ``lost_pct``
+    Returns ``{"path", "num_gages", "temperature", "lost_pct", "notes", "lines"}`` (``lines``:
+    what ``export`` prints); ``lost_pct``
     (per component, % F.S.) only for ``linear_part`` of a nonlinear model.
     """
     plan = plan_cal(model, source, linear_part=linear_part)
