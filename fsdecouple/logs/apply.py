@@ -14,7 +14,6 @@ keep empty forces and are counted.  CSV output uses the log's dialect (``sep``,
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import itertools
 import os
 import queue
@@ -33,13 +32,13 @@ from ..axes import FORCE_COLUMNS, VOLTAGE_COLUMNS
 from ..config import Settings
 from ..core.intervals import half_widths, interval_names, with_intervals
 from ..core.model import FORCE_LIMIT, CouplingErrorModel
-from ..data.ati_model import check_log_gauges
 from ..data.csv_text import HEADER_ROW, require_columns
 from ..data.zero import tare_offsets
 from ..errors import InputError, where
 from ..files import atomic_write, refuse_overwriting_input
 from ..units import LOAD_UNITS, load_factor
 from .columns import Dropped, kept_fields, passed_columns
+from .outputs import log_outputs
 from .reader import Block, LogFile, is_parquet
 from .sinks import CsvSink, ParquetSink, force_decimals
 
@@ -161,8 +160,8 @@ def apply_file(
         paper's sensor in N), a tenth of the fast path's 1e-9.  Parquet output
         always stores the doubles.
     temperature : float, optional
-        A model with temperature terms (core/temperature.py) whose log has no column
-        for the temperature: this reading [its unit] for every row, instead of refusing.
+        The temperature reading of every row, for a log without the model's temperature
+        column (:mod:`fsdecouple.logs.outputs`).
     interval : float, optional
         Add ``<component>_lo`` and ``<component>_hi``: bounds holding the true force
         with probability ``interval`` (0 < P < 1), by conformal prediction on the
@@ -182,9 +181,6 @@ def apply_file(
     if interval is not None:
         half_widths(model, interval)  # refused before the log is read
     refuse_overwriting_input(out, [path])
-    if temperature is not None and model.temperature is None:
-        raise InputError("--temperature: the model has no temperature terms; nothing would "
-                         "use it")
     with LogFile(path, settings) as log:
         return _apply(model, log, out, settings, tare, zero, unit, force, chunk_rows, progress,
                       workers, round_trip, interval, temperature)
@@ -305,23 +301,9 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
            temperature=None) -> ApplySummary:
     path = log.path
     layout = model.layout
-    names = [settings.columns[c] for c in layout.outputs]
-    read = dict(zip(layout.outputs, names, strict=True))
-    if temperature is not None:  # the temperature output, given instead of read
-        t_out = layout.outputs[model.temperature.channel]
-        if read[t_out] in log.header:
-            raise InputError(f"{where(path, HEADER_ROW, read[t_out])}: --temperature: the log "
-                             "has this column, which it would replace; give one or the other")
-        del read[t_out]
-        names = list(read.values())
-    elif model.temperature is not None:
-        t_name = read[layout.outputs[model.temperature.channel]]
-        if t_name not in log.header:
-            raise InputError(f"{where(path, HEADER_ROW)}: no column '{t_name}', the temperature "
-                             "the model corrects for (core/temperature.py); give its reading for "
-                             "every row with --temperature VALUE")
+    read, with_temperature = log_outputs(model, settings, log.header, path, temperature)
+    names = list(read.values())
     require_columns(log.header, read, path)
-    check_log_gauges(model, log.header, path)  # an imported factory matrix: NumGages columns
     # unnamed columns, repeated names and a side table are not passed through
     keep, dropped = passed_columns(log.header, names)
     header = [log.header[i] for i in keep]
@@ -343,8 +325,7 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
     scale = np.array([settings.scale[c] for c in layout.outputs])
     jobs: Iterator[Callable[[], Block]] = log.blocks(names, chunk_rows=chunk_rows,
                                                      want_table=is_parquet(out), keep=keep)
-    if temperature is not None:
-        jobs = (_with_column(job, model.temperature.channel, float(temperature)) for job in jobs)
+    jobs = with_temperature(jobs)
     summary = ApplySummary(force_unit=unit, output_unit=model.settings.output_unit,
                            outputs=layout.outputs, offsets=np.zeros(layout.m),
                            force_columns=forces, dropped=dropped)
@@ -408,15 +389,6 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
         if summary.rows == 0:
             raise InputError(f"{path}: header only, no data rows")
     return summary
-
-
-def _with_column(job: Callable[[], Block], at: int, value: float) -> Callable[[], Block]:
-    """``job`` whose block has a constant column ``value`` inserted at ``at`` (--temperature)."""
-    def with_column() -> Block:
-        block = job()
-        return dataclasses.replace(block, u=np.insert(block.u, at, value, axis=1))
-
-    return with_column
 
 
 def _prefetch(items: Iterator, depth: int) -> Iterator:
