@@ -145,18 +145,15 @@ def _parse(data: bytes, name: str):
     except SyntaxError as err:  # xml.etree.ElementTree.ParseError
         line, col = getattr(err, "position", (None, None))
         inside = f"inside element <{excerpt(stack[-1])}>" if stack else "before any element"
-        cut = "truncated" if stack and line is not None and _at_end(data, line, col) else "malformed"
+        # expat's words for a document that stops early (not a wrong tag or character)
+        cut = "truncated" if str(err).startswith(("no element found", "unclosed token",
+                                                  "unclosed CDATA")) else "malformed"
         raise InputError(f"{name}: not well-formed XML ({cut} {inside}, line {line}, column "
                          f"{(col or 0) + 1}: {excerpt(str(err).split(':')[0])}); expected an ATI "
                          "calibration file") from None
     if root is None:
         raise InputError(f"{name}: no XML element; expected an ATI calibration file")
     return root
-
-
-def _at_end(data: bytes, line: int, col: int) -> bool:
-    lines = data.rstrip().split(b"\n")
-    return line >= len(lines)
 
 
 def _attr(elem, key: str, name: str, where: str, *, required: bool = True, default=None):
@@ -244,9 +241,10 @@ def read_cal(path: str | Path, index: int = 1) -> AtiCalibration:
     users = tuple(_axis(e, n, name, "UserAxis", i, True)
                   for i, e in enumerate(cal.findall(".//UserAxis")))
     names = [a.name.lower() for a in axes]
-    twice = next((a for a in names if names.count(a) > 1), None)
+    twice = next((a.name for a in axes if names.count(a.name.lower()) > 1), None)
     if twice:
-        raise InputError(f"{name}, element <Axis Name=\"{excerpt(twice)}\">: named twice")
+        raise InputError(f"{name}, element <Axis Name=\"{excerpt(twice)}\">: two Axis rows have "
+                         "this name (case aside)")
     tt, bias, gain, therm = (0.0,) * 6, None, None, 0.0
     for child in cal:  # ATIDAQ reads these among the Calibration's own children
         if child.tag == "BasicTransform":

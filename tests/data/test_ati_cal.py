@@ -164,7 +164,7 @@ def refused(tmp_path, text: str | bytes, match: str, name: str = "bad.cal") -> s
 
 def test_truncated_file_is_refused(tmp_path):
     text = (FIXTURES / "FT_gamma_like.cal").read_text()
-    refused(tmp_path, text[:text.index('<Axis Name="Tx"') + 20], "inside element <Calibration>")
+    refused(tmp_path, text[:text.index('<Axis Name="Tx"') + 20], "truncated inside element <Calibration>")
 
 
 def test_a_row_with_the_wrong_number_of_values(tmp_path):
