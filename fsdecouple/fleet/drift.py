@@ -82,7 +82,8 @@ def compare(old: CouplingErrorModel | str | Path, new: CouplingErrorModel | str 
         models.append(m)
     old, new = models
     for m in models:
-        m.layout.one_output_each("compare")
+        if not m.imported:  # a factory matrix's extra output is its thermistor
+            m.layout.one_output_each("compare")
     _check_comparable(old, new, docs[0]["model"] or "old model", docs[1]["model"] or "new model")
 
     axes = old.layout.labels
@@ -124,6 +125,7 @@ def compare(old: CouplingErrorModel | str | Path, new: CouplingErrorModel | str 
                      for s in en["steps"] if abs(s["en"]) > 1.0][:5]
     gated = max_drift is not None or (en is not None and en_gate)
     return {
+        "temperature": temperature_drift(old, new),
         "format": FORMAT,
         "old": docs[0],
         "new": docs[1],
@@ -137,6 +139,24 @@ def compare(old: CouplingErrorModel | str | Path, new: CouplingErrorModel | str 
         "passed": None if not gated else not exceeded,
         "exceeded": exceeded,
     }
+
+
+def temperature_drift(old: CouplingErrorModel, new: CouplingErrorModel) -> dict[str, Any] | None:
+    """Per output, the change of the offset drift b_i and gain drift g_i (new - old) and of
+    T0 (core/temperature.py); None when neither model has temperature terms."""
+    t_old, t_new = old.temperature, new.temperature
+    if t_old is None and t_new is None:
+        return None
+    if t_old is None or t_new is None:
+        which = "old" if t_old is None else "new"
+        return {"note": f"the {which} model has no temperature terms: nothing to compare"}
+    if t_old.channel != t_new.channel or t_old.unit != t_new.unit:
+        return {"note": "the two models' temperatures are different channels or units"}
+    outputs = [o for i, o in enumerate(old.layout.outputs) if i != t_old.channel]
+    keep = [i for i in range(old.n_outputs) if i != t_old.channel]
+    return {"unit": t_old.unit, "t0_change": float(t_new.t0 - t_old.t0),
+            "b_change": dict(zip(outputs, map(float, t_new.b[keep] - t_old.b[keep]), strict=True)),
+            "g_change": dict(zip(outputs, map(float, t_new.g[keep] - t_old.g[keep]), strict=True))}
 
 
 def largest(doc: dict[str, Any]) -> float:

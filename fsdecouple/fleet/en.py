@@ -45,6 +45,8 @@ def en_figures(a: CouplingErrorModel, b: CouplingErrorModel, names=("old", "new"
         sa, sb = (zero, sb) if sa is None else (sa, zero)
         note = (f"the {missing[0]} model is a factory matrix with no stated uncertainty: E_n "
                 f"at the other's steps with U_{missing[0]} = 0 (|E_n| is at most this)")
+    elif all(factory):
+        return None, "both models are factory matrices with no stated uncertainty: no E_n"
     elif missing:
         return None, (f"the {' and '.join(missing)} model file has no certificate data (fitted "
                       "by an older fsdecouple, or with --no-verdict): no E_n; refit it, or gate "

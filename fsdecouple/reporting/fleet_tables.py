@@ -35,6 +35,12 @@ def drift_table(doc: dict[str, Any]) -> Table:
             return Text("-")
         return Text(text, style=FAILED if gate is not None and abs(v) > gate else "")
 
+    temp = doc.get("temperature")
+    if temp:  # temperature terms (core/temperature.py): their change, new - old
+        t.caption = temp.get("note") or (
+            f"temperature terms, new - old: T0 {temp['t0_change']:+.4g} {temp['unit']}; " + "; ".join(
+                f"{o} b {temp['b_change'][o]:+.3g} {doc['units']['output']}/{temp['unit']}, "
+                f"g {temp['g_change'][o]:+.3g} 1/{temp['unit']}" for o in temp["b_change"]))
     for a, c in doc["components"].items():
         chi = Text(", ").join(cell(v, f"{name} {v:.3f} %") for name, v in c["chi_max_pct"].items())
         t.add_row(a, cell(c["slope_change_pct"], _signed(c["slope_change_pct"])), chi,

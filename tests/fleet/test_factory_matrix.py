@@ -86,3 +86,34 @@ def test_compare_factory_against_recalibration(lab, tmp_path):
     assert doc["en"] is not None and "factory matrix" in doc["en_note"]
     r = invoke(["compare", d / "factory.json", tmp_path / "recal.json"], code=1)  # |E_n| > 1
     assert "factory matrix with no stated uncertainty" in r.stdout + r.stderr
+
+
+def test_compare_reports_the_drift_of_the_temperature_terms(tmp_path):
+    """Two temperature-compensated files: b and g change by minus the change of ATI's
+    BiasSlope and GainSlope (b = -BS, g = -GS), T0 by that of Thermistor."""
+    import xml.etree.ElementTree as ET
+
+    text = (FIXTURES / "FT_tc.cal").read_text()
+    root = ET.fromstring(text.encode())
+    bs = [float(v) for v in root.find(".//BiasSlope").get("values").split()]
+    gs = [float(v) for v in root.find(".//GainSlope").get("values").split()]
+    therm = float(root.find(".//Thermistor").get("value"))
+    bs2, gs2 = [v * 1.1 for v in bs], [v - 1e-4 for v in gs]
+    new = text.replace(root.find(".//BiasSlope").get("values"), " ".join(map(repr, bs2)))
+    new = new.replace(root.find(".//GainSlope").get("values"), " ".join(map(repr, gs2)))
+    new = new.replace(f'<Thermistor value="{therm!r}"', '<Thermistor value="1.5"')
+    (tmp_path / "new.cal").write_text(new)
+    invoke(["import", FIXTURES / "FT_tc.cal", "-o", tmp_path / "a.json"])
+    invoke(["import", tmp_path / "new.cal", "-o", tmp_path / "b.json"])
+    r = invoke(["compare", tmp_path / "a.json", tmp_path / "b.json", "--json"])
+    doc = json.loads(r.stdout)
+    t = doc["temperature"]
+    assert t["t0_change"] == pytest.approx(1.5 - therm)
+    for i in range(6):
+        assert t["b_change"][f"g{i}"] == pytest.approx(-(bs2[i] - bs[i]), rel=1e-9, abs=1e-15)
+        assert t["g_change"][f"g{i}"] == pytest.approx(-(gs2[i] - gs[i]), rel=1e-9, abs=1e-15)
+    # the matrices are the same: no force drift; no E_n without any stated uncertainty
+    assert all(c["force_max_pct"] < 1e-9 for c in doc["components"].values())
+    assert doc["en"] is None and "factory matrices" in doc["en_note"]
+    shown = invoke(["compare", tmp_path / "a.json", tmp_path / "b.json"]).stdout
+    assert "temperature terms, new - old" in shown
