@@ -51,7 +51,7 @@ def apply(
     ] = None,
     unit: Annotated[
         str | None,
-        typer.Option(help="Write forces in this load unit (N, kN, gf, kgf, lbf); "
+        typer.Option(help="Write forces in this load unit (N, kN, gf, kgf, lbf, klbf); "
                           "default: the calibration's."),
     ] = None,
     refine: Annotated[

@@ -34,8 +34,9 @@ from ..wrench import ati_rotation, wrench_transform
 CAL_LIMIT = 1 << 20  # bytes: a .cal file is a few kB
 MAX_GAUGES = 8  # ATIDAQ's MAX_GAUGES
 THERMISTOR = "thermistor"
-# ATI's unit names (ftconfig.c) -> fsdecouple's (units.py); klb has no fsdecouple unit
-FORCE_UNITS = {"N": "N", "kN": "kN", "lb": "lbf", "lbf": "lbf", "kg": "kgf", "g": "gf"}
+# ATI's unit names (ftconfig.c) -> fsdecouple's (units.py)
+FORCE_UNITS = {"N": "N", "kN": "kN", "lb": "lbf", "lbf": "lbf", "klb": "klbf", "klbf": "klbf",
+               "kg": "kgf", "g": "gf"}
 TORQUE_UNITS = {"N-m": "N·m", "Nm": "N·m", "N-mm": "N·mm", "Nmm": "N·mm",
                 "lbf-in": "lbf·in", "lb-in": "lbf·in", "in-lb": "lbf·in", "in-lbf": "lbf·in",
                 "lbf-ft": "lbf·ft", "lb-ft": "lbf·ft", "ft-lb": "lbf·ft", "ft-lbf": "lbf·ft",

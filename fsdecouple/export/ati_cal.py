@@ -30,7 +30,7 @@ from ..units import unit_key
 
 AXIS_NAMES = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz")
 MAX_GAUGES = 8  # ATIDAQ's MAX_GAUGES
-ATI_FORCE = {"N": "N", "kN": "kN", "lbf": "lbf", "kgf": "kg", "gf": "g"}
+ATI_FORCE = {"N": "N", "kN": "kN", "lbf": "lbf", "klbf": "klbf", "kgf": "kg", "gf": "g"}
 ATI_TORQUE = {"nm": "N-m", "nmm": "N-mm", "lbfin": "lbf-in", "lbfft": "lbf-ft", "kgfcm": "kg-cm",
               "knm": "kN-m"}
 DIST_OF_TORQUE = {"N-m": "m", "N-mm": "mm", "lbf-in": "in", "lbf-ft": "ft", "kg-cm": "cm",

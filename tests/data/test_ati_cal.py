@@ -280,3 +280,14 @@ def test_temperature_option_for_a_log_without_the_thermistor(tmp_path):
     r = invoke(["apply", plain, tmp_path / "log.csv", "-o", tmp_path / "x.csv", "--temperature",
                 "1.0"], code=2)
     assert "no temperature terms" in r.stderr
+
+
+def test_ati_unit_names(tmp_path):
+    """ATI's names become fsdecouple's units (lb -> lbf, klb -> klbf, kg -> kgf, N-mm -> N·mm)."""
+    text = (FIXTURES / "FT_gamma_like.cal").read_text()
+    for ati, force in (("lb", "lbf"), ("klb", "klbf"), ("kg", "kgf"), ("g", "gf"), ("kN", "kN")):
+        path = tmp_path / f"{ati}.cal"
+        path.write_text(text.replace('ForceUnits="N"', f'ForceUnits="{ati}"')
+                        .replace('TorqueUnits="N-m"', 'TorqueUnits="N-mm"'))
+        units = import_cal(path).settings.units
+        assert units.load_of(0) == force and units.load_of(5) == "N·mm"
