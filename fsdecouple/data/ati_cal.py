@@ -20,6 +20,7 @@ DTD (the carrier of entity-expansion bombs) is refused before anything is expand
 
 from __future__ import annotations
 
+import hashlib
 import io
 import math
 import re
@@ -89,6 +90,7 @@ class AtiCalibration:
     calibration: dict[str, str] = field(default_factory=dict)  # Calibration's attributes
     index: int = 1
     count: int = 1  # Calibration elements in the file
+    sha256: str = ""  # of the bytes read
 
     @property
     def temperature_compensated(self) -> bool:
@@ -263,4 +265,5 @@ def read_cal(path: str | Path, index: int = 1) -> AtiCalibration:
         source=name, num_gages=n, axes=axes, force_units=units["ForceUnits"],
         torque_units=units["TorqueUnits"], dist_units=units["DistUnits"], angle_units=angle,
         basic_transform=tt, user_axes=users, bias_slope=bias, gain_slope=gain, thermistor=therm,
-        sensor=dict(root.attrib), calibration=dict(cal.attrib), index=index, count=len(cals))
+        sensor=dict(root.attrib), calibration=dict(cal.attrib), index=index, count=len(cals),
+        sha256=hashlib.sha256(data).hexdigest())

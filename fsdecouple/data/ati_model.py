@@ -15,7 +15,6 @@
 
 from __future__ import annotations
 
-import hashlib
 import re
 from pathlib import Path
 from typing import Any
@@ -109,9 +108,8 @@ def import_cal(path: str | Path, index: int = 1, frame: Any = None, frame_source
         warnings.append(f"{name}: the UserAxis rows differ from the Axis rows and BasicTransform "
                         f"by up to {100 * agreement:.3g} % of max; decoupled from the Axis rows, as "
                         "ATIDAQ does")
-    data = Path(path).read_bytes()
     provenance: dict[str, Any] = {
-        "imported_from": {"file": str(path), "sha256": hashlib.sha256(data).hexdigest(),
+        "imported_from": {"file": str(path), "sha256": cal.sha256,
                           "format": "ATI calibration (.cal)", "calibration_index": cal.index},
         "ati": {"sensor": cal.sensor, "calibration": cal.calibration,
                 "basic_transform": dict(zip(TRANSFORM_KEYS, cal.basic_transform, strict=True)),
