@@ -33,6 +33,8 @@ _PUBLIC = {
     "load_cv_results": "evaluation.cv_results",
     "build_report": "reporting.report",
     "validate": "evaluation.validate",
+    "import_cal": "data.ati_model",
+    "export_cal": "export.ati_cal",
     "fit": "evaluation.calibrate",
 }
 __all__ = sorted(_PUBLIC)  # noqa: F822

@@ -12,8 +12,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 # One unit of each load unit in newtons (gf and kgf: standard gravity, 9.80665 m/s^2;
-# lbf: the avoirdupois pound-force).
-LOAD_UNITS = {"N": 1.0, "kN": 1000.0, "gf": 9.80665e-3, "kgf": 9.80665, "lbf": 4.4482216152605}
+# lbf: the avoirdupois pound-force, klbf a thousand of them).
+LOAD_UNITS = {"N": 1.0, "kN": 1000.0, "gf": 9.80665e-3, "kgf": 9.80665, "lbf": 4.4482216152605,
+              "klbf": 4448.2216152605}  # klbf: ATI's klb, large sensors' calibration files
 OUTPUT_UNITS = ("V", "mV", "uV", "count", "mV/V")
 # Moments, for the components of a six-axis sensor (one N·m in N·m; display only:
 # ``apply --unit`` converts forces of one unit, never a wrench of mixed units).

@@ -17,6 +17,16 @@ through P.  Both are linear, so the transform is the 6 x 6 matrix
 
 applied to ``(fx, fy, fz, mx, my, mz)`` by the same code path as the 3 x 3 rotation
 (:mod:`fsdecouple.core.decouple`).  The components must be forces then moments, x, y, z.
+
+ATI's convention (ATIDAQ's tool transform, ftconfig.c) is the same transform written
+with the displacement d of the tool point from the sensor origin, in the sensor
+frame: ``frame: {rotation: R, displacement: d}`` applies
+
+    F' = R F,    T' = R (T - d x F),
+
+which is the form above with r = -R d (``T = [[R, 0], [-R [d]x, R]]``).  ATI's angles
+(Rx, Ry, Rz in degrees) give R by :func:`ati_rotation`, and ``frame: {angles: [Rx, Ry,
+Rz]}`` takes them as ATIDAQ does.
 """
 
 from __future__ import annotations
@@ -66,21 +76,54 @@ def parse_rotation(raw: Any, where: str) -> tuple[tuple[float, float, float], ..
     return rows
 
 
+def ati_rotation(angles) -> np.ndarray:
+    """R of ATI's tool transform from (Rx, Ry, Rz) [degrees], as ATIDAQ's TTM builds it.
+
+    Rows (cy cz, sx sy cz + cx sz, sx sz - cx sy cz), (-cy sz, cx cz - sx sy sz,
+    sx cz + cx sy sz), (sy, -sx cy, cx cy), with s., c. the sines and cosines.
+    """
+    (sx, sy, sz), (cx, cy, cz) = (np.sin(np.radians(np.asarray(angles, dtype=float))),
+                                  np.cos(np.radians(np.asarray(angles, dtype=float))))
+    return np.array([[cy * cz, sx * sy * cz + cx * sz, sx * sz - cx * sy * cz],
+                     [-cy * sz, cx * cz - sx * sy * sz, sx * cz + cx * sy * sz],
+                     [sy, -sx * cy, cx * cy]])
+
+
+def wrench_transform(r, d) -> np.ndarray:
+    """ATI's 6 x 6 ``[[R, 0], [-R [d]x, R]]``: F' = R F, T' = R (T - d x F) on (F, T)."""
+    r = np.asarray(r, dtype=float)
+    dx, dy, dz = (float(v) for v in d)
+    cross = np.array([[0.0, -dz, dy], [dz, 0.0, -dx], [-dy, dx, 0.0]])  # [d]x F = d x F
+    t = np.zeros((6, 6))
+    t[:3, :3] = r
+    t[3:, 3:] = r
+    t[3:, :3] = -r @ cross
+    return t
+
+
 @dataclass(frozen=True)
 class Frame:
     """The reference frame of a six-axis sensor: ``rotation`` R (sensor to reference)
-    and ``origin`` r, the sensor's measuring point in the reference frame."""
+    and ``origin`` r, the sensor's measuring point in the reference frame; or, ATI's way,
+    ``displacement`` d, the tool point from the sensor origin in the sensor frame."""
 
     rotation: tuple[tuple[float, float, float], ...] = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0),
                                                         (0.0, 0.0, 1.0))
     origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    displacement: tuple[float, float, float] | None = None  # ATI's d: T' = R (T - d x F)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"rotation": [list(r) for r in self.rotation], "origin": list(self.origin)}
+        d = {"rotation": [list(r) for r in self.rotation], "origin": list(self.origin)}
+        if self.displacement is not None:  # files from before it keep their bytes
+            del d["origin"]
+            d["displacement"] = list(self.displacement)
+        return d
 
     def matrix(self) -> np.ndarray:
         """T, 6 x 6: ``(F', M') = T (F, M)``."""
         r = np.asarray(self.rotation, dtype=float)
+        if self.displacement is not None:
+            return wrench_transform(r, self.displacement)
         x, y, z = self.origin
         cross = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])  # [r]_x v = r x v
         t = np.zeros((6, 6))
@@ -97,17 +140,29 @@ def parse_frame(raw: Any, where: str, n_components: int) -> Frame:
                           f"(forces then moments); this one has {n_components}: use rotation:")
     if not isinstance(raw, dict):
         raise ConfigError(f"{where}: expected a mapping with rotation and origin, found {raw!r}")
-    unknown = [k for k in raw if k not in ("rotation", "origin")]
+    keys = ("angles", "displacement", "origin", "rotation")
+    unknown = [k for k in raw if k not in keys]
     if unknown:
-        raise ConfigError(f"{where}: unknown key {unknown[0]!r}; allowed: origin, rotation")
+        raise ConfigError(f"{where}: unknown key {unknown[0]!r}; allowed: {', '.join(keys)}")
+    for a, b in (("origin", "displacement"), ("rotation", "angles")):
+        if a in raw and b in raw:
+            raise ConfigError(f"{where}: give {a} or {b}, not both ({b} is ATI's form of the same "
+                              "transform, docs/six-axis.md)")
     kw: dict[str, Any] = {}
     if raw.get("rotation") is not None:
         kw["rotation"] = parse_rotation(raw["rotation"], f"{where}: rotation")
-    if "origin" in raw:
-        origin = raw["origin"]
-        if not (isinstance(origin, list) and len(origin) == 3):
-            n = len(origin) if isinstance(origin, list) else None
-            raise ConfigError(f"{where}: origin: expected [x, y, z], three numbers, found "
-                              + (f"{n} values" if n is not None else repr(origin)))
-        kw["origin"] = tuple(_number(v, f"{where}: origin[{i}]") for i, v in enumerate(origin))
+    if "angles" in raw:
+        angles = _triple(raw["angles"], f"{where}: angles", "[Rx, Ry, Rz] in degrees")
+        kw["rotation"] = tuple(tuple(float(v) for v in row) for row in ati_rotation(angles))
+    for key in ("origin", "displacement"):
+        if key in raw:
+            kw[key] = _triple(raw[key], f"{where}: {key}", "[x, y, z]")
     return Frame(**kw)
+
+
+def _triple(value: Any, where: str, what: str) -> tuple[float, float, float]:
+    if not (isinstance(value, list) and len(value) == 3):
+        n = len(value) if isinstance(value, list) else None
+        raise ConfigError(f"{where}: expected {what}, three numbers, found "
+                          + (f"{n} values" if n is not None else repr(value)))
+    return tuple(_number(v, f"{where}[{i}]") for i, v in enumerate(value))

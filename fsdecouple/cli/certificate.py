@@ -31,25 +31,34 @@ def certificate(
     calib: Annotated[Path, typer.Argument(help="The calibration directory or CSV it was fitted on.")],
     config: ConfigOpt = None,
     output: Annotated[
-        Path | None, output_file("HTML certificate to write (prints on A4).")
+        Path | None, output_file("Certificate to write: .html (prints on A4) or .pdf (A4).")
+    ] = None,
+    drift: Annotated[
+        Path | None, typer.Option("--drift", help="compare --json output of this sensor's last "
+                                  "two calibrations: the budget's drift term.")
     ] = None,
     force: ForceOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
-    """ISO 376 figures (b, b', f_c, f_0, v), class and uncertainty budget (U, k = 2) per step."""
+    """ISO 376 figures (b, b', f_c, f_0, v, c), class and uncertainty budget (U, k = 2) per step."""
     from ..data.calibration import load_calibration
     from ..evaluation.certificate import certificate as build
-    from ..reporting.certificate import certificate_tables, write_certificate
+    from ..evaluation.certificate import read_drift
+    from ..reporting.certificate import certificate_tables
+    from ..reporting.certificate_file import check_certificate_path, write_certificate
 
     with user_errors():
         model = load_model(model_file)
         settings = load_config(config) if config is not None else None
         if output is not None:
+            check_certificate_path(output)
             check_output(output, force=force)
+        changes = read_drift(drift) if drift is not None else None
         cs = load_calibration(calib, settings or model.settings)
-        doc = build(model, cs, source=str(model_file), settings=settings)
+        doc = build(model, cs, source=str(model_file), settings=settings, drift=changes)
         if output is not None:
-            refuse_overwriting_input(output, [model_file, *_read(cs), *_given(config)])
+            refuse_overwriting_input(output, [model_file, *_read(cs), *_given(config),
+                                              *_given(drift)])
             write_certificate(doc, output, force=force)
     if json_out:
         print_json(doc)

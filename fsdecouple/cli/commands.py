@@ -7,3 +7,4 @@ from . import evaluate  # noqa: F401  cv, validate, report
 from . import certificate  # noqa: F401  certificate
 from . import run  # noqa: F401  apply
 from . import fleet  # noqa: F401  compare, fit-many
+from . import ati  # noqa: F401  import (ATI .cal)

@@ -12,7 +12,7 @@ from rich.text import Text
 from ..config import load_config
 from ..core.metrics import check_max_gamma
 from ..core.modelfile import load_model, save_model
-from ..errors import printable
+from ..errors import ConfigError, printable
 from ..files import check_output, refuse_overwriting_input
 from ..reporting.tables import fit_checks_table, fit_tables
 from .app import (
@@ -175,7 +175,8 @@ def show(model_file: Annotated[Path, typer.Argument(help="Model file (JSON).")])
 @app.command()
 def export(
     model_file: Annotated[Path, typer.Argument(help="Model file (JSON).")],
-    output: Annotated[Path, output_file("C header to write, e.g. decoupler.h.")],
+    output: Annotated[Path, output_file("File to write: a C header (decoupler.h), or an ATI "
+                                        "calibration file (sensor.cal), chosen by the suffix.")],
     precision: Annotated[
         str, typer.Option(help="double: fsd_decouple; float: fsd_decouple_f with float tables.")
     ] = "double",
@@ -184,13 +185,24 @@ def export(
         float | None,
         typer.Option(help="Coarsest tables keeping this force error (fraction of full-scale load)."),
     ] = None,
+    linear_part: Annotated[bool, typer.Option(
+        "--linear-part", help=".cal of a nonlinear model: write its omega matrix and print what "
+                              "it loses in % F.S.")] = False,
     force: ForceOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
-    """Export the model as one dependency-free C99 header (eq. 11, or a linear model's matrix)."""
+    """Export the model as one dependency-free C99 header (eq. 11, or a linear model's matrix),
+    or, for an output ending in .cal, as an ATI calibration file (ATIDAQ loads it)."""
+    if output.suffix.lower() == ".cal":
+        _export_cal(model_file, output, linear_part, force, json_out,
+                    precision != "double" or prefix != "fsd_" or max_error is not None)
+        return
     from ..export.header import export_header
 
     with user_errors():
+        if linear_part:
+            raise ConfigError("--linear-part: for a .cal output only; the C header exports the "
+                              "model whole")
         model = load_model(model_file)
         check_output(output, force=force)
         refuse_overwriting_input(output, [model_file])
@@ -204,3 +216,23 @@ def export(
     if model.report is not None and model.report.certificate:
         console.print("note: the header decouples forces only; apply --interval's bounds are not "
                       "in it (docs/certificate.md)", highlight=False, soft_wrap=True)
+
+
+def _export_cal(model_file: Path, output: Path, linear_part: bool, force: bool, json_out: bool,
+                header_options: bool) -> None:
+    from ..export.ati_cal import export_cal
+
+    with user_errors():
+        if header_options:
+            raise ConfigError("--precision, --prefix and --max-error: for a C header; a .cal holds "
+                              "the matrix in full")
+        model = load_model(model_file)
+        check_output(output, force=force)
+        refuse_overwriting_input(output, [model_file])
+        result = export_cal(model, output, source=printable(model_file), linear_part=linear_part,
+                            force=force)
+    if json_out:
+        print_json({k: v for k, v in result.items() if k != "lines"})
+        return
+    for line in result["lines"]:
+        console.print(line, highlight=False, soft_wrap=True)

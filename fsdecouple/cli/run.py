@@ -51,7 +51,7 @@ def apply(
     ] = None,
     unit: Annotated[
         str | None,
-        typer.Option(help="Write forces in this load unit (N, kN, gf, kgf, lbf); "
+        typer.Option(help="Write forces in this load unit (N, kN, gf, kgf, lbf, klbf); "
                           "default: the calibration's."),
     ] = None,
     refine: Annotated[
@@ -74,6 +74,10 @@ def apply(
         float | None, typer.Option(help="Add <component>_lo and _hi columns holding the true force "
                                         "with this probability (0 < P < 1), e.g. 0.95.")
     ] = None,
+    temperature: Annotated[
+        float | None, typer.Option(help="A model with temperature terms, a log without the "
+                                        "temperature column: this reading for every row.")
+    ] = None,
     force: ForceOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
@@ -83,6 +87,9 @@ def apply(
     from ..logs.reader import is_parquet
 
     if is_batch(voltages, output):
+        if temperature is not None:
+            with user_errors():
+                raise InputError("--temperature: for one log (not yet for many)")
         return _apply_many(model_file, voltages, Path(output), config, tare, zero, unit, refine,
                            round_trip, engine, scheduler, workers, force, json_out, interval)
     with user_errors():
@@ -103,7 +110,7 @@ def apply(
             summary = apply_file(
                 model, voltages, output, settings=settings, tare=tare, zero=offsets,
                 unit=unit, force=force, round_trip=round_trip, progress=progress,
-                interval=interval,
+                interval=interval, temperature=temperature,
             )
     if json_out:
         print_json({"output": str(output), **summary.to_dict()})

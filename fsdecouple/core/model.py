@@ -22,6 +22,7 @@ from .decouple import coupling_errors as _coupling_errors
 from .extrapolation import Edges, continue_slopes, continue_values, edges
 from .kernel import rbf_sum, rbf_sum_slope
 from .surrogate import ChiSurrogate
+from .temperature import TemperatureTerms
 
 
 @dataclass(frozen=True)
@@ -200,6 +201,9 @@ class CouplingErrorModel:
     projection : ndarray, shape (N, M), optional
         M > N outputs (fitting/gauges.py): P = K^+ of the linear forward model; eq. (11)
         then acts on v = P u, in load units with k = 1.  None: one output per component.
+    temperature : TemperatureTerms, optional
+        Per-output offset and gain drift about T0 (:mod:`fsdecouple.core.temperature`),
+        corrected before eq. (11) by :meth:`zero_corrected`; one output is the temperature.
     provenance : dict
         Input files and digests, library versions.
     created : str
@@ -216,6 +220,7 @@ class CouplingErrorModel:
     matrix: np.ndarray | None = None
     own: dict[str, Chi] = field(default_factory=dict)
     projection: np.ndarray | None = None
+    temperature: TemperatureTerms | None = None
     _tables: Any = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -267,8 +272,27 @@ class CouplingErrorModel:
         return None if r is None else np.asarray(r, dtype=float)
 
     @property
+    def imported(self) -> bool:
+        """A linear model without chi: a factory matrix read from a file (data/ati_cal.py)."""
+        return self.method == "linear" and not self.chi
+
+    def zero_corrected(self, raw: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+        """Outputs as eq. (11) takes them: ``raw - offsets``, temperature-corrected first
+        when the model has temperature terms (core/temperature.py)."""
+        if self.temperature is None:
+            return np.asarray(raw, dtype=float) - offsets
+        return self.temperature.zero_corrected(raw, offsets)
+
+    @property
     def calibrated_range(self) -> np.ndarray:
-        """Prime-output range of the calibration per component, shape (N, 2) [V]."""
+        """Prime-output range of the calibration per component, shape (N, 2) [V].
+
+        An imported factory matrix (no chi; v = P u are its forces, k = 1): the rated
+        loads, -max .. +max.
+        """
+        if self.imported:
+            fs = np.abs(self.k) * np.asarray(self.settings.full_scale, dtype=float)
+            return np.column_stack([-fs, fs])
         r = np.empty((self.n_components, 2))
         for b in range(self.n_components):
             ranges = [c.input_range for c in self.chi.values() if c.input_axis == b]

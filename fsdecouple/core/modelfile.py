@@ -21,6 +21,7 @@ from ..files import MODEL_LIMIT, atomic_write, read_bounded
 from .decouple import MAX_SURROGATE_ERROR, usable
 from .model import Chi, CouplingErrorModel, FitReport
 from .surrogate import spot_check
+from .temperature import TemperatureTerms
 
 FORMAT = "fsdecouple.model"
 FORMAT_VERSION = 3
@@ -39,7 +40,13 @@ OWN_FORMAT_VERSION = 4
 # Version 5 adds ``projection``: P = K^+ (N x M) of a sensor with M > N outputs
 # (fitting/gauges.py), whose settings name M outputs; only such models are version 5.
 GAUGES_FORMAT_VERSION = 5
-READS_UP_TO = max(FORMAT_VERSION, OWN_FORMAT_VERSION, GAUGES_FORMAT_VERSION)
+# Version 6 adds imported linear models (a factory matrix, data/ati_cal.py): ``method``
+# linear with no chi, k = 1 and ``projection`` = ``matrix`` (N x M, its forces bound the
+# range), and ``temperature`` (core/temperature.py: the temperature output, T0, b_i, g_i).
+# Only such models are version 6.
+IMPORTED_FORMAT_VERSION = 6
+READS_UP_TO = max(FORMAT_VERSION, OWN_FORMAT_VERSION, GAUGES_FORMAT_VERSION,
+                  IMPORTED_FORMAT_VERSION)
 METHODS = ("svr", "linear")
 
 
@@ -47,7 +54,8 @@ def model_to_dict(model: CouplingErrorModel) -> dict[str, Any]:
     """The model file's document, ``integrity`` digest included."""
     doc = {
         "format": FORMAT,
-        "format_version": GAUGES_FORMAT_VERSION if model.projection is not None
+        "format_version": IMPORTED_FORMAT_VERSION if model.imported or model.temperature
+        else GAUGES_FORMAT_VERSION if model.projection is not None
         else OWN_FORMAT_VERSION if model.own else FORMAT_VERSION,
         "fsdecouple_version": __version__,
         "created": model.created,
@@ -69,6 +77,8 @@ def model_to_dict(model: CouplingErrorModel) -> dict[str, Any]:
         doc["matrix"] = [[float(v) for v in row] for row in model.matrix]
     if model.projection is not None:
         doc["projection"] = [[float(v) for v in row] for row in model.projection]
+    if model.temperature is not None:
+        doc["temperature"] = model.temperature.to_dict(model.layout.outputs)
     doc["integrity"] = {"algorithm": "sha256", "digest": content_digest(doc)}
     return doc
 
@@ -131,7 +141,9 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
                                  f"{version} file)")
         k = np.array([float(doc["omega"][a]["k"]) for a in layout.labels])
         chi = {}
-        for name, pair in zip(layout.chi_names, layout.pairs, strict=True):
+        imported = version >= IMPORTED_FORMAT_VERSION and doc.get("method") == "linear" \
+            and doc.get("chi") == {}
+        for name, pair in [] if imported else zip(layout.chi_names, layout.pairs, strict=True):
             if name not in doc["chi"]:
                 raise ModelFileError(f"{source}: malformed model file (chi '{name}' is missing)")
             try:
@@ -142,7 +154,8 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
                     f"{source}: malformed model file (chi '{name}': {err})"
                 ) from None
         own = _own_chis(doc.get("chi_own", {}), layout, version, source)
-        projection = _projection(doc, layout, version, source)
+        projection = _projection(doc, layout, version, source, imported)
+        temperature = _temperature(doc, layout, version, source)
     except (KeyError, TypeError, ValueError) as err:
         raise ModelFileError(f"{source}: malformed model file ({type(err).__name__}: {err})") from None
     labels = settings.layout.labels
@@ -153,20 +166,43 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
             "non-zero number"
         )
     report = doc.get("report")
-    _check_report(report, source, labels)
+    _check_report(report, source, () if imported else labels)
     method, matrix = _method(doc, len(k), source, layout.m)
+    if imported and not np.array_equal(matrix, projection):
+        raise ModelFileError(f"{source}: malformed model file (an imported model's projection is "
+                             "its matrix)")
     model = CouplingErrorModel(
         settings, k, chi, FitReport.from_dict(report), doc.get("provenance", {}),
-        doc.get("created", ""), method, matrix, own, projection,
+        doc.get("created", ""), method, matrix, own, projection, temperature,
     )
     _check_slopes(model, source)
     _check_tables(model, source)
     return model
 
 
-def _projection(doc: dict, layout, version: int, source: str) -> np.ndarray | None:
-    """P (N x M) of a version-5 file whose settings name M > N outputs; None otherwise."""
-    if not layout.overdetermined:
+def _temperature(doc: dict, layout, version: int, source: str):
+    """The temperature terms of a version-6 file, or None."""
+    raw = doc.get("temperature")
+    if raw is None:
+        return None
+    if version < IMPORTED_FORMAT_VERSION:
+        raise ModelFileError(f"{source}: malformed model file (temperature in a version {version} "
+                             "file)")
+    try:
+        return TemperatureTerms.from_dict(raw, layout.outputs)
+    except (KeyError, TypeError, ValueError, AttributeError) as err:
+        raise ModelFileError(f"{source}: malformed model file (temperature: {err})") from None
+
+
+def _projection(doc: dict, layout, version: int, source: str, imported: bool = False
+                ) -> np.ndarray | None:
+    """P (N x M) of a version-5 file whose settings name M > N outputs, or of an imported
+    model (version 6, P = its matrix); None otherwise."""
+    if imported:
+        if "projection" not in doc:
+            raise ModelFileError(f"{source}: malformed model file (an imported model needs its "
+                                 "projection)")
+    elif not layout.overdetermined:
         if "projection" in doc:
             raise ModelFileError(f"{source}: malformed model file (a projection, but one output "
                                  "per component)")

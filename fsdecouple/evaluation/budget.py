@@ -1,23 +1,35 @@
 """The uncertainty budget of every calibrated step, in the manner of EURAMET cg-4.
 
-EURAMET cg-4 (v2.0, 2011, Section 4) combines *relative* standard uncertainties in
-quadrature, w_c = sqrt(sum w_i^2), and states W = k w_c with k = 2.  Here, per
-component and non-zero load step L (figures of :mod:`fsdecouple.evaluation.iso376`):
+EURAMET cg-4 v3.0 (2022, "Guidelines on the Uncertainty of Force Measurements"),
+in its part on the calibration of force-measuring instruments, and ISO 376:2011
+(Annex C) combine *relative* standard uncertainties w_i in quadrature,
+w_c = sqrt(sum w_i^2), and state W = k w_c with k = 2.  (cg-4 v2.0's Section 4,
+cited here before, covers national force standard machines, not instruments.)
+Per component and non-zero load step L (figures of :mod:`.iso376`, X the step's
+deflections, X_mean their mean), :data:`CONTRIBUTIONS`:
 
-* ``reference``: w_1 = (reference_uncertainty / 100) / 2, the config's relative
-  expanded uncertainty of the applied loads at k = 2 (cg-4 4.3.1);
-* ``reproducibility``: w_2 = s(X_i) / (sqrt(n) |X_mean|), the standard deviation of the
-  mean of the n repetitions (cg-4 4.3.2); absent with one repetition;
-* ``resolution``: w_3 = sqrt(2) (r / (2 sqrt 3)) / |X_mean|, r the smallest step between
-  readings in the data; a deflection is the difference of two readings (cg-4 4.3.3);
-* ``interpolation``: w_4 = |f_c| / (100 sqrt 3), the deviation from the fitted curve
-  taken as the half-width of a rectangular distribution (cg-4 4.3.6);
-* ``zero``: w_5 = |f_0| / (100 sqrt 3), where the sweeps read zero at both ends
-  (cg-4 4.3.5);
-* ``model``: w_6 = u_model / |L|, the root mean square error of the decoupled prime
-  force on held-out points at that step, combined in quadrature with the RMS error
-  of the same component on held-out points where only other components are
-  loaded: the interference error (eq. 12) a user of that component meets.
+* ``reference``: (reference_uncertainty / 100) / 2, the config's relative expanded
+  uncertainty of the applied loads at k = 2;
+* ``reproducibility``: s(X_i) / (sqrt(n) |X_mean|), the standard deviation of the
+  mean of the n repetitions; 0 with one;
+* ``repeatability``: b' / (100 2 sqrt 3), half the spread of repetitions 1 and 2
+  taken as the half-width of a rectangular distribution;
+* ``resolution``: sqrt(2) (r / (2 sqrt 3)) / |X_mean|, r the step the readings are
+  recorded in; a deflection is the difference of two readings;
+* ``reversibility``: v / (100 sqrt 3) where the sweeps return through the step;
+* ``interpolation``: |f_c| / (100 sqrt 3);
+* ``zero``: |i_f - i_0| / (sqrt 3 |X_mean|), the largest zero drift of the step's
+  load sign over a sweep, relative to *this* step's deflection (relative to X_N it
+  would understate the small steps);
+* ``temperature``: |K_T| dT / (2 sqrt 3) where the calibration has a
+  ``temperature`` column: K_T the relative change of the deflections per kelvin
+  (least squares over the sweep's steps), dT the range of temperature;
+* ``drift``: d / sqrt 3, the relative change between two calibrations of the
+  sensor (``compare --json`` at this load, or the config's ``drift`` [%]);
+* ``model``: u_model / |L|, fsdecouple's own addition, not a cg-4 contribution:
+  the root mean square error of the decoupled prime force on held-out points at
+  that step, in quadrature with the RMS error of the same component on held-out
+  points where only other components are loaded (the interference, eq. 12).
 
 U = W |L| = 2 w_c |L|, in the load unit.
 """
@@ -33,8 +45,23 @@ from ..core.intervals import interval_calibration
 from ..data.calibration import CalibrationSet
 from .iso376 import ComponentSteps, component_steps, resolution
 
-CONTRIBUTIONS = ("reference", "reproducibility", "resolution", "interpolation", "zero", "model")
+CONTRIBUTIONS = ("reference", "reproducibility", "repeatability", "resolution", "reversibility",
+                 "interpolation", "zero", "temperature", "drift", "model")
+CG4 = "EURAMET cg-4 v3.0 (2022), calibration of force-measuring instruments"
+SOURCES = {
+    "reference": f"{CG4}; ISO 376:2011 Annex C and Table 3 (calibration force)",
+    "reproducibility": f"{CG4}; ISO 376:2011 Annex C (b)",
+    "repeatability": f"{CG4}; ISO 376:2011 Annex C (b')",
+    "resolution": f"{CG4}; ISO 376:2011 Annex C (r)",
+    "reversibility": f"{CG4} (v / sqrt 3)",
+    "interpolation": f"{CG4}; ISO 376:2011 Annex C (f_c)",
+    "zero": f"{CG4}; ISO 376:2011 Annex C (f_0, here per step)",
+    "temperature": f"{CG4}; ISO 376:2011 Annex C (temperature)",
+    "drift": f"{CG4} (drift between calibrations)",
+    "model": "fsdecouple's own addition (held-out error of the decoupled force, eq. 11 and 12)",
+}
 K = 2.0  # coverage factor of the expanded uncertainty
+TEMPERATURE = "temperature"  # the points' column of the calibration's temperature [°C or K]
 
 
 def model_errors(steps: ComponentSteps, points: pd.DataFrame, predicted: np.ndarray,
@@ -62,23 +89,64 @@ def model_errors(steps: ComponentSteps, points: pd.DataFrame, predicted: np.ndar
 
 
 def budget(steps: ComponentSteps, u_model: np.ndarray, reference_uncertainty: float,
-           r: float) -> dict[str, np.ndarray]:
-    """The relative standard uncertainties per step, w_c, W and U [load unit]."""
+           r: float, temperature: float = 0.0, drift=0.0) -> dict[str, np.ndarray]:
+    """The relative standard uncertainties per step, w_c, W and U [load unit].
+
+    ``temperature``: the relative standard uncertainty of the temperature term
+    (:func:`temperature_term`); ``drift``: the relative change between calibrations,
+    per step or one for all [fraction, not %].
+    """
     X, mean = steps.X, steps.mean
     n = np.isfinite(X).sum(axis=1)
     absx, absl = np.abs(mean), np.abs(steps.loads)
-    w = {"reference": np.full(absl.size, reference_uncertainty / 100.0 / K)}
+    size = absl.size
+    w = {"reference": np.full(size, reference_uncertainty / 100.0 / K)}
+    root3 = np.sqrt(3.0)
     with np.errstate(invalid="ignore", divide="ignore"):
-        sd = np.nanstd(X, axis=1, ddof=1) if X.shape[1] >= 2 else np.full(absl.size, np.nan)
+        sd = np.nanstd(X, axis=1, ddof=1) if X.shape[1] >= 2 else np.full(size, np.nan)
         w["reproducibility"] = np.where(n >= 2, sd / np.sqrt(n) / absx, 0.0)
-    w["resolution"] = np.sqrt(2.0) * r / (2.0 * np.sqrt(3.0)) / absx
-    w["interpolation"] = np.nan_to_num(np.abs(steps.figures["f_c"])) / 100.0 / np.sqrt(3.0)
-    f0 = steps.figures["f_0"]
-    zero = np.nanmax(np.abs(f0)) if np.isfinite(f0).any() else 0.0  # the sweep's, every step
-    w["zero"] = np.full(absl.size, zero / 100.0 / np.sqrt(3.0))
+    w["repeatability"] = np.nan_to_num(steps.figures["b_prime"]) / 100.0 / (2.0 * root3)
+    w["resolution"] = np.sqrt(2.0) * r / (2.0 * root3) / absx
+    w["reversibility"] = np.nan_to_num(np.abs(steps.figures["v"])) / 100.0 / root3
+    w["interpolation"] = np.nan_to_num(np.abs(steps.figures["f_c"])) / 100.0 / root3
+    drift0 = np.array([steps.zero_drift.get(float(np.sign(f)), 0.0) for f in steps.loads])
+    w["zero"] = drift0 / root3 / absx
+    w["temperature"] = np.full(size, float(temperature))
+    w["drift"] = np.broadcast_to(np.abs(np.asarray(drift, dtype=float)), (size,)) / root3
     w["model"] = np.asarray(u_model, dtype=float) / absl
     wc = np.sqrt(sum(v ** 2 for v in w.values()))
     return {**w, "w_c": wc, "W": K * wc, "U": K * wc * absl}
+
+
+def temperature_term(calib: CalibrationSet, steps: ComponentSteps) -> float | None:
+    """The relative standard uncertainty of the temperature term, or None without a
+    ``temperature`` column.
+
+    K_T [1/K]: the least-squares slope of X_i / X_mean - 1 against the temperature of
+    each first reading of the component's steps; the term is |K_T| dT / (2 sqrt 3),
+    dT the range of temperature over the calibration's points.
+    """
+    if TEMPERATURE not in calib.points.columns:
+        return None
+    temps = calib.points[TEMPERATURE].to_numpy(dtype=float)
+    if not np.isfinite(temps).all():
+        return None
+    s = calib.sweep(steps.axis)
+    col = calib.layout.loads[steps.index]
+    rel, t = [], []
+    for r, rep in enumerate(steps.repetitions):
+        g = s[s["repetition"] == rep].drop_duplicates(col)
+        for j, load in enumerate(steps.loads):
+            hit = g[g[col] == load]
+            if len(hit) and np.isfinite(steps.X[j, r]):
+                rel.append(steps.X[j, r] / steps.mean[j] - 1.0)
+                t.append(float(hit[TEMPERATURE].iloc[0]))
+    t_arr, rel_arr = np.asarray(t), np.asarray(rel)
+    spread = float(np.ptp(temps))
+    if t_arr.size < 2 or np.ptp(t_arr) == 0.0:
+        return 0.0
+    slope = np.polyfit(t_arr - t_arr.mean(), rel_arr, 1)[0]
+    return abs(float(slope)) * spread / (2.0 * np.sqrt(3.0))
 
 
 def step_budgets(calib: CalibrationSet, u_models: dict[str, np.ndarray],
@@ -87,7 +155,8 @@ def step_budgets(calib: CalibrationSet, u_models: dict[str, np.ndarray],
     out = []
     for a, axis in enumerate(calib.layout.labels):
         st = component_steps(calib, a)
-        out.append((st, budget(st, u_models[axis], reference_uncertainty, resolution(calib, a))))
+        out.append((st, budget(st, u_models[axis], reference_uncertainty, resolution(calib, a),
+                               temperature_term(calib, st) or 0.0)))
     return out
 
 

@@ -2,10 +2,12 @@
 
 :func:`certificate` reads a calibration set against the model fitted on it and
 returns the ``fsdecouple.certificate`` document: ``records`` ``[{axis, load, metric,
-value}]`` (``b``, ``b_prime``, ``f_c``, ``f_0``, ``v`` [%], ``U`` [load unit], one per
-component, non-zero load step of its own sweeps and metric; figures a set cannot give
-are absent and ``notes`` say why), a ``classes`` list, and the ``budget`` of every
-step (:mod:`fsdecouple.evaluation.budget`).
+value}]`` (``b``, ``b_prime``, ``f_c``, ``f_0``, ``v``, ``c`` [%], ``U`` [load unit],
+one per component, non-zero load step of its own sweeps and metric; figures a set
+cannot give are absent and ``notes`` say why), ``classes`` ``[{axis, sign, class,
+limited_by, from}]`` (:func:`fsdecouple.evaluation.iso376.classing`), and the
+``budget`` of every step with the ``budget_sources`` of its contributions
+(:mod:`fsdecouple.evaluation.budget`).
 """
 
 from __future__ import annotations
@@ -21,8 +23,18 @@ from ..config import Settings
 from ..core.model import CouplingErrorModel
 from ..data.calibration import CalibrationSet
 from ..errors import InputError
-from .budget import CONTRIBUTIONS, budget
-from .iso376 import CLASS_FROM, CLASS_LIMITS, METRICS, classify, component_steps, resolution
+from .budget import CONTRIBUTIONS, SOURCES, budget, temperature_term
+from .creep import creep_times
+from .iso376 import (
+    CLASS_FROM,
+    CLASS_LIMITS,
+    METRICS,
+    REFERENCE_LIMITS,
+    RESOLUTION_FACTORS,
+    classing,
+    component_steps,
+    resolution,
+)
 
 FORMAT = "fsdecouple.certificate"
 FORMAT_VERSION = 1
@@ -34,22 +46,55 @@ READING_KEYS = ("sensor", "full_scale", "columns", "scale", "csv", "units", "com
 
 def check_matches(model: CouplingErrorModel, calib: CalibrationSet, source: str,
                   settings: Settings | None = None) -> None:
-    """Refuse a calibration set, or a config, that is not the one the model was fitted on."""
-    fitted = {f["sha256"]: f["path"] for f in model.provenance.get("files", [])}
-    given = {digest: path for path, digest in calib.files}
-    if fitted and set(fitted) != set(given):
-        extra = sorted(p for d, p in given.items() if d not in fitted)
-        missing = sorted(p for d, p in fitted.items() if d not in given)
-        what = (f"{Path(extra[0]).name} is not a file the model was fitted on (SHA-256 differs)"
-                if extra else f"the model was fitted on {Path(missing[0]).name} too, which it lacks")
+    """Refuse a calibration set, or a config, that is not the one the model was fitted on.
+
+    The set must hold the very files of the model's provenance, by name *and* by
+    SHA-256 (a copy of ``rep1.csv`` saved as ``rep7.csv`` has rep1's digest but is
+    a seventh repetition), and the same repetition labels.  A config must read the
+    set as the model did (:data:`READING_KEYS`); a key it leaves unsaid that fit
+    chose itself (``zero: fit`` on sweeps out and back) is the model's choice.
+    """
+    fitted = [(Path(f["path"]).name, f["sha256"]) for f in model.provenance.get("files", [])]
+    given = [(Path(path).name, digest) for path, digest in calib.files]
+    if fitted and sorted(fitted) != sorted(given):
+        raise InputError(f"{calib.source}: does not match the model file {source}: "
+                         f"{_first_difference(fitted, given)}")
+    reps = model.report.repetitions if model.report is not None else []
+    if reps and sorted(reps) != sorted(calib.repetitions):
+        extra = sorted(set(calib.repetitions) - set(reps))
+        missing = sorted(set(reps) - set(calib.repetitions))
+        what = (f"it has repetition {extra[0]}, which the model was not fitted on" if extra
+                else f"it lacks repetition {missing[0]}, which the model was fitted on")
         raise InputError(f"{calib.source}: does not match the model file {source}: {what}")
     if settings is not None:
         mine, theirs = settings.to_dict(), model.settings.to_dict()
         for key in READING_KEYS:
+            if key == "zero" and settings.zero is None:
+                continue  # unsaid: fit's own choice (rows, or fit on sweeps out and back)
             if mine.get(key) != theirs.get(key):
                 raise InputError(f"the config's {key} is not the model's ({source}): the set would "
                                  "be read otherwise than it was fitted; use the model's own "
                                  "settings (no -c) or the config it was fitted with")
+
+
+def _first_difference(fitted: list[tuple[str, str]], given: list[tuple[str, str]]) -> str:
+    """The first file of the set that is not the model's, said by name and digest."""
+    by_name = dict(fitted)
+    names_of = {}
+    for name, digest in fitted:
+        names_of.setdefault(digest, name)
+    for name, digest in sorted(given):
+        if by_name.get(name) == digest:
+            continue
+        if name in by_name:
+            return f"{name} is not the file the model was fitted on under that name (SHA-256 differs)"
+        if digest in names_of:
+            return (f"{name} is not a file the model was fitted on: its content is "
+                    f"{names_of[digest]}'s, under another name")
+        return f"{name} is not a file the model was fitted on"
+    seen = {n for n, _ in given}
+    missing = sorted(n for n, _ in fitted if n not in seen) or sorted(n for n, _ in fitted)
+    return f"the model was fitted on {missing[0]} too, which it lacks"
 
 
 def _model_errors(model: CouplingErrorModel, axis: str, loads: np.ndarray, source: str) -> np.ndarray:
@@ -70,31 +115,99 @@ def _pct(v: float) -> float:
     return float(v) * 100.0
 
 
+def drift_fractions(drift: dict | None, percent: float | None, axis: str, loads: np.ndarray,
+                    full_scale: float) -> tuple[np.ndarray, str | None]:
+    """The relative change between calibrations at each step [fraction], and its source.
+
+    ``drift``: a ``compare --json`` document (``fsdecouple.drift``): |F_old - F_new| /
+    |L| at its calibrated steps of this component (interpolated over load between
+    them; the larger where both calibrations have the load), or without steps its
+    ``force_max_pct`` of full scale; ``percent``: the
+    config's ``drift`` [%], for every step.  Neither: zeros and None.
+    """
+    if drift is not None:
+        steps = [s for s in drift.get("en_steps") or [] if s.get("axis") == axis]
+        if steps:
+            largest: dict[float, float] = {}  # a load both calibrations have: the larger
+            for s in steps:
+                f = float(s["load"])
+                largest[f] = max(largest.get(f, 0.0), abs(float(s["F_old"]) - float(s["F_new"])))
+            at = np.array(sorted(largest))
+            moved = np.interp(loads, at, [largest[f] for f in at])
+            return moved / np.abs(loads), "compare --json (|F_old - F_new| at each step)"
+        comp = (drift.get("components") or {}).get(axis) or {}
+        if comp.get("force_max_pct") is not None:
+            return (np.full(loads.size, comp["force_max_pct"] / 100.0 * full_scale) / np.abs(loads),
+                    "compare --json (force_max_pct of full scale)")
+    if percent is not None:
+        return np.full(loads.size, percent / 100.0), "config drift"
+    return np.zeros(loads.size), None
+
+
+def check_drift_document(doc, source: str) -> dict:
+    """A ``compare --json`` document, or one line naming ``source``."""
+    if not isinstance(doc, dict) or doc.get("format") != "fsdecouple.drift":
+        raise InputError(f"{source}: not the output of 'fsdecouple compare --json' (expected "
+                         "\"format\": \"fsdecouple.drift\")")
+    for s in doc.get("en_steps") or []:
+        try:
+            ok = all(np.isfinite(float(s[k])) for k in ("load", "F_old", "F_new")) and s["load"] != 0
+        except (KeyError, TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise InputError(f"{source}: en_steps: each step needs a non-zero load and finite "
+                             "F_old and F_new")
+    return doc
+
+
+def read_drift(path: str | Path) -> dict:
+    """The ``compare --json`` output in file ``path`` (``certificate --drift``)."""
+    import json
+
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise InputError(f"{path}: cannot read ({err.__class__.__name__}): expected the output of "
+                         "'fsdecouple compare --json'") from None
+    try:
+        doc = json.loads(text)
+    except ValueError as err:
+        raise InputError(f"{path}: not JSON ({err}): expected the output of "
+                         "'fsdecouple compare --json'") from None
+    return check_drift_document(doc, str(path))
+
+
 def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str = "model",
-                settings: Settings | None = None) -> dict[str, Any]:
+                settings: Settings | None = None, drift: dict | None = None) -> dict[str, Any]:
     """The certificate document of ``calib`` and the model fitted on it.
 
-    ``settings``: the config's (``-c``), for the sensor's identity, reference and
-    environment; default: the model's own.  Refused if the set or the config do not
-    match the model (:func:`check_matches`).
+    ``settings``: the config's (``-c``), for the sensor's identity, reference,
+    environment, creep column and drift; default: the model's own.  ``drift``: a
+    ``compare --json`` document of this sensor's last two calibrations, for the
+    budget's drift term (default: the config's ``drift``, else none).  Refused if
+    the set or the config do not match the model (:func:`check_matches`).
     """
     model.layout.one_output_each("certificate")
     check_matches(model, calib, source, settings)
     s = settings or model.settings
     lab, layout = s.lab, calib.layout
+    times = creep_times(calib, s)
     records, budgets, classes, notes = [], [], [], []
     n_reps = len(calib.repetitions)
     if n_reps < 2:
         notes.append(f"one repetition: b (reproducibility) and b' (repeatability) compare "
                      f"repetitions and need at least two; the set has {n_reps}, so no class "
                      "(ISO 376 classes need both) and no reproducibility in the budget")
-    resolutions = {}
+    resolutions, drift_source, temperature = {}, None, False
     for a, axis in enumerate(layout.labels):
-        st = component_steps(calib, a)
+        st = component_steps(calib, a, times)
         r = resolution(calib, a)
         resolutions[axis] = r
         u_model = _model_errors(model, axis, st.loads, source)
-        b = budget(st, u_model, lab.reference_uncertainty, r)
+        w_t = temperature_term(calib, st)
+        temperature |= w_t is not None
+        d, drift_source = drift_fractions(drift, lab.drift, axis, st.loads, s.full_scale[a])
+        b = budget(st, u_model, lab.reference_uncertainty, r, w_t or 0.0, d)
         for j, load in enumerate(st.loads.tolist()):
             for metric in METRICS:
                 value = st.figures[metric][j]
@@ -104,12 +217,19 @@ def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str
             budgets.append({"axis": axis, "load": load,
                             **{c: _pct(b[c][j]) for c in (*CONTRIBUTIONS, "w_c", "W")},
                             "U": float(b["U"][j])})
-        for sign, cls in classify(st, s.full_scale[a]).items():
-            classes.append({"axis": axis, "sign": sign, "class": cls})
+        for sign, c in classing(st, s.full_scale[a], r, lab.reference_uncertainty).items():
+            classes.append({"axis": axis, "sign": sign, **c})
     for metric, why in (("f_0", "no sweep reads zero at both its start and its end"),
-                        ("v", "no sweep loads up and then down through the same steps")):
+                        ("v", "no sweep loads up and then down through the same steps"),
+                        ("c", "no creep column in the config (creep: {column: ...})" if times is None
+                         else "no sweep holds its largest load with readings 270 s apart")):
         if not any(r["metric"] == metric for r in records):
-            notes.append(f"{metric}: absent, {why}")
+            notes.append(f"{metric}: absent, {why}; not classed")
+    if not temperature:
+        notes.append("temperature: the calibration has no temperature column; its budget term is 0")
+    if drift_source is None:
+        notes.append("drift: no compare --json (certificate --drift) and no config drift; the "
+                     "budget's drift between calibrations is 0")
     return {
         "format": FORMAT, "format_version": FORMAT_VERSION, "fsdecouple_version": __version__,
         "date": datetime.now(UTC).date().isoformat(),
@@ -125,9 +245,15 @@ def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str
         "resolution": resolutions,
         "records": records,
         "classes": classes,
-        "class_limits": {"source": "ISO 376:2011, Table 2", "from_fraction_of_full_scale": CLASS_FROM,
-                         "limits_percent": {c: lim for c, lim in CLASS_LIMITS}},
+        "class_limits": {"source": "ISO 376:2011, Table 2",
+                         "limits_percent": {c: lim for c, lim in CLASS_LIMITS},
+                         "reference_source": "ISO 376:2011, Table 3",
+                         "reference_limits_percent_k2": dict(REFERENCE_LIMITS),
+                         "lower_limit_resolutions": dict(RESOLUTION_FACTORS),
+                         "from_fraction_of_full_scale": CLASS_FROM},
         "budget": budgets,
+        "budget_sources": dict(SOURCES),
+        "drift_source": drift_source,
         "coverage_factor": 2,
         "notes": notes,
     }

@@ -1,9 +1,10 @@
 """The ISO 376 figures of a calibration, step by step, and the class they allow.
 
 For each component and each non-zero load step of its own sweeps, X_i is the
-zero-corrected prime output of repetition i at that step (the first time the
-sweep reaches that load: the increasing series).  In percent, as ISO 376:2011
-(Section 7.5) states them:
+deflection of repetition i at that step: its prime output less the mean of its
+sweep's zero rows, the first time the sweep reaches that load with |load| rising
+(ISO 376's increasing series; :func:`_out_and_back`).  In percent, as
+ISO 376:2011 (Section 7.5) states them:
 
 * ``b``, reproducibility: 100 (max_i X_i - min_i X_i) / |mean_i X_i|, over all
   repetitions (two or more);
@@ -16,11 +17,17 @@ sweep reaches that load: the increasing series).  In percent, as ISO 376:2011
 * ``f_0``, zero error: 100 (i_f - i_0) / X_N for a sweep with zero rows at its start
   and its end (i_0, i_f the first and last zero reading, X_N the deflection at the
   sweep's largest load); stated at that largest step, the largest over repetitions;
-* ``v``, reversibility: 100 (X' - X) / |X| where a sweep loads up and then down and
-  reads the step again (X' on the way down), averaged over repetitions.
+* ``v``, reversibility: 100 |X'_i - X_i| / |X_i| where sweep i reads the step with
+  |load| rising and with |load| falling (X'_i), the largest over the repetitions
+  that do (as f_0 and c); absolute, so never negative;
+* ``c``, creep: 100 (i_300 - i_30) / X_N where the sweep holds its largest load and
+  a time column (config ``creep: {column: ...}``) dates the readings 30 s and
+  300 s after it was applied (:mod:`fsdecouple.evaluation.creep`).
 
-A class per component and load sign (:data:`CLASS_LIMITS`) comes from b, b' and f_c
-over the steps at or above 10 % of full scale.
+The class of each component and load sign (:func:`classing`) is the best whose
+ISO 376:2011 Table 2 limits every criterion the sweeps give holds, over the steps
+of its class range, no better than Table 3 allows the reference forces'
+uncertainty; the range starts at the lower limit ISO 376 ties to the resolution r.
 """
 
 from __future__ import annotations
@@ -32,25 +39,35 @@ import numpy as np
 from ..data.calibration import CalibrationSet
 
 # ISO 376:2011, Table 2 (characteristics of force-proving instruments), in percent:
-# the largest relative reproducibility b, repeatability b' and interpolation error
-# |f_c| a class allows.  (Its zero, reversibility and creep limits need series
-# this calibration does not always have: they are shown, not classed.)
+# the largest relative reproducibility b, repeatability b', interpolation |f_c|,
+# zero |f_0|, reversibility v and creep c each class allows.  A criterion the
+# calibration does not give (no return, no zero at both ends, no timed hold) is
+# not classed; b and b' always are (one repetition: no class).
 CLASS_LIMITS = (
-    ("00", {"b": 0.05, "b_prime": 0.025, "f_c": 0.025}),
-    ("0.5", {"b": 0.10, "b_prime": 0.05, "f_c": 0.05}),
-    ("1", {"b": 0.20, "b_prime": 0.10, "f_c": 0.10}),
-    ("2", {"b": 0.40, "b_prime": 0.20, "f_c": 0.20}),
+    ("00", {"b": 0.05, "b_prime": 0.025, "f_c": 0.025, "f_0": 0.012, "v": 0.07, "c": 0.025}),
+    ("0.5", {"b": 0.10, "b_prime": 0.05, "f_c": 0.05, "f_0": 0.025, "v": 0.15, "c": 0.05}),
+    ("1", {"b": 0.20, "b_prime": 0.10, "f_c": 0.10, "f_0": 0.050, "v": 0.30, "c": 0.10}),
+    ("2", {"b": 0.40, "b_prime": 0.20, "f_c": 0.20, "f_0": 0.10, "v": 0.50, "c": 0.20}),
 )
-CLASS_FROM = 0.1  # ISO 376: the class holds from the lower limit, here 10 % of full scale
-METRICS = ("b", "b_prime", "f_c", "f_0", "v")
+# ISO 376:2011, Table 3: the largest relative expanded uncertainty (k = 2) of the
+# calibration forces each class allows [%]
+REFERENCE_LIMITS = {"00": 0.01, "0.5": 0.02, "1": 0.05, "2": 0.10}
+# ISO 376:2011: the lower limit of the class range, in multiples of the resolution r
+RESOLUTION_FACTORS = {"00": 4000.0, "0.5": 2000.0, "1": 1000.0, "2": 500.0}
+CLASS_FROM = 0.1  # where the resolution is unknown: the class holds from 10 % of full scale
+METRICS = ("b", "b_prime", "f_c", "f_0", "v", "c")
+STEPWISE = ("b", "b_prime", "f_c", "v")  # checked at every step of the class range
+SWEEPWISE = ("f_0", "c")  # one figure per sweep, stated at its largest step
 
 
 @dataclass
 class ComponentSteps:
     """One component's load steps and their figures (arrays over steps, NaN: absent).
 
-    ``X``: shape (steps, repetitions), the zero-corrected prime output [output unit];
-    ``outputs``: the mean zero-corrected outputs of all components at each step.
+    ``X``: shape (steps, repetitions), the deflections [output unit];
+    ``outputs``: the mean zero-corrected outputs of all components at each step;
+    ``zero_drift``: per load sign (``-1.0``, ``1.0``), the largest |i_f - i_0| of
+    its sweeps with zero rows at both ends [output unit], NaN where none.
     """
 
     axis: str
@@ -60,27 +77,60 @@ class ComponentSteps:
     X: np.ndarray
     outputs: np.ndarray
     figures: dict[str, np.ndarray] = field(default_factory=dict)
+    zero_drift: dict[float, float] = field(default_factory=dict)
 
     @property
     def mean(self) -> np.ndarray:
         return np.nanmean(self.X, axis=1)
 
 
-def _first_and_return(loads: np.ndarray) -> tuple[dict[float, int], dict[float, int]]:
-    """Row of each load on the way up (first reading) and on the way back (a later one)."""
+def _out_and_back(loads: np.ndarray) -> tuple[dict[float, int], dict[float, int]]:
+    """Row of each load on its way out (X) and on its way back (X'), if it has one.
+
+    A visit is *out* when |load| rises into it (from a smaller load, from zero, or
+    from the other sign; a sweep's first row counts as out: the load was applied
+    from zero), *back* when |load| falls into it.  X is a load's first visit out,
+    or its first visit when it has none (a sweep from -100 to +100 reads the
+    negative steps only on their way back); X' its first visit back where X is a
+    visit out.  A reading right after one at the same load is a hold (creep), not
+    a visit.
+    """
     first: dict[float, int] = {}
+    out: dict[float, int] = {}
     back: dict[float, int] = {}
-    peak = int(np.argmax(np.abs(loads))) if loads.size else 0
+    prev = 0.0
     for i, f in enumerate(loads):
-        if f not in first:
-            first[f] = i
-        elif i > peak and f != 0.0:
-            back.setdefault(f, i)
-    return first, back
+        if i and loads[i - 1] == f:
+            continue
+        if f != 0.0:
+            rising = abs(f) > abs(prev) or np.sign(f) != np.sign(prev)
+            first.setdefault(f, i)
+            (out if rising else back).setdefault(f, i)
+        prev = f
+    return ({f: out.get(f, i) for f, i in first.items()},
+            {f: i for f, i in back.items() if f in out})
 
 
-def component_steps(calib: CalibrationSet, a: int) -> ComponentSteps:
-    """The steps of component ``a``'s sweeps, with b, b', f_c, f_0 and v."""
+def _creep(f: np.ndarray, u: np.ndarray, t: np.ndarray, tol: float = 15.0) -> float:
+    """i_300 - i_30 of a sweep holding its largest load [output unit], or NaN.
+
+    The first reading of the hold is taken 30 s after the load was applied; the
+    300 s reading is the one dated 270 s after it (within ``tol`` seconds).
+    """
+    peak = int(np.argmax(np.abs(f)))
+    end = peak
+    while end + 1 < f.size and f[end + 1] == f[peak]:
+        end += 1
+    if end == peak:
+        return np.nan
+    late = np.abs(t[peak + 1:end + 1] - t[peak] - 270.0)
+    j = int(np.argmin(late))
+    return float(u[peak + 1 + j] - u[peak]) if late[j] <= tol else np.nan
+
+
+def component_steps(calib: CalibrationSet, a: int, times=None) -> ComponentSteps:
+    """The steps of component ``a``'s sweeps, with b, b', f_c, f_0, v and (with
+    ``times``, a Series of seconds indexed like ``calib.points``) c."""
     layout = calib.layout
     axis = layout.labels[a]
     s = calib.sweep(axis)
@@ -93,31 +143,43 @@ def component_steps(calib: CalibrationSet, a: int) -> ComponentSteps:
     outputs = np.zeros((loads.size, layout.n))
     counts = np.zeros(loads.size)
     f0 = np.full((2, len(reps)), np.nan)  # per load sign (negative, positive)
+    drift = np.full((2, len(reps)), np.nan)
+    creep = np.full((2, len(reps)), np.nan)
     where = {f: j for j, f in enumerate(loads)}
     for r, rep in enumerate(reps):
         g = s[s["repetition"] == rep]
         f = g[load_col].to_numpy(dtype=float)
         u = g[list(layout.outputs)].to_numpy(dtype=float)
-        if getattr(calib, "zero_auto", False):  # out-and-back sweeps fitted with zero: fit:
+        if getattr(calib, "zero", "rows") == "fit" and (f == 0.0).any():
+            # zeroed by offsets fitted from all points: ISO 376's deflections still
+            # start from the sweep's own zero rows
             raw = g[[f"{c}_raw" for c in layout.outputs]].to_numpy(dtype=float)
-            u = raw - raw[f == 0.0].mean(axis=0)  # ISO 376 deflections, from the zero rows
-        first, again = _first_and_return(f)
+            u = raw - raw[f == 0.0].mean(axis=0)
+        first, again = _out_and_back(f)
         for load, i in first.items():
-            if load != 0.0:
-                X[where[load], r] = u[i, a]
-                outputs[where[load]] += u[i]
-                counts[where[load]] += 1
+            X[where[load], r] = u[i, a]
+            outputs[where[load]] += u[i]
+            counts[where[load]] += 1
         for load, i in again.items():
             back[where[load], r] = u[i, a]
-        if f.size > 2 and f[0] == 0.0 and f[-1] == 0.0 and (f != 0.0).any():
+        if f.size and (f != 0.0).any():
             peak = int(np.argmax(np.abs(f)))
-            f0[int(f[peak] > 0), r] = 100.0 * (u[-1, a] - u[0, a]) / abs(u[peak, a])
+            sign = int(f[peak] > 0)
+            if f.size > 2 and f[0] == 0.0 and f[-1] == 0.0:
+                drift[sign, r] = u[-1, a] - u[0, a]
+                f0[sign, r] = 100.0 * drift[sign, r] / abs(u[peak, a])
+            if times is not None:
+                t = np.asarray(times.loc[g.index], dtype=float)
+                creep[sign, r] = 100.0 * _creep(f, u[:, a], t) / abs(u[peak, a])
     steps = ComponentSteps(axis, a, loads, reps, X, outputs / counts[:, None].clip(1))
-    steps.figures = _figures(steps, back, f0)
+    steps.figures = _figures(steps, back, f0, creep)
+    steps.zero_drift = {sign: float(np.nanmax(np.abs(drift[int(sign > 0)])))
+                        for sign in (-1.0, 1.0) if np.isfinite(drift[int(sign > 0)]).any()}
     return steps
 
 
-def _figures(st: ComponentSteps, back: np.ndarray, f0: np.ndarray) -> dict[str, np.ndarray]:
+def _figures(st: ComponentSteps, back: np.ndarray, f0: np.ndarray,
+             creep: np.ndarray) -> dict[str, np.ndarray]:
     X, n = st.X, st.loads.size
     mean = st.mean
     out = {m: np.full(n, np.nan) for m in METRICS}
@@ -131,16 +193,17 @@ def _figures(st: ComponentSteps, back: np.ndarray, f0: np.ndarray) -> dict[str, 
             out["b_prime"] = 100.0 * np.abs(x2 - x1) / np.abs((x1 + x2) / 2.0)
         both = np.isfinite(back) & np.isfinite(X)
         returned = both.any(axis=1)
-        v = np.where(both, back - X, 0.0).sum(axis=1) / both.sum(axis=1).clip(1)
-        out["v"][returned] = (100.0 * v / np.abs(mean))[returned]
+        v = np.where(both, np.abs(back - X) / np.abs(X), 0.0).max(axis=1)  # the worst repetition
+        out["v"][returned] = 100.0 * v[returned]
     for sign in (-1.0, 1.0):
         idx = np.flatnonzero(np.sign(st.loads) == sign)
         if idx.size >= 2:
             out["f_c"][idx] = interpolation_errors(st.loads[idx], mean[idx])
-        vals = f0[int(sign > 0)]
-        if idx.size and np.isfinite(vals).any():
-            peak = idx[np.argmax(np.abs(st.loads[idx]))]
-            out["f_0"][peak] = vals[np.nanargmax(np.abs(vals))]
+        peak = idx[np.argmax(np.abs(st.loads[idx]))] if idx.size else None
+        for name, per_rep in (("f_0", f0), ("c", creep)):
+            vals = per_rep[int(sign > 0)]
+            if peak is not None and np.isfinite(vals).any():
+                out[name][peak] = vals[np.nanargmax(np.abs(vals))]
     return out
 
 
@@ -157,27 +220,79 @@ def interpolation_errors(loads: np.ndarray, means: np.ndarray) -> np.ndarray:
     return 100.0 * (means - xa) / xa
 
 
-def classify(st: ComponentSteps, full_scale: float) -> dict[str, str]:
-    """The ISO 376 class per load sign (``"+"``, ``"-"``) from b, b', f_c at steps >= 10 % F.S.
+def lower_limit(cls: str, r: float, full_scale: float, slope: float) -> float:
+    """The smallest |load| of class ``cls``'s range [load unit].
 
-    ``none`` when no class's limits hold, when no step reaches 10 % of full scale, or
-    when b or b' is absent there (one repetition): ISO 376 classes need both.
+    ISO 376:2011 ties it to the resolution r [output unit]: a deflection of at least
+    4000 r (class 00), 2000 r (0.5), 1000 r (1) or 500 r (2), here converted to a
+    load by the mean sensitivity ``slope`` [output unit / load unit].  Where r is
+    unknown (0 or NaN): 10 % of full scale.
+    """
+    if not (np.isfinite(r) and r > 0 and np.isfinite(slope) and slope > 0):
+        return CLASS_FROM * full_scale
+    return RESOLUTION_FACTORS[cls] * r / slope
+
+
+def _failures(st: ComponentSteps, sign: float, cls: str, limits: dict, floor: float,
+              reference_uncertainty: float | None) -> list[str]:
+    """The criteria that keep a load sign of ``st`` out of class ``cls``."""
+    out = []
+    if reference_uncertainty is not None and reference_uncertainty > REFERENCE_LIMITS[cls] * (1 + 1e-9):
+        out.append("reference")
+    mine = np.sign(st.loads) == sign
+    idx = np.flatnonzero(mine & (np.abs(st.loads) >= floor * (1 - 1e-12)))
+    if not idx.size:
+        return [*out, "resolution"]
+    for m in ("b", "b_prime"):
+        if not np.isfinite(st.figures[m][idx]).all():
+            return [*out, "repetitions"]  # ISO 376 classes need both
+    for m in STEPWISE:
+        w = np.abs(st.figures[m][idx])
+        if np.any(np.isfinite(w) & (w > limits[m])):  # f_c: 2+ steps; v: where it returns
+            out.append(m)
+    for m in SWEEPWISE:
+        w = np.abs(st.figures[m][mine])
+        if np.any(np.isfinite(w) & (w > limits[m])):
+            out.append(m)
+    return out
+
+
+def classing(st: ComponentSteps, full_scale: float, r: float = 0.0,
+             reference_uncertainty: float | None = None) -> dict[str, dict]:
+    """Per load sign (``"+"``, ``"-"``): ``{"class", "limited_by", "from"}``.
+
+    ``class``: the best of :data:`CLASS_LIMITS` whose every criterion holds, or
+    ``none``; ``limited_by``: what keeps it out of the next better class (for
+    ``none``: out of class 2), among the criteria of :data:`METRICS`,
+    ``reference`` (Table 3's cap by ``reference_uncertainty`` [%, k = 2]),
+    ``resolution`` (no step at or above the class range's lower limit) and
+    ``repetitions`` (b or b' absent); ``from``: the lower limit of the class's
+    range [load unit] (of class 2's for ``none``).  ``r``: the resolution [output
+    unit] (:func:`resolution`), 0 if unknown.
     """
     out = {}
     for sign, name in ((1.0, "+"), (-1.0, "-")):
-        idx = np.flatnonzero((np.sign(st.loads) == sign)
-                             & (np.abs(st.loads) >= CLASS_FROM * full_scale * (1 - 1e-12)))
-        if not (np.sign(st.loads) == sign).any():
+        mine = np.sign(st.loads) == sign
+        if not mine.any():
             continue
-        chosen = "none"
-        measured = idx.size and all(np.isfinite(st.figures[m][idx]).all() for m in ("b", "b_prime"))
-        for cls, limits in CLASS_LIMITS if measured else ():
-            worst = {m: np.abs(st.figures[m][idx]) for m in limits}
-            if all(np.all(~np.isfinite(w) | (w <= limits[m])) for m, w in worst.items()):  # f_c: 2+ steps
+        with np.errstate(invalid="ignore", divide="ignore"):
+            slope = float(np.nanmean(np.abs(st.mean[mine]) / np.abs(st.loads[mine])))
+        chosen, start, worse = "none", 0.0, []
+        for cls, limits in CLASS_LIMITS:
+            start = lower_limit(cls, r, full_scale, slope)
+            fails = _failures(st, sign, cls, limits, start, reference_uncertainty)
+            if not fails:
                 chosen = cls
                 break
-        out[name] = chosen
+            worse = fails  # none: class 2's
+        out[name] = {"class": chosen, "limited_by": worse, "from": float(start)}
     return out
+
+
+def classify(st: ComponentSteps, full_scale: float, r: float = 0.0,
+             reference_uncertainty: float | None = None) -> dict[str, str]:
+    """The class per load sign (``"+"``, ``"-"``): :func:`classing` without the reasons."""
+    return {s: c["class"] for s, c in classing(st, full_scale, r, reference_uncertainty).items()}
 
 
 def resolution(calib: CalibrationSet, a: int) -> float:

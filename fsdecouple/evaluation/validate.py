@@ -115,6 +115,9 @@ def validate(
     if model_path is not None:
         model = load_model(model_path)
     settings = settings or model.settings
+    if getattr(model, "temperature", None) is not None:  # core/temperature.py
+        raise InputError("validate: the model corrects its outputs for temperature, which a set "
+                         "zero-corrected sweep by sweep does not carry; apply it to a log instead")
     if settings.layout != model.layout:
         raise InputError(f"the config names components {', '.join(settings.layout.loads)}, the "
                          f"model {', '.join(model.layout.loads)}; use the calibration's config")
@@ -143,6 +146,8 @@ def validate(
                         "fsdecouple kept it): give the calibration (--calib CALIB) to set the "
                         "matrix fitted on it beside the model")
     forces["initial"] = model.initial_forces(u)
+    if getattr(model, "imported", False):  # a factory matrix: its own f = C u, nothing beside
+        forces = {"model": forces["model"]}
     inside = in_calibrated_range(model, u)
     axis_of = points["axis"].to_numpy()
     fs = np.asarray(settings.full_scale, dtype=float)

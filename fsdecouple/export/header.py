@@ -118,6 +118,12 @@ def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",
         matrix=np.asarray(model.matrix, dtype=float) if linear else None,
         projection=getattr(model, "projection", None),
     )
+    if getattr(model, "imported", False):  # a factory matrix (data/ati_cal.py): v = P u are its
+        plan.matrix = np.eye(n)  # forces, so f = I v, and its range is checked on them
+    if getattr(model, "temperature", None) is not None:
+        raise ConfigError("the model corrects its outputs for temperature (core/temperature.py); "
+                          "the C header has no temperature input yet: export it as a .cal "
+                          "(ATIDAQ compensates) or apply it in Python")
     if linear:
         plan.refine = 0  # a linear model has no refinement (model.decouple ignores it)
     # own chi_aa last

@@ -82,15 +82,19 @@ def compare(old: CouplingErrorModel | str | Path, new: CouplingErrorModel | str 
         models.append(m)
     old, new = models
     for m in models:
-        m.layout.one_output_each("compare")
+        if not m.imported:  # a factory matrix's extra output is its thermistor
+            m.layout.one_output_each("compare")
     _check_comparable(old, new, docs[0]["model"] or "old model", docs[1]["model"] or "new model")
 
     axes = old.layout.labels
     fso = old.full_scale_output
     fs = np.asarray(old.settings.full_scale, dtype=float)
-    slope = 100.0 * (new.k - old.k) / old.k
+    # an imported factory matrix (data/ati_cal.py) has no slopes and no chi of its own:
+    # only the forces compare, on loads within the full scale
+    factory = next((m for m in (old, new) if m.imported), None)
+    slope = [None] * len(axes) if factory else 100.0 * (new.k - old.k) / old.k
     chi_pct: dict[str, dict[str, float]] = {a: {} for a in axes}
-    for name, c_old in old.chi.items():
+    for name, c_old in ({} if factory else old.chi).items():
         c_new = new.chi[name]
         lo = max(c_old.input_range[0], c_new.input_range[0])
         hi = min(c_old.input_range[1], c_new.input_range[1])
@@ -102,13 +106,14 @@ def compare(old: CouplingErrorModel | str | Path, new: CouplingErrorModel | str 
         u = np.linspace(lo, hi, CHI_POINTS)
         diff = np.abs(c_new(u) - c_old(u)).max()
         chi_pct[axes[c_old.output_axis]][name] = float(100.0 * diff / fso[c_old.output_axis])
-    u = _output_grid(old, new)
+    u = _output_grid(old, new) if factory is None else _load_grid(factory)
     f_old = old.decouple(u, rotate=False, exact=True)
     f_new = new.decouple(u, rotate=False, exact=True)
     force = 100.0 * np.abs(f_new - f_old).max(axis=0) / fs
 
     components = {
-        a: {"slope_change_pct": float(slope[i]), "chi_max_pct": chi_pct[a],
+        a: {"slope_change_pct": None if slope[i] is None else float(slope[i]),
+            "chi_max_pct": chi_pct[a],
             "force_max_pct": float(force[i])}
         for i, a in enumerate(axes)
     }
@@ -120,6 +125,7 @@ def compare(old: CouplingErrorModel | str | Path, new: CouplingErrorModel | str 
                      for s in en["steps"] if abs(s["en"]) > 1.0][:5]
     gated = max_drift is not None or (en is not None and en_gate)
     return {
+        "temperature": temperature_drift(old, new),
         "format": FORMAT,
         "old": docs[0],
         "new": docs[1],
@@ -135,6 +141,24 @@ def compare(old: CouplingErrorModel | str | Path, new: CouplingErrorModel | str 
     }
 
 
+def temperature_drift(old: CouplingErrorModel, new: CouplingErrorModel) -> dict[str, Any] | None:
+    """Per output, the change of the offset drift b_i and gain drift g_i (new - old) and of
+    T0 (core/temperature.py); None when neither model has temperature terms."""
+    t_old, t_new = old.temperature, new.temperature
+    if t_old is None and t_new is None:
+        return None
+    if t_old is None or t_new is None:
+        which = "old" if t_old is None else "new"
+        return {"note": f"the {which} model has no temperature terms: nothing to compare"}
+    if t_old.channel != t_new.channel or t_old.unit != t_new.unit:
+        return {"note": "the two models' temperatures are different channels or units"}
+    outputs = [o for i, o in enumerate(old.layout.outputs) if i != t_old.channel]
+    keep = [i for i in range(old.n_outputs) if i != t_old.channel]
+    return {"unit": t_old.unit, "t0_change": float(t_new.t0 - t_old.t0),
+            "b_change": dict(zip(outputs, map(float, t_new.b[keep] - t_old.b[keep]), strict=True)),
+            "g_change": dict(zip(outputs, map(float, t_new.g[keep] - t_old.g[keep]), strict=True))}
+
+
 def largest(doc: dict[str, Any]) -> float:
     """The largest drift figure of a drift document, in absolute value [%]."""
     return max(abs(v) for _, v in _figures(doc["components"]))
@@ -146,7 +170,8 @@ def _output(model: CouplingErrorModel, b: int) -> str:
 
 def _figures(components):
     for a, c in components.items():
-        yield f"{a}: slope change", c["slope_change_pct"]
+        if c["slope_change_pct"] is not None:  # None: an imported factory matrix
+            yield f"{a}: slope change", c["slope_change_pct"]
         for name, v in c["chi_max_pct"].items():
             yield f"chi {name}", v
         yield f"{a}: force", c["force_max_pct"]
@@ -162,10 +187,15 @@ def _range(r) -> str:
 
 
 def _check_comparable(old: CouplingErrorModel, new: CouplingErrorModel, a: str, b: str) -> None:
-    if old.n_components != new.n_components or sorted(old.chi) != sorted(new.chi):
+    chis_differ = sorted(old.chi) != sorted(new.chi) and not (old.imported or new.imported)
+    if old.n_components != new.n_components or chis_differ:
         raise InputError(f"{b}: has {new.n_components} components ({', '.join(new.layout.labels)}), "
                          f"{a} has {old.n_components} ({', '.join(old.layout.labels)}); "
                          "compare two calibrations of one sensor")
+    if old.n_outputs != new.n_outputs:
+        raise InputError(f"{b}: takes {new.n_outputs} outputs ({', '.join(new.layout.outputs)}), "
+                         f"{a} {old.n_outputs} ({', '.join(old.layout.outputs)}); compare two "
+                         "calibrations of one sensor")
     if old.settings.units != new.settings.units:
         raise InputError(f"{b}: is in {new.settings.units.load} and {new.settings.units.output}, "
                          f"{a} in {old.settings.units.load} and {old.settings.units.output}; "
@@ -182,6 +212,17 @@ def _shared(lo: float, hi: float, r_old, r_new) -> bool:
     span = hi - lo
     return bool(span >= MIN_SHARED * (r_old[1] - r_old[0]) and span >= MIN_SHARED * (r_new[1] - r_new[0])
                 and span > 0)
+
+
+def _load_grid(factory: CouplingErrorModel) -> np.ndarray:
+    """Outputs (n, M) whose forces by the factory matrix C span +-F_FS in every component:
+    u = C^+ f over a grid of loads, seven a component for six."""
+    fs = np.asarray(factory.settings.full_scale, dtype=float)
+    n = factory.n_components
+    k = FORCE_POINTS if n <= 3 else max(3, int(2e5 ** (1 / n)))
+    f = np.stack(np.meshgrid(*[np.linspace(-v, v, k) for v in fs], indexing="ij"),
+                 axis=-1).reshape(-1, n)
+    return f @ np.linalg.pinv(factory.matrix).T
 
 
 def _output_grid(old: CouplingErrorModel, new: CouplingErrorModel) -> np.ndarray:

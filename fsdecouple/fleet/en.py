@@ -36,7 +36,18 @@ def en_figures(a: CouplingErrorModel, b: CouplingErrorModel, names=("old", "new"
     """``({"en": {component: max |E_n|}, "steps": [...]}, None)``, or ``(None, why not)``."""
     sa, sb = _steps(a), _steps(b)
     missing = [n for n, s in zip(names, (sa, sb), strict=True) if s is None]
-    if missing:
+    factory = [getattr(m, "imported", False) for m in (a, b)]
+    note = None
+    if len(missing) == 1 and factory[names.index(missing[0])]:
+        # an imported factory matrix (data/ati_cal.py) states no uncertainty: E_n at the
+        # other calibration's steps with U = 0 for the factory's, an upper bound on |E_n|
+        zero = {axis: {"load": [], "U": []} for axis in a.layout.labels}
+        sa, sb = (zero, sb) if sa is None else (sa, zero)
+        note = (f"the {missing[0]} model is a factory matrix with no stated uncertainty: E_n "
+                f"at the other's steps with U_{missing[0]} = 0 (|E_n| is at most this)")
+    elif all(factory):
+        return None, "both models are factory matrices with no stated uncertainty: no E_n"
+    elif missing:
         return None, (f"the {' and '.join(missing)} model file has no certificate data (fitted "
                       "by an older fsdecouple, or with --no-verdict): no E_n; refit it, or gate "
                       "by --max-drift")
@@ -44,6 +55,8 @@ def en_figures(a: CouplingErrorModel, b: CouplingErrorModel, names=("old", "new"
     for i, axis in enumerate(a.layout.labels):
         worst = 0.0
         for own, data, other in ((names[0], sa[axis], sb[axis]), (names[1], sb[axis], sa[axis])):
+            if not data["load"]:
+                continue  # the factory matrix's: no steps of its own
             loads = np.asarray(data["load"], dtype=float)
             outputs = np.asarray(data["outputs"], dtype=float)
             f_a = a.decouple(outputs, rotate=False, exact=True)[:, i]
@@ -51,7 +64,8 @@ def en_figures(a: CouplingErrorModel, b: CouplingErrorModel, names=("old", "new"
             u_own = np.asarray(data["U"], dtype=float)
             order = np.argsort(other["load"])
             u_other = np.interp(loads, np.asarray(other["load"], dtype=float)[order],
-                                np.asarray(other["U"], dtype=float)[order])
+                                np.asarray(other["U"], dtype=float)[order]) if other["load"] \
+                else np.zeros_like(loads)
             u_a, u_b = (u_own, u_other) if own == names[0] else (u_other, u_own)
             en = (f_a - f_b) / np.sqrt(u_a ** 2 + u_b ** 2)
             worst = max(worst, float(np.abs(en).max(initial=0.0)))
@@ -60,4 +74,4 @@ def en_figures(a: CouplingErrorModel, b: CouplingErrorModel, names=("old", "new"
                        "en": float(e)}
                       for f, x, y, p, q, e in zip(loads, f_a, f_b, u_a, u_b, en, strict=True)]
         out[axis] = worst
-    return {"en": out, "steps": steps}, None
+    return {"en": out, "steps": steps}, note

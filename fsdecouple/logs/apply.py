@@ -38,6 +38,7 @@ from ..errors import InputError, where
 from ..files import atomic_write, refuse_overwriting_input
 from ..units import LOAD_UNITS, load_factor
 from .columns import Dropped, kept_fields, passed_columns
+from .outputs import log_outputs
 from .reader import Block, LogFile, is_parquet
 from .sinks import CsvSink, ParquetSink, force_decimals
 
@@ -130,6 +131,7 @@ def apply_file(
     workers: int | None = None,
     round_trip: bool = False,
     interval: float | None = None,
+    temperature: float | None = None,
 ) -> ApplySummary:
     """Decouple the voltage log ``voltages`` into ``out`` by eq. (11).
 
@@ -157,6 +159,9 @@ def apply_file(
         (:func:`~fsdecouple.logs.sinks.force_decimals`, 8 decimals for the
         paper's sensor in N), a tenth of the fast path's 1e-9.  Parquet output
         always stores the doubles.
+    temperature : float, optional
+        The temperature reading of every row, for a log without the model's temperature
+        column (:mod:`fsdecouple.logs.outputs`).
     interval : float, optional
         Add ``<component>_lo`` and ``<component>_hi``: bounds holding the true force
         with probability ``interval`` (0 < P < 1), by conformal prediction on the
@@ -178,7 +183,7 @@ def apply_file(
     refuse_overwriting_input(out, [path])
     with LogFile(path, settings) as log:
         return _apply(model, log, out, settings, tare, zero, unit, force, chunk_rows, progress,
-                      workers, round_trip, interval)
+                      workers, round_trip, interval, temperature)
 
 
 def check_options(model: CouplingErrorModel, settings: Settings | None, tare, zero,
@@ -252,7 +257,7 @@ def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarra
     The one place that decides a row's status (:data:`STATUSES`), for ``apply``'s
     blocks and for :func:`fsdecouple.logs.frame.decouple_frame` alike.
     """
-    u = raw - offsets
+    u = model.zero_corrected(raw, offsets)  # temperature terms first, if any
     code = np.zeros(len(u), dtype=np.int8)  # index into STATUSES
     empty = np.isnan(u).any(axis=1)
     code[empty] = MISSING_
@@ -292,11 +297,13 @@ def _limit_bounds(settings: Settings, model: CouplingErrorModel) -> tuple[np.nda
 
 
 def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit, force,
-           chunk_rows, progress, workers, round_trip, interval=None) -> ApplySummary:
+           chunk_rows, progress, workers, round_trip, interval=None,
+           temperature=None) -> ApplySummary:
     path = log.path
     layout = model.layout
-    names = [settings.columns[c] for c in layout.outputs]
-    require_columns(log.header, dict(zip(layout.outputs, names, strict=True)), path)
+    read, with_temperature = log_outputs(model, settings, log.header, path, temperature)
+    names = list(read.values())
+    require_columns(log.header, read, path)
     # unnamed columns, repeated names and a side table are not passed through
     keep, dropped = passed_columns(log.header, names)
     header = [log.header[i] for i in keep]
@@ -318,6 +325,7 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
     scale = np.array([settings.scale[c] for c in layout.outputs])
     jobs: Iterator[Callable[[], Block]] = log.blocks(names, chunk_rows=chunk_rows,
                                                      want_table=is_parquet(out), keep=keep)
+    jobs = with_temperature(jobs)
     summary = ApplySummary(force_unit=unit, output_unit=model.settings.output_unit,
                            outputs=layout.outputs, offsets=np.zeros(layout.m),
                            force_columns=forces, dropped=dropped)

@@ -1,9 +1,16 @@
-"""The certificate a lab signs: one self-contained HTML page that prints on A4, and
-the terminal's tables, both from the ``fsdecouple.certificate`` document
-(:func:`fsdecouple.evaluation.certificate.certificate`)."""
+"""The certificate a lab signs: one self-contained HTML page that prints on A4, the
+PDF (:mod:`.certificate_pdf`) and the terminal's tables, all from the
+``fsdecouple.certificate`` document
+(:func:`fsdecouple.evaluation.certificate.certificate`).
+
+:func:`certificate_blocks` lays the certificate out once, as a list of headings,
+tables, notes and figures; the HTML and the PDF each render that list, so both
+carry the same content and the same figures.
+"""
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from html import escape
 
 from matplotlib.figure import Figure
@@ -13,10 +20,17 @@ from .html import CSS, cell, figure_html, note, table, th, tr
 from .plots import to_png
 
 METRIC_NAMES = {"b": "b [%]", "b_prime": "b′ [%]", "f_c": "f_c [%]", "f_0": "f_0 [%]",
-                "v": "v [%]"}
+                "v": "v [%]", "c": "c [%]"}
 BUDGET_NAMES = {"reference": "reference", "reproducibility": "reproducibility",
-                "resolution": "resolution", "interpolation": "interpolation",
-                "zero": "zero", "model": "model (held-out)"}
+                "repeatability": "repeatability", "resolution": "resolution",
+                "reversibility": "reversibility", "interpolation": "interpolation",
+                "zero": "zero", "temperature": "temperature", "drift": "drift",
+                "model": "model (fsdecouple)"}
+CRITERIA = {"b": "b (reproducibility)", "b_prime": "b′ (repeatability)",
+            "f_c": "f_c (interpolation)", "f_0": "f_0 (zero)", "v": "v (reversibility)",
+            "c": "c (creep)", "reference": "reference uncertainty (Table 3)",
+            "resolution": "resolution (no step in the class range)",
+            "repetitions": "one repetition (no b, b′)"}
 PRINT_CSS = """
 @page{size:A4;margin:14mm 12mm}
 @media print{body{font-size:9pt;margin:0;padding:0}table{font-size:8pt}
@@ -26,7 +40,21 @@ section.component:first-of-type{page-break-before:auto}.noprint{display:none}}
 """
 
 
-def _fmt(v: float | None, digits: int = 4) -> str:
+@dataclass
+class Block:
+    """One piece of the certificate: ``kind`` is ``title``, ``heading`` (a component's
+    section starts), ``table``, ``note`` or ``figure`` (a component's U against load)."""
+
+    kind: str
+    text: str = ""
+    ident: str = ""
+    head: list[str] = field(default_factory=list)
+    rows: list[list[str]] = field(default_factory=list)
+    emphasis: int | None = None  # a table column shown larger (the class)
+
+
+def fmt(v: float | None, digits: int = 4) -> str:
+    """A figure as the certificate shows it (the same text in HTML, PDF and terminal)."""
     return "—" if v is None else f"{v:.{digits}g}"
 
 
@@ -58,9 +86,14 @@ def u_figure(doc: dict, axis: str) -> Figure:
     return fig
 
 
-def certificate_html(doc: dict) -> str:
-    """The certificate page: identity, reference, environment, per component the
-    figures, class, budget and a plot of U against load; notes and class limits."""
+def _limited(c: dict) -> str:
+    why = c.get("limited_by") or []
+    return ", ".join(CRITERIA.get(w, w) for w in why) if why else "— (the best class)"
+
+
+def certificate_blocks(doc: dict) -> list[Block]:
+    """The certificate's content in order: identity, classes, notes, per component its
+    figures, budget and plot, then the method (class limits and budget sources)."""
     unit, out_unit = doc["units"]["load"], doc["units"]["output"]
     ref = doc["reference"]
     ident = [("Sensor", doc["sensor"]), ("Serial number", doc["serial"] or "not stated"),
@@ -71,70 +104,113 @@ def certificate_html(doc: dict) -> str:
              ("Reference", ref["description"] or "not stated"),
              ("Reference uncertainty", f"{ref['uncertainty_percent_k2']:g} % (k = 2)"),
              ("Units", f"loads in {unit}, outputs in {out_unit}")]
-    ident += [(f"Environment: {k}", v) for k, v in doc["environment"].items()]
+    ident += [(f"Environment: {k}", str(v)) for k, v in doc["environment"].items()]
     if not doc["environment"]:
         ident.append(("Environment", "not stated (config: environment)"))
-    parts = [f"<h1>Calibration certificate: {escape(doc['sensor'])}</h1>\n",
-             table("identity", "Identity", [], [tr(cell(k), cell(str(v))) for k, v in ident])
-             .replace("<table ", '<table class="ident" ', 1)]
-    cls_rows = [tr(cell(c["axis"]), cell("positive" if c["sign"] == "+" else "negative"),
-                   f'<td class="class">{escape(c["class"])}</td>') for c in doc["classes"]]
-    parts.append(table("classes", "Class per component and load sign (ISO 376)",
-                       [tr(th("component"), th("loads"), th("class"))], cls_rows))
-    for n in doc["notes"]:
-        parts.append(note(n))
+    out = [Block("title", f"Calibration certificate: {doc['sensor']}"),
+           Block("table", "Identity", "identity", [], [[k, str(v)] for k, v in ident])]
+    out.append(Block("table", "Class per component and load sign (ISO 376:2011)", "classes",
+                     ["component", "loads", "class", "limited by", f"class range from [{unit}]"],
+                     [[c["axis"], "positive" if c["sign"] == "+" else "negative", c["class"],
+                       _limited(c), f"{c['from']:.4g}" if "from" in c else "—"]
+                      for c in doc["classes"]], emphasis=2))
+    out += [Block("note", n) for n in doc["notes"]]
     for axis in doc["full_scale"]:
         unit = _unit(doc, axis)
         steps = _steps(doc, axis)
         metrics = [m for m in METRIC_NAMES if any(m in s for s in steps.values())]
-        head = [tr(th(f"load [{unit}]"), *[th(METRIC_NAMES[m]) for m in metrics],
-                   th(f"U [{unit}]"))]
-        rows = [tr(cell(f"{load:g}"), *[cell(_fmt(s.get(m))) for m in metrics],
-                   cell(_fmt(s.get("U")))) for load, s in steps.items()]
+        out.append(Block("heading", f"Component {axis} (full scale {doc['full_scale'][axis]:g} "
+                                    f"{unit})", axis))
+        out.append(Block("table", f"ISO 376 figures of {axis} [%], U [{unit}]", f"figures-{axis}",
+                         [f"load [{unit}]", *[METRIC_NAMES[m] for m in metrics], f"U [{unit}]"],
+                         [[f"{load:g}", *[fmt(s.get(m)) for m in metrics], fmt(s.get("U"))]
+                          for load, s in steps.items()]))
         budget = [b for b in doc["budget"] if b["axis"] == axis]
-        bhead = [tr(th(f"load [{unit}]"), *[th(BUDGET_NAMES[c]) for c in BUDGET_NAMES],
-                    th("w_c"), th("W = 2 w_c"), th(f"U [{unit}]"))]
-        brows = [tr(cell(f"{b['load']:g}"), *[cell(_fmt(b[c], 3)) for c in BUDGET_NAMES],
-                    cell(_fmt(b["w_c"], 3)), cell(_fmt(b["W"], 3)), cell(_fmt(b["U"], 3)))
-                 for b in budget]
-        fig = figure_html(f"u-{axis}", to_png(u_figure(doc, axis)), f"U against load, {axis}",
-                          f"Expanded uncertainty U (k = 2) of each calibrated {axis} step [{unit}].")
-        parts.append(
-            f'<section class="component"><h2>Component {escape(axis)} (full scale '
-            f"{doc['full_scale'][axis]:g} {escape(unit)})</h2>\n"
-            + table(f"figures-{axis}", f"ISO 376 figures of {axis} [%], U [{unit}]", head, rows)
-            + table(f"budget-{axis}", f"Uncertainty budget of {axis}: relative standard "
-                                      "uncertainties [%] (EURAMET cg-4)", bhead, brows)
-            + fig + "</section>\n")
+        names = [c for c in BUDGET_NAMES if budget and c in budget[0]]
+        out.append(Block("table", f"Uncertainty budget of {axis}: relative standard "
+                                  "uncertainties [%] (EURAMET cg-4 v3.0)", f"budget-{axis}",
+                         [f"load [{unit}]", *[BUDGET_NAMES[c] for c in names], "w_c",
+                          "W = 2 w_c", f"U [{unit}]"],
+                         [[f"{b['load']:g}", *[fmt(b[c], 3) for c in names], fmt(b["w_c"], 3),
+                           fmt(b["W"], 3), fmt(b["U"], 3)] for b in budget]))
+        out.append(Block("figure", f"Expanded uncertainty U (k = 2) of each calibrated {axis} "
+                                   f"step [{unit}].", axis))
     lim = doc["class_limits"]
-    lrows = [tr(cell(c), *[cell(f"{v[m]:g}") for m in ("b", "b_prime", "f_c")])
-             for c, v in lim["limits_percent"].items()]
-    parts.append("<h2>Method</h2>\n" + table(
-        "limits", f"Class limits [%] ({lim['source']}), over steps at or above "
-                  f"{100 * lim['from_fraction_of_full_scale']:g} % of full scale",
-        [tr(th("class"), th("b"), th("b′"), th("|f_c|"))], lrows))
-    parts.append(note(
+    cols = ("b", "b_prime", "f_c", "f_0", "v", "c")
+    ref_lim = lim.get("reference_limits_percent_k2", {})
+    res = lim.get("lower_limit_resolutions", {})
+    out.append(Block("heading", "Method", "method"))
+    out.append(Block("table", f"Class limits [%] ({lim['source']}; reference forces: "
+                              f"{lim.get('reference_source', 'ISO 376:2011, Table 3')})", "limits",
+                     ["class", "b", "b′", "|f_c|", "|f_0|", "v", "c", "reference (k = 2)",
+                      "range from"],
+                     [[c, *[f"{v[m]:g}" if m in v else "—" for m in cols],
+                       f"{ref_lim[c]:g}" if c in ref_lim else "—",
+                       f"{res[c]:g} r" if c in res else "—"]
+                      for c, v in lim["limits_percent"].items()]))
+    sources = doc.get("budget_sources", {})
+    out.append(Block("table", "Sources of the budget's contributions", "sources",
+                     ["contribution", "source"],
+                     [[BUDGET_NAMES.get(c, c), s] for c, s in sources.items()]))
+    out.append(Block("note", (
         "b = 100 (max X_i − min X_i)/|mean X_i|; b′ = 100 |X_2 − X_1|/|(X_1 + X_2)/2|; "
         "f_c = 100 (X̄ − X_a)/X_a, X_a a least-squares cubic without constant term per load "
-        "sign; X_i the zero-corrected prime output of repetition i. The budget combines "
-        "relative standard uncertainties in quadrature (w_c) and states W = 2 w_c, "
-        f"U = W |load| in {doc['units']['load']}; the model contribution is the decoupled force's error on "
-        "held-out calibration points, interference included."))
+        "sign; f_0 = 100 (i_f − i_0)/X_N; v = 100 |X′ − X|/X; c = 100 (i_300 − i_30)/X_N; "
+        "X_i the deflection of repetition i. A class holds when every criterion the sweeps "
+        "give is within its limits at every step of its range (from the resolution's lower "
+        f"limit; {100 * lim['from_fraction_of_full_scale']:g} % of full scale where the "
+        "resolution is unknown), and the reference uncertainty within Table 3's. The budget "
+        "combines relative standard uncertainties in quadrature (w_c) and states W = 2 w_c, "
+        f"U = W |load| in {doc['units']['load']}; the model contribution is fsdecouple's own "
+        "addition: the decoupled force's error on held-out calibration points, interference "
+        "included.")))
+    return out
+
+
+def certificate_html(doc: dict) -> str:
+    """The certificate page: :func:`certificate_blocks` as one self-contained HTML page."""
+    parts, open_section = [], False
+    for b in certificate_blocks(doc):
+        if b.kind == "title":
+            parts.append(f"<h1>{escape(b.text)}</h1>\n")
+        elif b.kind == "heading":
+            if open_section:
+                parts.append("</section>\n")
+            open_section = b.ident != "method"
+            parts.append(f'<section class="component"><h2>{escape(b.text)}</h2>\n'
+                         if open_section else f"<h2>{escape(b.text)}</h2>\n")
+        elif b.kind == "note":
+            parts.append(note(b.text))
+        elif b.kind == "figure":
+            axis = b.ident
+            parts.append(figure_html(f"u-{axis}", to_png(u_figure(doc, axis)),
+                                     f"U against load, {axis}", b.text))
+        else:
+            head = [tr(*[th(h) for h in b.head])] if b.head else []
+            rows = [tr(*[f'<td class="class">{escape(v)}</td>' if i == b.emphasis else cell(v)
+                         for i, v in enumerate(r)]) for r in b.rows]
+            html = table(b.ident, b.text, head, rows)
+            parts.append(html.replace("<table ", '<table class="ident" ', 1)
+                         if b.ident == "identity" else html)
+    if open_section:
+        parts.append("</section>\n")
     parts.append('<p class="noprint note">Print this page on A4 (the print style sheet '
-                 "starts each component on its own page).</p>")
+                 "starts each component on its own page), or write the PDF: "
+                 "certificate -o certificate.pdf.</p>")
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
             f"<title>Calibration certificate: {escape(doc['sensor'])}</title>"
             f"<style>{CSS}{PRINT_CSS}</style></head><body>\n{''.join(parts)}</body></html>\n")
 
 
 def certificate_tables(doc: dict) -> list[Table]:
-    """The terminal's view: classes, and per component its figures and U."""
+    """The terminal's view: classes and what limits them, and per component its figures and U."""
     out = []
     t = Table(title=f"Certificate of {doc['sensor']}: class (ISO 376)")
-    for col in ("component", "loads", "class"):
+    for col in ("component", "loads", "class", "limited by"):
         t.add_column(col)
     for c in doc["classes"]:
-        t.add_row(c["axis"], "positive" if c["sign"] == "+" else "negative", c["class"])
+        t.add_row(c["axis"], "positive" if c["sign"] == "+" else "negative", c["class"],
+                  _limited(c))
     out.append(t)
     for axis in doc["full_scale"]:
         unit = _unit(doc, axis)
@@ -144,17 +220,7 @@ def certificate_tables(doc: dict) -> list[Table]:
         for col in (f"load [{unit}]", *[METRIC_NAMES[m] for m in metrics], f"U [{unit}]"):
             t.add_column(col, justify="right")
         for load, s in steps.items():
-            t.add_row(f"{load:g}", *[_fmt(s.get(m)) for m in metrics], _fmt(s.get("U")))
+            t.add_row(f"{load:g}", *[fmt(s.get(m)) for m in metrics], fmt(s.get("U")))
         out.append(t)
     return out
 
-
-def write_certificate(doc: dict, path, *, force: bool = False) -> None:
-    """Write the certificate of ``doc`` as one HTML file, atomically."""
-    from pathlib import Path
-
-    from ..files import atomic_write
-
-    html = certificate_html(doc)
-    with atomic_write(Path(path), force=force) as fh:
-        fh.write(html)

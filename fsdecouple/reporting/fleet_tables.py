@@ -16,8 +16,8 @@ from ..core.metrics import pct
 FAILED = "bold red"
 
 
-def _signed(v: float) -> str:
-    return f"{v:+.3f} %"
+def _signed(v: float | None) -> str:
+    return "-" if v is None else f"{v:+.3f} %"
 
 
 def drift_table(doc: dict[str, Any]) -> Table:
@@ -30,9 +30,17 @@ def drift_table(doc: dict[str, Any]) -> Table:
                 "force, largest difference (eq. 11)"):
         t.add_column(col, justify="right")
 
-    def cell(v: float, text: str) -> Text:
+    def cell(v: float | None, text: str) -> Text:
+        if v is None:  # an imported factory matrix has no slopes (fleet/drift.py)
+            return Text("-")
         return Text(text, style=FAILED if gate is not None and abs(v) > gate else "")
 
+    temp = doc.get("temperature")
+    if temp:  # temperature terms (core/temperature.py): their change, new - old
+        t.caption = temp.get("note") or (
+            f"temperature terms, new - old: T0 {temp['t0_change']:+.4g} {temp['unit']}; " + "; ".join(
+                f"{o} b {temp['b_change'][o]:+.3g} {doc['units']['output']}/{temp['unit']}, "
+                f"g {temp['g_change'][o]:+.3g} 1/{temp['unit']}" for o in temp["b_change"]))
     for a, c in doc["components"].items():
         chi = Text(", ").join(cell(v, f"{name} {v:.3f} %") for name, v in c["chi_max_pct"].items())
         t.add_row(a, cell(c["slope_change_pct"], _signed(c["slope_change_pct"])), chi,
@@ -48,9 +56,12 @@ def drift_line(doc: dict[str, Any]) -> str | None:
         return f"note: {doc['en_note']}" if doc.get("en_note") else None
     gates = " or ".join(([f"--max-drift {doc['max_drift']:g} %"] if doc["max_drift"] is not None
                          else []) + (["|E_n| > 1"] if doc.get("en_gate") else []))
+    # a note beside E_n figures says how they were made (a factory matrix: U = 0 for it)
+    note = f"; note: {doc['en_note']}" if en_text and doc.get("en_note") else ""
     if doc["passed"]:
-        return f"no change exceeds {gates}" + (f" ({en_text})" if en_text else "")
-    return f"changed beyond {gates}: {'; '.join(doc['exceeded'])}" + (f" ({en_text})" if en_text else "")
+        return f"no change exceeds {gates}" + (f" ({en_text})" if en_text else "") + note
+    return (f"changed beyond {gates}: {'; '.join(doc['exceeded'])}" + (f" ({en_text})" if en_text
+                                                                       else "") + note)
 
 
 def fleet_table(doc: dict[str, Any]) -> Table:
@@ -83,7 +94,8 @@ def fleet_gate_lines(doc: dict[str, Any]) -> list[str]:
 
 
 def _largest(drift: dict[str, Any]) -> float:
-    return max(max(abs(c["slope_change_pct"]), abs(c["force_max_pct"]), *c["chi_max_pct"].values())
+    return max(max(abs(c["slope_change_pct"] or 0.0), abs(c["force_max_pct"]),
+                   *c["chi_max_pct"].values())
                for c in drift["components"].values())
 
 

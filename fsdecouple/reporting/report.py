@@ -288,6 +288,11 @@ def build_report(model, cv: dict | None = None, calib=None) -> Report:
         The calibration set, to plot its points.
     """
     model.layout.one_output_each("report")
+    if getattr(model, "imported", False):
+        from ..errors import InputError
+
+        raise InputError("report: the model is an imported factory matrix (docs/ati.md), with no "
+                         "fit, chi or calibration of its own to report; validate it on your set")
     if cv is not None:
         check_cv_fits(model, cv)
     figs: dict[str, bytes] = {}

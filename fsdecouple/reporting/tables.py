@@ -67,7 +67,35 @@ def ingest_tables(summary: dict[str, Any]) -> list:
     return out
 
 
+def imported_tables(model) -> list:
+    """An imported factory matrix (data/ati_cal.py): f = C u, full scale, temperature terms."""
+    units, layout = model.settings.units, model.layout
+    t = Table(title=f"Factory calibration matrix f = C u, sensor {model.settings.sensor} "
+                    "(imported; decoupled as ATIDAQ does)")
+    t.add_column("component", justify="right")
+    t.add_column("full scale", justify="right")
+    for o in layout.outputs:
+        t.add_column(f"{o} [load/{units.output_of(0)}]", justify="right")
+    for a, axis in enumerate(layout.labels):
+        t.add_row(f"{axis} [{units.load_of(a)}]", f"{model.settings.full_scale[a]:g}",
+                  *(f"{v:.6g}" for v in model.matrix[a]))
+    out = [t]
+    temp = model.temperature
+    if temp is not None:
+        c = Table(title=f"Temperature terms: u(T0) = (u - b (T - T0)) / (1 + g (T - T0)), "
+                        f"T = {layout.outputs[temp.channel]}, T0 = {temp.t0:g} {temp.unit}")
+        for col in ("output", f"b [{units.output_of(0)}/{temp.unit}]", f"g [1/{temp.unit}]"):
+            c.add_column(col, justify="right")
+        for i, o in enumerate(layout.outputs):
+            if i != temp.channel:
+                c.add_row(o, f"{temp.b[i]:+.6g}", f"{temp.g[i]:+.6g}")
+        out.append(c)
+    return out
+
+
 def fit_tables(model) -> list:
+    if getattr(model, "imported", False):
+        return imported_tables(model)
     rep = model.report
     units = model.settings.units
     volts = units == Units()  # the paper's figures keep their paper-like format

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import base64
+import io
 import json
+import re
+import shutil
 
 import numpy as np
 import pandas as pd
@@ -10,6 +14,7 @@ import pytest
 from conftest import assert_one_line_error, invoke
 
 from fsdecouple import decouple_frame, load_model
+from fsdecouple.reporting.certificate import fmt
 from fsdecouple.sim.simulate import simulate
 
 
@@ -72,7 +77,7 @@ def test_apply_interval_adds_bounds_and_decouple_frame_gives_the_same(fitted, si
     assert inside > 0.8  # one log; the coverage over seeds is test_coverage.py's
 
 
-@pytest.mark.parametrize("p", ["1.5", "0", "-0.2"])
+@pytest.mark.parametrize("p", ["1.5", "0", "-0.2", "1", "nan", "inf"])
 def test_interval_outside_0_1_is_one_line_and_writes_nothing(fitted, sim_dir, tmp_path, p):
     out = tmp_path / "f.csv"
     r = invoke(["apply", fitted, sim_dir / "task_voltages.csv", "-o", out, "--tare", 200,
@@ -84,3 +89,163 @@ def test_interval_outside_0_1_is_one_line_and_writes_nothing(fitted, sim_dir, tm
 def test_export_says_the_header_has_no_intervals(fitted, tmp_path):
     r = invoke(["export", fitted, "-o", tmp_path / "d.h"])
     assert "apply --interval's bounds are not in it" in r.stdout
+
+
+def test_certificate_pdf_has_the_json_figures_on_a4_with_fonts_embedded(fitted, sim_dir, tmp_path):
+    from PIL import Image
+    from pypdf import PdfReader
+
+    doc = json.loads(invoke(["certificate", fitted, sim_dir / "calibration", "--json"]).stdout)
+    pdf, html = tmp_path / "cert.pdf", tmp_path / "cert.html"
+    invoke(["certificate", fitted, sim_dir / "calibration", "-o", pdf])
+    invoke(["certificate", fitted, sim_dir / "calibration", "-o", html])
+    assert pdf.read_bytes().startswith(b"%PDF-")
+    reader = PdfReader(pdf)
+    lines = {ln.strip() for page in reader.pages for ln in page.extract_text().splitlines()}
+    for p in reader.pages:  # A4: 210 x 297 mm in points
+        assert (float(p.mediabox.width), float(p.mediabox.height)) == pytest.approx(
+            (210 / 25.4 * 72, 297 / 25.4 * 72), abs=0.01)
+    # every figure of --json, as the certificate prints it, stands in the PDF's text
+    for r in doc["records"]:
+        assert fmt(r["value"]) in lines, r
+    for b in doc["budget"]:
+        assert fmt(b["U"], 3) in lines and fmt(b["model"], 3) in lines, b
+    for c in doc["classes"]:
+        assert c["class"] in lines
+    text = " ".join(lines)
+    for needle in ("Calibration certificate: paper-3axis", "0.05 % (k = 2)",
+                   "fsdecouple's own addition", "EURAMET cg-4 v3.0", "ISO 376:2011, Table 3"):
+        assert needle in text, needle
+    # fonts: every one embedded (a FontFile2 stream), none of the 14 standard fonts
+    for page in reader.pages:
+        for font in page["/Resources"]["/Font"].values():
+            font = font.get_object()
+            desc = (font["/DescendantFonts"][0].get_object() if "/DescendantFonts" in font
+                    else font)["/FontDescriptor"].get_object()
+            assert "/FontFile2" in desc, font["/BaseFont"]
+    # the figures are the HTML's: one per component, the same pixels across
+    images = [img.image for page in reader.pages for img in page.images]
+    pngs = [Image.open(io.BytesIO(base64.b64decode(m)))
+            for m in re.findall(r'src="data:image/png;base64,([^"]+)"', html.read_text())]
+    assert len(images) == len(pngs) == len(doc["full_scale"])
+    assert [i.size for i in images] == [p.size for p in pngs]
+    # the HTML carries the same content
+    page = html.read_text()
+    for c in doc["classes"]:
+        assert f'<td class="class">{c["class"]}</td>' in page
+
+
+def test_certificate_suffix_other_than_html_or_pdf_is_one_line(fitted, sim_dir, tmp_path):
+    out = tmp_path / "cert.docx"
+    r = invoke(["certificate", fitted, sim_dir / "calibration", "-o", out], 2)
+    assert_one_line_error(r, "cert.docx", "HTML (.html) or PDF (.pdf)")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("value", ["0", "0.0", "abc", "-0.01", ".nan"])
+def test_reference_uncertainty_not_above_zero_or_not_a_number_is_one_line(
+        fitted, sim_dir, tmp_path, value):
+    config = tmp_path / "lab.yaml"
+    config.write_text(f"reference_uncertainty: {value}\n")
+    r = invoke(["certificate", fitted, sim_dir / "calibration", "-c", config], 2)
+    assert_one_line_error(r, "reference_uncertainty")
+
+
+def test_a_copied_repetition_is_refused_naming_the_file(fitted, sim_dir, tmp_path):
+    copy = tmp_path / "calibration"
+    shutil.copytree(sim_dir / "calibration", copy)
+    shutil.copy(copy / "rep1.csv", copy / "rep7.csv")  # byte for byte rep1
+    out = tmp_path / "c.html"
+    r = invoke(["certificate", fitted, copy, "-o", out], 2)
+    assert_one_line_error(r, "rep7.csv", "rep1.csv")
+    assert not out.exists()
+    (copy / "rep7.csv").unlink()
+    (copy / "rep6.csv").rename(copy / "rep8.csv")  # renamed, content unchanged
+    r = invoke(["certificate", fitted, copy], 2)
+    assert_one_line_error(r, "rep8.csv", "rep6.csv")
+    (copy / "rep8.csv").unlink()  # a repetition missing (min_repetitions would say so first)
+    config = tmp_path / "five.yaml"
+    config.write_text("min_repetitions: 5\n")
+    r = invoke(["certificate", fitted, copy, "-c", config], 2)
+    assert_one_line_error(r, "fitted on rep6.csv too")
+
+
+def test_certificate_takes_the_config_fit_was_given_on_sweeps_out_and_back(tmp_path):
+    simulate(tmp_path / "s", seed=4, hysteresis=0.001)
+    config = tmp_path / "lab.yaml"
+    config.write_text("serial: SN-7\nreference_uncertainty: 0.01\n")  # no zero key
+    model = tmp_path / "m.json"
+    r = invoke(["fit", tmp_path / "s" / "calibration", "-c", config, "-o", model])
+    assert "zero: fit" in r.stdout + r.stderr  # fit chose zero: fit itself
+    doc = json.loads(invoke(["certificate", model, tmp_path / "s" / "calibration", "-c", config,
+                             "--json"]).stdout)
+    assert doc["serial"] == "SN-7" and all(r["value"] >= 0 for r in doc["records"]
+                                           if r["metric"] == "v")
+    config.write_text("zero: rows\n")  # a zero the config does state is compared
+    r = invoke(["certificate", model, tmp_path / "s" / "calibration", "-c", config], 2)
+    assert_one_line_error(r, "zero is not the model's")
+
+
+@pytest.fixture(scope="module")
+def timed(sim_dir, tmp_path_factory):
+    """The simulated set with two time columns: 't' is not a number in rep2, row 5;
+    't2' goes back in rep4, row 9; fitted (fit reads neither)."""
+    d = tmp_path_factory.mktemp("timed")
+    calib = d / "calibration"
+    calib.mkdir()
+    for f in sorted((sim_dir / "calibration").glob("rep*.csv")):
+        t = pd.read_csv(f)
+        t["t"] = np.arange(len(t)) * 60.0
+        t["t2"] = t["t"]
+        if f.name == "rep2.csv":
+            t["t"] = t["t"].astype(object)
+            t.loc[3, "t"] = "soon"
+        if f.name == "rep4.csv":
+            t.loc[7, "t2"] = 1.0
+        t.to_csv(calib / f.name, index=False)
+    model = d / "m.json"
+    invoke(["fit", calib, "-o", model])
+    return model, calib
+
+
+@pytest.mark.parametrize(("column", "needles"), [
+    ("t", ("rep2.csv, row 5", "'t'", "soon")),
+    ("t2", ("rep4.csv, row 9", "'t2'", "never goes back")),
+    ("time", ("rep1.csv", "no column 'time'", "creep")),
+])
+def test_a_creep_column_that_is_not_time_is_one_line(timed, tmp_path, column, needles):
+    model, calib = timed
+    config = tmp_path / "c.yaml"
+    config.write_text(f"creep: {{column: {column}}}\n")
+    out = tmp_path / "c.pdf"
+    r = invoke(["certificate", model, calib, "-c", config, "-o", out], 2)
+    assert_one_line_error(r, *needles)
+    assert not out.exists()
+
+
+def test_certificate_drift_from_compare_json(fitted, sim_dir, tmp_path):
+    other = tmp_path / "other"
+    simulate(other, seed=12)
+    m2 = tmp_path / "m2.json"
+    invoke(["fit", other / "calibration", "-o", m2])
+    cmp = tmp_path / "cmp.json"
+    from fsdecouple.fleet.drift import compare  # what compare --json prints; it exits 1 on E_n > 1
+
+    cmp.write_text(json.dumps(compare(fitted, m2)))
+    plain = json.loads(invoke(["certificate", fitted, sim_dir / "calibration", "--json"]).stdout)
+    doc = json.loads(invoke(["certificate", fitted, sim_dir / "calibration", "--drift", cmp,
+                             "--json"]).stdout)
+    steps = json.loads(cmp.read_text())["en_steps"]
+    for b, p in zip(doc["budget"], plain["budget"], strict=True):
+        # |F_old - F_new| / |L| / sqrt 3 [%] where compare has this very step (the larger
+        # where it has it from both calibrations)
+        same = [s for s in steps if s["axis"] == b["axis"] and s["load"] == b["load"]]
+        if same:
+            moved = max(abs(s["F_old"] - s["F_new"]) for s in same)
+            assert b["drift"] == pytest.approx(100 * moved / abs(b["load"]) / 3 ** 0.5, rel=1e-9)
+        assert b["U"] >= p["U"] and p["drift"] == 0.0
+    assert "compare" in doc["drift_source"]
+    bad = tmp_path / "bad.json"
+    bad.write_text("{}")
+    r = invoke(["certificate", fitted, sim_dir / "calibration", "--drift", bad], 2)
+    assert_one_line_error(r, "bad.json", "compare --json")

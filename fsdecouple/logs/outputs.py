@@ -1,0 +1,56 @@
+"""Which columns of a log are the model's outputs, and a temperature given instead of read.
+
+The outputs are read by the config's column names.  A model with temperature terms
+(:mod:`fsdecouple.core.temperature`) reads its temperature as one of its outputs (an
+ATI thermistor).  A log without that column is refused in one line, unless
+``apply --temperature VALUE`` gives the reading for every row: then the column is not
+read and a constant one is put in its place.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Iterable, Iterator
+
+import numpy as np
+
+from ..data.ati_model import check_log_gauges
+from ..data.csv_text import HEADER_ROW
+from ..errors import InputError, where
+
+
+def log_outputs(model, settings, header, path, temperature: float | None = None
+                ) -> tuple[dict[str, str], Callable[[Iterable], Iterator]]:
+    """``({output: log column} to read, jobs -> jobs)``: the second adds the temperature
+    column to each block when ``temperature`` is given, else passes the jobs through.
+
+    Gauge columns beyond an imported factory matrix's NumGages are refused
+    (:func:`fsdecouple.data.ati_model.check_log_gauges`)."""
+    check_log_gauges(model, header, path)  # an imported factory matrix: NumGages columns
+    layout = model.layout
+    read = {c: settings.columns[c] for c in layout.outputs}
+    terms = model.temperature
+    if temperature is not None and terms is None:
+        raise InputError("--temperature: the model has no temperature terms; nothing would use it")
+    if terms is None:
+        return read, iter
+    t_name = read[layout.outputs[terms.channel]]
+    if temperature is None:
+        if t_name not in header:
+            raise InputError(f"{where(path, HEADER_ROW)}: no column '{t_name}', the temperature "
+                             "the model corrects for (core/temperature.py); give its reading for "
+                             "every row with --temperature VALUE")
+        return read, iter
+    if t_name in header:
+        raise InputError(f"{where(path, HEADER_ROW, t_name)}: --temperature: the log has this "
+                         "column, which it would replace; give one or the other")
+    del read[layout.outputs[terms.channel]]
+    value = float(temperature)
+
+    def with_column(job):
+        def add() -> object:
+            block = job()
+            return dataclasses.replace(block, u=np.insert(block.u, terms.channel, value, axis=1))
+        return add
+
+    return read, lambda jobs: (with_column(job) for job in jobs)
