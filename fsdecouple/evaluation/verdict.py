@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from ..config import Settings
+from ..core.intervals import centre
 from ..core.metrics import interference_error, pct
 from ..data.calibration import CalibrationSet
 from ..errors import InputError
@@ -99,6 +100,8 @@ def heldout_verdict(calib: CalibrationSet, settings: Settings, *, protocol: str 
         heldout[m]["worst_rms"] = rms
     # the held-out forces of each method, for the certificate's budget and intervals
     predictions = {m: heldout_predictions(rounds, models, m) for m in ("svr", "linear")}
+    # and where apply --interval centres its intervals (refined: core/intervals.py)
+    centred = {m: heldout_predictions(rounds, models, m, centre)[1] for m in ("svr", "linear")}
     trained = float(np.mean([len(r.train.repetitions) for r in rounds]))
     # rig rows (several loads a row, fitting/joint.py): judged by every component's error,
     # for eq. (12) sees no error of a component in its own load; the paper's sweeps by gamma
@@ -115,6 +118,7 @@ def heldout_verdict(calib: CalibrationSet, settings: Settings, *, protocol: str 
         "better": better,
         "records": records,
         "predictions": predictions,
+        "centred": centred,
         "trained": trained,
     }
 
@@ -151,7 +155,7 @@ def verdict_warning(verdict: dict[str, Any], method: str) -> str | None:
 
 def summary(verdict: dict[str, Any]) -> dict[str, Any]:
     """The verdict without its records: what the model file and ``fit --json`` keep."""
-    return {k: v for k, v in verdict.items() if k not in ("records", "predictions", "trained")}
+    return {k: v for k, v in verdict.items() if k not in ("records", "predictions", "centred", "trained")}
 
 
 def calibrate(calib: CalibrationSet, settings: Settings, *, method: str = "svr",
@@ -214,7 +218,8 @@ def calibrate(calib: CalibrationSet, settings: Settings, *, method: str = "svr",
         model.report.verdict = {**summary(found), "asked": method, "chosen": chosen}
         if not settings.layout.overdetermined:  # per prime output: none with M > N outputs
             model.report.certificate = certificate_data(calib, model,
-                                                        *found["predictions"][chosen], found["trained"])
+                                                        *found["predictions"][chosen], found["trained"],
+                                                        found["centred"][chosen])
         warning = verdict_warning(found, chosen)
         if warning:
             model.report.warnings.append(warning)
