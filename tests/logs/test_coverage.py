@@ -8,13 +8,14 @@ rows; a component's coverage is the fraction of rows whose true force lies in
 [lo, hi], its width ratio the mean width over 5 x 1.96 x the RMS error of decoupling
 with the simulator's true coupling functions (the floor).
 
-The limits come from ``benchmarks/interval_coverage.py`` over 62 sensors (docs/
-certificate.md): at P = 0.95 the largest width ratio was 0.72, 86 % of the component
-coverages lay in 0.92-0.985, the median per scenario 0.945-0.97 and over all 0.961;
-at P = 0.9 the median was 0.914.  One log's coverage scatters from sensor to sensor
-(the final model's own error is one realisation, the same on many rows), so single
-sensors are not held to the window; the fraction in it is, with two binomial standard
-deviations of margin for 36 coverages (0.86 - 2 x 0.058 -> 0.72).
+The limits come from ``benchmarks/interval_coverage.py`` over 58 sensors (docs/
+certificate.md): at P = 0.95 the largest width ratio was 0.71, 75-88 % of the component
+coverages lay in 0.92-0.985 in these three scenarios (79 % on average), the median per
+scenario 0.949-0.966; in memory, on 62 sensors, the median at P = 0.9 was 0.914.  One
+log's coverage scatters from sensor to sensor (the final model's own error is one
+realisation, the same on many rows), so single sensors are not held to the window;
+the fraction in it is, with two binomial standard deviations of margin for 36
+coverages (0.79 - 2 x 0.068 -> 0.65).
 """
 
 from __future__ import annotations
@@ -70,14 +71,14 @@ def measured(tmp_path_factory):
 def test_every_sensor_keeps_the_width_bound(measured):
     _, width = measured
     for label, w in width.items():
-        assert (w <= 0.9).all(), (label, w)  # largest measured 0.72
+        assert (w <= 0.9).all(), (label, w)  # largest measured 0.71
 
 
 def test_the_coverage_at_095_holds_per_scenario_and_mostly_per_sensor(measured):
     coverage, _ = measured
     everything = np.concatenate([c[0.95].ravel() for c in coverage.values()])
     inside = ((everything >= 0.92) & (everything <= 0.985)).mean()
-    assert inside >= 0.72, everything
+    assert inside >= 0.65, everything
     for label, c in coverage.items():
         assert 0.93 <= np.median(c[0.95]) <= 0.985, (label, c[0.95])
 
