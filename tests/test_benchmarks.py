@@ -24,6 +24,8 @@ CASES = {
     "accuracy": ["accuracy.py", "--seeds", "1", "--scenarios", "hysteresis"],
     "fleet": ["fleet.py", "--quick", "--repeats", "1"],
     "c_export": ["c_export.py", "--repeats", "1", "--vectors", "1000"],
+    # issue 33's per-sensor coverage of apply --interval, one sensor with a lag
+    "interval_coverage": ["interval_coverage.py", "--seeds", "1", "--scenarios", "hysteresis 0.1"],
 }
 
 

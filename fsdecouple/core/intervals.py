@@ -1,40 +1,54 @@
-"""An interval on every decoupled force: conformal prediction on held-out residuals.
+"""An interval on every decoupled force: conformal prediction on held-out residuals,
+with a term for the model's error under combined loads.
 
 ``fit`` scores the model's method on calibration points it was not fitted on (the
-held-out rounds of the verdict, :mod:`fsdecouple.evaluation.heldout`).  Each point's
-residual r = F_hat - F on component a becomes a normalised score s = |r| / sigma_a,
-and for a coverage P the half-width on a log's row is q sigma'_a, q the
-ceil((n + 1) P)-th smallest of the n scores: split conformal prediction (Vovk et al.,
-*Algorithmic Learning in a Random World*, 2005; normalised scores: Papadopoulos et al.,
-2008; Lei et al., JASA 2018), the rounds' models standing in for the final one as in
-cross-conformal prediction.
+held-out rounds of the verdict, :mod:`fsdecouple.evaluation.heldout`), each point
+decoupled where the interval is centred (:func:`centre`).  Each residual r = F_hat - F
+on component a becomes a normalised score |r| / sigma_a, and for a coverage P the
+half-width on a log's row is q sigma'_a(row), q the ceil((n + 1) P)-th smallest of the
+n scores: split conformal prediction (Vovk et al., *Algorithmic Learning in a Random
+World*, 2005; normalised scores: Papadopoulos et al., 2008; Lei et al., JASA 2018), the
+rounds' models standing in for the final one as in cross-conformal prediction.
 
 sigma (a held-out point) and sigma' (a row of a tared log decoupled by the final
-model) differ, and a noise model says by how much.  With s the noise of one reading
-in the decoupled force (from the repetitions' scatter), m zero readings per sweep, N
-components and n repetitions (n_t in a round's training set):
+model) differ, and a variance model says by how much.  With s the noise of one
+reading in the decoupled force (from the repetitions' scatter), m zero readings per
+sweep (m = inf with ``zero: fit``), n repetitions (n_t in a round's training set):
 
 * a zero-corrected reading carries its sweep's zero readings too: s^2 (1 + 1/m); a
   log's row, tared over many rows, s^2;
-* eq. (11) has N estimated terms (the slope and N - 1 chi) of output a, each from n
-  repetitions of such readings: N s^2 (1 + 1/m) / n (n_t for a round's model);
+* the model's own error at one load (chi and slope estimated from noisy sweeps, a lag
+  eq. (1) cannot represent) adds v s^2 on a held-out point, which loads one component.
+  v is measured: the mean of r^2 / s^2 - (1 + 1/m) over every held-out point and
+  component, less p = (1 + 1/m) / (2 n_t) (the same order as its own scatter: the
+  rounds are three realisations of the model's error), and never below p;
+* a combined load carries every loaded component's share at once (the coupling error
+  model is additive, eq. 1, so are its errors): on a row with loads f_b the model adds
+  v s^2 (n_t / n) sum_b min(1, |f_b| / L_b), L_b the smallest calibrated non-zero
+  |load| of component b; n_t / n, the final model being fitted on all n repetitions.
 
-so sigma^2 = s^2 (1 + 1/m) (1 + N / n_t) and sigma'^2 = s^2 (1 + N (1 + 1/m) / n).  What
-the noise model misses (the SVR's own error, a sensor that is not the paper's) stays
-in the scores and widens q.  The scores of all components are pooled (they are
-unit-free), so q does not hang on one component's few hundred points.  With one
-repetition s is unknown: each component keeps its own raw residuals (sigma = sigma' = 1).
+So sigma^2 = s^2 (1 + 1/m + v) and sigma'^2 = s^2 + v s^2 (n_t / n) sum_b min(1, |f_b| /
+L_b): the term grows with the loads and the number of components loaded.  Single-axis
+points never show that sum; it is the assumption (errors of the loads add, independent)
+on which the intervals hold under combined loads, and docs/certificate.md gives its
+measured coverage.  The scores of all components are pooled (they are unit-free), so q
+does not hang on one component's few hundred points.  With one repetition s is
+unknown: each component keeps its own raw residuals (sigma = sigma' = 1).  A sweep's
+zero-load points are its own reference (r = 0 by construction) and score nothing.
 
 Under combined loads eq. (11) also errs in second order (each chi is read at an
-output that carries the other components' coupling; single-axis points never show
-it): the interval is centred on the forces refined by ``EXTRA_STEPS`` more
-fixed-point steps (eqs. 5-6, :mod:`fsdecouple.core.decouple`), so it is not symmetric
-about the row's force, which stays eq. (11)'s.
+output that carries the other components' coupling): the interval is centred on the
+forces refined by ``EXTRA_STEPS`` more fixed-point steps (eqs. 5-6,
+:mod:`fsdecouple.core.decouple`), so it is not symmetric about the row's force, which
+stays eq. (11)'s.  The held-out points are decoupled the same way, so the scores
+measure the centre's error and not eq. (11)'s second-order error, which on a strongly
+coupled sensor (5 % F.S.) is several times the noise even on single-axis points.
 
-The scores and sigma' live in the model file's ``report.certificate["interval"]``.
-No conformal library is used: MAPIE and crepes refit an estimator per fold through
-scikit-learn's API, where these residuals come from the verdict's own rounds and the
-method is a sort and an index.
+The scores, s, v s^2 n_t / n (``load_variance``) and L_b (``first_step``) live in the
+model file's ``report.certificate["interval"]``; :func:`check_interval_data` checks
+them when they are used.  No conformal library is used: MAPIE and crepes refit an
+estimator per fold through scikit-learn's API, where these residuals come from the
+verdict's own rounds and the method is a sort and an index.
 """
 
 from __future__ import annotations
@@ -52,28 +66,86 @@ EXTRA_STEPS = 3  # refinement steps that estimate eq. (11)'s second-order error
 def interval_calibration(true: np.ndarray, predicted: np.ndarray, labels, noise=None,
                          zeros: float = 1.0, repetitions: int = 1,
                          trained: float = 1.0) -> dict[str, Any]:
-    """The conformal scores of held-out forces (``true``, ``predicted``: shape (n, N)).
+    """The conformal scores of held-out forces (``true``, ``predicted``: shape (n, N)
+    [load unit]), and the variance model of a log's row.
 
-    ``noise``: per component, s [load unit] (NaN: unknown); ``zeros``: m;
-    ``repetitions``: n; ``trained``: n_t.  Returns ``{"scores": pooled sorted scores
-    or None, "components": {axis: {"sigma": sigma', "scores": own sorted scores or None}}}``.
+    ``noise``: per component, s [load unit] (NaN: unknown); ``zeros``: m (inf: zero
+    offsets fitted); ``repetitions``: n; ``trained``: n_t.  Returns ``{"scores": pooled
+    sorted scores or None, "first_step": {axis: L_b [load unit]}, "components": {axis:
+    {"sigma": s, "scores": own sorted scores or None, "load_variance": v s^2 n_t / n
+    [load unit^2]}}}`` (a component without s: sigma 1, its own raw residuals, no
+    load_variance).
     """
     n_comp = len(labels)
     noise = np.full(n_comp, np.nan) if noise is None else np.asarray(noise, dtype=float)
+    loaded = (true != 0.0).any(axis=1)  # a sweep's zero reading is its own reference: r = 0
+    reading = 1.0 + 1.0 / zeros  # a held-out point's zero-corrected reading [s^2]
+    known = [a for a in range(n_comp) if np.isfinite(noise[a]) and noise[a] > 0]
+    residuals = [np.abs(predicted[:, a] - true[:, a]) for a in range(n_comp)]
+    ok = [np.isfinite(predicted[:, a]) & loaded for a in range(n_comp)]
+    v = 0.0
+    if known:
+        excess = float(np.mean(np.concatenate(
+            [(residuals[a][ok[a]] / noise[a]) ** 2 for a in known]))) - reading
+        p = reading / (2.0 * trained)
+        v = max(p, excess - p)
     pooled, comps = [], {}
     for a, axis in enumerate(labels):
-        ok = np.isfinite(predicted[:, a])
-        r = np.abs(predicted[ok, a] - true[ok, a])
-        s = float(noise[a])
-        if np.isfinite(s) and s > 0:
-            held = s * np.sqrt((1.0 + 1.0 / zeros) * (1.0 + n_comp / trained))
-            row = s * np.sqrt(1.0 + n_comp * (1.0 + 1.0 / zeros) / repetitions)
-            pooled.append(r / held)
-            comps[axis] = {"sigma": row, "scores": None}
+        r = residuals[a][ok[a]]
+        if a in known:
+            s = float(noise[a])
+            pooled.append(r / (s * math.sqrt(reading + v)))
+            comps[axis] = {"sigma": s, "scores": None,
+                           "load_variance": v * s * s * trained / repetitions}
         else:
             comps[axis] = {"sigma": 1.0, "scores": np.sort(r).tolist()}
+    steps = {}
+    for b, axis in enumerate(labels):
+        nonzero = np.abs(true[:, b])[true[:, b] != 0.0]
+        if nonzero.size:
+            steps[axis] = float(nonzero.min())
     return {"scores": np.sort(np.concatenate(pooled)).tolist() if pooled else None,
-            "components": comps}
+            "first_step": steps, "components": comps}
+
+
+def row_sigma(cal: dict[str, Any], f: np.ndarray, labels) -> np.ndarray:
+    """sigma' of every row and component, shape (n, N) [load unit], at forces ``f``
+    (shape (n, N)): the reading's noise and, per loaded component b, one share of the
+    model's error (models fitted before the share was stored: sigma' alone)."""
+    steps = cal.get("first_step") or {}
+    loads = np.zeros(len(f))
+    for b, axis in enumerate(labels):
+        if axis in steps:
+            loads += np.minimum(1.0, np.abs(np.nan_to_num(f[:, b])) / steps[axis])
+    out = np.empty((len(f), len(labels)))
+    for a, axis in enumerate(labels):
+        c = cal["components"][axis]
+        out[:, a] = np.sqrt(c["sigma"] ** 2 + c.get("load_variance", 0.0) * loads)
+    return out
+
+
+def check_interval_data(cal: Any, labels) -> None:
+    """Refuse interval data a fit cannot have written: the fields this module added
+    (``load_variance``, ``first_step``) must be finite, >= 0 and > 0 respectively."""
+    def bad(what: str, value) -> InputError:
+        return InputError(f"--interval: the model file's interval data are damaged ({what} is "
+                          f"{value!r}, expected a finite number {'>= 0' if 'variance' in what else '> 0'}); "
+                          "refit the model")
+
+    def number(x) -> bool:
+        return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
+
+    for axis in labels:
+        c = cal["components"][axis]
+        if "load_variance" in c and not (number(c["load_variance"]) and c["load_variance"] >= 0):
+            raise bad(f"load_variance of {axis}", c["load_variance"])
+    steps = cal.get("first_step")
+    if steps is not None:
+        if not isinstance(steps, dict):
+            raise bad("first_step", steps)
+        for axis, value in steps.items():
+            if axis not in labels or not (number(value) and value > 0):
+                raise bad(f"first_step of {axis}", value)
 
 
 def check_coverage(p: Any) -> float:
@@ -97,8 +169,9 @@ def _quantile(scores: list[float], p: float, axis: str) -> float:
     return float(scores[k - 1])
 
 
-def half_widths(model, p: float) -> np.ndarray:
-    """Half-width per component, shape (N,), of the P intervals [the model's load unit]."""
+def half_widths(model, p: float, f: np.ndarray | None = None) -> np.ndarray:
+    """Half-widths of the P intervals [the model's load unit]: shape (N,) at zero load, or
+    (n, N) at the rows of forces ``f`` (shape (n, N))."""
     p = check_coverage(p)
     cert = (model.report.certificate if model.report is not None else None) or {}
     cal = cert.get("interval")
@@ -106,12 +179,34 @@ def half_widths(model, p: float) -> np.ndarray:
         raise InputError("--interval: the model file has no held-out residuals to calibrate "
                          "intervals on (fitted by an older fsdecouple, or with --no-verdict); "
                          "refit it")
-    out = np.empty(model.n_components)
-    for a, axis in enumerate(model.layout.labels):
+    labels = model.layout.labels
+    check_interval_data(cal, labels)
+    at_rows = f is not None
+    f = np.asarray(f, dtype=float) if at_rows else np.zeros((1, len(labels)))
+    q = np.empty(len(labels))
+    for a, axis in enumerate(labels):
         c = cal["components"][axis]
-        scores = c["scores"] if c["scores"] is not None else cal["scores"]
-        out[a] = _quantile(scores, p, axis) * c["sigma"]
-    return out
+        q[a] = _quantile(c["scores"] if c["scores"] is not None else cal["scores"], p, axis)
+    out = q * row_sigma(cal, f, labels)
+    return out if at_rows else out[0]
+
+
+def centre(model, u: np.ndarray, f: np.ndarray | None = None) -> np.ndarray:
+    """Where an interval is centred: eq. (11)'s forces refined by ``EXTRA_STEPS`` more
+    fixed-point steps (eqs. 5-6), shape (n, N) [load unit], without rotation.
+
+    The held-out points are scored here too, so the scores measure the centre's error.
+    A row whose refinement does not settle keeps eq. (11)'s force ``f`` (computed
+    from ``u`` if not given).
+    """
+    if f is None:
+        f = model.decouple(u, rotate=False)
+    if getattr(model, "method", None) != "svr":  # the calibration matrix: nothing to refine
+        return f
+    with np.errstate(all="ignore"):
+        refined = model.decouple(np.nan_to_num(u), rotate=False,
+                                 refine=model.settings.refine + EXTRA_STEPS)
+    return np.where(np.isfinite(refined), refined, f)
 
 
 def with_intervals(model, f: np.ndarray, p: float, u: np.ndarray | None = None) -> np.ndarray:
@@ -123,12 +218,7 @@ def with_intervals(model, f: np.ndarray, p: float, u: np.ndarray | None = None) 
     if model.rotation is not None:
         raise InputError("--interval: the intervals are calibrated in the sensor's frame; this "
                          "model rotates its forces (rotation or frame in its config)")
-    h = half_widths(model, p)
-    centre = f
-    if u is not None and model.method == "svr":
-        with np.errstate(all="ignore"):
-            refined = model.decouple(np.nan_to_num(u), rotate=False,
-                                     refine=model.settings.refine + EXTRA_STEPS)
-        centre = np.where(np.isfinite(refined), refined, f)  # a row refinement did not settle
-    bounds = np.stack([centre - h, centre + h], axis=2).reshape(len(f), -1)
+    mid = f if u is None else centre(model, u, f)
+    h = half_widths(model, p, mid)
+    bounds = np.stack([mid - h, mid + h], axis=2).reshape(len(f), -1)
     return np.hstack([f, bounds])

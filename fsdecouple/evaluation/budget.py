@@ -194,13 +194,15 @@ def reading_noise(calib: CalibrationSet, k: np.ndarray) -> tuple[np.ndarray, flo
 
 
 def certificate_data(calib: CalibrationSet, model, points: pd.DataFrame,
-                     predicted: np.ndarray, trained: float = 1.0) -> dict[str, Any]:
+                     predicted: np.ndarray, trained: float = 1.0,
+                     centred: np.ndarray | None = None) -> dict[str, Any]:
     """What the model file keeps for ``certificate``, ``compare`` (E_n) and ``apply --interval``.
 
     Per component: the step loads [load unit], the mean zero-corrected outputs of
     every component at each step [output unit], u_model and U per step [load unit];
     and the held-out residuals' conformal scores (``trained``: the fraction of the
-    repetitions each held-out round was fitted on) (:mod:`fsdecouple.core.intervals`).
+    repetitions each held-out round was fitted on; ``centred``: the same points' forces
+    where the intervals centre them, default ``predicted``) (:mod:`fsdecouple.core.intervals`).
     """
     layout, settings = calib.layout, model.settings
     u_models = {axis: model_errors(component_steps(calib, a), points, predicted, layout)
@@ -210,19 +212,29 @@ def certificate_data(calib: CalibrationSet, model, points: pd.DataFrame,
         steps[st.axis] = {"load": st.loads.tolist(), "outputs": st.outputs.tolist(),
                           "model_error": u_models[st.axis].tolist(), "U": b["U"].tolist()}
     true = points[list(layout.loads)].to_numpy(dtype=float)
+    noise, zeros = reading_noise(calib, model.k)
+    if settings.zero_method == "fit":  # offsets fitted to whole sweeps, not read at zero rows
+        zeros = np.inf
     return {"reference_uncertainty": settings.lab.reference_uncertainty, "steps": steps,
-            "interval": interval_calibration(true, predicted, layout.labels,
-                                             *reading_noise(calib, model.k),
+            "interval": interval_calibration(true, predicted if centred is None else centred,
+                                             layout.labels, noise, zeros,
                                              len(calib.repetitions), trained)}
 
 
-def heldout_predictions(rounds, models: dict, method: str) -> tuple[pd.DataFrame, np.ndarray]:
+def heldout_predictions(rounds, models: dict, method: str,
+                        forces=None) -> tuple[pd.DataFrame, np.ndarray]:
     """The held-out points of every round (ends too) and their forces by ``method``'s model
-    fitted without them."""
+    fitted without them.
+
+    ``forces(model, u)``: how a model's forces are computed; default eq. (11) without
+    rotation (the intervals pass their centre, :func:`fsdecouple.core.intervals.centre`).
+    """
     frames, preds = [], []
     for rnd in rounds:
         tests = [t for _, t in rnd.tests] + ([rnd.end] if rnd.end is not None else [])
         for test in tests:
             frames.append(test.points)
-            preds.append(models[(rnd.index, method)].decouple(test.voltages, rotate=False))
+            model = models[(rnd.index, method)]
+            preds.append(model.decouple(test.voltages, rotate=False) if forces is None
+                         else forces(model, test.voltages))
     return pd.concat(frames, ignore_index=True), np.concatenate(preds)

@@ -148,7 +148,8 @@ def _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress):
         model.report.verdict = {**summary(found), "asked": method, "chosen": chosen}
         if not settings.layout.overdetermined:  # per prime output: none with M > N outputs
             model.report.certificate = certificate_data(calib, model,
-                                                        *found["predictions"][chosen], found["trained"])
+                                                        *found["predictions"][chosen], found["trained"],
+                                                        found["centred"][chosen])
         warning = verdict_warning(found, chosen)
         if warning:
             model.report.warnings.append(warning)

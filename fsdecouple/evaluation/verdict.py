@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from ..config import Settings
+from ..core.intervals import centre
 from ..core.metrics import interference_error, pct
 from ..data.calibration import CalibrationSet
 from ..fitting.baselines import train_all
@@ -98,6 +99,8 @@ def heldout_verdict(calib: CalibrationSet, settings: Settings, *, protocol: str 
         heldout[m]["worst_rms"] = rms
     # the held-out forces of each method, for the certificate's budget and intervals
     predictions = {m: heldout_predictions(rounds, models, m) for m in ("svr", "linear")}
+    # and where apply --interval centres its intervals (refined: core/intervals.py)
+    centred = {m: heldout_predictions(rounds, models, m, centre)[1] for m in ("svr", "linear")}
     trained = float(np.mean([len(r.train.repetitions) for r in rounds]))
     # rig rows (several loads a row, fitting/joint.py): judged by every component's error,
     # for eq. (12) sees no error of a component in its own load; the paper's sweeps by gamma
@@ -114,6 +117,7 @@ def heldout_verdict(calib: CalibrationSet, settings: Settings, *, protocol: str 
         "better": better,
         "records": records,
         "predictions": predictions,
+        "centred": centred,
         "trained": trained,
     }
 
@@ -150,4 +154,4 @@ def verdict_warning(verdict: dict[str, Any], method: str) -> str | None:
 
 def summary(verdict: dict[str, Any]) -> dict[str, Any]:
     """The verdict without its records: what the model file and ``fit --json`` keep."""
-    return {k: v for k, v in verdict.items() if k not in ("records", "predictions", "trained")}
+    return {k: v for k, v in verdict.items() if k not in ("records", "predictions", "centred", "trained")}

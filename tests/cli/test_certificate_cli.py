@@ -67,7 +67,9 @@ def test_apply_interval_adds_bounds_and_decouple_frame_gives_the_same(fitted, si
     assert list(got.columns[4:]) == ["fx", "fy", "fz", "fx_lo", "fx_hi", "fy_lo", "fy_hi",
                                      "fz_lo", "fz_hi", "status"]
     width = got["fx_hi"] - got["fx_lo"]
-    assert (width > 0).all() and np.ptp(width) < 1e-9  # one width per component
+    # the model's share grows with the loads (core/intervals.py): the unloaded tare rows
+    # have the narrowest intervals, the combined-load rows wider ones
+    assert (width > 0).all() and width[:150].max() < width[1000:].min()
     frame = pd.read_csv(sim_dir / "task_voltages.csv")
     same = decouple_frame(load_model(fitted), frame, tare=200, interval=0.95)
     for c in ("fx", "fx_lo", "fz_hi"):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -43,20 +44,109 @@ def test_bounds_without_outputs_are_symmetric(model):
     assert interval_names(("fx", "fy")) == ("fx_lo", "fx_hi", "fy_lo", "fy_hi")
 
 
-def test_scores_are_residuals_over_the_held_out_sigma_and_rows_get_the_tared_sigma():
+def _held_out(rng, n, s, m, tau, comps=3, step=10.0):
+    """Single-axis held-out points: each loads one component (a zero-load point per 20),
+    and every component's residual is the zero-corrected reading's noise s^2 (1 + 1/m)
+    plus, from the one load, a model error of variance tau^2."""
+    true = np.zeros((n, comps))
+    axis = rng.integers(0, comps, n)
+    true[np.arange(n), axis] = step * rng.integers(1, 11, n) * rng.choice([-1, 1], n)
+    true[::20] = 0.0
+    err = rng.normal(scale=s * math.sqrt(1 + 1 / m), size=(n, comps))
+    err += rng.normal(scale=tau, size=(n, comps))
+    err[::20] = 0.0  # a sweep's zero reading is its own reference
+    return true, true + err
+
+
+def test_the_model_share_is_the_held_out_excess_over_the_reading_noise():
     rng = np.random.default_rng(0)
-    true = rng.normal(size=(50, 2))
-    pred = true + rng.normal(scale=0.1, size=(50, 2))
-    cal = interval_calibration(true, pred, ("x", "y"), np.array([0.1, np.nan]), zeros=1.0,
-                               repetitions=6, trained=4.0)
-    s, m, n, nt, comps = 0.1, 1.0, 6, 4.0, 2
-    held = s * math.sqrt((1 + 1 / m) * (1 + comps / nt))  # zero reading, fold's model terms
-    row = s * math.sqrt(1 + comps * (1 + 1 / m) / n)  # a tared row, the final model's terms
-    assert cal["components"]["x"]["sigma"] == pytest.approx(row)
-    assert cal["scores"] == pytest.approx(sorted(np.abs(pred[:, 0] - true[:, 0]) / held))
-    # no noise figure (one repetition): raw residuals of its own
-    assert cal["components"]["y"] == {"sigma": 1.0,
-                                      "scores": sorted(np.abs(pred[:, 1] - true[:, 1]).tolist())}
+    s, m, n, nt, tau = 0.1, 1.0, 6, 4.0, 0.08  # tau^2 / s^2 = 0.64
+    true, pred = _held_out(rng, 60_000, s, m, tau)
+    cal = interval_calibration(true, pred, ("x", "y", "z"), np.full(3, s), zeros=m,
+                               repetitions=n, trained=nt)
+    # brute force: the excess of the loaded points' mean squared residual over the
+    # reading's variance, less p = (1 + 1/m) / (2 n_t) = 0.25; scaled to n repetitions
+    loaded = (true != 0).any(axis=1)
+    excess = np.mean(((pred - true)[loaded] / s) ** 2) - (1 + 1 / m)
+    assert excess == pytest.approx(0.64, abs=0.03)  # the simulation's own tau^2 / s^2
+    p = (1 + 1 / m) / (2 * nt)
+    for c in cal["components"].values():
+        assert c["sigma"] == s
+        assert c["load_variance"] == pytest.approx((excess - p) * s * s * nt / n, rel=1e-9)
+    # zero-load points score nothing; the rest are |r| / (s sqrt(1 + 1/m + v))
+    assert len(cal["scores"]) == 3 * loaded.sum()
+    v = excess - p
+    expected = np.sort((np.abs(pred - true)[loaded] / (s * math.sqrt(2 + v))).ravel())
+    assert cal["scores"] == pytest.approx(expected.tolist())
+    assert cal["first_step"] == {"x": 10.0, "y": 10.0, "z": 10.0}
+
+
+def test_without_excess_the_model_share_keeps_its_floor_and_zero_fit_drops_the_zero_reading():
+    rng = np.random.default_rng(1)
+    s, n, nt = 0.1, 6, 4.0
+    true, pred = _held_out(rng, 30_000, s, m=np.inf, tau=0.0)  # zero: fit, no model error
+    cal = interval_calibration(true, pred, ("x", "y", "z"), np.full(3, s), zeros=np.inf,
+                               repetitions=n, trained=nt)
+    # p = (1 + 0) / (2 n_t): the floor, since the excess (~0) less p is below it
+    assert cal["components"]["y"]["load_variance"] == pytest.approx(s * s / (2 * nt) * nt / n)
+
+
+def test_a_combined_load_row_carries_one_model_share_per_loaded_component(model):
+    from fsdecouple.core.intervals import row_sigma
+
+    cal = {"scores": [1.0], "first_step": {"x": 10.0, "y": 10.0, "z": 5.0},
+           "components": {a: {"sigma": 0.1, "scores": None, "load_variance": 0.02} for a in "xyz"}}
+    f = np.array([[0.0, 0.0, 0.0], [50.0, 0.0, 0.0], [50.0, -80.0, -100.0], [5.0, 0.0, -2.5]])
+    loaded = np.array([0.0, 1.0, 3.0, 0.5 + 0.5])  # min(1, |f_b| / L_b) summed by hand
+    assert row_sigma(cal, f, "xyz") == pytest.approx(
+        np.sqrt(0.01 + 0.02 * loaded)[:, None].repeat(3, axis=1))
+    # a model file from before the share: sigma' alone
+    old = {"scores": [1.0], "components": {a: {"sigma": 0.3, "scores": None} for a in "xyz"}}
+    assert row_sigma(old, f, "xyz") == pytest.approx(np.full((4, 3), 0.3))
+
+
+def test_intervals_hold_on_combined_loads_whose_errors_add():
+    """The additive assumption, simulated: each loaded component adds an independent
+    model error tau to every component.  Held-out single-axis points show one tau; rows
+    loading all three show three.  Scores pooled as before the load term (the point's
+    noise alone) cover too few rows; with it, P of them."""
+    from fsdecouple.core.intervals import _quantile, row_sigma
+
+    rng = np.random.default_rng(2)
+    s, m, n, nt, tau, p = 0.1, 1.0, 6, 4.0, 0.12, 0.95
+    true, pred = _held_out(rng, 20_000, s, m, tau)
+    cal = interval_calibration(true, pred, ("x", "y", "z"), np.full(3, s), zeros=m,
+                               repetitions=n, trained=nt)
+    # the final model's share is n_t / n of a round's: tau^2 n_t / n per loaded component
+    rows = 50_000
+    f = rng.uniform(20, 100, (rows, 3)) * rng.choice([-1, 1], (rows, 3))
+    err = rng.normal(scale=s, size=(rows, 3))
+    err += rng.normal(scale=tau * math.sqrt(nt / n), size=(rows, 3, 3)).sum(axis=2)
+    h = _quantile(cal["scores"], p, "x") * row_sigma(cal, f, "xyz")
+    covered = (np.abs(err) <= h).mean(axis=0)
+    # v is tau^2 / s^2 = 1.44 less p = 0.25: q = 1.96 sqrt(3.44 / 3.19) = 2.035 and
+    # sigma' = 0.933 of the rows' sigma, so |N(0, 1)| <= 1.90 holds 0.943 of the rows
+    assert covered == pytest.approx(np.full(3, 0.943), abs=0.006)  # 50 000 rows: sd 0.001
+    without = _quantile(cal["scores"], p, "x") * s  # the reading's noise alone
+    assert (np.abs(err) <= without).mean() < 0.75
+
+
+@pytest.mark.parametrize("field, value, match", [
+    ("load_variance", -1.0, "load_variance of y is -1.0"),
+    ("load_variance", float("nan"), "load_variance of y is nan"),
+    ("first_step", {"y": 0.0}, "first_step of y is 0.0"),
+    ("first_step", {"q": 1.0}, "first_step of q"),
+    ("first_step", [1.0], "first_step is"),
+])
+def test_damaged_interval_data_are_refused(model, field, value, match):
+    m = _with_scores(model, np.arange(1.0, 20.0))
+    cal = m.report.certificate["interval"]
+    if field == "load_variance":
+        cal["components"]["y"]["load_variance"] = value
+    else:
+        cal["first_step"] = value
+    with pytest.raises(InputError, match=f"damaged \\({re.escape(match)}"):
+        half_widths(m, 0.5)
 
 
 @pytest.mark.parametrize("bad", [1.5, 0.0, 1.0, -0.1, True, "0.9"])

@@ -1,19 +1,26 @@
-"""apply --interval's coverage on simulated sensors: P = 0.9 and 0.95 over 20 seeds.
+"""apply --interval's coverage and width, per sensor, on simulated sensors (issue 33).
 
-Each seed: the paper's sensor simulated with its own noise, fitted as ``fit`` does,
-and its combined-load task log decoupled with a tare of 200 rows; the coverage is the
-fraction of rows whose true force lies in [lo, hi].
+Twelve sensors: the paper's (seeds 0-3), one whose coupling peaks at 5 % F.S. (the
+intervals were twice the width bound there, covering every row: seeds 100-103) and one
+with a 0.1 % F.S. lag (they covered 0.87-0.93: seeds 200-203).  Each is simulated,
+fitted as ``fit`` does, and its combined-load task log decoupled with a tare of 200
+rows; a component's coverage is the fraction of rows whose true force lies in
+[lo, hi], its width ratio the mean width over 5 x 1.96 x the RMS error of decoupling
+with the simulator's true coupling functions (the floor).
 
-The limits come from the scatter of 40 seeds (docs/certificate.md): one log's
-coverage scatters from seed to seed (10th-90th percentile 0.92-0.99 at P = 0.95),
-since the log is one realisation of the model's own error.  Over seeds 0-19 the
-median per component was 0.948-0.971 at P = 0.95 and 0.884-0.930 at P = 0.9, the
-mean over components and seeds 0.956 and 0.906: the median must lie in
-[P - 0.04, P + 0.05] and the mean at or above P - 0.03 (a few hundredths of margin
-over the scatter of a 20-seed median).
+The limits come from ``benchmarks/interval_coverage.py`` over 58 sensors (docs/
+certificate.md): at P = 0.95 the largest width ratio was 0.71, 75-88 % of the component
+coverages lay in 0.92-0.985 in these three scenarios (79 % on average), the median per
+scenario 0.949-0.966; in memory, on 62 sensors, the median at P = 0.9 was 0.914.  One
+log's coverage scatters from sensor to sensor (the final model's own error is one
+realisation, the same on many rows), so single sensors are not held to the window;
+the fraction in it is, with two binomial standard deviations of margin for 36
+coverages (0.79 - 2 x 0.068 -> 0.65).
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -22,33 +29,61 @@ import pytest
 from fsdecouple import load_calibration, load_config
 from fsdecouple.core.intervals import with_intervals
 from fsdecouple.evaluation.calibrate import fit as calibrate
-from fsdecouple.sim.simulate import simulate
+from fsdecouple.sim.simulate import SimulatedSensor, simulate, with_coupling
 
 pytestmark = pytest.mark.slow
-SEEDS = range(20)
+SCENARIOS = {  # label: (coupling, hysteresis, seeds)
+    "paper": (None, None, range(0, 4)),
+    "coupling 5 %": (0.05, None, range(100, 104)),
+    "hysteresis 0.1 %": (None, 0.001, range(200, 204)),
+}
+TARE = 200
 
 
 @pytest.fixture(scope="module")
-def coverage(tmp_path_factory):
+def measured(tmp_path_factory):
+    """label -> {P: coverage (sensors, 3)}, and label -> width ratio at 0.95 (sensors, 3)."""
     settings = load_config()
-    out = {0.9: [], 0.95: []}
-    for seed in SEEDS:
-        d = tmp_path_factory.mktemp(f"cov{seed}")
-        simulate(d, seed=seed)
-        model = calibrate(load_calibration(d / "calibration", settings), settings)
-        u = pd.read_csv(d / "task_voltages.csv")[["ux", "uy", "uz"]].to_numpy()
-        truth = pd.read_csv(d / "task_forces.csv")[["fx", "fy", "fz"]].to_numpy()
-        u = u - u[:200].mean(axis=0)
-        f = model.decouple(u, rotate=False)
-        for p in out:
-            w = with_intervals(model, f, p, u)
-            out[p].append(((truth >= w[:, 3::2]) & (truth <= w[:, 4::2])).mean(axis=0))
-    return {p: np.array(v) for p, v in out.items()}
+    coverage, width = {}, {}
+    for label, (coupling, hysteresis, seeds) in SCENARIOS.items():
+        truth_sensor = SimulatedSensor() if coupling is None else with_coupling(SimulatedSensor(), coupling)
+        truth_sensor = replace(truth_sensor, hysteresis=hysteresis)
+        coverage[label], width[label] = {0.9: [], 0.95: []}, []
+        for seed in seeds:
+            d = tmp_path_factory.mktemp(f"cov{seed}")
+            simulate(d, seed=seed, coupling=coupling, hysteresis=hysteresis)
+            model = calibrate(load_calibration(d / "calibration", settings), settings)
+            u = pd.read_csv(d / "task_voltages.csv")[["ux", "uy", "uz"]].to_numpy()
+            truth = pd.read_csv(d / "task_forces.csv")[["fx", "fy", "fz"]].to_numpy()
+            u = u - u[:TARE].mean(axis=0)
+            f = model.decouple(u, rotate=False)
+            floor = np.sqrt(np.mean((truth_sensor.solve(u) - truth) ** 2, axis=0))
+            for p in (0.9, 0.95):
+                w = with_intervals(model, f, p, u)
+                lo, hi = w[:, 3::2], w[:, 4::2]
+                coverage[label][p].append(((truth >= lo) & (truth <= hi)).mean(axis=0))
+                if p == 0.95:
+                    width[label].append((hi - lo).mean(axis=0) / (5 * 1.96 * floor))
+    return ({k: {p: np.array(v) for p, v in c.items()} for k, c in coverage.items()},
+            {k: np.array(v) for k, v in width.items()})
 
 
-@pytest.mark.parametrize("p", [0.9, 0.95])
-def test_intervals_hold_the_true_forces_at_their_coverage(coverage, p):
-    c = coverage[p]  # (seeds, components)
-    median = np.median(c, axis=0)
-    assert ((median >= p - 0.04) & (median <= p + 0.05)).all(), median
-    assert c.mean() >= p - 0.03, c.mean(axis=0)
+def test_every_sensor_keeps_the_width_bound(measured):
+    _, width = measured
+    for label, w in width.items():
+        assert (w <= 0.9).all(), (label, w)  # largest measured 0.71
+
+
+def test_the_coverage_at_095_holds_per_scenario_and_mostly_per_sensor(measured):
+    coverage, _ = measured
+    everything = np.concatenate([c[0.95].ravel() for c in coverage.values()])
+    inside = ((everything >= 0.92) & (everything <= 0.985)).mean()
+    assert inside >= 0.65, everything
+    for label, c in coverage.items():
+        assert 0.93 <= np.median(c[0.95]) <= 0.985, (label, c[0.95])
+
+
+def test_the_coverage_at_09_is_centred_on_it(measured):
+    coverage, _ = measured
+    everything = np.concatenate([c[0.9].ravel() for c in coverage.values()])
+    assert 0.87 <= np.median(everything) <= 0.94, everything
