@@ -200,6 +200,10 @@ class CouplingErrorModel:
     projection : ndarray, shape (N, M), optional
         M > N outputs (fitting/gauges.py): P = K^+ of the linear forward model; eq. (11)
         then acts on v = P u, in load units with k = 1.  None: one output per component.
+    zero : ndarray, shape (M,), optional
+        Each output's offset fitted with the loads (``zero: intercept``, data/zero.py) [output
+        unit]: the zero ``apply`` subtracts from a log's raw outputs when given neither
+        ``--tare`` nor ``--zero``.  None: the outputs are zeroed by a tare, as Section 3's.
     provenance : dict
         Input files and digests, library versions.
     created : str
@@ -216,6 +220,7 @@ class CouplingErrorModel:
     matrix: np.ndarray | None = None
     own: dict[str, Chi] = field(default_factory=dict)
     projection: np.ndarray | None = None
+    zero: np.ndarray | None = None  # zero: intercept's fitted offsets [output unit]
     _tables: Any = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:

@@ -39,7 +39,10 @@ OWN_FORMAT_VERSION = 4
 # Version 5 adds ``projection``: P = K^+ (N x M) of a sensor with M > N outputs
 # (fitting/gauges.py), whose settings name M outputs; only such models are version 5.
 GAUGES_FORMAT_VERSION = 5
-READS_UP_TO = max(FORMAT_VERSION, OWN_FORMAT_VERSION, GAUGES_FORMAT_VERSION)
+# Version 6 adds ``zero``: the outputs' offsets fitted as an intercept (zero: intercept), which
+# apply subtracts without a tare; a reader that ignored it would decouple offset forces.
+ZERO_FORMAT_VERSION = 6
+READS_UP_TO = max(FORMAT_VERSION, OWN_FORMAT_VERSION, GAUGES_FORMAT_VERSION, ZERO_FORMAT_VERSION)
 METHODS = ("svr", "linear")
 
 
@@ -69,6 +72,10 @@ def model_to_dict(model: CouplingErrorModel) -> dict[str, Any]:
         doc["matrix"] = [[float(v) for v in row] for row in model.matrix]
     if model.projection is not None:
         doc["projection"] = [[float(v) for v in row] for row in model.projection]
+    if model.zero is not None:
+        doc["zero"] = {"method": "intercept", "offsets": dict(zip(
+            model.layout.outputs, (float(v) for v in model.zero), strict=True))}
+        doc["format_version"] = ZERO_FORMAT_VERSION
     doc["integrity"] = {"algorithm": "sha256", "digest": content_digest(doc)}
     return doc
 
@@ -143,6 +150,7 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
                 ) from None
         own = _own_chis(doc.get("chi_own", {}), layout, version, source)
         projection = _projection(doc, layout, version, source)
+        zero = _zero(doc, layout, version, source)
     except (KeyError, TypeError, ValueError) as err:
         raise ModelFileError(f"{source}: malformed model file ({type(err).__name__}: {err})") from None
     labels = settings.layout.labels
@@ -157,11 +165,28 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
     method, matrix = _method(doc, len(k), source, layout.m)
     model = CouplingErrorModel(
         settings, k, chi, FitReport.from_dict(report), doc.get("provenance", {}),
-        doc.get("created", ""), method, matrix, own, projection,
+        doc.get("created", ""), method, matrix, own, projection, zero,
     )
     _check_slopes(model, source)
     _check_tables(model, source)
     return model
+
+
+def _zero(doc: dict, layout, version: int, source: str) -> np.ndarray | None:
+    """The fitted offsets of a version-6 file (zero: intercept), one finite number per output."""
+    if "zero" not in doc:
+        return None
+    raw = doc["zero"]
+    offsets = raw.get("offsets") if isinstance(raw, dict) else None
+    if version < ZERO_FORMAT_VERSION or not isinstance(offsets, dict) \
+            or set(offsets) != set(layout.outputs):
+        raise ModelFileError(f"{source}: malformed model file (zero: expected the offsets of "
+                             f"outputs {', '.join(layout.outputs)}, format version "
+                             f"{ZERO_FORMAT_VERSION})")
+    z = np.array([offsets[c] for c in layout.outputs], dtype=float)
+    if not np.isfinite(z).all():
+        raise ModelFileError(f"{source}: malformed model file (zero: offsets must be finite)")
+    return z
 
 
 def _projection(doc: dict, layout, version: int, source: str) -> np.ndarray | None:

@@ -13,7 +13,8 @@ from ..axes import DEFAULT, Layout
 from ..config import Settings
 from ..errors import InputError
 from .calibration_csv import read_calibration_table
-from .zero import assign_sweeps, out_and_back, zero_correct
+from .zero import (assign_sweeps, has_zero_row, intercept_offsets, out_and_back,
+                   zero_correct)
 
 
 @dataclass(frozen=True)
@@ -137,7 +138,12 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
     its zero rows; without it (``fit``) they are fitted jointly and zeroed by the zero row before.
     """
     layout = settings.layout
+    dead_channels(table, layout, _source(files))
     table = assign_sweeps(table, layout, combined, settings.full_scale)
+    # no unloaded row (poses of a known mass): each output's offset is fitted (zero.py)
+    intercept = settings.zero == "intercept" or (settings.zero is None
+                                                 and not has_zero_row(table, layout))
+    several = not combined and ((table[list(layout.loads)].to_numpy() != 0.0).sum(axis=1) > 1).any()
     reps = sorted(table["repetition"].unique())
     if len(reps) < settings.min_repetitions:
         raise InputError(
@@ -150,7 +156,8 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
     # one grouping, not a scan of the table per repetition (quadratic in thousands)
     pairs = table[["repetition", "axis"]].drop_duplicates()
     n_axes = pairs.groupby("repetition", sort=True).size()
-    for rep in n_axes.index[n_axes.to_numpy() < layout.n][:1]:
+    # rows loading several components are fitted jointly: no sweep need isolate a component
+    for rep in n_axes.index[n_axes.to_numpy() < layout.n][:0 if intercept and several else 1]:
         have = set(pairs.loc[pairs["repetition"] == rep, "axis"])
         missing = [a for a in layout.labels if a not in have]
         if missing:
@@ -162,20 +169,27 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
             )
     # rows loading several components (a lever arm): each row is zeroed by the nearest
     # zero row before it (docs/rigs.md); the polynomial of zero: fit assumes one load a sweep
-    several = not combined and ((table[list(layout.loads)].to_numpy() != 0.0).sum(axis=1) > 1).any()
     # sweeps out and back: offsets from all points measured better than the zero rows
     # (zero.out_and_back; zero: rows in the config keeps the rows)
-    back = not several and settings.zero is None and settings.zero_method == "rows" \
-        and out_and_back(table, layout)
-    method = settings.zero or ("before" if several else "fit" if back else settings.zero_method)
-    points, offsets = zero_correct(table, layout, method)
+    back = not intercept and not several and settings.zero is None \
+        and settings.zero_method == "rows" and out_and_back(table, layout)
+    method = "intercept" if intercept else settings.zero or (
+        "before" if several else "fit" if back else settings.zero_method)
     warnings = []
+    if intercept:
+        points, offsets = intercept_offsets(table, layout, settings.full_scale, _source(files))
+        if settings.zero is None:
+            warnings.append("no row is unloaded (all loads 0): each output's offset is fitted "
+                            "with the loads as an intercept (zero: intercept); the model keeps "
+                            "it, so decoupling a log needs no --tare (docs/data.md)")
+    else:
+        points, offsets = zero_correct(table, layout, method)
     if back:
         warnings.append("the sweeps visit their loads twice (out and back): zeroed by offsets "
                         "fitted from all points (zero: fit), more accurate than the zero rows "
                         "on such sweeps (docs/tuning.md); 'zero: rows' in the config keeps the "
                         "zero rows")
-    if several:  # a typo in a single-axis set reads the same: say where, once
+    if several and not intercept:  # a typo in a single-axis set reads the same: say where, once
         rows = table[(table[list(layout.loads)].to_numpy() != 0.0).sum(axis=1) > 1]
         first = ", ".join(f"{f}, row {r}" for f, r in zip(rows["file"][:3], rows["row"][:3],
                                                           strict=True))
@@ -185,6 +199,8 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
     cs = CalibrationSet(points, offsets, tuple(files), tuple(skipped), layout=layout)
     for axis in layout.labels:
         grids = cs.load_grid(axis)
+        if not grids:  # rows loading several components, none of them mostly this one
+            continue
         ref_rep, ref = next(iter(grids.items()))
         for rep, g in grids.items():
             if g.shape != ref.shape or not np.allclose(g, ref, rtol=0, atol=1e-9):
@@ -196,7 +212,7 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
     for a, axis in enumerate(layout.labels):
         # loads far from the full scale usually mean other units (kN, kgf) or a
         # wrong full_scale, and gamma (eq. 12) is a fraction of the full scale
-        peak = float(np.abs(cs.sweep(axis)[layout.loads[a]]).max())
+        peak = float(np.abs(cs.points[layout.loads[a]]).max())
         fs, unit = settings.full_scale[a], settings.units.load_of(a)
         if peak > 1.05 * fs or peak < 0.2 * fs:
             warnings.append(
@@ -212,6 +228,24 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
         seen.setdefault(digest, name)
     return CalibrationSet(points, offsets, tuple(files), tuple(skipped), tuple(warnings),
                           layout=layout, zero=method, zero_auto=back)
+
+
+def dead_channels(table: pd.DataFrame, layout: Layout, source: str) -> None:
+    """Refuse an output that never changes (a dead or disconnected channel), by name.
+
+    A constant channel carries no load: the forward model and every chi divide by its
+    span, and the overflow that follows would blame an innocent cell of another channel.
+    """
+    u = table[list(layout.outputs)].to_numpy(dtype=float)
+    if len(u) < 2 or not layout.overdetermined:  # one output per component: fit names it
+        return
+    flat = np.flatnonzero(np.ptp(u, axis=0) == 0.0)
+    if flat.size:
+        names = ", ".join(f"'{layout.outputs[j]}'" for j in flat)
+        value = u[0, flat[0]]
+        raise InputError(f"{source}: output {names} is constant ({value:g} on every row): a dead "
+                         "or disconnected channel carries no load; remove it from outputs: and "
+                         "columns: in the config")
 
 
 def load_calibration(path: str | Path, settings: Settings, exclude=(),

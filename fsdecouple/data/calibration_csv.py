@@ -228,7 +228,7 @@ def read_calibration_table(path: str | Path, settings: Settings,
             if runs:
                 pose_ss, pose_dof = pose_ss + ss, pose_dof + dof
                 pose_inv, pose_n = pose_inv + inverse, pose_n + len(runs)
-                warnings.append(pose_note(f, runs, sum(c for *_, c in runs)))
+                warnings.append(pose_note(f, runs, sum(r[2] for r in runs)))
         frames.append(out)
     table = pd.concat(frames, ignore_index=True)
     # training order is file order: repetition, then row (stable)

@@ -274,6 +274,7 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
     }
     if calib.excluded:
         model.provenance["excluded"] = list(calib.excluded)
+    model.zero = fitted_zero(calib)
     model.created = datetime.now(UTC).replace(microsecond=0).isoformat()
     return model
 
@@ -343,8 +344,17 @@ def _establish_gauges(calib: CalibrationSet, settings: Settings, workers: int | 
                         "libraries": _library_versions()}
     if calib.excluded:
         model.provenance["excluded"] = list(calib.excluded)
+    model.zero = fitted_zero(calib)
     model.created = datetime.now(UTC).replace(microsecond=0).isoformat()
     return model
+
+
+def fitted_zero(calib: CalibrationSet) -> np.ndarray | None:
+    """``zero: intercept``: the outputs' offsets the model carries (raw output units), the
+    mean over the repetitions of each one's fitted intercept (data/zero.py); else None."""
+    if calib.zero != "intercept":
+        return None
+    return calib.offsets[list(calib.layout.outputs)].to_numpy(dtype=float).mean(axis=0)
 
 
 def _overflow(calib: CalibrationSet, what: str) -> InputError:
