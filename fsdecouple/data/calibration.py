@@ -13,8 +13,7 @@ from ..axes import DEFAULT, Layout
 from ..config import Settings
 from ..errors import InputError
 from .calibration_csv import read_calibration_table
-from .zero import (assign_sweeps, has_zero_row, intercept_offsets, out_and_back,
-                   zero_correct)
+from .zero import assign_sweeps, has_zero_row, intercept_offsets, out_and_back, zero_correct
 
 
 @dataclass(frozen=True)

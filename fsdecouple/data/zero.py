@@ -311,7 +311,8 @@ def intercept_offsets(table: pd.DataFrame, layout: Layout, full_scale,
     _, sv, vt = np.linalg.svd(design, full_matrices=False)
     if same or len(design) < design.shape[1] or sv[-1] < SEPARABLE * sv[0]:
         if same:
-            why = (f"every row has the same loads ({', '.join(f'{c} {v:g}' for c, v in zip(loads, points[loads].iloc[0], strict=True))})")
+            first = points[loads].iloc[0]
+            why = f"every row has the same loads ({', '.join(f'{c} {first[c]:g}' for c in loads)})"
         elif len(design) < design.shape[1]:
             why = (f"{len(design)} rows for {design.shape[1]} unknowns (an offset per output "
                    f"and repetition and a slope per load)")
