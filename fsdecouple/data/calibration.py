@@ -156,7 +156,7 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
     pairs = table[["repetition", "axis"]].drop_duplicates()
     n_axes = pairs.groupby("repetition", sort=True).size()
     # rows loading several components are fitted jointly: no sweep need isolate a component
-    for rep in n_axes.index[n_axes.to_numpy() < layout.n][:0 if intercept and several else 1]:
+    for rep in n_axes.index[n_axes.to_numpy() < layout.n][:0 if several else 1]:
         have = set(pairs.loc[pairs["repetition"] == rep, "axis"])
         missing = [a for a in layout.labels if a not in have]
         if missing:
@@ -254,8 +254,11 @@ def load_calibration(path: str | Path, settings: Settings, exclude=(),
     ``exclude``: ``FILE:ROW`` points to drop before zero correction (``fit --exclude``);
     FILE is a file of the set by path or by name, ROW its spreadsheet row.
     """
-    read = read_calibration_table(path, settings, strict)
-    table, dropped = _exclude(read.table, exclude)
+    specs = [parse_exclude(spec) for spec in exclude]
+    # lines that are not a calibration point once read (a pose's later samples) or cannot
+    # be read (a blank or garbled cell) are dropped before their cells are read
+    read = read_calibration_table(path, settings, strict, specs)
+    table, dropped = _exclude(read.table, exclude, read.excluded)
     cs = from_table(table, settings, read.files, [*read.skipped, *dropped], combined)
     hidden = tuple(f"{f}: hidden file, not read as a repetition" for f in read.hidden)
     hidden += read.warnings
@@ -263,22 +266,42 @@ def load_calibration(path: str | Path, settings: Settings, exclude=(),
     return replace(cs, warnings=hidden + cs.warnings) if hidden else cs
 
 
-def _exclude(table: pd.DataFrame, specs) -> tuple[pd.DataFrame, list[str]]:
-    """Drop the ``FILE:ROW`` points named; each must be a point of the set."""
+def parse_exclude(spec) -> tuple[str, int]:
+    """``FILE:LINE`` of ``--exclude`` as (FILE, LINE); LINE as an editor numbers it, header 1."""
+    name, sep, row = str(spec).rpartition(":")
+    if not sep or not name or not row.strip().isascii() or not row.strip().isdigit():
+        raise InputError(f"--exclude {spec!r}: expected FILE:LINE, e.g. rep3.csv:17 (lines "
+                         "as an editor numbers them, the header is line 1)")
+    line = int(row)
+    if line < 2:
+        raise InputError(f"--exclude {spec!r}: line {line} is the header or before it; data "
+                         "rows start at line 2")
+    return name, line
+
+
+def _exclude(table: pd.DataFrame, specs, unread=()) -> tuple[pd.DataFrame, list[str]]:
+    """Drop the ``FILE:LINE`` points named; each must be a line of the set.
+
+    ``unread``: (file, line) already dropped while reading (a pose's samples, a line that
+    could not be parsed): excluded, and not looked for among the points.
+    """
     drop = np.zeros(len(table), dtype=bool)
     dropped = []
     files = table["file"].to_numpy()
     names = np.array([Path(f).name for f in files])
+    gone = {(Path(f).name, line): f for f, line in unread}
+    gone.update({(f, line): f for f, line in unread})
     for spec in specs:
-        name, sep, row = str(spec).rpartition(":")
-        if not sep or not name or not row.strip().isdigit():
-            raise InputError(f"--exclude {spec!r}: expected FILE:ROW, e.g. rep3.csv:17")
-        row = int(row)
+        name, row = parse_exclude(spec)
         in_file = (files == name) | (names == Path(name).name) if "/" not in name else files == name
         hit = np.flatnonzero(in_file & (table["row"].to_numpy() == row))
+        key = (name if "/" in name else Path(name).name, row)
+        if hit.size == 0 and key in gone:
+            dropped.append(f"{gone[key]}, row {row}: excluded (--exclude)")
+            continue
         if hit.size == 0:
-            known = "a file of the set" if not in_file.any() else f"a calibration point of {name}"
-            raise InputError(f"--exclude {spec!r}: row {row} of {name} is not {known}")
+            known = "a file of the set" if not in_file.any() else f"a data line of {name}"
+            raise InputError(f"--exclude {spec!r}: line {row} of {name} is not {known}")
         drop[hit] = True
         dropped.append(f"{files[hit[0]]}, row {row}: excluded (--exclude)")
     return table[~drop].reset_index(drop=True), dropped

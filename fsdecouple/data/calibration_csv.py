@@ -113,20 +113,25 @@ class CalibrationTable:
     hidden: list[Path]
     warnings: tuple[str, ...] = ()
     noise: np.ndarray | None = None  # pose logs: sigma of each averaged output (poses.py)
+    excluded: tuple[tuple[str, int], ...] = ()  # (file, line) dropped by --exclude unread
 
 
 def read_calibration_table(path: str | Path, settings: Settings,
-                           strict: bool = False) -> CalibrationTable:
+                           strict: bool = False, exclude=()) -> CalibrationTable:
     """Read a calibration set into one long table in file order.
 
     The directory is listed once and each file read once (its digest, header
-    and cells all come from the same bytes).
+    and cells all come from the same bytes).  ``exclude``: ``(file, line)`` pairs
+    (:func:`fsdecouple.data.calibration.parse_exclude`) dropped before their cells are
+    read, so a line that cannot be parsed can be excluded too; each pair found is
+    marked in ``excluded``.
     """
     import pandas as pd
 
     files, hidden = list_calibration(path)
     single = len(files) == 1 and not Path(path).is_dir()
     frames, skipped, digests, warnings = [], [], [], []
+    excluded: list[tuple[str, int]] = []
     pose_ss, pose_dof, pose_inv, pose_n = 0.0, 0, 0.0, 0  # pose logs (poses.py)
     cols = settings.columns
     layout = settings.layout
@@ -176,6 +181,17 @@ def read_calibration_table(path: str | Path, settings: Settings,
         if raw.empty:
             raise InputError(f"{f}: header only, no data rows")
         rows = np.arange(len(raw)) + HEADER_ROW + 1
+        mine = {line for name, line in exclude if _names_file(name, f)}
+        if mine:  # --exclude FILE:LINE, before any cell of the line is read
+            gone = np.isin(rows, sorted(mine))
+            excluded.extend((str(f), int(r)) for r in rows[gone])
+            if timestamp_column(header) is not None:
+                # a pose log: a line of a pose names the pose (one calibration point), so
+                # the run of consecutive lines with its load cells goes with it
+                key = raw[[cols[c] for c in layout.loads]].agg("\x1f".join, axis=1).to_numpy()
+                run = np.cumsum(np.r_[True, key[1:] != key[:-1]])
+                gone = np.isin(run, run[gone])
+            raw, rows = raw[~gone], rows[~gone]
         used = list(mapped)
         blank = np.logical_and.reduce([raw[c].str.strip().eq("").to_numpy() for c in used])
         for r in rows[blank]:
@@ -194,6 +210,24 @@ def read_calibration_table(path: str | Path, settings: Settings,
             warnings.append(f"{f}, {lines}: applied loads blank; rows skipped "
                             "(--strict refuses them)")
             raw, rows = raw[~noload], rows[~noload]
+        # some applied loads blank (a cell not typed in): the row cannot be placed, skipped
+        # with a warning naming its lines, or refused with --strict
+        blanks = np.column_stack([raw[c].str.strip().eq("").to_numpy() for c in loads])
+        partial = blanks.any(axis=1)
+        if partial.any():
+            lines = ("lines " if partial.sum() > 1 else "line ") + ", ".join(map(str, rows[partial]))
+            i = int(np.argmax(partial))
+            col = loads[int(np.argmax(blanks[i]))]
+            if strict:
+                raise InputError(f"{where(f, int(rows[i]), col)}: an applied load is blank "
+                                 f"({lines}); --strict refuses rows without every load")
+            cells = "; ".join(
+                f"line {r}: {', '.join(repr(c) for c, b in zip(loads, bl, strict=True) if b)}"
+                for r, bl in zip(rows[partial][:5], blanks[partial][:5], strict=True))
+            warnings.append(f"{f}, {lines}: an applied load is blank ({cells}"
+                            f"{'; ...' if partial.sum() > 5 else ''}); rows skipped "
+                            "(--strict refuses them)")
+            raw, rows = raw[~partial], rows[~partial]
         if raw.empty:
             raise InputError(f"{f}: header only, no data rows")
         out = pd.DataFrame({"file": str(f), "row": rows})
@@ -235,7 +269,13 @@ def read_calibration_table(path: str | Path, settings: Settings,
     table = table.sort_values(["repetition"], kind="stable").reset_index(drop=True)
     table = table[["repetition", "axis", "file", "row", *layout.loads, *layout.outputs]]
     noise = np.sqrt(pose_ss / pose_dof * pose_inv / pose_n) if pose_dof else None
-    return CalibrationTable(table, skipped, tuple(digests), hidden, tuple(warnings), noise)
+    return CalibrationTable(table, skipped, tuple(digests), hidden, tuple(warnings), noise,
+                            tuple(excluded))
+
+
+def _names_file(name: str, f: Path) -> bool:
+    """Whether ``--exclude``'s FILE names file ``f``: by its path, or by its name alone."""
+    return str(f) == name if "/" in name else Path(name).name == f.name or str(f) == name
 
 
 

@@ -96,6 +96,7 @@ class Guess:
     outputs: tuple[str, ...] = ()
     load_units: dict[str, str] | None = None  # per component, where they differ
     output_units: dict[str, str] | None = None  # per output, where they differ
+    zero: str | None = None  # "intercept" for data without an unloaded row (data/zero.py)
 
     def to_dict(self) -> dict[str, Any]:
         """The ``--json`` document."""
@@ -110,6 +111,7 @@ class Guess:
             **({"components": list(self.components), "outputs": list(self.outputs),
                 "load_units": self.load_units, "output_units": self.output_units}
                if self.components else {}),
+            **({"zero": self.zero} if self.zero else {}),
         }
 
     def settings(self) -> list[tuple[str, str, str]]:
@@ -126,6 +128,7 @@ class Guess:
             "full_scale": f"{{{fs}}}", "min_repetitions": str(self.min_repetitions),
             "csv": f"{{sep: {json.dumps(self.sep)}, decimal: {json.dumps(self.decimal)}}}",
             "scaling": self.scaling,
+            **({"zero": self.zero} if self.zero else {}),
         }
         return [(k, v, self.reasons[k]) for k, v in values.items()]
 

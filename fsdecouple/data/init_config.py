@@ -263,6 +263,12 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
                           "volts of order 1 as Table 2's gamma assumes: divide by each full-scale output")
     reasons["csv"] = (f"{'the default' if sep == ',' else 'detected'}: \"{sep}\"-separated"
                       f"{', decimal comma' if decimal == ',' else ''}")
+    zero = None
+    if not (f == 0).all(axis=1).any():  # gravity never switches off: no zero to subtract
+        zero = "intercept"
+        reasons["zero"] = (f"no row of the {len(f):,} read has every load 0: each output's "
+                           "offset is fitted with the loads (an intercept), and the model "
+                           "keeps it, so logs need no tare")
     for i in set(usable) - set(mapped) - set(special):
         ignored[i] = ("a timestamp: not used" if i in stamps
                       else "not a load component or an output channel")
@@ -274,7 +280,7 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
         ignored=[Ignored(i + 1, names[i], r) for i, r in sorted(ignored.items())], notes=notes,
         rows=len(table), keys=("repetition", "axis", *components, *outputs),
         components=components, outputs=outputs, load_units=load_units if mixed else None,
-        output_units=out_units,
+        output_units=out_units, zero=zero,
     )
 
 

@@ -58,6 +58,12 @@ def assign_sweeps(table: pd.DataFrame, layout: Layout = DEFAULT,
         rel = np.where(alone & (rel > 0).any(axis=0) & (rel * ~alone > 0).any(axis=1)[:, None],
                        0.0, rel)
         loaded[two] = np.argmax(rel, axis=1)
+        if not np.isin(np.arange(len(loads)), loaded).all():
+            # poses of a mass (every row loads every component): a row belongs to the
+            # component it loads most relative to that component's peak in the set, so
+            # every component has rows to be scored on (as init pairs outputs)
+            peak = np.abs(forces).max(axis=0)
+            loaded[two] = np.argmax(np.abs(forces[two]) / np.where(peak > 0, peak, np.inf), axis=1)
         two = two[:0]
     if combined and two.size:
         loaded = loaded.copy()
