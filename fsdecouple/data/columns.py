@@ -363,15 +363,15 @@ def guess_rows(path: Path, names: list[str], raw_rows: list[list[str]], sep: str
     peak_load = max(abs(v) for k in FORCE_COLUMNS for v in values[k])
     peak_out = max(abs(v) for k in VOLTAGE_COLUMNS for v in values[k])
     load, load_why = _unit("load", hints, peak_load, integers, notes, labels)
-    output, output_why = _unit("output", hints, peak_out, integers, notes, labels)
+    bits = adc_bits([v for k in VOLTAGE_COLUMNS for v in values[k]]) if integers else None
+    output, output_why = _unit("output", hints, peak_out, integers, notes, labels, bits=bits)
     reasons["units"] = f"load {load}: {load_why}; output {output}: {output_why}"
 
     peaks = {a: max(abs(v) for v in values[k]) for a, k in zip(AXES, FORCE_COLUMNS, strict=True)}
-    full_scale = {a: nice_ceil(p) if p else 1.0 for a, p in peaks.items()}
+    full_scale = {a: full_scale_of(p) if p else 1.0 for a, p in peaks.items()}
     notes += [f"full_scale {a}: no load along {a} in the data; 1 is a placeholder"
               for a, p in peaks.items() if not p]
-    seen = ", ".join(f"{a} {p:g}" for a, p in peaks.items())
-    reasons["full_scale"] = f"largest |load| per axis ({seen} {load}) rounded up to 1, 2, 2.5 or 5 x 10^k"
+    reasons["full_scale"] = full_scale_reason(peaks, dict.fromkeys(peaks, load))
     min_repetitions = max(1, len(reps))
     reasons["min_repetitions"] = (f"{len(reps)} distinct values in {labels['repetition']}"
                                   if "repetition" in columns else
@@ -405,8 +405,52 @@ def _sniff_decimal(sep: str, rows: list[list[str]], cols: list[int]) -> str:
     return "." if sep == "," or point > comma else ","
 
 
+ADC_BITS = (8, 10, 12, 14, 16, 18, 20, 24)  # common converter resolutions
+# Readings of a k-bit ADC lie within 0 .. 2^k - 1 but for rare serial misreads (459 read
+# as 4598): the range is the smallest that holds this fraction of the readings.
+ADC_QUANTILE = 0.999
+
+
+def adc_bits(values) -> int | None:
+    """k when ``values`` are whole numbers >= 0 that a k-bit ADC gives (0 .. 2^k - 1 but for
+    misreads, :data:`ADC_QUANTILE`), the smallest such k of :data:`ADC_BITS`; else None."""
+    flat = values.ravel().tolist() if hasattr(values, "ravel") else list(values)
+    v = sorted(float(x) for x in flat if math.isfinite(float(x)))
+    if not v or v[0] < 0 or any(x != round(x) for x in v):
+        return None
+    top = v[min(len(v) - 1, math.ceil(ADC_QUANTILE * len(v)) - 1)]
+    return next((k for k in ADC_BITS if top <= 2 ** k - 1), None)
+
+
+# Full scale from the data (issue 32): the largest load rounded up to a round number, by
+# at most 25 %; 1, 2, 2.5, 5 x 10^k when one is that close, else the finer steps.
+FULL_SCALE_MARGIN = 1.25
+FINE_STEPS = (1.0, 1.2, 1.5, 1.8, 2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 7.0, 8.0)
+
+
+def full_scale_of(peak: float) -> float:
+    """The full scale guessed from the largest |load| ``peak`` (> 0): :func:`nice_ceil` when it
+    is within :data:`FULL_SCALE_MARGIN` of the peak, else the next of :data:`FINE_STEPS`
+    x 10^k (consecutive steps differ by at most 25 %, so one always is)."""
+    nice = nice_ceil(peak)
+    if nice <= FULL_SCALE_MARGIN * peak:
+        return nice
+    k = math.floor(math.log10(peak))
+    return next(float(f"{m * 10.0**e:.12g}") for e in (k - 1, k, k + 1)
+                for m in FINE_STEPS if m * 10.0**e >= peak * (1 - 1e-12))
+
+
+def full_scale_reason(peaks: dict, units: dict) -> str:
+    """The reason init prints for its full scales: each peak, its full scale and the margin."""
+    parts = [f"{c} {p:g} {units[c]} -> {full_scale_of(p):g} (+{100 * (full_scale_of(p) / p - 1):.0f} %)"
+             if p else f"{c}: no load" for c, p in peaks.items()]
+    return ("largest |load| per component, rounded up by at most 25 % to a round number ("
+            + ", ".join(parts) + ")")
+
+
 def _unit(kind: str, hints: dict[str, str | None], peak: float, integers: bool,
-          notes: list[str], shown: dict[str, str], keys=None) -> tuple[str, str]:
+          notes: list[str], shown: dict[str, str], keys=None,
+          bits: int | None = None) -> tuple[str, str]:
     """The ``load`` or ``output`` unit: from header hints, else from the magnitudes.
 
     ``keys``: the columns to look at (default: fx, fy, fz or ux, uy, uz).
@@ -421,6 +465,9 @@ def _unit(kind: str, hints: dict[str, str | None], peak: float, integers: bool,
             notes.append(f"{kind} headers disagree on the unit "
                          f"({', '.join(sorted(set(found.values())))}); took {unit}")
         return unit, f"header hint in {', '.join(shown[k] for k in found)} ({_UNIT_NAMES[unit]})"
+    if kind == "output" and integers and bits is not None:
+        return "count", (f"every output a whole number within 0 .. {2 ** bits - 1} (a {bits}-bit "
+                         "ADC's raw counts)")
     if kind == "output" and integers and peak > COUNT_ABOVE:
         return "count", f"every output an integer, largest |output| {peak:g} > {COUNT_ABOVE:g}"
     if kind == "load":

@@ -37,8 +37,10 @@ from .columns import (
     _parse_name,
     _sniff_decimal,
     _unit,
+    adc_bits,
+    full_scale_of,
+    full_scale_reason,
     guess_rows,
-    nice_ceil,
     read_rows,
     shown,
 )
@@ -241,17 +243,15 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
     else:
         out_unit, out_why = _unit("output", hints, peak_out, integers, notes,
                                   {f"c{j}": shown(names[i]) for j, i in enumerate(channels)},
-                                  keys=list(hints))
+                                  keys=list(hints), bits=adc_bits(u) if integers else None)
     mixed = len(set(load_units.values())) > 1
     reasons["units"] = (f"load {', '.join(f'{c} {v}' for c, v in load_units.items())}: header hints, "
                         f"else N and N·m; output {out_unit}: {out_why}")
     peaks = np.abs(f).max(axis=0)
-    full_scale = {c: nice_ceil(p) if p else 1.0 for c, p in zip(components, peaks, strict=True)}
+    full_scale = {c: full_scale_of(p) if p else 1.0 for c, p in zip(components, peaks, strict=True)}
     notes += [f"full_scale {c}: no load on {c} in the data; 1 is a placeholder"
               for c, p in zip(components, peaks, strict=True) if not p]
-    reasons["full_scale"] = ("largest |load| per component (" + ", ".join(
-        f"{c} {p:g} {load_units[c]}" for c, p in zip(components, peaks, strict=True))
-        + ") rounded up to 1, 2, 2.5 or 5 x 10^k")
+    reasons["full_scale"] = full_scale_reason(dict(zip(components, peaks, strict=True)), load_units)
     reps = {row[i].strip() for row in rows for i in special if special[i] == "repetition"
             and i < len(row) and row[i].strip()}
     reasons["min_repetitions"] = (f"{len(reps)} distinct values in {shown(columns['repetition'])}"
