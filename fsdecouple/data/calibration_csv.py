@@ -16,9 +16,10 @@ import numpy as np
 from ..config import Settings
 from ..errors import InputError, excerpt, printable, where
 from ..files import CALIBRATION_LIMIT, TASK_LIMIT, natural_key, read_bounded, reading
-from .columns import applied_load
+from .columns import adc_bits, applied_load
 from .csv_text import HEADER_ROW, read_csv_text, read_header, require_columns, to_numbers
 from .poses import average_poses, pose_note, timestamp_column
+from .rails import at_rail, ranges
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -256,6 +257,9 @@ def read_calibration_table(path: str | Path, settings: Settings,
             values = to_numbers(raw[name], f, name, rows, settings.decimal)
             # check each cell before scaling so the message quotes the file's value
             out[canonical] = values * settings.scale[canonical]
+        # raw counts: the converter's range, from the samples before any averaging (rails.py)
+        bits = adc_bits(out[list(layout.outputs)].to_numpy()) \
+            if settings.output_unit == "count" else None
         if timestamp_column(header) is not None:  # a pose log: samples averaged per load
             keys = [*layout.loads, "repetition", "axis"]
             out, ss, dof, runs, inverse = average_poses(out, keys, list(layout.outputs))
@@ -263,6 +267,11 @@ def read_calibration_table(path: str | Path, settings: Settings,
                 pose_ss, pose_dof = pose_ss + ss, pose_dof + dof
                 pose_inv, pose_n = pose_inv + inverse, pose_n + len(runs)
                 warnings.append(pose_note(f, runs, sum(r[2] for r in runs)))
+        known = ranges(settings, layout.outputs, out[list(layout.outputs)].to_numpy(), bits)
+        if known:
+            keep, notes = at_rail(out, layout.outputs, known, f, strict)
+            warnings.extend(notes)
+            out = out[keep].reset_index(drop=True)
         frames.append(out)
     table = pd.concat(frames, ignore_index=True)
     # training order is file order: repetition, then row (stable)

@@ -97,6 +97,7 @@ class Guess:
     load_units: dict[str, str] | None = None  # per component, where they differ
     output_units: dict[str, str] | None = None  # per output, where they differ
     zero: str | None = None  # "intercept" for data without an unloaded row (data/zero.py)
+    gamma: float | None = None  # svr: gamma for poses of a mass (init_config.POSE_GAMMA)
 
     def to_dict(self) -> dict[str, Any]:
         """The ``--json`` document."""
@@ -112,6 +113,7 @@ class Guess:
                 "load_units": self.load_units, "output_units": self.output_units}
                if self.components else {}),
             **({"zero": self.zero} if self.zero else {}),
+            **({"svr": {"gamma": self.gamma}} if self.gamma else {}),
         }
 
     def settings(self) -> list[tuple[str, str, str]]:
@@ -129,6 +131,7 @@ class Guess:
             "csv": f"{{sep: {json.dumps(self.sep)}, decimal: {json.dumps(self.decimal)}}}",
             "scaling": self.scaling,
             **({"zero": self.zero} if self.zero else {}),
+            **({"svr": f"{{gamma: {self.gamma!r}}}"} if self.gamma else {}),
         }
         return [(k, v, self.reasons[k]) for k, v in values.items()]
 

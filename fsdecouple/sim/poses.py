@@ -19,8 +19,9 @@ switches off, so no pose is unloaded: the gauges' offsets can only be fitted
   0 .. 1023;
 * :data:`SAMPLES` timestamped samples per pose, of which about :data:`MISREAD` are
   serial misreads (a digit appended: 459 read as 4598);
-* one channel whose offset puts it near its upper rail (within 5 % of 1023) on
-  :data:`RAILING` poses.
+* three channels whose offsets put them near their upper rail (within 5 % of 1023) on
+  about :data:`RAILING` poses in all (fewer where a channel's highest poses spread wider
+  than the 5 %).
 
 The truth (loads, noise-free counts) comes back with the rows, so a test can score a
 model against it.
@@ -63,7 +64,7 @@ class PoseSet:
     loads: np.ndarray  # (poses, 6) [N, N·m]
     samples: list[np.ndarray]  # per pose, (samples, gauges) integer counts as written
     truth: np.ndarray  # (poses, gauges) noise-free counts of each pose
-    railing: int  # the channel near its rail
+    railing: np.ndarray  # the channels near their rail
 
 
 def icosahedron() -> np.ndarray:
@@ -100,11 +101,14 @@ def simulate_poses(seed: int = 0, samples: int = SAMPLES, gauges: int = GAUGES,
     signal = SPAN * (linear + (s ** 2) @ quad.T)
     top = 2 ** BITS - 1
     offset = rng.uniform(0.35, 0.65, gauges) * top
-    railing = int(rng.integers(gauges))
-    # the railing channel: its RAILING-th largest pose just inside 5 % of the upper rail
-    high = np.sort(signal[:, railing])[-RAILING]
-    offset[railing] = 0.975 * top - high
-    offset[railing] = min(offset[railing], top - 3 - signal[:, railing].max())  # never clipped
+    # RAILING poses near a rail, spread over three channels: each one's offset puts its
+    # RAILING / 3 highest poses within 5 % of the upper rail, never clipped at it
+    railing = rng.choice(gauges, 3, replace=False)
+    for j in railing:
+        high = np.sort(signal[:, j])
+        n = RAILING // 3
+        offset[j] = 0.955 * top - high[-n] + 1.0
+        offset[j] = min(offset[j], top - 3 - high[-1])
     truth = offset + signal
     if dead is not None:
         truth[:, dead] = offset[dead]
