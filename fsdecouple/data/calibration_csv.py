@@ -133,6 +133,8 @@ def read_calibration_table(path: str | Path, settings: Settings,
     single = len(files) == 1 and not Path(path).is_dir()
     frames, skipped, digests, warnings = [], [], [], []
     excluded: list[tuple[str, int]] = []
+    poses: list = []  # pose logs: (file, header, runs averaged, points)
+    counts: list[np.ndarray] = []  # raw ADC counts as read, for the converter's range (rails.py)
     pose_ss, pose_dof, pose_inv, pose_n = 0.0, 0, 0.0, 0  # pose logs (poses.py)
     cols = settings.columns
     layout = settings.layout
@@ -257,29 +259,57 @@ def read_calibration_table(path: str | Path, settings: Settings,
             values = to_numbers(raw[name], f, name, rows, settings.decimal)
             # check each cell before scaling so the message quotes the file's value
             out[canonical] = values * settings.scale[canonical]
-        # raw counts: the converter's range, from the samples before any averaging (rails.py)
-        bits = adc_bits(out[list(layout.outputs)].to_numpy()) \
-            if settings.output_unit == "count" else None
+        if settings.output_unit == "count":  # the converter's range, from the samples (rails.py)
+            counts.append(out[list(layout.outputs)].to_numpy())
         if timestamp_column(header) is not None:  # a pose log: samples averaged per load
             keys = [*layout.loads, "repetition", "axis"]
             out, ss, dof, runs, inverse = average_poses(out, keys, list(layout.outputs))
             if runs:
                 pose_ss, pose_dof = pose_ss + ss, pose_dof + dof
                 pose_inv, pose_n = pose_inv + inverse, pose_n + len(runs)
-                warnings.append(pose_note(f, runs, sum(r[2] for r in runs)))
-        known = ranges(settings, layout.outputs, out[list(layout.outputs)].to_numpy(), bits)
-        if known:
-            keep, notes = at_rail(out, layout.outputs, known, f, strict)
-            warnings.extend(notes)
-            out = out[keep].reset_index(drop=True)
+            poses.append((f, header, runs, out))
         frames.append(out)
+    if len(poses) == len(files) > 1 and len(poses[0][3]) == 1:
+        # a directory of pose files: one static pose per file, all one calibration set
+        _one_pose_each(poses)
+        for frame in frames:
+            frame["repetition"] = 1
+        runs = [(f"{Path(f).name}, lines {r[0]}-{r[1]}", *r[2:]) for f, _, rs, _ in poses for r in rs]
+        warnings.append(pose_note(Path(path), [(a, "", *rest) for a, *rest in runs],
+                                  sum(r[1] for r in runs), files=len(poses)))
+    else:
+        warnings += [pose_note(f, runs, sum(r[2] for r in runs)) for f, _, runs, _ in poses if runs]
     table = pd.concat(frames, ignore_index=True)
+    bits = adc_bits(np.concatenate(counts)) if counts else None
+    known = ranges(settings, layout.outputs, table[list(layout.outputs)].to_numpy(), bits)
+    if known:  # a channel at a rail (rails.py)
+        keep, notes = at_rail(table, layout.outputs, known, strict)
+        warnings.extend(notes)
+        table = table[keep].reset_index(drop=True)
     # training order is file order: repetition, then row (stable)
     table = table.sort_values(["repetition"], kind="stable").reset_index(drop=True)
     table = table[["repetition", "axis", "file", "row", *layout.loads, *layout.outputs]]
     noise = np.sqrt(pose_ss / pose_dof * pose_inv / pose_n) if pose_dof else None
     return CalibrationTable(table, skipped, tuple(digests), hidden, tuple(warnings), noise,
                             tuple(excluded))
+
+
+def _one_pose_each(poses) -> None:
+    """A pose directory's files: each one static pose, all in the first file's layout."""
+    first, header0 = poses[0][0], poses[0][1]
+    for f, header, _, out in poses[1:]:
+        if header != header0:
+            j = next((i for i, (a, b) in enumerate(zip(header, header0, strict=False)) if a != b),
+                     min(len(header), len(header0)))
+            found = repr(header[j]) if j < len(header) else "nothing"
+            want = repr(header0[j]) if j < len(header0) else "nothing"
+            raise InputError(f"{where(f, HEADER_ROW)}: column {j + 1} is {found}, {first.name} has "
+                             f"{want} there; the files of a pose directory share one layout")
+        if len(out) > 1:
+            line = int(out["row"].iat[1])
+            raise InputError(f"{where(f, line)}: the applied loads change here (from line "
+                             f"{int(out['row'].iat[0])}'s); a pose file holds one static pose "
+                             "(split it into one file per pose)")
 
 
 def _names_file(name: str, f: Path) -> bool:

@@ -417,11 +417,13 @@ ADC_QUANTILE = 0.999
 def adc_bits(values) -> int | None:
     """k when ``values`` are whole numbers >= 0 that a k-bit ADC gives (0 .. 2^k - 1 but for
     misreads, :data:`ADC_QUANTILE`), the smallest such k of :data:`ADC_BITS`; else None."""
-    flat = values.ravel().tolist() if hasattr(values, "ravel") else list(values)
-    v = sorted(float(x) for x in flat if math.isfinite(float(x)))
-    if not v or v[0] < 0 or any(x != round(x) for x in v):
+    import numpy as np  # init's header guess needs no numpy; this runs on its numbers
+
+    v = np.asarray(values, dtype=float).ravel()
+    v = v[np.isfinite(v)]
+    if not v.size or v.min() < 0 or (v != np.round(v)).any():
         return None
-    top = v[min(len(v) - 1, math.ceil(ADC_QUANTILE * len(v)) - 1)]
+    top = float(np.quantile(v, ADC_QUANTILE, method="higher"))
     return next((k for k in ADC_BITS if top <= 2 ** k - 1), None)
 
 

@@ -125,7 +125,10 @@ def guess_layout(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
     """:func:`guess_components` when the header names a moment or a rig's applied loads beside
     the readings, else the 3-axis guess."""
     path = Path(path)
-    names, rows, sep, truncated = read_rows(path, max_rows)
+    if path.is_dir():
+        names, rows, sep, truncated = _directory_rows(path, max_rows)
+    else:
+        names, rows, sep, truncated = read_rows(path, max_rows)
     # a moment, or applied loads named as such beside readings named like the components
     # (Fx_ref and Fx: a rig's reference and the sensor's own reading) take the component path
     rig = any(_applied(n) for n in names) and any(_component(n) and not _applied(n) for n in names)
@@ -138,6 +141,32 @@ def guess_layout(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
             return guess_rows(path, names, rows, sep, truncated)
         except InputError:
             raise err from None
+
+
+def _directory_rows(path: Path, max_rows: int) -> tuple[list[str], list[list[str]], str, bool]:
+    """The rows of a directory's CSV files (a pose directory: one pose a file), joined under
+    their one header: every file's rows count for the loads, the zero rule and full scale.
+    Files in another layout are refused by name, as fit refuses them."""
+    from .calibration_csv import list_calibration
+
+    files, _ = list_calibration(path)
+    names, rows, sep, truncated = read_rows(files[0], max_rows)
+    for f in files[1:]:
+        if len(rows) >= max_rows:
+            truncated = True
+            break
+        other, more, _, cut = read_rows(f, max_rows - len(rows))
+        if other != names:
+            j = next((i for i, (a, b) in enumerate(zip(other, names, strict=False)) if a != b),
+                     min(len(other), len(names)))
+            found = repr(other[j]) if j < len(other) else "nothing"
+            want = repr(names[j]) if j < len(names) else "nothing"
+            raise InputError(f"{_comment(str(f))}, row 1: column {j + 1} is {_comment(found)}, "
+                             f"{_comment(files[0].name)} has {_comment(want)} there; the files "
+                             "of a calibration directory share one layout")
+        rows += more
+        truncated |= cut
+    return names, rows, sep, truncated
 
 
 def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: str,

@@ -105,12 +105,23 @@ def robust_keep(u: np.ndarray, run: np.ndarray, counts: np.ndarray) -> np.ndarra
     return keep
 
 
-def pose_note(path, runs, samples: int) -> str:
-    """One line naming the poses averaged in a file, and the samples rejected per pose."""
-    shown = ", ".join(f"{a}-{b}" for a, b, *_ in runs[:3]) + (", ..." if len(runs) > 3 else "")
+def pose_note(path, runs, samples: int, files: int = 0) -> str:
+    """One line naming the poses averaged in a file (or in ``files`` pose files), and the
+    samples rejected per pose.  ``runs``: (first line, last line, samples, rejected); in a
+    pose directory (first line as "FILE, lines A-B", "")."""
+    def span(a, b):
+        return f"{a}-{b}" if b != "" else a
+    shown = ", ".join(span(a, b) for a, b, *_ in runs[:3]) + (", ..." if len(runs) > 3 else "")
     rejected = [(a, b, r) for a, b, _, r in runs if r]
-    told = "; ".join(f"lines {a}-{b}: {r}" for a, b, r in rejected[:8]) + \
+    told = "; ".join(f"{'lines ' if b != '' else ''}{span(a, b)}: {r}" for a, b, r in rejected[:8]) + \
         ("; ..." if len(rejected) > 8 else "")
+    if files:
+        return (f"{path}: {files} pose files, one calibration set: {samples} timestamped samples "
+                f"averaged per pose ({shown})"
+                + (f"; samples rejected as beyond {REJECT:g} robust sigmas of their pose's median "
+                   f"(misreads), {sum(r for *_, r in rejected)} in {len(rejected)} poses ({told})"
+                   if rejected else "; no sample rejected")
+                + "; their scatter is the noise sigma (docs/rigs.md)")
     dropped = (f"; samples rejected as beyond {REJECT:g} robust sigmas of their pose's median "
                f"(misreads), {sum(r for *_, r in rejected)} in {len(rejected)} poses ({told})"
                if rejected else "; no sample rejected")

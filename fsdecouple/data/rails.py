@@ -10,6 +10,8 @@ warning per channel naming its lines, or refused with ``--strict``.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from ..errors import InputError, where
@@ -29,8 +31,9 @@ def ranges(settings, outputs, raw: np.ndarray, bits: int | None) -> dict[str, tu
     return out
 
 
-def at_rail(frame, outputs, known: dict, path, strict: bool) -> tuple[np.ndarray, list[str]]:
-    """Which rows of ``frame`` (points with ``row`` and ``outputs``) to keep, and the warnings.
+def at_rail(frame, outputs, known: dict, strict: bool) -> tuple[np.ndarray, list[str]]:
+    """Which rows of ``frame`` (points with ``file``, ``row`` and ``outputs``) to keep, and
+    the warnings.
 
     A row is left out when any output with a known range is within :data:`RAIL` of its
     range's ends; ``strict`` refuses it instead, naming the file, line and column.
@@ -38,6 +41,8 @@ def at_rail(frame, outputs, known: dict, path, strict: bool) -> tuple[np.ndarray
     keep = np.ones(len(frame), dtype=bool)
     notes = []
     rows = frame["row"].to_numpy()
+    files = frame["file"].to_numpy()
+    single = len(set(files)) == 1
     for c in outputs:
         if c not in known:
             continue
@@ -50,10 +55,13 @@ def at_rail(frame, outputs, known: dict, path, strict: bool) -> tuple[np.ndarray
         i = int(np.argmax(near))
         end = "upper" if u[i] >= hi - margin else "lower"
         if strict:
-            raise InputError(f"{where(path, int(rows[i]), c)}: {u[i]:g} is within {RAIL:.0%} of "
+            raise InputError(f"{where(files[i], int(rows[i]), c)}: {u[i]:g} is within {RAIL:.0%} of "
                              f"the {end} end of its range {lo:g} .. {hi:g} ({whence}): a channel "
                              "at its rail no longer follows the load; --strict refuses it")
-        lines = ", ".join(map(str, rows[near][:6])) + (", ..." if near.sum() > 6 else "")
+        at = [str(r) if single else f"{Path(f).name} {r}"
+              for f, r in zip(files[near][:6], rows[near][:6], strict=True)]
+        lines = ", ".join(at) + (", ..." if near.sum() > 6 else "")
+        path = files[i] if single else Path(files[i]).parent
         notes.append(f"{path}: output {c} is within {RAIL:.0%} of an end of its range {lo:g} .. "
                      f"{hi:g} ({whence}) on {int(near.sum())} point{'s' if near.sum() > 1 else ''} "
                      f"(lines {lines}): a channel at its rail no longer follows the load, so "
