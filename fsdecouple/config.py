@@ -25,9 +25,7 @@ from .yamlfile import SafeUniqueLoader, read_yaml  # noqa: F401 (the loader, for
 SCALINGS = ("none", "full_scale")
 NOT_CSV = "0123456789eE+-\"\r\n"  # csv: characters that stand inside a number or a quoted cell
 CSV_CHARS = {"decimal": "'.' or ','", "sep": "one character that is no digit, sign, 'e', quote or line break"}
-# how sweeps are zeroed: Section 3, zero.fitted_offsets, or each output's offset fitted as an
-# intercept with the loads when no row is unloaded (issue 32, zero.intercept_offsets)
-ZERO_MODES = ("rows", "fit", "intercept")
+ZERO_MODES = ("rows", "fit", "intercept")  # Section 3; zero.fitted_offsets; zero.intercept_offsets
 # chi beyond its range (core/extrapolation.py): tangent for new fits, kernel for older files
 EXTRAPOLATIONS = DEFAULT_EXTRAPOLATION, LEGACY_EXTRAPOLATION = ("tangent", "kernel")
 MAX_REFINE = 100  # refinement steps (core/decouple.py): each gains about a digit
@@ -171,8 +169,7 @@ def check_refine(value: Any, where: str = "refine") -> int:
 
 
 def check_zero(value: Any, where: str = "zero") -> str:
-    """How sweeps are zeroed: ``rows`` (Section 3), ``fit`` (all points, zero.fitted_offsets)
-    or ``intercept`` (each output's offset a fitted unknown, zero.intercept_offsets)."""
+    """How sweeps are zeroed: one of ZERO_MODES (``rows``, ``fit`` or ``intercept``, data/zero.py)."""
     return check_choice(value, where, ZERO_MODES)
 
 

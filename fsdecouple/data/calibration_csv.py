@@ -16,8 +16,9 @@ import numpy as np
 from ..config import Settings
 from ..errors import InputError, excerpt, printable, where
 from ..files import CALIBRATION_LIMIT, TASK_LIMIT, natural_key, read_bounded, reading
-from .columns import adc_bits, applied_load
+from .columns import applied_load
 from .csv_text import HEADER_ROW, read_csv_text, read_header, require_columns, to_numbers
+from .magnitudes import adc_bits
 from .poses import average_poses, pose_note, timestamp_column
 from .rails import at_rail, ranges
 
@@ -161,6 +162,7 @@ def read_calibration_table(path: str | Path, settings: Settings,
                 f"{where(f, HEADER_ROW)}: this is the output of 'fsdecouple ingest -o' (it has "
                 f"{layout.outputs[0]}_raw), not a repetition; move it out of the calibration directory"
             )
+        _suggest_init(header, settings, numeric, f, path)
         require_columns(header, numeric, f)
         for c in layout.outputs:  # a reading mapped to a reference column: a swapped config
             if applied_load(cols[c]):
@@ -292,6 +294,20 @@ def read_calibration_table(path: str | Path, settings: Settings,
     noise = np.sqrt(pose_ss / pose_dof * pose_inv / pose_n) if pose_dof else None
     return CalibrationTable(table, skipped, tuple(digests), hidden, tuple(warnings), noise,
                             tuple(excluded))
+
+
+def _suggest_init(header, settings: Settings, numeric: dict, f: Path, path) -> None:
+    """The built-in columns (no config, or one without ``columns:``) none of which the file
+    has: a file from another rig, whose config ``init`` guesses; say so, not "did you mean"."""
+    if settings.components is not None or settings.columns != Settings().columns:
+        return
+    if any(name in header for name in numeric.values()):
+        return  # some mapped: a typo in a paper-layout file, which require_columns names
+    shown = printable(str(path))
+    raise InputError(f"{where(f, HEADER_ROW)}: none of the built-in columns "
+                     f"({', '.join(numeric.values())}) is in the header; for this file's "
+                     f"layout run 'fsdecouple init {shown} -o sensor.yaml', check it, then "
+                     "fit with -c sensor.yaml")
 
 
 def _one_pose_each(poses) -> None:

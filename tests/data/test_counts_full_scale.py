@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from fsdecouple.data.columns import FINE_STEPS, adc_bits, full_scale_of, nice_ceil
+from fsdecouple.data.magnitudes import FINE_STEPS, adc_bits, full_scale_of, nice_ceil
 
 
 @pytest.mark.parametrize("seed", range(5))
