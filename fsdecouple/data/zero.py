@@ -63,7 +63,16 @@ def assign_sweeps(table: pd.DataFrame, layout: Layout = DEFAULT,
             # component it loads most relative to that component's peak in the set, so
             # every component has rows to be scored on (as init pairs outputs)
             peak = np.abs(forces).max(axis=0)
-            loaded[two] = np.argmax(np.abs(forces[two]) / np.where(peak > 0, peak, np.inf), axis=1)
+            rel = np.abs(forces[two]) / np.where(peak > 0, peak, np.inf)
+            loaded[two] = np.argmax(rel, axis=1)
+            # a component never the largest (a small moment beside a weight's forces) takes
+            # the rows it loads most, from components that keep two rows or more
+            for c in np.flatnonzero(peak > 0):
+                for r in np.argsort(-rel[:, c], kind="stable")[:2]:
+                    if not (loaded[two] == c).sum() < 2:
+                        break
+                    if (loaded[two] == loaded[two[r]]).sum() > 2 and rel[r, c] > 0:
+                        loaded[two[r]] = c
         two = two[:0]
     if combined and two.size:
         loaded = loaded.copy()
