@@ -188,3 +188,63 @@ def test_misread_samples_are_rejected_and_counted_per_pose(tmp_path):
     np.testing.assert_array_equal(np.sort(pose), np.flatnonzero(~railing))
     assert any("within 5% of an end of its range 0 .. 1023 (a 10-bit ADC's" in w
                for w in calib.warnings)
+
+
+def test_tare_and_zero_still_replace_the_fitted_offsets(tmp_path):
+    offsets = np.random.default_rng(4).uniform(300, 700, 8)
+    path = tmp_path / "poses.csv"
+    linear_poses(path, offsets, noise=0.3)
+    init_config(path, tmp_path / "cfg.yaml")
+    invoke(["fit", path, "-c", tmp_path / "cfg.yaml", "-o", tmp_path / "m.json", "--no-verdict"])
+    model = load_model(tmp_path / "m.json")
+    log = tmp_path / "log.csv"
+    shifted = model.zero + 25.0  # the sensor drifted 25 counts since its calibration
+    with log.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow([f"s{j}" for j in range(8)])
+        w.writerows([[repr(float(v)) for v in shifted]] * 4)
+
+    def forces(*extra):
+        out = tmp_path / f"out{len(extra)}.csv"
+        invoke(["apply", tmp_path / "m.json", log, "-o", out, "--force", *extra])
+        with out.open() as fh:
+            return np.array([[float(r[c]) for c in ("fx", "fy", "fz", "mx", "my", "mz")]
+                             for r in csv.DictReader(fh)])
+
+    # the model's zero leaves the drift as a load; a tare of the log's own rows removes it,
+    # and --zero with the drifted zero does the same: both decode a zero-corrected output of
+    # 0, as the model does (its chi need not vanish at 0 under an intercept: ~1e-4 F.S.)
+    at_zero = model.decouple(np.zeros((1, 8)), rotate=False, exact=True)
+    drift = forces()
+    assert (np.abs(drift - at_zero) / FS).max() > 0.01
+    np.testing.assert_allclose(forces("--tare", "2"), np.repeat(at_zero, 4, axis=0), atol=1e-6)
+    np.testing.assert_allclose(forces("--zero", ",".join(repr(float(v)) for v in shifted)),
+                               np.repeat(at_zero, 4, axis=0), atol=1e-6)
+
+
+def test_the_fitted_zero_round_trips_and_is_checked(tmp_path):
+    import json
+
+    from fsdecouple.core.modelfile import content_digest, model_from_dict, model_to_dict
+    from fsdecouple.errors import ModelFileError
+
+    path = tmp_path / "poses.csv"
+    linear_poses(path, np.full(8, 512.0), noise=0.3)
+    init_config(path, tmp_path / "cfg.yaml")
+    invoke(["fit", path, "-c", tmp_path / "cfg.yaml", "-o", tmp_path / "m.json", "--no-verdict"])
+    model = load_model(tmp_path / "m.json")
+    doc = model_to_dict(model)
+    assert doc["format_version"] == 6 and set(doc["zero"]["offsets"]) == {f"s{j}" for j in range(8)}
+    np.testing.assert_array_equal(model_from_dict(json.loads(json.dumps(doc))).zero, model.zero)
+    del doc["zero"]["offsets"]["s3"]
+    doc["integrity"]["digest"] = content_digest(doc)
+    with pytest.raises(ModelFileError, match="zero: expected the offsets of outputs s0"):
+        model_from_dict(doc)
+
+
+def test_fit_without_a_config_on_another_rigs_file_points_to_init(tmp_path):
+    path = tmp_path / "poses.csv"
+    linear_poses(path, np.full(8, 512.0))
+    r = invoke(["fit", path, "-o", tmp_path / "m.json"], code=2)
+    assert_one_line_error(r, f"fsdecouple init {path} -o sensor.yaml")
+    assert "did you mean" not in r.stderr
