@@ -370,8 +370,8 @@ def ingest_summary(calib, settings) -> dict[str, Any]:
             "points_per_repetition": {
                 int(r): int(n) for r, n in s.groupby("repetition").size().items()
             },
-            "load_min": float(grid.min()),
-            "load_max": float(grid.max()),
+            "load_min": float(grid.min()) if grid.size else None,
+            "load_max": float(grid.max()) if grid.size else None,
             "load_levels": int(grid.size),
             "full_scale": settings.full_scale[a],
         }
@@ -382,7 +382,8 @@ def ingest_summary(calib, settings) -> dict[str, Any]:
         "repetitions": calib.repetitions,
         "axes": axes,
         "offsets": calib.offsets.to_dict(orient="records"),
-        **({"zero": "fit"} if settings.zero_method == "fit" else {}),
+        **({"zero": "intercept"} if calib.zero == "intercept" else
+           {"zero": "fit"} if settings.zero_method == "fit" else {}),
         "skipped": list(calib.skipped),
         "warnings": list(calib.warnings),
     }

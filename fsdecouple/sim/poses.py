@@ -90,17 +90,27 @@ def pose_loads(seed: int) -> np.ndarray:
 
 
 def simulate_poses(seed: int = 0, samples: int = SAMPLES, gauges: int = GAUGES,
-                   dead: int | None = None) -> PoseSet:
-    """Draw a pose calibration (module docstring); ``dead``: a channel stuck at one value."""
+                   dead: int | None = None, drift: float = 0.0, noise_seed: int = 0) -> PoseSet:
+    """Draw a pose calibration (module docstring); ``dead``: a channel stuck at one value.
+
+    ``drift``: the same sensor later (in-situ recalibration, fitting/prior.py): each gauge's
+    gains scaled by 1 + drift N(0, 1) and its offset moved by drift x SPAN N(0, 1), drawn
+    from the seed; ``noise_seed`` draws another calibration's noise and misreads.
+    """
     rng = np.random.default_rng([320, seed])
     f = pose_loads(seed)
     s = f / FULL_SCALE
     mix = gauge_mix(seed, gauges)  # (gauges, 6), well conditioned
-    linear = s @ mix.T
     quad = rng.uniform(-NONLINEAR, NONLINEAR, (gauges, 6))
-    signal = SPAN * (linear + (s ** 2) @ quad.T)
     top = 2 ** BITS - 1
     offset = rng.uniform(0.35, 0.65, gauges) * top
+    if drift:
+        moved = np.random.default_rng([321, seed])
+        mix = mix * (1.0 + drift * moved.normal(size=(gauges, 1)))
+        offset = offset + drift * SPAN * moved.normal(size=gauges)
+    noise = np.random.default_rng([322, seed, noise_seed]) if noise_seed else rng
+    linear = s @ mix.T
+    signal = SPAN * (linear + (s ** 2) @ quad.T)
     # RAILING poses near a rail, spread over three channels: each one's offset puts its
     # RAILING / 3 highest poses within 5 % of the upper rail, never clipped at it
     railing = rng.choice(gauges, 3, replace=False)
@@ -114,13 +124,13 @@ def simulate_poses(seed: int = 0, samples: int = SAMPLES, gauges: int = GAUGES,
         truth[:, dead] = offset[dead]
     out = []
     for p in range(len(f)):
-        x = truth[p] + rng.normal(0.0, NOISE, (samples, gauges))
+        x = truth[p] + noise.normal(0.0, NOISE, (samples, gauges))
         if dead is not None:
             x[:, dead] = offset[dead]
         x = np.clip(np.rint(x), 0, top).astype(np.int64)
-        bad = rng.random(samples) < MISREAD * gauges
-        cols = rng.integers(gauges, size=samples)
-        x[bad, cols[bad]] = x[bad, cols[bad]] * 10 + rng.integers(0, 10, int(bad.sum()))
+        bad = noise.random(samples) < MISREAD * gauges
+        cols = noise.integers(gauges, size=samples)
+        x[bad, cols[bad]] = x[bad, cols[bad]] * 10 + noise.integers(0, 10, int(bad.sum()))
         out.append(x)
     return PoseSet(f, out, truth, railing)
 
