@@ -251,8 +251,8 @@ def load_calibration(path: str | Path, settings: Settings, exclude=(),
                      combined: bool = False, strict: bool = False) -> CalibrationSet:
     """Read, validate and zero-correct a calibration set (a directory or one CSV).
 
-    ``exclude``: ``FILE:ROW`` points to drop before zero correction (``fit --exclude``);
-    FILE is a file of the set by path or by name, ROW its spreadsheet row.
+    ``exclude``: ``FILE:LINE`` lines to drop before zero correction (``fit --exclude``);
+    FILE is a file of the set by path or by name, LINE as an editor numbers it (header 1).
     """
     specs = [parse_exclude(spec) for spec in exclude]
     # lines that are not a calibration point once read (a pose's later samples) or cannot

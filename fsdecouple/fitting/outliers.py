@@ -16,7 +16,7 @@ does not drag its neighbours' residuals over the limit.  The coupling outputs ar
 not checked: their shape is the unknown the SVRs learn, so a residual there cannot
 tell a gross error from coupling.  A rig whose rows load several components is checked
 over all its rows at once, each prime output fitted on every load and its square
-(:func:`joint_gross_errors`, issue 32).  Nothing is dropped: ``fit --exclude FILE:ROW``
+(:func:`joint_gross_errors`, issue 32).  Nothing is dropped: ``fit --exclude FILE:LINE``
 drops a point the technician has checked.
 """
 
