@@ -284,8 +284,10 @@ def read_calibration_table(path: str | Path, settings: Settings,
     table = pd.concat(frames, ignore_index=True)
     bits = adc_bits(np.concatenate(counts)) if counts else None
     known = ranges(settings, layout.outputs, table[list(layout.outputs)].to_numpy(), bits)
-    if known:  # a channel at a rail (rails.py)
-        keep, notes = at_rail(table, layout.outputs, known, strict)
+    posed = table["file"].isin([str(f) for f, *_ in poses]).to_numpy()
+    if known and posed.any():  # a channel at a rail on a pose (rails.py)
+        keep = np.ones(len(table), dtype=bool)
+        keep[posed], notes = at_rail(table[posed], layout.outputs, known, strict)
         warnings.extend(notes)
         table = table[keep].reset_index(drop=True)
     # training order is file order: repetition, then row (stable)

@@ -4,8 +4,10 @@ An amplifier or ADC near the end of its range no longer follows the load (it cli
 bends before it does), so a calibration point where an output sits there is no point of
 the sensor's model.  The range is the config's ``limits:`` where given, else, for raw
 ADC counts (``units: {output: count}``), 0 .. 2^k - 1 of the converter the readings
-show (:func:`fsdecouple.data.columns.adc_bits`).  Such points are left out with one
-warning per channel naming its lines, or refused with ``--strict``.
+show (:func:`fsdecouple.data.magnitudes.adc_bits`).  Such points are left out with one
+warning per channel naming its lines, or refused with ``--strict``.  Only poses are
+checked (the averaged samples of files with a timestamp column, data/poses.py): a sweep's
+single readings keep ``limits:`` for ``apply``'s saturated status, as before.
 """
 
 from __future__ import annotations

@@ -158,8 +158,7 @@ def zero_correct(table: pd.DataFrame, layout: Layout = DEFAULT,
         what = f"{where(first['file'])}: the {axis} sweep of repetition {rep} (from row {first['row']})"
         if n_zero[g] == 0:
             raise InputError(f"{what} has no zero-load row ({' = '.join(layout.loads)} = 0), so it "
-                             "cannot be zero-corrected; a set without an unloaded row takes "
-                             "'zero: intercept' (each output's offset fitted)")
+                             "cannot be zero-corrected")
         raise InputError(f"{what} has only zero-load rows; a sweep needs loaded points")
     # each sweep's zero rows in file order, side by side: the mean of a contiguous
     # run is the same pairwise sum, divided by the count, as pandas' mean of them
