@@ -248,3 +248,15 @@ def test_fit_without_a_config_on_another_rigs_file_points_to_init(tmp_path):
     r = invoke(["fit", path, "-o", tmp_path / "m.json"], code=2)
     assert_one_line_error(r, f"fsdecouple init {path} -o sensor.yaml")
     assert "did you mean" not in r.stderr
+
+
+def test_export_says_the_header_needs_the_fitted_offsets(tmp_path):
+    offsets = np.full(8, 512.0)
+    path = tmp_path / "poses.csv"
+    linear_poses(path, offsets, noise=0.3)
+    init_config(path, tmp_path / "cfg.yaml")
+    invoke(["fit", path, "-c", tmp_path / "cfg.yaml", "-o", tmp_path / "m.json", "--no-verdict"])
+    r = invoke(["export", tmp_path / "m.json", "-o", tmp_path / "d.h"])
+    zero = load_model(tmp_path / "m.json").zero
+    assert "subtract this model's fitted offsets first" in r.stdout
+    assert f"s0={zero[0]:.6g}" in r.stdout
