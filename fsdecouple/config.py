@@ -25,7 +25,7 @@ from .yamlfile import SafeUniqueLoader, read_yaml  # noqa: F401 (the loader, for
 SCALINGS = ("none", "full_scale")
 NOT_CSV = "0123456789eE+-\"\r\n"  # csv: characters that stand inside a number or a quoted cell
 CSV_CHARS = {"decimal": "'.' or ','", "sep": "one character that is no digit, sign, 'e', quote or line break"}
-ZERO_MODES = ("rows", "fit")  # how sweeps are zeroed: Section 3, or zero.fitted_offsets
+ZERO_MODES = ("rows", "fit", "intercept")  # Section 3; zero.fitted_offsets; zero.intercept_offsets
 # chi beyond its range (core/extrapolation.py): tangent for new fits, kernel for older files
 EXTRAPOLATIONS = DEFAULT_EXTRAPOLATION, LEGACY_EXTRAPOLATION = ("tangent", "kernel")
 MAX_REFINE = 100  # refinement steps (core/decouple.py): each gains about a digit
@@ -169,7 +169,7 @@ def check_refine(value: Any, where: str = "refine") -> int:
 
 
 def check_zero(value: Any, where: str = "zero") -> str:
-    """How sweeps are zeroed: ``rows`` (Section 3) or ``fit`` (all points, zero.fitted_offsets)."""
+    """How sweeps are zeroed: one of ZERO_MODES (``rows``, ``fit`` or ``intercept``, data/zero.py)."""
     return check_choice(value, where, ZERO_MODES)
 
 

@@ -63,7 +63,9 @@ def simulate(
         str | None, typer.Option(help="lever-arm: a six-axis rig's calibration.csv whose moments "
                                       "come from a force on a lever arm (known_Fx.. headers); "
                                       "quadratic: the same rig, its readings bending with the "
-                                      "squares of the loads (a few % F.S.).")
+                                      "squares of the loads (a few % F.S.); poses: 60 static "
+                                      "poses of a known mass, eight gauges in 10-bit counts, "
+                                      "pose01..pose60.csv (no unloaded pose).")
     ] = None,
     gauges: Annotated[
         int | None, typer.Option(help="--rig only: output channels, 6 to 64 (default 6: readings "
@@ -90,6 +92,14 @@ def simulate(
                       if v != d]
             if given:  # never ignored in silence
                 raise InputError(f"--rig: {', '.join(given)}: not with --rig (a rig file has its own layout)")
+            if rig == "poses":
+                from ..sim.poses import write_poses
+
+                if gauges is not None or levels is not None:
+                    raise InputError("--rig poses: eight gauges and 60 poses; no --gauges or --levels")
+                files = write_poses(out_dir, seed=seed, force=force)
+                console.print(f"wrote {len(files)} files under {printable(out_dir)}")
+                return
             files = write_rig(out_dir, seed=seed, gauges=6 if gauges is None else gauges,
                               levels=LEVELS if levels is None else levels, force=force, kind=rig)
             console.print(f"wrote {len(files)} files under {printable(out_dir)}")
@@ -146,7 +156,8 @@ def ingest(
 
 @app.command()
 def init(
-    data_file: Annotated[Path, typer.Argument(help="A calibration CSV to guess the config from.")],
+    data_file: Annotated[Path, typer.Argument(help="A calibration CSV to guess the config from, "
+                                                   "or a directory of them (pose files).")],
     output: Annotated[Path, output_file("Config file to write (YAML).")],
     force: ForceOpt = False,
     json_out: JsonOpt = False,

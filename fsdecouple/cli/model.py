@@ -56,8 +56,9 @@ def fit(
     ] = "svr",
     exclude: Annotated[
         list[str] | None,
-        typer.Option(metavar="FILE:ROW", help="Drop the calibration point FILE:ROW (repeatable), "
-                                            "e.g. a gross error fit flagged.")
+        typer.Option(metavar="FILE:LINE", help="Drop line LINE of FILE (header = line 1; "
+                                             "repeatable), e.g. a gross error fit flagged, "
+                                             "even a line that cannot be read.")
     ] = None,
     refine: Annotated[
         int | None, typer.Option(help="Second-order refinement steps K stored in the model "
@@ -84,6 +85,11 @@ def fit(
         bool, typer.Option("--strict", help="Refuse rows whose applied loads are blank "
                                             "(default: skip them with a warning).")
     ] = False,
+    prior: Annotated[
+        Path | None, typer.Option(help="A previous model of the same sensor: fit shrinks "
+                                       "toward it, by as much as held-out error chooses "
+                                       "(in-situ recalibration with few poses).")
+    ] = None,
     force: ForceOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
@@ -106,7 +112,12 @@ def fit(
         grid = grid_option(tune, tune_grid)
         check_output(output, force=force)
         cs = load_calibration(calib, settings, exclude=exclude or (), strict=strict)
-        refuse_overwriting_input(output, [*_read(cs), *_given(config)])
+        refuse_overwriting_input(output, [*_read(cs), *_given(config), *_given(prior)])
+        if prior is not None:  # fitting/prior.py: lambda chosen by held-out error
+            from ..core.modelfile import load_model
+            from ..fitting.prior import prior_set
+
+            cs = prior_set(cs, settings, load_model(prior), printable(prior))
         with progress_bar("tuning" if tune else "fitting", MofNCompleteColumn()) as progress:
             model = fit_model(cs, settings, method=method, verdict=not no_verdict, tune=tune,
                               tune_grid=grid, progress=progress)
@@ -216,6 +227,11 @@ def export(
     if model.report is not None and model.report.certificate:
         console.print("note: the header decouples forces only; apply --interval's bounds are not "
                       "in it (docs/certificate.md)", highlight=False, soft_wrap=True)
+    if model.zero is not None:  # zero: intercept (data/zero.py): apply subtracts it, C does not
+        zero = ", ".join(f"{c}={v:.6g}" for c, v in zip(model.layout.outputs, model.zero, strict=True))
+        console.print(f"note: the header decouples zero-corrected outputs; subtract this model's "
+                      f"fitted offsets first ({zero} {model.settings.output_unit})",
+                      highlight=False, soft_wrap=True)
 
 
 def _export_cal(model_file: Path, output: Path, linear_part: bool, force: bool, json_out: bool,

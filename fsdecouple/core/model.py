@@ -204,6 +204,10 @@ class CouplingErrorModel:
     temperature : TemperatureTerms, optional
         Per-output offset and gain drift about T0 (:mod:`fsdecouple.core.temperature`),
         corrected before eq. (11) by :meth:`zero_corrected`; one output is the temperature.
+    zero : ndarray, shape (M,), optional
+        Each output's offset fitted with the loads (``zero: intercept``, data/zero.py) [output
+        unit]: the zero ``apply`` subtracts from a log's raw outputs when given neither
+        ``--tare`` nor ``--zero``.  None: the outputs are zeroed by a tare, as Section 3's.
     provenance : dict
         Input files and digests, library versions.
     created : str
@@ -221,6 +225,7 @@ class CouplingErrorModel:
     own: dict[str, Chi] = field(default_factory=dict)
     projection: np.ndarray | None = None
     temperature: TemperatureTerms | None = None
+    zero: np.ndarray | None = None  # zero: intercept's fitted offsets [output unit]
     _tables: Any = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:

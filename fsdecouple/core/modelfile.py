@@ -43,8 +43,11 @@ GAUGES_FORMAT_VERSION = 5
 # Version 6 adds imported linear models (a factory matrix, data/ati_cal.py): ``method``
 # linear with no chi, k = 1 and ``projection`` = ``matrix`` (N x M, its forces bound the
 # range), and ``temperature`` (core/temperature.py: the temperature output, T0, b_i, g_i).
-# Only such models are version 6.
+# Version 6 also adds ``zero``: the outputs' offsets fitted as an intercept (zero:
+# intercept), which apply subtracts without a tare; a reader that ignored it would
+# decouple offset forces.  Only models with one of these are version 6.
 IMPORTED_FORMAT_VERSION = 6
+ZERO_FORMAT_VERSION = IMPORTED_FORMAT_VERSION
 READS_UP_TO = max(FORMAT_VERSION, OWN_FORMAT_VERSION, GAUGES_FORMAT_VERSION,
                   IMPORTED_FORMAT_VERSION)
 METHODS = ("svr", "linear")
@@ -79,6 +82,10 @@ def model_to_dict(model: CouplingErrorModel) -> dict[str, Any]:
         doc["projection"] = [[float(v) for v in row] for row in model.projection]
     if model.temperature is not None:
         doc["temperature"] = model.temperature.to_dict(model.layout.outputs)
+    if model.zero is not None:
+        doc["zero"] = {"method": "intercept", "offsets": dict(zip(
+            model.layout.outputs, (float(v) for v in model.zero), strict=True))}
+        doc["format_version"] = ZERO_FORMAT_VERSION
     doc["integrity"] = {"algorithm": "sha256", "digest": content_digest(doc)}
     return doc
 
@@ -156,6 +163,7 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
         own = _own_chis(doc.get("chi_own", {}), layout, version, source)
         projection = _projection(doc, layout, version, source, imported)
         temperature = _temperature(doc, layout, version, source)
+        zero = _zero(doc, layout, version, source)
     except (KeyError, TypeError, ValueError) as err:
         raise ModelFileError(f"{source}: malformed model file ({type(err).__name__}: {err})") from None
     labels = settings.layout.labels
@@ -173,11 +181,28 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
                              "its matrix)")
     model = CouplingErrorModel(
         settings, k, chi, FitReport.from_dict(report), doc.get("provenance", {}),
-        doc.get("created", ""), method, matrix, own, projection, temperature,
+        doc.get("created", ""), method, matrix, own, projection, temperature, zero,
     )
     _check_slopes(model, source)
     _check_tables(model, source)
     return model
+
+
+def _zero(doc: dict, layout, version: int, source: str) -> np.ndarray | None:
+    """The fitted offsets of a version-6 file (zero: intercept), one finite number per output."""
+    if "zero" not in doc:
+        return None
+    raw = doc["zero"]
+    offsets = raw.get("offsets") if isinstance(raw, dict) else None
+    if version < ZERO_FORMAT_VERSION or not isinstance(offsets, dict) \
+            or set(offsets) != set(layout.outputs):
+        raise ModelFileError(f"{source}: malformed model file (zero: expected the offsets of "
+                             f"outputs {', '.join(layout.outputs)}, format version "
+                             f"{ZERO_FORMAT_VERSION})")
+    z = np.array([offsets[c] for c in layout.outputs], dtype=float)
+    if not np.isfinite(z).all():
+        raise ModelFileError(f"{source}: malformed model file (zero: offsets must be finite)")
+    return z
 
 
 def _temperature(doc: dict, layout, version: int, source: str):

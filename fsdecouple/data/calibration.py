@@ -13,7 +13,7 @@ from ..axes import DEFAULT, Layout
 from ..config import Settings
 from ..errors import InputError
 from .calibration_csv import read_calibration_table
-from .zero import assign_sweeps, out_and_back, zero_correct
+from .zero import assign_sweeps, has_zero_row, intercept_offsets, out_and_back, zero_correct
 
 
 @dataclass(frozen=True)
@@ -137,7 +137,12 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
     its zero rows; without it (``fit``) they are fitted jointly and zeroed by the zero row before.
     """
     layout = settings.layout
+    dead_channels(table, layout, _source(files))
     table = assign_sweeps(table, layout, combined, settings.full_scale)
+    # no unloaded row (poses of a known mass): each output's offset is fitted (zero.py)
+    intercept = settings.zero == "intercept" or (settings.zero is None
+                                                 and not has_zero_row(table, layout))
+    several = not combined and ((table[list(layout.loads)].to_numpy() != 0.0).sum(axis=1) > 1).any()
     reps = sorted(table["repetition"].unique())
     if len(reps) < settings.min_repetitions:
         raise InputError(
@@ -150,7 +155,8 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
     # one grouping, not a scan of the table per repetition (quadratic in thousands)
     pairs = table[["repetition", "axis"]].drop_duplicates()
     n_axes = pairs.groupby("repetition", sort=True).size()
-    for rep in n_axes.index[n_axes.to_numpy() < layout.n][:1]:
+    # rows loading several components are fitted jointly: no sweep need isolate a component
+    for rep in n_axes.index[n_axes.to_numpy() < layout.n][:0 if several else 1]:
         have = set(pairs.loc[pairs["repetition"] == rep, "axis"])
         missing = [a for a in layout.labels if a not in have]
         if missing:
@@ -162,20 +168,27 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
             )
     # rows loading several components (a lever arm): each row is zeroed by the nearest
     # zero row before it (docs/rigs.md); the polynomial of zero: fit assumes one load a sweep
-    several = not combined and ((table[list(layout.loads)].to_numpy() != 0.0).sum(axis=1) > 1).any()
     # sweeps out and back: offsets from all points measured better than the zero rows
     # (zero.out_and_back; zero: rows in the config keeps the rows)
-    back = not several and settings.zero is None and settings.zero_method == "rows" \
-        and out_and_back(table, layout)
-    method = settings.zero or ("before" if several else "fit" if back else settings.zero_method)
-    points, offsets = zero_correct(table, layout, method)
+    back = not intercept and not several and settings.zero is None \
+        and settings.zero_method == "rows" and out_and_back(table, layout)
+    method = "intercept" if intercept else settings.zero or (
+        "before" if several else "fit" if back else settings.zero_method)
     warnings = []
+    if intercept:
+        points, offsets = intercept_offsets(table, layout, settings.full_scale, _source(files))
+        if settings.zero is None:
+            warnings.append("no row is unloaded (all loads 0): each output's offset is fitted "
+                            "with the loads as an intercept (zero: intercept); the model keeps "
+                            "it, so decoupling a log needs no --tare (docs/data.md)")
+    else:
+        points, offsets = zero_correct(table, layout, method)
     if back:
         warnings.append("the sweeps visit their loads twice (out and back): zeroed by offsets "
                         "fitted from all points (zero: fit), more accurate than the zero rows "
                         "on such sweeps (docs/tuning.md); 'zero: rows' in the config keeps the "
                         "zero rows")
-    if several:  # a typo in a single-axis set reads the same: say where, once
+    if several and not intercept:  # a typo in a single-axis set reads the same: say where, once
         rows = table[(table[list(layout.loads)].to_numpy() != 0.0).sum(axis=1) > 1]
         first = ", ".join(f"{f}, row {r}" for f, r in zip(rows["file"][:3], rows["row"][:3],
                                                           strict=True))
@@ -185,6 +198,8 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
     cs = CalibrationSet(points, offsets, tuple(files), tuple(skipped), layout=layout)
     for axis in layout.labels:
         grids = cs.load_grid(axis)
+        if not grids:  # rows loading several components, none of them mostly this one
+            continue
         ref_rep, ref = next(iter(grids.items()))
         for rep, g in grids.items():
             if g.shape != ref.shape or not np.allclose(g, ref, rtol=0, atol=1e-9):
@@ -196,7 +211,7 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
     for a, axis in enumerate(layout.labels):
         # loads far from the full scale usually mean other units (kN, kgf) or a
         # wrong full_scale, and gamma (eq. 12) is a fraction of the full scale
-        peak = float(np.abs(cs.sweep(axis)[layout.loads[a]]).max())
+        peak = float(np.abs(cs.points[layout.loads[a]]).max())
         fs, unit = settings.full_scale[a], settings.units.load_of(a)
         if peak > 1.05 * fs or peak < 0.2 * fs:
             warnings.append(
@@ -214,15 +229,36 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
                           layout=layout, zero=method, zero_auto=back)
 
 
+def dead_channels(table: pd.DataFrame, layout: Layout, source: str) -> None:
+    """Refuse an output that never changes (a dead or disconnected channel), by name.
+
+    A constant channel carries no load: the forward model and every chi divide by its
+    span, and the overflow that follows would blame an innocent cell of another channel.
+    """
+    u = table[list(layout.outputs)].to_numpy(dtype=float)
+    if len(u) < 2 or not layout.overdetermined:  # one output per component: fit names it
+        return
+    flat = np.flatnonzero(np.ptp(u, axis=0) == 0.0)
+    if flat.size:
+        names = ", ".join(f"'{layout.outputs[j]}'" for j in flat)
+        value = u[0, flat[0]]
+        raise InputError(f"{source}: output {names} is constant ({value:g} on every row): a dead "
+                         "or disconnected channel carries no load; remove it from outputs: and "
+                         "columns: in the config")
+
+
 def load_calibration(path: str | Path, settings: Settings, exclude=(),
                      combined: bool = False, strict: bool = False) -> CalibrationSet:
     """Read, validate and zero-correct a calibration set (a directory or one CSV).
 
-    ``exclude``: ``FILE:ROW`` points to drop before zero correction (``fit --exclude``);
-    FILE is a file of the set by path or by name, ROW its spreadsheet row.
+    ``exclude``: ``FILE:LINE`` lines to drop before zero correction (``fit --exclude``);
+    FILE is a file of the set by path or by name, LINE as an editor numbers it (header 1).
     """
-    read = read_calibration_table(path, settings, strict)
-    table, dropped = _exclude(read.table, exclude)
+    specs = [parse_exclude(spec) for spec in exclude]
+    # lines that are not a calibration point once read (a pose's later samples) or cannot
+    # be read (a blank or garbled cell) are dropped before their cells are read
+    read = read_calibration_table(path, settings, strict, specs)
+    table, dropped = _exclude(read.table, exclude, read.excluded)
     cs = from_table(table, settings, read.files, [*read.skipped, *dropped], combined)
     hidden = tuple(f"{f}: hidden file, not read as a repetition" for f in read.hidden)
     hidden += read.warnings
@@ -230,22 +266,42 @@ def load_calibration(path: str | Path, settings: Settings, exclude=(),
     return replace(cs, warnings=hidden + cs.warnings) if hidden else cs
 
 
-def _exclude(table: pd.DataFrame, specs) -> tuple[pd.DataFrame, list[str]]:
-    """Drop the ``FILE:ROW`` points named; each must be a point of the set."""
+def parse_exclude(spec) -> tuple[str, int]:
+    """``FILE:LINE`` of ``--exclude`` as (FILE, LINE); LINE as an editor numbers it, header 1."""
+    name, sep, row = str(spec).rpartition(":")
+    if not sep or not name or not row.strip().isascii() or not row.strip().isdigit():
+        raise InputError(f"--exclude {spec!r}: expected FILE:LINE, e.g. rep3.csv:17 (lines "
+                         "as an editor numbers them, the header is line 1)")
+    line = int(row)
+    if line < 2:
+        raise InputError(f"--exclude {spec!r}: line {line} is the header or before it; data "
+                         "rows start at line 2")
+    return name, line
+
+
+def _exclude(table: pd.DataFrame, specs, unread=()) -> tuple[pd.DataFrame, list[str]]:
+    """Drop the ``FILE:LINE`` points named; each must be a line of the set.
+
+    ``unread``: (file, line) already dropped while reading (a pose's samples, a line that
+    could not be parsed): excluded, and not looked for among the points.
+    """
     drop = np.zeros(len(table), dtype=bool)
     dropped = []
     files = table["file"].to_numpy()
     names = np.array([Path(f).name for f in files])
+    gone = {(Path(f).name, line): f for f, line in unread}
+    gone.update({(f, line): f for f, line in unread})
     for spec in specs:
-        name, sep, row = str(spec).rpartition(":")
-        if not sep or not name or not row.strip().isdigit():
-            raise InputError(f"--exclude {spec!r}: expected FILE:ROW, e.g. rep3.csv:17")
-        row = int(row)
+        name, row = parse_exclude(spec)
         in_file = (files == name) | (names == Path(name).name) if "/" not in name else files == name
         hit = np.flatnonzero(in_file & (table["row"].to_numpy() == row))
+        key = (name if "/" in name else Path(name).name, row)
+        if hit.size == 0 and key in gone:
+            dropped.append(f"{gone[key]}, row {row}: excluded (--exclude)")
+            continue
         if hit.size == 0:
-            known = "a file of the set" if not in_file.any() else f"a calibration point of {name}"
-            raise InputError(f"--exclude {spec!r}: row {row} of {name} is not {known}")
+            known = "a file of the set" if not in_file.any() else f"a data line of {name}"
+            raise InputError(f"--exclude {spec!r}: line {row} of {name} is not {known}")
         drop[hit] = True
         dropped.append(f"{files[hit[0]]}, row {row}: excluded (--exclude)")
     return table[~drop].reset_index(drop=True), dropped
@@ -314,8 +370,8 @@ def ingest_summary(calib, settings) -> dict[str, Any]:
             "points_per_repetition": {
                 int(r): int(n) for r, n in s.groupby("repetition").size().items()
             },
-            "load_min": float(grid.min()),
-            "load_max": float(grid.max()),
+            "load_min": float(grid.min()) if grid.size else None,
+            "load_max": float(grid.max()) if grid.size else None,
             "load_levels": int(grid.size),
             "full_scale": settings.full_scale[a],
         }
@@ -326,7 +382,8 @@ def ingest_summary(calib, settings) -> dict[str, Any]:
         "repetitions": calib.repetitions,
         "axes": axes,
         "offsets": calib.offsets.to_dict(orient="records"),
-        **({"zero": "fit"} if settings.zero_method == "fit" else {}),
+        **({"zero": "intercept"} if calib.zero == "intercept" else
+           {"zero": "fit"} if settings.zero_method == "fit" else {}),
         "skipped": list(calib.skipped),
         "warnings": list(calib.warnings),
     }

@@ -18,7 +18,9 @@ from ..errors import InputError, excerpt, printable, where
 from ..files import CALIBRATION_LIMIT, TASK_LIMIT, natural_key, read_bounded, reading
 from .columns import applied_load
 from .csv_text import HEADER_ROW, read_csv_text, read_header, require_columns, to_numbers
+from .magnitudes import adc_bits
 from .poses import average_poses, pose_note, timestamp_column
+from .rails import at_rail, ranges
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -113,20 +115,27 @@ class CalibrationTable:
     hidden: list[Path]
     warnings: tuple[str, ...] = ()
     noise: np.ndarray | None = None  # pose logs: sigma of each averaged output (poses.py)
+    excluded: tuple[tuple[str, int], ...] = ()  # (file, line) dropped by --exclude unread
 
 
 def read_calibration_table(path: str | Path, settings: Settings,
-                           strict: bool = False) -> CalibrationTable:
+                           strict: bool = False, exclude=()) -> CalibrationTable:
     """Read a calibration set into one long table in file order.
 
     The directory is listed once and each file read once (its digest, header
-    and cells all come from the same bytes).
+    and cells all come from the same bytes).  ``exclude``: ``(file, line)`` pairs
+    (:func:`fsdecouple.data.calibration.parse_exclude`) dropped before their cells are
+    read, so a line that cannot be parsed can be excluded too; each pair found is
+    marked in ``excluded``.
     """
     import pandas as pd
 
     files, hidden = list_calibration(path)
     single = len(files) == 1 and not Path(path).is_dir()
     frames, skipped, digests, warnings = [], [], [], []
+    excluded: list[tuple[str, int]] = []
+    poses: list = []  # pose logs: (file, header, runs averaged, points)
+    counts: list[np.ndarray] = []  # raw ADC counts as read, for the converter's range (rails.py)
     pose_ss, pose_dof, pose_inv, pose_n = 0.0, 0, 0.0, 0  # pose logs (poses.py)
     cols = settings.columns
     layout = settings.layout
@@ -153,6 +162,7 @@ def read_calibration_table(path: str | Path, settings: Settings,
                 f"{where(f, HEADER_ROW)}: this is the output of 'fsdecouple ingest -o' (it has "
                 f"{layout.outputs[0]}_raw), not a repetition; move it out of the calibration directory"
             )
+        _suggest_init(header, settings, numeric, f, path)
         require_columns(header, numeric, f)
         for c in layout.outputs:  # a reading mapped to a reference column: a swapped config
             if applied_load(cols[c]):
@@ -176,6 +186,17 @@ def read_calibration_table(path: str | Path, settings: Settings,
         if raw.empty:
             raise InputError(f"{f}: header only, no data rows")
         rows = np.arange(len(raw)) + HEADER_ROW + 1
+        mine = {line for name, line in exclude if _names_file(name, f)}
+        if mine:  # --exclude FILE:LINE, before any cell of the line is read
+            gone = np.isin(rows, sorted(mine))
+            excluded.extend((str(f), int(r)) for r in rows[gone])
+            if timestamp_column(header) is not None:
+                # a pose log: a line of a pose names the pose (one calibration point), so
+                # the run of consecutive lines with its load cells goes with it
+                key = raw[[cols[c] for c in layout.loads]].agg("\x1f".join, axis=1).to_numpy()
+                run = np.cumsum(np.r_[True, key[1:] != key[:-1]])
+                gone = np.isin(run, run[gone])
+            raw, rows = raw[~gone], rows[~gone]
         used = list(mapped)
         blank = np.logical_and.reduce([raw[c].str.strip().eq("").to_numpy() for c in used])
         for r in rows[blank]:
@@ -194,6 +215,24 @@ def read_calibration_table(path: str | Path, settings: Settings,
             warnings.append(f"{f}, {lines}: applied loads blank; rows skipped "
                             "(--strict refuses them)")
             raw, rows = raw[~noload], rows[~noload]
+        # some applied loads blank (a cell not typed in): the row cannot be placed, skipped
+        # with a warning naming its lines, or refused with --strict
+        blanks = np.column_stack([raw[c].str.strip().eq("").to_numpy() for c in loads])
+        partial = blanks.any(axis=1)
+        if partial.any():
+            lines = ("lines " if partial.sum() > 1 else "line ") + ", ".join(map(str, rows[partial]))
+            i = int(np.argmax(partial))
+            col = loads[int(np.argmax(blanks[i]))]
+            if strict:
+                raise InputError(f"{where(f, int(rows[i]), col)}: an applied load is blank "
+                                 f"({lines}); --strict refuses rows without every load")
+            cells = "; ".join(
+                f"line {r}: {', '.join(repr(c) for c, b in zip(loads, bl, strict=True) if b)}"
+                for r, bl in zip(rows[partial][:5], blanks[partial][:5], strict=True))
+            warnings.append(f"{f}, {lines}: an applied load is blank ({cells}"
+                            f"{'; ...' if partial.sum() > 5 else ''}); rows skipped "
+                            "(--strict refuses them)")
+            raw, rows = raw[~partial], rows[~partial]
         if raw.empty:
             raise InputError(f"{f}: header only, no data rows")
         out = pd.DataFrame({"file": str(f), "row": rows})
@@ -222,20 +261,78 @@ def read_calibration_table(path: str | Path, settings: Settings,
             values = to_numbers(raw[name], f, name, rows, settings.decimal)
             # check each cell before scaling so the message quotes the file's value
             out[canonical] = values * settings.scale[canonical]
+        if settings.output_unit == "count":  # the converter's range, from the samples (rails.py)
+            counts.append(out[list(layout.outputs)].to_numpy())
         if timestamp_column(header) is not None:  # a pose log: samples averaged per load
             keys = [*layout.loads, "repetition", "axis"]
             out, ss, dof, runs, inverse = average_poses(out, keys, list(layout.outputs))
             if runs:
                 pose_ss, pose_dof = pose_ss + ss, pose_dof + dof
                 pose_inv, pose_n = pose_inv + inverse, pose_n + len(runs)
-                warnings.append(pose_note(f, runs, sum(c for *_, c in runs)))
+            poses.append((f, header, runs, out))
         frames.append(out)
+    if len(poses) == len(files) > 1 and len(poses[0][3]) == 1:
+        # a directory of pose files: one static pose per file, all one calibration set
+        _one_pose_each(poses)
+        for frame in frames:
+            frame["repetition"] = 1
+        runs = [(f"{Path(f).name}, lines {r[0]}-{r[1]}", *r[2:]) for f, _, rs, _ in poses for r in rs]
+        warnings.append(pose_note(Path(path), [(a, "", *rest) for a, *rest in runs],
+                                  sum(r[1] for r in runs), files=len(poses)))
+    else:
+        warnings += [pose_note(f, runs, sum(r[2] for r in runs)) for f, _, runs, _ in poses if runs]
     table = pd.concat(frames, ignore_index=True)
+    bits = adc_bits(np.concatenate(counts)) if counts else None
+    known = ranges(settings, layout.outputs, table[list(layout.outputs)].to_numpy(), bits)
+    posed = table["file"].isin([str(f) for f, *_ in poses]).to_numpy()
+    if known and posed.any():  # a channel at a rail on a pose (rails.py)
+        keep = np.ones(len(table), dtype=bool)
+        keep[posed], notes = at_rail(table[posed], layout.outputs, known, strict)
+        warnings.extend(notes)
+        table = table[keep].reset_index(drop=True)
     # training order is file order: repetition, then row (stable)
     table = table.sort_values(["repetition"], kind="stable").reset_index(drop=True)
     table = table[["repetition", "axis", "file", "row", *layout.loads, *layout.outputs]]
     noise = np.sqrt(pose_ss / pose_dof * pose_inv / pose_n) if pose_dof else None
-    return CalibrationTable(table, skipped, tuple(digests), hidden, tuple(warnings), noise)
+    return CalibrationTable(table, skipped, tuple(digests), hidden, tuple(warnings), noise,
+                            tuple(excluded))
+
+
+def _suggest_init(header, settings: Settings, numeric: dict, f: Path, path) -> None:
+    """The built-in columns (no config, or one without ``columns:``) none of which the file
+    has: a file from another rig, whose config ``init`` guesses; say so, not "did you mean"."""
+    if settings.components is not None or settings.columns != Settings().columns:
+        return
+    if any(name in header for name in numeric.values()):
+        return  # some mapped: a typo in a paper-layout file, which require_columns names
+    shown = printable(str(path))
+    raise InputError(f"{where(f, HEADER_ROW)}: none of the built-in columns "
+                     f"({', '.join(numeric.values())}) is in the header; for this file's "
+                     f"layout run 'fsdecouple init {shown} -o sensor.yaml', check it, then "
+                     "fit with -c sensor.yaml")
+
+
+def _one_pose_each(poses) -> None:
+    """A pose directory's files: each one static pose, all in the first file's layout."""
+    first, header0 = poses[0][0], poses[0][1]
+    for f, header, _, out in poses[1:]:
+        if header != header0:
+            j = next((i for i, (a, b) in enumerate(zip(header, header0, strict=False)) if a != b),
+                     min(len(header), len(header0)))
+            found = repr(header[j]) if j < len(header) else "nothing"
+            want = repr(header0[j]) if j < len(header0) else "nothing"
+            raise InputError(f"{where(f, HEADER_ROW)}: column {j + 1} is {found}, {first.name} has "
+                             f"{want} there; the files of a pose directory share one layout")
+        if len(out) > 1:
+            line = int(out["row"].iat[1])
+            raise InputError(f"{where(f, line)}: the applied loads change here (from line "
+                             f"{int(out['row'].iat[0])}'s); a pose file holds one static pose "
+                             "(split it into one file per pose)")
+
+
+def _names_file(name: str, f: Path) -> bool:
+    """Whether ``--exclude``'s FILE names file ``f``: by its path, or by its name alone."""
+    return str(f) == name if "/" in name else Path(name).name == f.name or str(f) == name
 
 
 

@@ -22,6 +22,7 @@ from ..axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from ..errors import InputError
 from ..units import MOMENT_UNITS, unit_key
 from .csv_text import read_rows
+from .magnitudes import adc_bits, full_scale_of, full_scale_reason, nice_ceil  # noqa: F401
 
 MAX_ROWS = 100_000  # enough for any calibration; bounds a wrong file's cost
 
@@ -96,6 +97,8 @@ class Guess:
     outputs: tuple[str, ...] = ()
     load_units: dict[str, str] | None = None  # per component, where they differ
     output_units: dict[str, str] | None = None  # per output, where they differ
+    zero: str | None = None  # "intercept" for data without an unloaded row (data/zero.py)
+    gamma: float | None = None  # svr: gamma for poses of a mass (init_config.POSE_GAMMA)
 
     def to_dict(self) -> dict[str, Any]:
         """The ``--json`` document."""
@@ -110,6 +113,8 @@ class Guess:
             **({"components": list(self.components), "outputs": list(self.outputs),
                 "load_units": self.load_units, "output_units": self.output_units}
                if self.components else {}),
+            **({"zero": self.zero} if self.zero else {}),
+            **({"svr": {"gamma": self.gamma}} if self.gamma else {}),
         }
 
     def settings(self) -> list[tuple[str, str, str]]:
@@ -126,6 +131,8 @@ class Guess:
             "full_scale": f"{{{fs}}}", "min_repetitions": str(self.min_repetitions),
             "csv": f"{{sep: {json.dumps(self.sep)}, decimal: {json.dumps(self.decimal)}}}",
             "scaling": self.scaling,
+            **({"zero": self.zero} if self.zero else {}),
+            **({"svr": f"{{gamma: {self.gamma!r}}}"} if self.gamma else {}),
         }
         return [(k, v, self.reasons[k]) for k, v in values.items()]
 
@@ -177,14 +184,6 @@ def shown(name: str) -> str:
 
 def _num(v: float) -> str:
     return str(int(v)) if float(v).is_integer() else repr(float(v))
-
-
-def nice_ceil(value: float) -> float:
-    """The smallest 1, 2, 2.5 or 5 x 10^k that is >= ``value`` (> 0)."""
-    k = math.floor(math.log10(value))
-    # .12g: 2.5 x 10^-1 is 0.25, not 0.25000000000000006
-    return next(float(f"{m * 10.0**e:.12g}") for e in (k - 1, k, k + 1)
-                for m in (1.0, 2.0, 2.5, 5.0) if m * 10.0**e >= value * (1 - 1e-12))
 
 
 def _parse_name(header: str) -> tuple[str, str | None]:
@@ -360,15 +359,15 @@ def guess_rows(path: Path, names: list[str], raw_rows: list[list[str]], sep: str
     peak_load = max(abs(v) for k in FORCE_COLUMNS for v in values[k])
     peak_out = max(abs(v) for k in VOLTAGE_COLUMNS for v in values[k])
     load, load_why = _unit("load", hints, peak_load, integers, notes, labels)
-    output, output_why = _unit("output", hints, peak_out, integers, notes, labels)
+    bits = adc_bits([v for k in VOLTAGE_COLUMNS for v in values[k]]) if integers else None
+    output, output_why = _unit("output", hints, peak_out, integers, notes, labels, bits=bits)
     reasons["units"] = f"load {load}: {load_why}; output {output}: {output_why}"
 
     peaks = {a: max(abs(v) for v in values[k]) for a, k in zip(AXES, FORCE_COLUMNS, strict=True)}
-    full_scale = {a: nice_ceil(p) if p else 1.0 for a, p in peaks.items()}
+    full_scale = {a: full_scale_of(p) if p else 1.0 for a, p in peaks.items()}
     notes += [f"full_scale {a}: no load along {a} in the data; 1 is a placeholder"
               for a, p in peaks.items() if not p]
-    seen = ", ".join(f"{a} {p:g}" for a, p in peaks.items())
-    reasons["full_scale"] = f"largest |load| per axis ({seen} {load}) rounded up to 1, 2, 2.5 or 5 x 10^k"
+    reasons["full_scale"] = full_scale_reason(peaks, dict.fromkeys(peaks, load))
     min_repetitions = max(1, len(reps))
     reasons["min_repetitions"] = (f"{len(reps)} distinct values in {labels['repetition']}"
                                   if "repetition" in columns else
@@ -403,7 +402,8 @@ def _sniff_decimal(sep: str, rows: list[list[str]], cols: list[int]) -> str:
 
 
 def _unit(kind: str, hints: dict[str, str | None], peak: float, integers: bool,
-          notes: list[str], shown: dict[str, str], keys=None) -> tuple[str, str]:
+          notes: list[str], shown: dict[str, str], keys=None,
+          bits: int | None = None) -> tuple[str, str]:
     """The ``load`` or ``output`` unit: from header hints, else from the magnitudes.
 
     ``keys``: the columns to look at (default: fx, fy, fz or ux, uy, uz).
@@ -418,6 +418,9 @@ def _unit(kind: str, hints: dict[str, str | None], peak: float, integers: bool,
             notes.append(f"{kind} headers disagree on the unit "
                          f"({', '.join(sorted(set(found.values())))}); took {unit}")
         return unit, f"header hint in {', '.join(shown[k] for k in found)} ({_UNIT_NAMES[unit]})"
+    if kind == "output" and integers and bits is not None:
+        return "count", (f"every output a whole number within 0 .. {2 ** bits - 1} (a {bits}-bit "
+                         "ADC's raw counts)")
     if kind == "output" and integers and peak > COUNT_ABOVE:
         return "count", f"every output an integer, largest |output| {peak:g} > {COUNT_ABOVE:g}"
     if kind == "load":

@@ -54,23 +54,76 @@ def average_poses(frame, keys: list[str], outputs: list[str]):
     if counts.max() < 2:
         return frame, np.zeros(len(outputs)), 0, [], 0.0
     u = frame[outputs].to_numpy(dtype=float)
+    keep = robust_keep(u, run, counts)
+    kept = np.bincount(run[keep], minlength=counts.size)
     sums = np.zeros((counts.size, u.shape[1]))
-    np.add.at(sums, run, u)
-    means = sums / counts[:, None]
-    ss = ((u - means[run]) ** 2).sum(axis=0)
-    dof = int((counts - 1).sum())
+    np.add.at(sums, run[keep], u[keep])
+    means = sums / kept[:, None]
+    ss = ((u[keep] - means[run[keep]]) ** 2).sum(axis=0)
+    dof = int((kept - 1).sum())
     rows = frame["row"].to_numpy()
     first = np.flatnonzero(start)
     last = np.append(first[1:], n) - 1
-    runs = [(int(rows[a]), int(rows[b]), int(c))
-            for a, b, c in zip(first, last, counts, strict=True) if c > 1]
+    runs = [(int(rows[a]), int(rows[b]), int(c), int(c - k))
+            for a, b, c, k in zip(first, last, counts, kept, strict=True) if c > 1]
     out = frame.iloc[first].copy()
     out[outputs] = means
-    return out.reset_index(drop=True), ss, dof, runs, float((1.0 / counts[counts > 1]).sum())
+    return out.reset_index(drop=True), ss, dof, runs, float((1.0 / kept[counts > 1]).sum())
 
 
-def pose_note(path, runs, samples: int) -> str:
-    """One line naming the poses averaged in a file."""
-    shown = ", ".join(f"{a}-{b}" for a, b, _ in runs[:3]) + (", ..." if len(runs) > 3 else "")
+# A sample further than this many robust sigmas (1.4826 MAD, at least the readings' quantum)
+# from its pose's median on any output is rejected: a serial misread (459 read as 4598) is
+# hundreds of sigmas out, and Gaussian noise passes 6 sigma once in 5e8 samples.
+REJECT = 6.0
+
+
+def robust_keep(u: np.ndarray, run: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """Which samples (rows of ``u``) to average: those within REJECT robust sigmas of their
+    run's median on every output.  The robust sigma of an output is 1.4826 x the median
+    absolute deviation, the larger of its run's and of all runs' pooled (a MAD of a dozen
+    samples can be a third of sigma by chance), and at least the readings' quantum (a MAD
+    of 0 counts must not reject a step of 1).  Runs of fewer than 3 samples keep every
+    sample."""
+    keep = np.ones(len(u), dtype=bool)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    big = [(s, c) for s, c in zip(starts, counts, strict=True) if c >= 3]
+    if not big:
+        return keep
+    dev = np.zeros_like(u)
+    for s, c in big:
+        dev[s:s + c] = np.abs(u[s:s + c] - np.median(u[s:s + c], axis=0))
+    inside = np.concatenate([np.arange(s, s + c) for s, c in big])
+    pooled = 1.4826 * np.median(dev[inside], axis=0)
+    for s, c in big:
+        x = u[s:s + c]
+        mad = 1.4826 * np.median(dev[s:s + c], axis=0)
+        steps = np.diff(np.sort(x, axis=0), axis=0)
+        quantum = np.where(steps > 0, steps, np.inf).min(axis=0, initial=np.inf)
+        quantum = np.where(np.isfinite(quantum), quantum, 0.0)
+        scale = np.maximum(np.maximum(mad, pooled), quantum)
+        keep[s:s + c] = (dev[s:s + c] <= REJECT * scale).all(axis=1)
+    return keep
+
+
+def pose_note(path, runs, samples: int, files: int = 0) -> str:
+    """One line naming the poses averaged in a file (or in ``files`` pose files), and the
+    samples rejected per pose.  ``runs``: (first line, last line, samples, rejected); in a
+    pose directory (first line as "FILE, lines A-B", "")."""
+    def span(a, b):
+        return f"{a}-{b}" if b != "" else a
+    shown = ", ".join(span(a, b) for a, b, *_ in runs[:3]) + (", ..." if len(runs) > 3 else "")
+    rejected = [(a, b, r) for a, b, _, r in runs if r]
+    told = "; ".join(f"{'lines ' if b != '' else ''}{span(a, b)}: {r}" for a, b, r in rejected[:8]) + \
+        ("; ..." if len(rejected) > 8 else "")
+    if files:
+        return (f"{path}: {files} pose files, one calibration set: {samples} timestamped samples "
+                f"averaged per pose ({shown})"
+                + (f"; samples rejected as beyond {REJECT:g} robust sigmas of their pose's median "
+                   f"(misreads), {sum(r for *_, r in rejected)} in {len(rejected)} poses ({told})"
+                   if rejected else "; no sample rejected")
+                + "; their scatter is the noise sigma (docs/rigs.md)")
+    dropped = (f"; samples rejected as beyond {REJECT:g} robust sigmas of their pose's median "
+               f"(misreads), {sum(r for *_, r in rejected)} in {len(rejected)} poses ({told})"
+               if rejected else "; no sample rejected")
     return (f"{path}: {samples} timestamped samples of {len(runs)} static loads (lines {shown}) "
-            "averaged per load; their scatter is the noise sigma (docs/rigs.md)")
+            f"averaged per load{dropped}; their scatter is the noise sigma (docs/rigs.md)")

@@ -58,6 +58,21 @@ def assign_sweeps(table: pd.DataFrame, layout: Layout = DEFAULT,
         rel = np.where(alone & (rel > 0).any(axis=0) & (rel * ~alone > 0).any(axis=1)[:, None],
                        0.0, rel)
         loaded[two] = np.argmax(rel, axis=1)
+        if not np.isin(np.arange(len(loads)), loaded).all():
+            # poses of a mass (every row loads every component): a row belongs to the
+            # component it loads most relative to that component's peak in the set, so
+            # every component has rows to be scored on (as init pairs outputs)
+            peak = np.abs(forces).max(axis=0)
+            rel = np.abs(forces[two]) / np.where(peak > 0, peak, np.inf)
+            loaded[two] = np.argmax(rel, axis=1)
+            # a component never the largest (a small moment beside a weight's forces) takes
+            # the rows it loads most, from components that keep two rows or more
+            for c in np.flatnonzero(peak > 0):
+                for r in np.argsort(-rel[:, c], kind="stable")[:2]:
+                    if not (loaded[two] == c).sum() < 2:
+                        break
+                    if (loaded[two] == loaded[two[r]]).sum() > 2 and rel[r, c] > 0:
+                        loaded[two[r]] = c
         two = two[:0]
     if combined and two.size:
         loaded = loaded.copy()
@@ -265,3 +280,67 @@ def tare_offsets(u: np.ndarray, n: int, source=None) -> np.ndarray:
             "the zero needs complete rows"
         )
     return head.mean(axis=0)
+
+
+# Singular values of the intercept design below this fraction of the largest: the offsets
+# and the loads cannot be told apart (a double's rounding of full-scale loads is 1e-16).
+SEPARABLE = 1e-6
+
+
+def has_zero_row(table: pd.DataFrame, layout: Layout = DEFAULT) -> bool:
+    """Whether any row of the set is unloaded (every applied load 0)."""
+    return bool((table[list(layout.loads)].to_numpy() == 0.0).all(axis=1).any())
+
+
+def intercept_offsets(table: pd.DataFrame, layout: Layout, full_scale,
+                      source: str) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """``zero: intercept``: each output's offset fitted as an unknown with the loads.
+
+    A set without an unloaded row (poses of a known mass: gravity never switches off) has
+    no zero to subtract, so each output u_j is fitted by least squares as
+
+        u_j = c_j,rep + sum_a K_ja f_a
+
+    one offset c per output and repetition, one linear response K shared by the
+    repetitions, as in-situ calibration does; the offsets are then subtracted like a
+    zero row's mean (Section 3's zero correction), and eq. (2)'s omega and the chi are
+    fitted to the corrected outputs as before.  Refused by name when the offsets and
+    the loads cannot be separated (every row the same load; a load that moves with the
+    intercept): a rank-deficient design.
+
+    Returns the corrected points (raw outputs kept as ``<output>_raw``) and the offsets,
+    one row per repetition, ``axis`` empty and ``n_zero`` 0 [output units].
+    """
+    import pandas as pd
+
+    outputs, loads = list(layout.outputs), list(layout.loads)
+    points = table.copy()
+    for c in outputs:
+        points[f"{c}_raw"] = points[c]
+    reps = points["repetition"].to_numpy()
+    keys, index = np.unique(reps, return_inverse=True)
+    f = points[loads].to_numpy(dtype=float) / np.asarray(full_scale, dtype=float)
+    design = np.column_stack([np.eye(keys.size)[index], f])
+    same = np.ptp(f, axis=0).max(initial=0.0) == 0.0
+    _, sv, vt = np.linalg.svd(design, full_matrices=False)
+    if same or len(design) < design.shape[1] or sv[-1] < SEPARABLE * sv[0]:
+        if same:
+            first = points[loads].iloc[0]
+            why = f"every row has the same loads ({', '.join(f'{c} {first[c]:g}' for c in loads)})"
+        elif len(design) < design.shape[1]:
+            why = (f"{len(design)} rows for {design.shape[1]} unknowns (an offset per output "
+                   f"and repetition and a slope per load)")
+        else:
+            v = vt[-1][keys.size:]
+            tied = [loads[a] for a in np.flatnonzero(np.abs(v) > 0.1 * np.abs(vt[-1]).max())]
+            why = (f"{' and '.join(tied) or 'the loads'} move{'s' if len(tied) == 1 else ''} "
+                   "with the offset in every row (a rank-deficient design)")
+        raise InputError(f"{source}: zero: intercept cannot separate the outputs' offsets from "
+                         f"the loads: {why}; add poses with other loads, or an unloaded row")
+    u = points[outputs].to_numpy(dtype=float)
+    coef, *_ = np.linalg.lstsq(design, u, rcond=None)
+    offsets = coef[:keys.size]  # (repetitions, outputs)
+    points[outputs] = u - offsets[index]
+    table_out = pd.DataFrame({"repetition": keys.astype(int), "axis": "", "n_zero": 0,
+                              **{c: offsets[:, j] for j, c in enumerate(outputs)}})
+    return points, table_out

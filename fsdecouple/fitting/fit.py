@@ -144,6 +144,11 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         return _establish_gauges(calib, settings, workers, fit_svr, with_tables)
     labels, pairs = layout.labels, dict(zip(layout.chi_names, layout.pairs, strict=True))
     omega = fit_omega(calib.points, layout)
+    if calib.zero == "intercept" and multi_load(calib.forces):
+        # poses of a mass: no row isolates a load, so each prime output's slope (eq. 2) is
+        # its load's coefficient in the least-squares fit of the output on every load
+        coef, *_ = np.linalg.lstsq(calib.forces, calib.voltages, rcond=None)
+        omega = replace(omega, k=np.diag(coef).copy())
     warnings = list(calib.warnings)
     for a, axis in enumerate(labels):
         if not np.isfinite(omega.k[a]) or omega.k[a] == 0.0:
@@ -170,7 +175,8 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
     if joint:
         check_separable(calib.forces, settings.full_scale, layout.loads, calib.source)
     for a, axis in enumerate(labels):
-        x = calib.sweep(axis)[layout.outputs[a]].to_numpy() / scale[a]
+        rows = calib.points if joint else calib.sweep(axis)  # a joint fit's chi see every row
+        x = rows[layout.outputs[a]].to_numpy() / scale[a]
         span = (x.max() - x.min()) * np.sqrt(2.0 * settings.svr.gamma)
         lo, hi = KERNEL_SPAN_RANGE
         if not lo <= span <= hi:
@@ -281,6 +287,7 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
     }
     if calib.excluded:
         model.provenance["excluded"] = list(calib.excluded)
+    model.zero = fitted_zero(calib)
     model.created = datetime.now(UTC).replace(microsecond=0).isoformat()
     return model
 
@@ -350,8 +357,17 @@ def _establish_gauges(calib: CalibrationSet, settings: Settings, workers: int | 
                         "libraries": _library_versions()}
     if calib.excluded:
         model.provenance["excluded"] = list(calib.excluded)
+    model.zero = fitted_zero(calib)
     model.created = datetime.now(UTC).replace(microsecond=0).isoformat()
     return model
+
+
+def fitted_zero(calib: CalibrationSet) -> np.ndarray | None:
+    """``zero: intercept``: the outputs' offsets the model carries (raw output units), the
+    mean over the repetitions of each one's fitted intercept (data/zero.py); else None."""
+    if calib.zero != "intercept":
+        return None
+    return calib.offsets[list(calib.layout.outputs)].to_numpy(dtype=float).mean(axis=0)
 
 
 def _overflow(calib: CalibrationSet, what: str) -> InputError:

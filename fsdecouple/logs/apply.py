@@ -337,6 +337,8 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
         jobs = itertools.chain((lambda block=block: block for block in kept), jobs)
     elif zero is not None:
         summary.offsets = np.asarray(zero, dtype=float)
+    elif model.zero is not None:  # zero: intercept: the offsets fitted with the loads
+        summary.offsets = np.asarray(model.zero, dtype=float)
     rows = RowRules(*model.extrapolation_limits().T, sat_lo, sat_hi)
     # blocks in flight bound the memory (~60 MB each), so not every core of a big box
     workers = workers or min(MAX_WORKERS, os.cpu_count() or 1)

@@ -144,6 +144,8 @@ def frame_forces(model: CouplingErrorModel, frame: pd.DataFrame, *, tare: int | 
         offsets = np.asarray(zero, dtype=float)
         if offsets.shape != (model.n_outputs,) or not np.isfinite(offsets).all():
             raise InputError(f"zero {zero!r}: expected {model.n_outputs} finite outputs")
+    elif model.zero is not None:  # zero: intercept: the offsets fitted with the loads
+        offsets = np.asarray(model.zero, dtype=float)
     f, code, empty = decouple_rows(model, raw, offsets, RowRules.for_model(model, settings))
     if interval is not None:
         f = with_intervals(model, f, interval, raw - offsets)

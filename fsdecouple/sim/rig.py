@@ -37,7 +37,7 @@ NOISE = 2e-4  # reading noise, fraction of full scale
 # ``quadratic``: own-load square 1-3 % F.S. (either sign), other loads' squares up to
 # 1.5 %, cubes up to 0.3 %, noise 0.1 % F.S.
 QUADRATIC = {"own": 0.03, "cross": 0.015, "cubic": 0.003, "noise": 1e-3}
-RIGS = ("lever-arm", "quadratic")
+RIGS = ("lever-arm", "quadratic")  # and "poses" (sim/poses.py), written by its own writer
 MAX_GAUGES = 64  # output channels of a rig: --gauges 100000000 would fill the memory
 # which force the lever arm loads with each moment, and its sign per N·m
 LEVER = {3: (1, -1.0 / ARM), 4: (0, 1.0 / ARM), 5: (0, 1.0 / ARM)}
@@ -105,7 +105,7 @@ def write_rig(out: str | Path, *, seed: int = 0, gauges: int = 6, levels: int = 
     ``kind``: ``lever-arm`` or ``quadratic`` (module docstring).
     """
     if kind not in RIGS:
-        raise InputError(f"--rig {kind!r}: expected {' or '.join(RIGS)}")
+        raise InputError(f"--rig {kind!r}: expected {', '.join(RIGS)} or poses")
     check_count(seed, "seed", 0)
     if isinstance(gauges, int) and gauges < len(COMPONENTS):
         raise InputError(f"--gauges {gauges}: a six-axis rig needs at least 6 output channels")

@@ -56,10 +56,18 @@ def test_non_numeric_cell(cal, tmp_path):
     fails(["fit", cal], tmp_path, "rep3.csv", "row 17", "column 'uy'", "'n/a'")
 
 
-@pytest.mark.parametrize("value", ["nan", "inf", ""])
+@pytest.mark.parametrize("value", ["nan", "inf"])
 def test_nan_inf_empty(cal, tmp_path, value):
     edit(cal / "rep1.csv", 5, "fx", value)
     fails(["fit", cal], tmp_path, "rep1.csv", "row 5", "column 'fx'")
+
+
+def test_a_blank_load_cell_is_skipped_or_refused_with_strict(cal, tmp_path):
+    # issue 32: a load not typed in skips its row with a warning; --strict refuses it
+    edit(cal / "rep1.csv", 5, "fx", "")
+    r = invoke(["fit", cal, "-o", tmp_path / "m.json", "--no-verdict"])
+    assert "rep1.csv, line 5: an applied load is blank" in r.stderr
+    fails(["fit", cal, "--strict"], tmp_path, "rep1.csv", "row 5", "column 'fx'", "--strict")
 
 
 @pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute

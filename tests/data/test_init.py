@@ -55,8 +55,9 @@ def test_lab_file_counts_in_gram_force(tmp_path):
     assert doc["columns"] == {"fx": "Fx [gf]", "fy": "Fy [gf]", "fz": "Fz [gf]",
                               "ux": "ch0", "uy": "ch1", "uz": "ch2"}
     assert doc["units"] == {"load": "gf", "output": "count"}
-    # largest |load| 1200 gf on each axis; the next of 1, 2, 2.5, 5 x 10^k is 2000
-    assert doc["full_scale"] == {"x": 2000, "y": 2000, "z": 2000}
+    # largest |load| 1200 gf on each axis; 2000 (1, 2, 2.5, 5 x 10^k) is 67 % above it,
+    # more than the 25 % a full scale may add (issue 32), and 1200 is a round step itself
+    assert doc["full_scale"] == {"x": 1200, "y": 1200, "z": 1200}
     assert doc["min_repetitions"] == 1
     assert doc["scaling"] == "full_scale"
     assert doc["csv"] == {"sep": ",", "decimal": "."}
@@ -67,7 +68,7 @@ def test_lab_file_counts_in_gram_force(tmp_path):
 
     text = out.read_text()
     cfg = validate(text)
-    assert cfg["columns"]["ux"] == "ch0" and cfg["full_scale"]["z"] == 2000
+    assert cfg["columns"]["ux"] == "ch0" and cfg["full_scale"]["z"] == 1200
     assert "# guessed: 'Fx [gf]': header names fx, unit gf (gram-force)" in text
     assert "'orientation': right of the unnamed column 7: a side table" in text
     assert "Table 2's gamma" in text
@@ -80,8 +81,9 @@ def test_paper_layout_is_the_identity(tmp_path):
     assert g.columns == {k: k for k in ("axis", "fx", "fy", "fz", "ux", "uy", "uz")}
     assert g.units == {"load": "N", "output": "V"}
     assert g.scaling == "none"
-    # the sample's peaks are 100, 100 and 150 N (README, Sample data)
-    assert g.full_scale == {"x": 100, "y": 100, "z": 200}
+    # the sample's peaks are 100, 100 and 150 N (README, Sample data): within 25 % of
+    # themselves, so Section 3's full scales (issue 32: rounded up by at most 25 %)
+    assert g.full_scale == {"x": 100, "y": 100, "z": 150}
     cfg = validate(out.read_text())
     assert cfg["columns"] == g.columns and cfg["scaling"] == "none"
 
@@ -108,8 +110,8 @@ def test_semicolon_decimal_comma(tmp_path):
     assert doc["csv"] == {"sep": ";", "decimal": ","}
     assert doc["columns"]["fx"] == "Fx (N)" and doc["columns"]["uz"] == "u_z"
     assert doc["units"]["load"] == "N"
-    # 10,5 read as 10.5 (not 105): rounded up to 20
-    assert doc["full_scale"] == {"x": 20, "y": 20, "z": 50}
+    # 10,5 read as 10.5 (not 105): rounded up by at most 25 % to 12; 20 and 30 stay
+    assert doc["full_scale"] == {"x": 12, "y": 20, "z": 30}
     cfg = validate(out.read_text())
     assert cfg["csv"] == {"sep": ";", "decimal": ","}
     assert settings_from_dict({k: v for k, v in cfg.items() if k != "units"}).sep == ";"
@@ -288,12 +290,14 @@ def test_a_guess_that_would_not_load_is_one_line_and_writes_nothing(tmp_path, ed
 
 def test_an_infinite_reading_is_skipped_not_a_traceback(tmp_path):
     """1e400 matches a number's pattern but reads as inf: left out, never a crash."""
-    for src, bad in ((SAMPLE / "calibration" / "rep1.csv", "x,1e400,0,0,1,0,0"),
-                     (SAMPLE / "six_axis" / "calibration" / "rep1.csv", "fx,1e400,0,0,0,0,0,1,2,3,4,5,6")):
+    for src, bad, peak in ((SAMPLE / "calibration" / "rep1.csv", "x,1e400,0,0,1,0,0", 150),
+                           (SAMPLE / "six_axis" / "calibration" / "rep1.csv",
+                            "fx,1e400,0,0,0,0,0,1,2,3,4,5,6", 200)):
         data = tmp_path / f"{src.parent.parent.name}.csv"
         data.write_text(src.read_text() + bad + "\n")
         doc = json.loads(invoke(["init", data, "-o", tmp_path / f"{data.stem}.yaml", "--json"]).stdout)
-        assert max(doc["full_scale"].values()) == 200, doc["full_scale"]
+        # the largest finite load of each sample is its full scale (the inf row left out)
+        assert max(doc["full_scale"].values()) == peak, doc["full_scale"]
 
 
 def test_init_reads_any_input_once_and_within_the_limits(tmp_path):

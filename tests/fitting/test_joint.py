@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import re
 from pathlib import Path
 
 import numpy as np
@@ -95,6 +96,7 @@ def _edit(path: Path, out: Path, change) -> Path:
     pytest.param("quadratic", "known_Fx", (10, 11), marks=pytest.mark.slow),
     pytest.param("quadratic", "Known_Mx", (33, 34), marks=pytest.mark.slow),
     pytest.param("quadratic", "known_Fz", (23, 24), marks=pytest.mark.slow),
+    pytest.param("quadratic", "known_Fy", (17, 18), marks=pytest.mark.slow),  # issue 32's
 ])
 def test_two_swapped_loads_are_flagged_by_their_editor_lines(tmp_path, kind, column, lines):
     """Two neighbouring levels typed into each other's rows: fit names exactly those two
@@ -195,3 +197,25 @@ def test_auto_beats_the_matrix_on_the_quadratic_stand_in_by_the_issues_margin(tm
         err["matrix"].append((u @ ct - f) / fs)
     rms = {m: np.sqrt((np.concatenate(e) ** 2).mean(axis=0)).max() for m, e in err.items()}
     assert rms["auto"] <= 0.85 * rms["matrix"]
+
+
+@pytest.mark.parametrize("kind", ["lever-arm", "quadratic"])
+def test_a_blank_load_and_a_slip_in_one_rig_file(tmp_path, kind):
+    """Issue 32's public-rig check: line 61's Known_Mx blank and the Fy loads of lines 17
+    and 18 typed into each other's rows: fit exits 0, warns of line 61, and flags both
+    slipped lines among at most 4 (joint leave-one-out residuals, fitting/outliers.py)."""
+    from conftest import invoke
+
+    path, _, _ = rig(tmp_path, kind=kind)
+    init_config(path, tmp_path / "cfg.yaml", force=True)
+
+    def edit(rows):
+        col = rows[0].index("known_Fy")
+        rows[16][col], rows[17][col] = rows[17][col], rows[16][col]
+        rows[60][rows[0].index("Known_Mx")] = ""
+
+    bad = _edit(path, tmp_path / "rig.csv", edit)
+    r = invoke(["fit", bad, "-c", tmp_path / "cfg.yaml", "-o", tmp_path / "m.json"])
+    assert "rig.csv, line 61: an applied load is blank" in r.stderr
+    flagged = [int(m) for m in re.findall(r"row (\d+): possible gross error", r.stderr)]
+    assert {17, 18} <= set(flagged) and len(flagged) <= 4, flagged

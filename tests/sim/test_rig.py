@@ -96,7 +96,7 @@ def test_the_quadratic_rig_bends_with_its_own_and_the_other_loads(tmp_path):
 
 def test_an_unknown_rig_is_refused_in_one_line(tmp_path):
     res = invoke(["simulate", str(tmp_path), "--rig", "lever"], code=2)
-    assert "--rig 'lever': expected lever-arm or quadratic" in res.stderr
+    assert "--rig 'lever': expected lever-arm, quadratic or poses" in res.stderr
     assert not (tmp_path / "calibration.csv").exists()
 
 
