@@ -119,17 +119,22 @@ def test_fast_decouple_equals_exact_in_range(model):
     np.testing.assert_array_less(np.abs(fast - exact) * np.abs(model.k), BOUND_V)
 
 
-def test_fast_decouple_does_not_depend_on_blocks_or_threads(model):
+def test_fast_decouple_does_not_depend_on_blocks_threads_or_compiler(model):
+    """numpy and the compiled kernel (numba) run the same operations in the same order."""
     u = in_range_voltages(model, 100_003)
+    u[::101, 1] = 9.0  # outside a table: the exact path in both
     fd = model.fast_decoupler()
-    ref = fd.decouple(u, workers=1)
+    ref = fd.decouple(u, workers=1, compiled=False)
     np.testing.assert_array_equal(fd.decouple(u, workers=2, block_rows=997), ref)
+    for k in (0, 2):
+        np.testing.assert_array_equal(fd.decouple(u, refine=k, compiled=True),
+                                      fd.decouple(u, refine=k, compiled=False))
     np.testing.assert_array_equal(model.decouple(u[:5]), ref[:5])
 
 
 def test_small_calls_are_bit_identical_to_the_block_path(model):
     """Up to SMALL_ROWS rows go row by row (fast for one vector); same bits as a big call."""
-    from fsdecouple.core.decouple import SMALL_ROWS
+    from fsdecouple.core.table_path import SMALL_ROWS
 
     u = in_range_voltages(model, 200, seed=11)
     u[::9, 2] = 7.5  # outside a table: exact in both
