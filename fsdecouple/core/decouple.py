@@ -90,15 +90,16 @@ def couple(step: Couple, u: np.ndarray, chi=_exact_chi) -> tuple[np.ndarray, np.
         return e
 
     own, cross = step.own, step.cross
-    base = u - errors(u, own) if own else u  # the own-load chi always at the measured u_a
-    p = u
-    for _ in range(step.refine):
-        p = base - errors(p, cross)
-    kf = base - errors(p, cross)  # = p^(K+1)
-    f = kf / np.asarray(step.k).astype(dtype)
-    if not step.refine:
-        return f, np.ones(len(f), dtype=bool)
-    return f, settled(kf - p, step.step_tol)
+    with np.errstate(invalid="ignore", over="ignore"):  # an infinite row stays inf or NaN
+        base = u - errors(u, own) if own else u  # the own-load chi always at the measured u_a
+        p = u
+        for _ in range(step.refine):
+            p = base - errors(p, cross)
+        kf = base - errors(p, cross)  # = p^(K+1)
+        f = kf / np.asarray(step.k).astype(dtype)
+        if not step.refine:
+            return f, np.ones(len(f), dtype=bool)
+        return f, settled(kf - p, step.step_tol)
 
 
 def exact(plan: Plan, u: np.ndarray, converged: np.ndarray | None = None) -> np.ndarray:

@@ -13,11 +13,12 @@ and its offset s_b = t_b - int(t_b); each g_ab is the cubic ((c3 s + c2) s + c1)
 
 The arithmetic is the numpy kernel's (:func:`fsdecouple.core.table_path.eq11_rows`) and
 the plain-Python evaluator's (:meth:`TableDecoupler.one`), with the same
-:func:`~fsdecouple.core.surrogate.horner` step compiled, operation for operation, in the same order and without fused multiply-adds
-(numba leaves LLVM's contraction off unless ``fastmath`` is asked), so both give
-the same bits; tests hold them to it.  numba is the standard compiler for numeric
-loops in Python: numpy alone needs one pass over memory per operation, seven per
-chi, and runs at about a third of this speed (0.61 against 0.22 us a row, 2 cores).
+:func:`~fsdecouple.core.surrogate.horner` step compiled, operation for operation, in
+the same order and without fused multiply-adds (numba leaves LLVM's contraction off
+unless ``fastmath`` is asked), so all three give the same bits; tests hold them to
+it.  numba is the standard compiler for numeric loops in Python: numpy alone needs
+one pass over memory per operation, seven per chi, and runs at about a third of this
+speed (0.61 against 0.22 us a row, 2 cores).
 """
 
 from __future__ import annotations
