@@ -33,7 +33,8 @@ from ..core.plan import Term, walk
 from ..core.surrogate import CHECKS_PER_INTERVAL
 from ..errors import ConfigError, FsdecoupleError
 from ..files import atomic_write
-from .c_source import MAX_CHANNELS, render
+from .c_function import MAX_CHANNELS
+from .c_source import render
 from .plan import ExportPlan, ExportResult
 from .tables import coarsest_tables, table_bound
 
@@ -229,7 +230,7 @@ def float_bound(plan: ExportPlan, seed: int = 0) -> float:
 
 def expected_status(plan: ExportPlan, u: np.ndarray, f: np.ndarray) -> int:
     """The C's status word for one double input ``u`` and its forces ``f``."""
-    from .c_source import (
+    from .c_function import (
         BIT_INPUT_NOT_FINITE,
         BIT_NOT_CONVERGED,
         BIT_NOT_FINITE,
