@@ -235,6 +235,7 @@ def main() -> int:
               f"({goal}): {'PASS' if ok else 'FAIL'}", flush=True)
 
     model = fit(calib, settings)
+    py = sys.executable
 
     if section("fit"):
         # --- 9. ingest of many repetition files: linear in the number of files ----------
@@ -285,7 +286,6 @@ def main() -> int:
 
         # --- 4b. the cv command on the sample data -----------------------------------------
         print("fsdecouple cv on the sample data")
-        py = sys.executable
         with tempfile.TemporaryDirectory(prefix="fsdecouple-bench-cv-") as tmp:
             doc = Path(tmp) / "cv.json"
             cv_args = [py, "-m", "fsdecouple", "cv", ROOT / "sample_data" / "calibration", "-o", doc,
