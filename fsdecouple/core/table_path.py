@@ -139,6 +139,7 @@ class TableDecoupler:
         self.n = n
         tables = {(t.out, t.inp): t.table for t in step.terms}
         self._small: dict[int, Callable] = {}
+        self._plans: dict[tuple[bool, int], Plan] = {}
         self.k = np.asarray(step.k, dtype=float)
         self.inv_k = 1.0 / self.k
         self.step_tol = np.asarray(step.step_tol, dtype=float)
@@ -197,9 +198,13 @@ class TableDecoupler:
         return cls(plan)
 
     def _plan(self, rotate: bool, refine: int) -> Plan:
-        steps = tuple(replace(s, refine=int(refine)) if isinstance(s, Couple) else s
-                      for s in self.plan.steps if rotate or not isinstance(s, Rotate))
-        return replace(self.plan, steps=steps)
+        """The plan without its rotation (``rotate`` False) and with K = ``refine``."""
+        key = (bool(rotate), int(refine))
+        if key not in self._plans:
+            steps = tuple(replace(s, refine=int(refine)) if isinstance(s, Couple) else s
+                          for s in self.plan.steps if rotate or not isinstance(s, Rotate))
+            self._plans[key] = replace(self.plan, steps=steps)
+        return self._plans[key]
 
     # --- arrays -------------------------------------------------------------------
 
