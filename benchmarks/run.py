@@ -366,10 +366,25 @@ def main() -> int:
     model.decouple(u[:1000])  # build the tables
     fast_t = median_time(lambda: model.decouple(u), max(repeats, 5))
     fast_rate = n / fast_t
+    # numpy's table path against the compiled kernel (numba, imported for long logs only:
+    # core/table_path.py COMPILED_ROWS), on 10 M rows whatever --rows
+    big = np.random.default_rng(2).uniform(r[:, 0], r[:, 1], (10_000_000, 3))
+    tables = model.fast_decoupler()
+    tables.decouple(big[:100_000], compiled=True)  # compile (or load the cache) first
+    numba_t = median_time(lambda: tables.decouple(big, compiled=True), 3)
+    numpy_t = median_time(lambda: tables.decouple(big, compiled=False), 3)
+    big = None  # its 240 MB freed
+    row("1d. table path on 10 M rows, numpy vs compiled", numpy_t, "s", numba_t,
+        "numba kernel [s]", numpy_t / numba_t,
+        "info (<= 1.5 would drop numba; above, it loads for long logs only)", True)
+    # libsvm trained as the model's chi were: with the settings the model carries, whose
+    # solver tolerance fit sets against the noise (fitting/noise.py), not the config's
     libsvm = {}
     for name in CHI_NAMES:
         x, y = chi_training_data(calib, name)
-        libsvm[name] = train(x, y, settings.svr)
+        c = model.chi[name]
+        assert c.input_scale == 1.0 and c.output_scale == 1.0  # the sample config: volts
+        libsvm[name] = train(x, y, model.settings.svr)
     from libsvm import svmutil
 
     m_lib = 20_000
@@ -445,9 +460,9 @@ def main() -> int:
         # the goal is set for a 10 M-row log; on a smaller one the ~0.5 s of imports
         # weigh more, so the ratio is shown but does not fail the run
         full = rows >= 10_000_000
-        goal = "<= 1.5x" if full else "info (<= 1.5x at 10 M rows)"
+        goal = "<= 1.0x" if full else "info (<= 1.0x at 10 M rows)"
         row("3. fsdecouple apply, CSV -> CSV", app_t, "s", base_t,
-            "pyarrow CSV read + write [s]", app_t / base_t, goal, app_t / base_t <= 1.5 or not full)
+            "pyarrow CSV read + write [s]", app_t / base_t, goal, app_t / base_t <= 1.0 or not full)
         text_t, _ = median_child([py, "-c", PYARROW_CSV_TEXT_COPY, log, tmp / "copy-text.csv"],
                                  repeats)
         row("3g. apply, CSV, vs a text-only copy", app_t, "s", text_t,
@@ -460,7 +475,11 @@ def main() -> int:
         start_t, _ = median_child([py, "-m", "fsdecouple", "apply", mfile, tiny, "-o", tmp / "t.csv",
                                    "--force"], repeats)
         copy_start_t, _ = median_child([py, "-c", PYARROW_CSV_COPY, tiny, tmp / "t2.csv"], repeats)
-        row("3e. apply on a 1-row log (start-up)", start_t, "s", copy_start_t,
+        imports_t, _ = median_child([py, "-c", "import numpy, pyarrow.csv"], repeats)
+        row("3e. apply on a 1-row log (start-up)", start_t, "s", imports_t,
+            "python -c 'import numpy, pyarrow.csv' [s]", start_t / imports_t, "<= 4x",
+            start_t / imports_t <= 4.0)
+        row("3i. apply on a 1-row log vs a copy of it", start_t, "s", copy_start_t,
             "pyarrow read + write of it [s]", start_t / copy_start_t, "info", True)
         rate = rows / app_t
         print(f"  (apply throughput {rate / 1e6:.2f} M rows/s, {size / app_t:.0f} MB/s)")
@@ -475,7 +494,7 @@ def main() -> int:
             repeats)
         row("3c. apply, Parquet -> Parquet", papp_t, "s", pbase_t,
             "pyarrow Parquet read + write [s]", papp_t / pbase_t, f"{goal}, < 500 MB",
-            (papp_t / pbase_t <= 1.5 or not full) and papp_mb < 500)
+            (papp_t / pbase_t <= 1.0 or not full) and papp_mb < 500)
         plain_t, _ = median_child([py, "-c", PYARROW_PARQUET_PLAIN_COPY, plog,
                                    tmp / "copy-plain.parquet"], repeats)
         row("3h. apply, Parquet, vs a copy without dictionary", papp_t, "s", plain_t,

@@ -17,11 +17,14 @@ import numpy as np
 from ..axes import Layout, NamedChi, chi_labels
 from ..config import Settings, check_refine
 from .advice import REFINE_TARGET, recommend_refine, refine_advice, tune_advice  # noqa: F401
-from .decouple import TableDecoupler, decouple_exact, initial_forces
 from .decouple import coupling_errors as _coupling_errors
+from .decouple import exact as _exact_plan
+from .decouple import initial_forces
 from .extrapolation import Edges, continue_slopes, continue_values, edges
 from .kernel import rbf_sum, rbf_sum_slope
+from .plan import Plan, model_plan
 from .surrogate import ChiSurrogate
+from .table_path import TableDecoupler
 from .temperature import TemperatureTerms
 
 
@@ -320,12 +323,9 @@ class CouplingErrorModel:
         return _coupling_errors(np.asarray(u, dtype=float).reshape(-1, self.n_components),
                                 [*self.chi.values(), *self.own.values()])
 
-    def _exact(self, u: np.ndarray, rotate: bool, refine: int = 0,
-               converged: np.ndarray | None = None) -> np.ndarray:
-        return decouple_exact(u, self.k, [*self.chi.values(), *self.own.values()],
-                              self.rotation if rotate else None,
-                              refine=refine, full_scale_output=self.full_scale_output,
-                              converged=converged)
+    def plan(self, *, rotate: bool = True, refine: int | None = None) -> Plan:
+        """The decoupling plan (:mod:`fsdecouple.core.plan`): what every evaluator reads."""
+        return model_plan(self, rotate=rotate, refine=self._refine(refine))
 
     def _refine(self, refine: int | None) -> int:
         return self.settings.refine if refine is None else check_refine(refine, "refine")
@@ -340,6 +340,7 @@ class CouplingErrorModel:
     def decouple(
         self, u: np.ndarray, *, rotate: bool = True, exact: bool = False, workers: int | None = None,
         refine: int | None = None, converged: np.ndarray | None = None,
+        compiled: bool | None = None,
     ) -> np.ndarray:
         """Forces [N] from zero-corrected outputs [V] by eq. (11).
 
@@ -367,56 +368,49 @@ class CouplingErrorModel:
             Set False for rows whose refinement did not settle (last step above
             ``REFINE_TOLERANCE`` of full-scale output, or not finite): their
             forces are NaN.  All True for K = 0 and for linear models.
+        compiled : bool, optional
+            Use the compiled table kernel (numba); default: for calls of at least
+            ``table_path.COMPILED_ROWS`` rows, as ``apply`` asks for on long logs.
         """
         u_arr = np.asarray(u, dtype=float)
         flat = u_arr.reshape(-1, self.n_outputs)
         shape = (*u_arr.shape[:-1], self.n_components) if u_arr.ndim else u_arr.shape
         refine = self._refine(refine)
         tables = None if exact else self.fast_decoupler()
-        if self.method == "linear":
-            f = flat @ self.matrix.T
-            if rotate and self.rotation is not None:
-                f = f @ self.rotation.T
-            if converged is not None:
-                converged[:] = True
-        elif tables is not None:
-            f = tables.decouple(self.project(flat), rotate=rotate, workers=workers, refine=refine,
-                                converged=converged)
+        if tables is not None:
+            f = tables.decouple(flat, rotate=rotate, workers=workers, refine=refine,
+                                converged=converged, compiled=compiled)
         else:
-            f = self._exact(self.project(flat), rotate, refine, converged)
+            f = _exact_plan(self.plan(rotate=rotate, refine=refine), flat, converged)
         return f.reshape(shape)
 
     def fast_decoupler(self) -> TableDecoupler | None:
-        """The table path of :mod:`fsdecouple.core.decouple`, or None without usable surrogates."""
+        """The table path (:mod:`fsdecouple.core.table_path`), or None without usable tables."""
         if self.method == "linear":
             return None
         if self._tables is None:  # own-load chi (joint fit) on their input's grid, or none
-            self._tables = TableDecoupler.from_chis(
-                self.k, [*self.chi.values(), *self.own.values()], self._exact, self.rotation,
-                self.full_scale_output) or False
+            self._tables = TableDecoupler.from_plan(model_plan(self)) or False
         return self._tables or None
 
     def decoupler(self, refine: int | None = None):
         """A plain-Python function ``(ux, uy, uz) -> (fx, fy, fz)`` for control loops.
 
-        About a microsecond per call: no numpy, no allocation beyond the result
-        tuple.  Same tables and arithmetic as :meth:`decouple` (equal to it within
-        1e-12 N); exact kernel sum for inputs outside the tables and for NaN.
-        ``refine`` as for :meth:`decouple`; a vector that does not settle gives NaN.
+        A few microseconds per call: no numpy, no allocation beyond small lists.  Same
+        plan, tables and arithmetic as :meth:`decouple` (equal to it within 1e-12 N);
+        exact kernel sum for inputs outside the tables and for NaN.  ``refine`` as for
+        :meth:`decouple`; a vector that does not settle gives NaN.
 
         >>> f = model.decoupler()
         >>> fx, fy, fz = f(0.5, 0.01, -0.2)
         """
         refine = self._refine(refine)
         tables = self.fast_decoupler()
-        if tables is not None and self.projection is None:
+        if tables is not None:
             return tables.one(refine=refine)
-        if tables is not None:  # M > N: v = P u in plain Python, then the tables
-            one, rows = tables.one(refine=refine), [tuple(r) for r in self.projection.tolist()]
-            return lambda *u: one(*(sum(p * x for p, x in zip(r, u, strict=True)) for r in rows))
+        plan = self.plan(refine=refine)
 
         def exact_one(*u: float) -> tuple[float, ...]:
-            return tuple(self.decouple(list(u), exact=True, refine=refine).tolist())
+            return tuple(_exact_plan(plan, np.array([u], dtype=float))[0].tolist())
 
         return exact_one
 
