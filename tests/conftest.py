@@ -1,6 +1,8 @@
 from __future__ import annotations
 
+import contextlib
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -157,12 +159,35 @@ def cv_json(tmp_path_factory):
     return path
 
 
+@contextlib.contextmanager
+def working_directory(path):
+    here = os.getcwd()
+    os.chdir(path)
+    try:
+        yield Path(path)
+    finally:
+        os.chdir(here)
+
+
 @pytest.fixture(scope="session")
-def sample_model(tmp_path_factory):
-    """A model file fitted on the committed sample data."""
-    path = tmp_path_factory.mktemp("model") / "model.json"
-    invoke(["fit", SAMPLE / "calibration", "-o", path])
-    return path
+def sample_fit(tmp_path_factory):
+    """``fsdecouple fit sample_data/calibration -o model.json``, with its held-out verdict,
+    run once for the whole suite exactly as the README shows it (in a directory holding
+    a link to sample_data/): (that directory, the command's result).  Tests that need
+    *a* model fitted on the sample take ``sample_model``; tests/test_docs.py compares the
+    README's fit block with this run's output."""
+    d = tmp_path_factory.mktemp("sample_fit")
+    (d / "sample_data").symlink_to(SAMPLE, target_is_directory=True)
+    with working_directory(d):
+        result = invoke(["fit", "sample_data/calibration", "-o", "model.json"])
+    (d / "model.json").chmod(0o444)  # shared: a test that needs to change it takes a copy
+    return d, result
+
+
+@pytest.fixture(scope="session")
+def sample_model(sample_fit):
+    """A model file fitted on the committed sample data (``sample_fit``'s)."""
+    return sample_fit[0] / "model.json"
 
 
 @pytest.fixture(scope="session")
