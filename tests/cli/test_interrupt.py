@@ -12,13 +12,9 @@ import numpy as np
 import pytest
 from conftest import ROOT, SAMPLE
 
-from fsdecouple import load_calibration, load_config
-from fsdecouple.core.modelfile import save_model
-from fsdecouple.fitting.fit import fit
-
 
 @pytest.fixture(scope="module")
-def big_log(tmp_path_factory):
+def big_log(tmp_path_factory, sample_model):
     """2 million rows (~70 MB): long enough to be caught mid-write on any machine."""
     d = tmp_path_factory.mktemp("big")
     rng = np.random.default_rng(0)
@@ -29,9 +25,7 @@ def big_log(tmp_path_factory):
         fh.write("t,ux,uy,uz\n")
         for _ in range(100):
             fh.write(body)
-    model = d / "model.json"
-    save_model(fit(load_calibration(SAMPLE / "calibration", load_config())), model)
-    return log, model
+    return log, sample_model  # apply only reads it
 
 
 @pytest.mark.slow
