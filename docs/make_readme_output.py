@@ -5,7 +5,7 @@
     python docs/make_readme_output.py --check    # rewrite nothing; exit 1 if a block is stale
 
 Each example of docs/examples.py runs its commands for real (``python -m fsdecouple``
-from this checkout, in a scratch directory holding a link to ``sample_data/``) and
+from this checkout, in a scratch directory holding links to ``sample_data/`` and ``configs/``) and
 its block, between ``<!-- NAME:start -->`` and ``<!-- NAME:end -->`` on its page,
 is replaced by what they printed.  Never edit those blocks by hand: change the code,
 then run this script (tests/test_docs.py fails when a block is stale).
@@ -42,7 +42,8 @@ def scratch(tmp: Path, group: str):
     d = tmp / group
     if not d.exists():
         d.mkdir()
-        (d / "sample_data").symlink_to(ROOT / "sample_data", target_is_directory=True)
+        for name in ("sample_data", "configs"):
+            (d / name).symlink_to(ROOT / name, target_is_directory=True)
     here = Path.cwd()
     os.chdir(d)
     try:

@@ -15,7 +15,7 @@ import sys
 
 import pytest
 import yaml
-from conftest import ROOT, SAMPLE, working_directory
+from conftest import ROOT, working_directory
 
 README = ROOT / "README.md"
 MAX_README_LINES = 400
@@ -148,7 +148,8 @@ def test_every_example_block_is_a_fresh_run(group, sample_fit, tmp_path):
     """Each group's commands run again (in-process), in order, in a scratch directory; the
     sample fit is the suite's shared one (its model file copied in, its output reused)."""
     fit = "fsdecouple fit sample_data/calibration -o model.json"
-    (tmp_path / "sample_data").symlink_to(SAMPLE, target_is_directory=True)
+    for name in ("sample_data", "configs"):
+        (tmp_path / name).symlink_to(ROOT / name, target_is_directory=True)
     with working_directory(tmp_path):
         for example in (e for e in examples.EXAMPLES if e.group == group):
             results = []
