@@ -63,12 +63,13 @@ def main(argv=None) -> int:
     # a group runs whole (apply needs fit's model) but only the named blocks are written
     groups = {e.group for e in EXAMPLES if not args.names or e.name in args.names}
     stale = []
+    done: dict[str, dict] = {g: {} for g in groups}  # per group: the commands run, their results
     with tempfile.TemporaryDirectory() as tmp:
         for example in EXAMPLES:
             if example.group not in groups:
                 continue
             with scratch(Path(tmp), example.group):
-                text = run(example, subprocess_runner)
+                text = run(example, subprocess_runner, done[example.group])
             if args.names and example.name not in args.names:
                 continue
             if masked(text, example.volatile) != masked(block(example), example.volatile):

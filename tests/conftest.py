@@ -149,14 +149,28 @@ def invoke(args, code=0, **kw):
     return result
 
 
+SAMPLE_CV = ["cv", "sample_data/calibration", "--task", "sample_data/task_voltages.csv",
+             "--task-forces", "sample_data/task_forces.csv", "--task-tare", "200",
+             "--gross-error", "x:1:5:0.2", "--max-gamma", "0.016", "-o", "cv.json"]
+
+
 @pytest.fixture(scope="session")
-def cv_json(tmp_path_factory):
-    """cv.json of the sample data, from a real `fsdecouple cv` run with every option."""
-    path = tmp_path_factory.mktemp("cv") / "cv.json"
-    invoke(["cv", SAMPLE / "calibration", "-o", path, "--task", SAMPLE / "task_voltages.csv",
-            "--task-forces", SAMPLE / "task_forces.csv", "--task-tare", "200",
-            "--gross-error", "x:3:5:0.2"])
-    return path
+def sample_cv(tmp_path_factory):
+    """A real `fsdecouple cv` run on the sample with every option (task log, gross error,
+    gate), once a session, as docs/cv.md and the README show it: (its directory, the
+    command's result).  tests/test_docs.py compares those pages with its output."""
+    d = tmp_path_factory.mktemp("sample_cv")
+    (d / "sample_data").symlink_to(SAMPLE, target_is_directory=True)
+    with working_directory(d):
+        result = invoke(SAMPLE_CV)
+    (d / "cv.json").chmod(0o444)  # shared: read only
+    return d, result
+
+
+@pytest.fixture(scope="session")
+def cv_json(sample_cv):
+    """cv.json of the sample data (``sample_cv``'s)."""
+    return sample_cv[0] / "cv.json"
 
 
 @contextlib.contextmanager

@@ -144,23 +144,25 @@ def test_the_readme_fit_block_is_the_shared_sample_fit(sample_fit):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("group", sorted({e.group for e in examples.EXAMPLES}))
-def test_every_example_block_is_a_fresh_run(group, sample_fit, tmp_path):
+def test_every_example_block_is_a_fresh_run(group, sample_fit, sample_cv, tmp_path):
     """Each group's commands run again (in-process), in order, in a scratch directory; the
-    sample fit is the suite's shared one (its model file copied in, its output reused)."""
-    fit = "fsdecouple fit sample_data/calibration -o model.json"
+    sample's fit and cv are the suite's shared runs of the same commands (their files
+    copied in, their output reused)."""
+    from conftest import SAMPLE_CV
+
+    done = {}
+    if group == "sample":
+        for (d, r), command, name in ((sample_fit, "fsdecouple fit sample_data/calibration -o model.json",
+                                       "model.json"),
+                                      (sample_cv, "fsdecouple " + " ".join(SAMPLE_CV), "cv.json")):
+            shutil.copyfile(d / name, tmp_path / name)
+            done[command] = examples.Result(r.exit_code, r.stdout, r.stderr)
+        assert set(done) <= {c for e in examples.EXAMPLES for c in e.commands}, "the shared runs changed"
     for name in ("sample_data", "configs"):
         (tmp_path / name).symlink_to(ROOT / name, target_is_directory=True)
     with working_directory(tmp_path):
         for example in (e for e in examples.EXAMPLES if e.group == group):
-            results = []
-            for command in example.commands:
-                if command == fit:
-                    shutil.copyfile(sample_fit[0] / "model.json", "model.json")
-                    r = sample_fit[1]
-                    results.append(examples.Result(r.exit_code, r.stdout, r.stderr))
-                else:
-                    results.append(examples.run_command(command, _in_process))
-            fresh = _fresh(example, results)
+            fresh = examples.masked(examples.run(example, _in_process, done), example.volatile)
             want = examples.masked(examples.block(example), example.volatile)
             assert fresh == want, _stale(example, fresh)
 
