@@ -64,6 +64,22 @@ def model(calib, settings):
     return fit(calib, settings)
 
 
+@pytest.fixture(scope="session")
+def sim_fit(tmp_path_factory, sim_dir):
+    """`fsdecouple fit` (with its verdict) of the session's simulated set, once a session:
+    (the model file, the command's result).  Tests that check the command read the result;
+    the others only read the model file."""
+    path = tmp_path_factory.mktemp("sim_model") / "model.json"
+    result = invoke(["fit", sim_dir / "calibration", "-o", path])
+    path.chmod(0o444)  # shared: read only
+    return path, result
+
+
+@pytest.fixture(scope="session")
+def sim_model_file(sim_fit):
+    return sim_fit[0]
+
+
 def eq11_from_file(doc: dict, u: np.ndarray) -> np.ndarray:
     """Forces [load unit] by eq. (11) from a model file's own numbers, sharing no code
     with fsdecouple: f_a = [u_a - sum_{b != a} chi_ab(u_b)] / k_a, with

@@ -11,20 +11,6 @@ import pytest
 from conftest import SAMPLE, invoke
 
 
-@pytest.fixture(scope="module")
-def sim_fit(tmp_path_factory, sim_dir):
-    """`fsdecouple fit` of the session's simulated set, once a module: (the model file, the
-    command's result).  test_fit_apply_round_trip checks the command; the others only read
-    the model."""
-    path = tmp_path_factory.mktemp("sim_model") / "model.json"
-    return path, invoke(["fit", sim_dir / "calibration", "-o", path])
-
-
-@pytest.fixture(scope="module")
-def sim_model_file(sim_fit):
-    return sim_fit[0]
-
-
 @pytest.mark.slow  # over ~0.6 s: the not-slow run stays under a minute
 def test_fit_apply_round_trip(tmp_path, sim_dir, sim_fit):
     model, r = sim_fit
