@@ -29,6 +29,7 @@ from rich.progress import (
 from rich.segment import Segment
 from rich.table import Table
 from rich.text import Text
+from typer.core import TyperGroup
 
 from .. import __version__
 from ..errors import FsdecoupleError, InputError, printable
@@ -61,7 +62,36 @@ def _plain_list_types() -> None:
 
 _plain_list_types()
 
+
+class _Interrupted(BaseException):
+    """A Ctrl-C carried past typer, which turns a KeyboardInterrupt into ``Exit(130)``."""
+
+
+class _Group(TyperGroup):
+    """The app's command group, letting a Ctrl-C through as a KeyboardInterrupt.
+
+    typer answers a KeyboardInterrupt with exit code 130 in its own ``main``.  For the
+    command run from a shell :func:`main` gives that code too (after every ``finally``
+    has run), but a caller that runs the app in-process (pytest's ``CliRunner``, a
+    notebook) must see the interrupt itself: typer's ``Exit(130)`` made a test fail
+    and the suite go on after a Ctrl-C.
+    """
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt as stop:
+            raise _Interrupted from stop
+
+    def main(self, *args, **kwargs):
+        try:
+            return super().main(*args, **kwargs)
+        except _Interrupted:
+            raise KeyboardInterrupt from None
+
+
 app = typer.Typer(
+    cls=_Group,
     add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
     # plain help: the rich formatter labels every flag "<bool>", as if it took a value
     rich_markup_mode=None,
@@ -88,29 +118,12 @@ def _standard_streams() -> None:
 _standard_streams()
 
 
-def _stdout_gone(stream=None) -> None:
-    """Point stdout (or ``stream``) at /dev/null, so the interpreter's last flush cannot
-    fail again."""
+def _stdout_gone() -> None:
+    """Point stdout at /dev/null, so the interpreter's last flush cannot fail again."""
     with contextlib.suppress(OSError, ValueError):
         devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, (stream or sys.stdout).fileno())
+        os.dup2(devnull, sys.stdout.fileno())
         os.close(devnull)
-
-
-def _last_flush(code: int) -> int:
-    """Flush stdout and stderr before the interpreter does, and send a stream that cannot
-    be written to /dev/null: without PYTHONUNBUFFERED (cron, systemd) an error line to a
-    full stderr stayed in its buffer, and Python's own flush at exit made the code 120."""
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (OSError, ValueError) as err:
-            _stdout_gone(stream)
-            with contextlib.suppress(OSError, ValueError):
-                stream.flush()  # what stayed in the buffer goes to /dev/null
-            if code == 0 and isinstance(err, OSError):
-                code = 128 + signal.SIGPIPE if isinstance(err, BrokenPipeError) else 2
-    return code
 
 
 def _literal(text, keep: str = ""):
@@ -328,7 +341,7 @@ def main() -> None:
             sys.stdout.flush()
             sys.stderr.flush()
         os._exit(code)
-    sys.exit(_last_flush(code if isinstance(code, int) else 0))
+    sys.exit(code if isinstance(code, int) else 0)
 
 
 def _run() -> int:
