@@ -54,6 +54,7 @@ def test_noise_free_sensor_with_coupling(tmp_path):
     assert np.isfinite(f).all() and np.abs(f - truth).max() < 0.75
 
 
+@pytest.mark.slow  # a fit on twice the points: seconds of CPU; the not-slow run stays under a minute
 def test_duplicate_points(tmp_path, sim_dir, model):
     """Every calibration row twice (a copy-paste slip): fits, and barely moves the model."""
     d = tmp_path / "dup"

@@ -188,6 +188,7 @@ def certified(calib, settings):
     return model, certificate(model, calib)
 
 
+@pytest.mark.slow  # a fit with the held-out verdict: seconds of CPU; the not-slow run stays under a minute
 def test_certificate_on_a_simulated_sensor_matches_the_definitions(certified, calib):
     model, doc = certified
     recs = pd.DataFrame(doc["records"])

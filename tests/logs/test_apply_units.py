@@ -75,6 +75,7 @@ def per_unit(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow  # three fits in normalised units: seconds of CPU; the not-slow run stays under a minute
 @pytest.mark.parametrize("unit", ["count", "mV"])
 def test_volts_millivolts_and_counts_give_the_same_forces(per_unit, unit):
     ref_model, ref_summary, ref = per_unit["V"]
