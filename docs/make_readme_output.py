@@ -1,14 +1,20 @@
-"""Regenerate the sample `fsdecouple cv` output quoted in the docs (docs/cv.md).
+"""Regenerate every example output quoted in README.md and the docs pages.
 
-Runs the command below on the committed sample data, writes its printed text to
-docs/cv-sample-output.txt and copies that text into docs/cv.md between the
-``<!-- cv-sample-output:start -->`` and ``<!-- cv-sample-output:end -->`` markers.
-Never edit either by hand; run ``python docs/make_readme_output.py`` from the
-repository root instead.
+    python docs/make_readme_output.py            # run every example, rewrite its block
+    python docs/make_readme_output.py readme-fit # only the blocks named
+    python docs/make_readme_output.py --check    # rewrite nothing; exit 1 if a block is stale
+
+Each example of docs/examples.py runs its commands for real (``python -m fsdecouple``
+from this checkout, in a scratch directory holding links to ``sample_data/`` and ``configs/``) and
+its block, between ``<!-- NAME:start -->`` and ``<!-- NAME:end -->`` on its page,
+is replaced by what they printed.  Never edit those blocks by hand: change the code,
+then run this script (tests/test_docs.py fails when a block is stale).
 """
 
 from __future__ import annotations
 
+import argparse
+import contextlib
 import os
 import subprocess
 import sys
@@ -17,31 +23,62 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "docs"))
-from readme_blocks import replace_block  # noqa: E402
+from examples import EXAMPLES, Result, block, masked, run  # noqa: E402
+from readme_blocks import replace_block, written  # noqa: E402
 
-ARGS = [
-    "cv", "sample_data/calibration",
-    "--task", "sample_data/task_voltages.csv", "--task-forces", "sample_data/task_forces.csv",
-    "--task-tare", "200", "--gross-error", "x:1:5:0.2", "--max-gamma", "0.016",
-]
-WIDTH = 132
+# Output that is not a terminal is never wrapped (fsdecouple.cli.app.WIDE); colour off.
+ENV = {**os.environ, "NO_COLOR": "1", "TERM": "dumb", "PYTHONPATH": str(ROOT), "CI": "true"}
 
 
-def main() -> int:
-    env = {**os.environ, "COLUMNS": str(WIDTH), "NO_COLOR": "1", "TERM": "dumb",
-           "PYTHONPATH": str(ROOT)}
+def subprocess_runner(argv) -> Result:
+    run_ = subprocess.run([sys.executable, "-m", "fsdecouple", *argv], env=ENV,
+                          capture_output=True, text=True, encoding="utf-8")
+    return Result(run_.returncode, run_.stdout, run_.stderr)
+
+
+@contextlib.contextmanager
+def scratch(tmp: Path, group: str):
+    """The group's scratch directory, as the current directory."""
+    d = tmp / group
+    if not d.exists():
+        d.mkdir()
+        for name in ("sample_data", "configs"):
+            (d / name).symlink_to(ROOT / name, target_is_directory=True)
+    here = Path.cwd()
+    os.chdir(d)
+    try:
+        yield d
+    finally:
+        os.chdir(here)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("names", nargs="*", help="only these blocks (default: all)")
+    parser.add_argument("--check", action="store_true", help="compare, rewrite nothing")
+    args = parser.parse_args(argv)
+    unknown = set(args.names) - {e.name for e in EXAMPLES}
+    if unknown:
+        parser.error(f"no example named {', '.join(sorted(unknown))}")
+    # a group runs whole (apply needs fit's model) but only the named blocks are written
+    groups = {e.group for e in EXAMPLES if not args.names or e.name in args.names}
+    stale = []
+    done: dict[str, dict] = {g: {} for g in groups}  # per group: the commands run, their results
     with tempfile.TemporaryDirectory() as tmp:
-        cmd = [sys.executable, "-m", "fsdecouple", *ARGS, "-o", str(Path(tmp) / "cv.json")]
-        run = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
-    if run.returncode not in (0, 1):
-        sys.stderr.write(run.stderr)
-        return run.returncode
-    lines = [line.rstrip() for line in run.stdout.splitlines()]
-    lines = [line for line in lines if not line.startswith("cv document written to")]
-    text = "$ fsdecouple " + " ".join(ARGS) + " -o cv.json\n" + "\n".join(lines).rstrip() + "\n"
-    (ROOT / "docs" / "cv-sample-output.txt").write_text(text, encoding="utf-8")
-    page = replace_block("cv-sample-output", f"```text\n{text}```")
-    print(f"wrote docs/cv-sample-output.txt and {page.relative_to(ROOT)} ({len(lines)} lines)")
+        for example in EXAMPLES:
+            if example.group not in groups:
+                continue
+            with scratch(Path(tmp), example.group):
+                text = run(example, subprocess_runner, done[example.group])
+            if args.names and example.name not in args.names:
+                continue
+            if masked(text, example.volatile) != masked(block(example), example.volatile):
+                stale.append(example.name)
+            if not args.check:
+                print(written(replace_block(example.name, text, ROOT / example.page), example.name))
+    if args.check and stale:
+        print("stale: " + ", ".join(stale) + " (run python docs/make_readme_output.py)")
+        return 1
     return 0
 
 

@@ -1,7 +1,7 @@
 """Replace a generated block of a docs page between two HTML comment markers.
 
-Used by the scripts that write measured or printed output into the docs
-(docs/make_readme_output.py, benchmarks/*.py --docs), so that no figure in them
+Used by the scripts that write measured or printed output into the docs and the
+README (docs/make_readme_output.py, benchmarks/*.py --docs), so that no figure in them
 is typed in by hand.  Each block lives on one page of the docs site; ``PAGES``
 says which, so a script names its block and nothing else.
 """
@@ -9,13 +9,13 @@ says which, so a script names its block and nothing else.
 from __future__ import annotations
 
 import re
+import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
 # block name -> the page holding its <!-- NAME:start --> ... <!-- NAME:end --> markers
 PAGES = {
-    "cv-sample-output": DOCS / "cv.md",             # docs/make_readme_output.py
     "benchmarks": DOCS / "benchmarks.md",           # benchmarks/run.py --docs
     "refine-benchmarks": DOCS / "benchmarks.md",    # benchmarks/refine.py --docs
     "accuracy": DOCS / "benchmarks.md",             # benchmarks/accuracy.py --docs
@@ -23,6 +23,14 @@ PAGES = {
     "fleet-benchmarks": DOCS / "benchmarks.md",     # benchmarks/fleet.py --docs
     "six-axis-benchmarks": DOCS / "benchmarks.md",  # benchmarks/six_axis.py --docs
 }
+
+
+if str(DOCS) not in sys.path:
+    sys.path.insert(0, str(DOCS))
+from examples import EXAMPLES  # noqa: E402
+
+# docs/make_readme_output.py: the example outputs (README.md's among them)
+PAGES.update({e.name: ROOT / e.page for e in EXAMPLES})
 
 
 def page_of(name: str) -> Path:

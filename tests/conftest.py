@@ -1,6 +1,8 @@
 from __future__ import annotations
 
+import contextlib
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -60,6 +62,22 @@ def calib(sim_dir, settings):
 @pytest.fixture(scope="session")
 def model(calib, settings):
     return fit(calib, settings)
+
+
+@pytest.fixture(scope="session")
+def sim_fit(tmp_path_factory, sim_dir):
+    """`fsdecouple fit` (with its verdict) of the session's simulated set, once a session:
+    (the model file, the command's result).  Tests that check the command read the result;
+    the others only read the model file."""
+    path = tmp_path_factory.mktemp("sim_model") / "model.json"
+    result = invoke(["fit", sim_dir / "calibration", "-o", path])
+    path.chmod(0o444)  # shared: read only
+    return path, result
+
+
+@pytest.fixture(scope="session")
+def sim_model_file(sim_fit):
+    return sim_fit[0]
 
 
 def eq11_from_file(doc: dict, u: np.ndarray, correction=None, refine=None) -> np.ndarray:
@@ -224,22 +242,59 @@ def invoke(args, code=0, **kw):
     return result
 
 
-@pytest.fixture(scope="session")
-def cv_json(tmp_path_factory):
-    """cv.json of the sample data, from a real `fsdecouple cv` run with every option."""
-    path = tmp_path_factory.mktemp("cv") / "cv.json"
-    invoke(["cv", SAMPLE / "calibration", "-o", path, "--task", SAMPLE / "task_voltages.csv",
-            "--task-forces", SAMPLE / "task_forces.csv", "--task-tare", "200",
-            "--gross-error", "x:3:5:0.2"])
-    return path
+SAMPLE_CV = ["cv", "sample_data/calibration", "--task", "sample_data/task_voltages.csv",
+             "--task-forces", "sample_data/task_forces.csv", "--task-tare", "200",
+             "--gross-error", "x:1:5:0.2", "--max-gamma", "0.016", "-o", "cv.json"]
 
 
 @pytest.fixture(scope="session")
-def sample_model(tmp_path_factory):
-    """A model file fitted on the committed sample data."""
-    path = tmp_path_factory.mktemp("model") / "model.json"
-    invoke(["fit", SAMPLE / "calibration", "-o", path])
-    return path
+def sample_cv(tmp_path_factory):
+    """A real `fsdecouple cv` run on the sample with every option (task log, gross error,
+    gate), once a session, as docs/cv.md and the README show it: (its directory, the
+    command's result).  tests/test_docs.py compares those pages with its output."""
+    d = tmp_path_factory.mktemp("sample_cv")
+    (d / "sample_data").symlink_to(SAMPLE, target_is_directory=True)
+    with working_directory(d):
+        result = invoke(SAMPLE_CV)
+    (d / "cv.json").chmod(0o444)  # shared: read only
+    return d, result
+
+
+@pytest.fixture(scope="session")
+def cv_json(sample_cv):
+    """cv.json of the sample data (``sample_cv``'s)."""
+    return sample_cv[0] / "cv.json"
+
+
+@contextlib.contextmanager
+def working_directory(path):
+    here = os.getcwd()
+    os.chdir(path)
+    try:
+        yield Path(path)
+    finally:
+        os.chdir(here)
+
+
+@pytest.fixture(scope="session")
+def sample_fit(tmp_path_factory):
+    """``fsdecouple fit sample_data/calibration -o model.json``, with its held-out verdict,
+    run once for the whole suite exactly as the README shows it (in a directory holding
+    a link to sample_data/): (that directory, the command's result).  Tests that need
+    *a* model fitted on the sample take ``sample_model``; tests/test_docs.py compares the
+    README's fit block with this run's output."""
+    d = tmp_path_factory.mktemp("sample_fit")
+    (d / "sample_data").symlink_to(SAMPLE, target_is_directory=True)
+    with working_directory(d):
+        result = invoke(["fit", "sample_data/calibration", "-o", "model.json"])
+    (d / "model.json").chmod(0o444)  # shared: a test that needs to change it takes a copy
+    return d, result
+
+
+@pytest.fixture(scope="session")
+def sample_model(sample_fit):
+    """A model file fitted on the committed sample data (``sample_fit``'s)."""
+    return sample_fit[0] / "model.json"
 
 
 @pytest.fixture(scope="session")

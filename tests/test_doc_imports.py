@@ -13,7 +13,7 @@ import re
 import pytest
 from conftest import ROOT
 
-IMPORT = re.compile(r"^\s*from (fsdecouple(?:\.[a-z_.]+)?) import ([A-Za-z_, ]+)", re.M)
+IMPORT = re.compile(r"^\s*(?:>>> )?from (fsdecouple(?:\.[a-z_.]+)?) import ([A-Za-z_, ]+)", re.M)
 SOURCES = ["README.md", *sorted(str(p.relative_to(ROOT)) for p in (ROOT / "docs").glob("*.py")),
            *sorted(str(p.relative_to(ROOT)) for p in (ROOT / "docs").rglob("*.md")),
            *sorted(str(p.relative_to(ROOT)) for p in (ROOT / "benchmarks").glob("*.py"))]

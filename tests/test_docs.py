@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import importlib.util
 import re
+import shutil
 import subprocess
 import sys
 
 import pytest
 import yaml
-from conftest import ROOT
+from conftest import ROOT, working_directory
 
 README = ROOT / "README.md"
 MAX_README_LINES = 400
@@ -81,7 +82,8 @@ def test_every_generated_block_has_its_markers_on_its_page():
         text = page.read_text(encoding="utf-8")
         assert text.count(f"<!-- {name}:start -->") == 1 == text.count(f"<!-- {name}:end -->"), (name, page)
     readme = README.read_text(encoding="utf-8")
-    assert not re.search(r"<!-- [\w-]+:start -->", readme), "generated blocks live in docs/, not the README"
+    in_readme = set(re.findall(r"<!-- ([\w-]+):start -->", readme))
+    assert in_readme == {n for n, p in PAGES.items() if p == README}, in_readme
 
 
 @pytest.mark.slow
@@ -91,3 +93,126 @@ def test_the_site_builds_strictly(tmp_path):
                          cwd=ROOT, capture_output=True, text=True)
     assert run.returncode == 0, run.stderr[-3000:]
     assert (tmp_path / "api" / "index.html").is_file()
+
+
+# Example outputs (docs/examples.py): each block must be what its commands print now.
+sys.path.insert(0, str(ROOT / "docs"))
+import examples  # noqa: E402
+
+sys.path.remove(str(ROOT / "docs"))
+
+
+def _in_process(argv) -> examples.Result:
+    from typer.testing import CliRunner
+
+    from fsdecouple.cli import app
+
+    r = CliRunner().invoke(app, list(argv))
+    if r.exception is not None and not isinstance(r.exception, SystemExit):
+        raise r.exception
+    return examples.Result(r.exit_code, r.stdout, r.stderr)
+
+
+def _fresh(example, results) -> str:
+    return examples.masked(examples.render(example, results), example.volatile)
+
+
+def _stale(example, fresh: str) -> str:
+    return (f"{example.page}'s {example.name} block is stale: run python docs/make_readme_output.py"
+            f"\n--- fresh run:\n{fresh}")
+
+
+def test_every_example_block_is_on_its_page_and_fenced():
+    names = [e.name for e in examples.EXAMPLES]
+    assert len(names) == len(set(names))
+    for example in examples.EXAMPLES:
+        text = examples.block(example)
+        assert text.startswith("```") and text.endswith("```"), example.name
+        assert not example.prompt or text.count("\n$ ") == len(example.commands), example.name
+
+
+def test_the_readme_fit_block_is_the_shared_sample_fit(sample_fit):
+    """The README's fit block against the suite's one sample fit (the same command in
+    the same kind of directory), so a change to fit's output fails here, not slow-marked."""
+    example = examples.by_name("readme-fit")
+    _, r = sample_fit
+    fresh = _fresh(example, [examples.Result(r.exit_code, r.stdout, r.stderr)])
+    assert fresh == examples.masked(examples.block(example), example.volatile), _stale(example, fresh)
+    # what the hidden check reads verbatim from a real run
+    assert "verdict: " in fresh and "second-order coupling error" in fresh
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("group", sorted({e.group for e in examples.EXAMPLES}))
+def test_every_example_block_is_a_fresh_run(group, sample_fit, sample_cv, tmp_path):
+    """Each group's commands run again (in-process), in order, in a scratch directory; the
+    sample's fit and cv are the suite's shared runs of the same commands (their files
+    copied in, their output reused)."""
+    from conftest import SAMPLE_CV
+
+    done = {}
+    if group == "sample":
+        for (d, r), command, name in ((sample_fit, "fsdecouple fit sample_data/calibration -o model.json",
+                                       "model.json"),
+                                      (sample_cv, "fsdecouple " + " ".join(SAMPLE_CV), "cv.json")):
+            shutil.copyfile(d / name, tmp_path / name)
+            done[command] = examples.Result(r.exit_code, r.stdout, r.stderr)
+        assert set(done) <= {c for e in examples.EXAMPLES for c in e.commands}, "the shared runs changed"
+    for name in ("sample_data", "configs"):
+        (tmp_path / name).symlink_to(ROOT / name, target_is_directory=True)
+    with working_directory(tmp_path):
+        for example in (e for e in examples.EXAMPLES if e.group == group):
+            fresh = examples.masked(examples.run(example, _in_process, done), example.volatile)
+            want = examples.masked(examples.block(example), example.volatile)
+            assert fresh == want, _stale(example, fresh)
+
+
+def _doctests(page):
+    """The doctest examples of a page's ```python blocks (those with '>>>' lines)."""
+    import doctest
+
+    text = page.read_text(encoding="utf-8")
+    blocks = [b for b in re.findall(r"^```python\n(.*?)^```$", text, re.M | re.S) if ">>>" in b]
+    return doctest.DocTestParser().get_doctest("\n".join(blocks), {}, page.name, str(page), 0), blocks
+
+
+@pytest.mark.slow
+def test_the_api_page_examples_run_as_doctests(tmp_path):
+    """docs/api.md's examples, run from a directory that looks like the repository's root
+    (its sample data and configs) as the page says; every '>>>' line runs and every shown
+    result must match (one raised NameError when they were not run)."""
+    import doctest
+
+    test, blocks = _doctests(ROOT / "docs" / "api.md")
+    assert blocks and len(test.examples) >= 15, "the API page lost its examples"
+    for name in ("sample_data", "configs"):
+        (tmp_path / name).symlink_to(ROOT / name, target_is_directory=True)
+    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS)
+    out = []
+    with working_directory(tmp_path):
+        result = runner.run(test, out=out.append)
+    assert result.failed == 0, "".join(out)
+    assert (tmp_path / "model.json").is_file() and (tmp_path / "forces.csv").is_file()
+
+
+def test_the_architecture_page_is_generated_and_names_every_module():
+    """docs/architecture.md is docs/make_architecture.py's output for the package as it is
+    now, and names each module (found here by walking the package, not by the script)."""
+    sys.path.insert(0, str(ROOT / "docs"))
+    try:
+        import make_architecture
+    finally:
+        sys.path.remove(str(ROOT / "docs"))
+    page = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
+    package = ROOT / "fsdecouple"
+    names = set()
+    for path in package.rglob("*.py"):
+        parts = list(path.relative_to(ROOT).with_suffix("").parts)
+        names.add(".".join(parts[:-1] if parts[-1] == "__init__" else parts))
+    missing = sorted(n for n in names if f"`{n}`" not in page)
+    assert not missing, f"docs/architecture.md misses {missing}: run python docs/make_architecture.py"
+    assert page == make_architecture.render(), "docs/architecture.md is stale: run docs/make_architecture.py"
+    # the floors follow the imports: core, under every other stage, is on the lowest stage floor
+    floors = dict(re.findall(r"^## `fsdecouple\.(\w+)` \(floor (\d+)\)$", page, re.M))
+    assert floors and int(floors["core"]) == min(int(f) for f in floors.values())
+    assert int(floors["cli"]) == max(int(f) for f in floors.values())

@@ -29,6 +29,7 @@ from rich.progress import (
 from rich.segment import Segment
 from rich.table import Table
 from rich.text import Text
+from typer.core import TyperGroup
 
 from .. import __version__
 from ..errors import FsdecoupleError, InputError, printable
@@ -61,7 +62,36 @@ def _plain_list_types() -> None:
 
 _plain_list_types()
 
+
+class _Interrupted(BaseException):
+    """A Ctrl-C carried past typer, which turns a KeyboardInterrupt into ``Exit(130)``."""
+
+
+class _Group(TyperGroup):
+    """The app's command group, letting a Ctrl-C through as a KeyboardInterrupt.
+
+    typer answers a KeyboardInterrupt with exit code 130 in its own ``main``.  For the
+    command run from a shell :func:`main` gives that code too (after every ``finally``
+    has run), but a caller that runs the app in-process (pytest's ``CliRunner``, a
+    notebook) must see the interrupt itself: typer's ``Exit(130)`` made a test fail
+    and the suite go on after a Ctrl-C.
+    """
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt as stop:
+            raise _Interrupted from stop
+
+    def main(self, *args, **kwargs):
+        try:
+            return super().main(*args, **kwargs)
+        except _Interrupted:
+            raise KeyboardInterrupt from None
+
+
 app = typer.Typer(
+    cls=_Group,
     add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
     # plain help: the rich formatter labels every flag "<bool>", as if it took a value
     rich_markup_mode=None,

@@ -19,10 +19,8 @@ from fsdecouple.sim.simulate import simulate
 
 
 @pytest.fixture(scope="module")
-def fitted(sim_dir, tmp_path_factory):
-    path = tmp_path_factory.mktemp("cert") / "model.json"
-    invoke(["fit", sim_dir / "calibration", "-o", path])
-    return path
+def fitted(sim_model_file):
+    return sim_model_file  # `fsdecouple fit` of the simulated set, once a session
 
 
 def test_certificate_json_and_html(fitted, sim_dir, tmp_path):

@@ -11,19 +11,9 @@ import pytest
 from conftest import SAMPLE, invoke
 
 
-@pytest.fixture(scope="module")
-def sim_model_file(tmp_path_factory, sim_dir):
-    """`fsdecouple fit` of the session's simulated set, once a module: the tests below only
-    read it (test_fit_apply_round_trip runs and checks the command itself)."""
-    path = tmp_path_factory.mktemp("sim_model") / "model.json"
-    invoke(["fit", sim_dir / "calibration", "-o", path])
-    return path
-
-
 @pytest.mark.slow  # over ~0.6 s: the not-slow run stays under a minute
-def test_fit_apply_round_trip(tmp_path, sim_dir):
-    model = tmp_path / "model.json"
-    r = invoke(["fit", sim_dir / "calibration", "-o", model])
+def test_fit_apply_round_trip(tmp_path, sim_dir, sim_fit):
+    model, r = sim_fit
     assert "Interference error gamma" in r.stdout and model.exists()
     doc = json.loads(model.read_text())
     assert doc["format"] == "fsdecouple.model" and len(doc["chi"]) == 6
@@ -93,9 +83,10 @@ def test_axis_column_is_optional(tmp_path, sim_dir, sim_model_file):
 
 @pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_max_gamma_gate(tmp_path):
-    invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "a.json", "--max-gamma", "0.5"])
-    r = invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "b.json", "--max-gamma", "1e-6"],
-               code=1)
+    # the gate reads the fit's gamma after decoupling, not the held-out verdict
+    invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "a.json", "--max-gamma", "0.5", "--no-verdict"])
+    r = invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "b.json", "--max-gamma", "1e-6",
+                "--no-verdict"], code=1)
     assert "gate failed" in r.stderr
 
 
@@ -184,7 +175,7 @@ def test_outputs_get_the_usual_file_mode(tmp_path):
     old = os.umask(0o022)
     try:
         out = tmp_path / "m.json"
-        invoke(["fit", SAMPLE / "calibration", "-o", out])
+        invoke(["fit", SAMPLE / "calibration", "-o", out, "--no-verdict"])
     finally:
         os.umask(old)
     assert out.stat().st_mode & 0o777 == 0o644
@@ -269,8 +260,9 @@ def test_redirected_output_keeps_every_column_and_every_sentence_whole(tmp_path)
     import sys
 
     six = SAMPLE / "six_axis"
+    # one round (--folds 1,2) prints the same 30-column table as three
     r = subprocess.run([sys.executable, "-m", "fsdecouple", "cv", six / "calibration", "-c",
-                        six / "sensor.yaml", "-o", tmp_path / "cv.json"],
+                        six / "sensor.yaml", "--folds", "1,2", "-o", tmp_path / "cv.json"],
                        capture_output=True, text=True, timeout=600, env={**os.environ, "COLUMNS": "80"})
     assert r.returncode == 0, r.stderr
     lines = r.stdout.splitlines()

@@ -43,6 +43,7 @@ SLOW_CASES = {
     "report-png-under-a-file",  # renders every figure before the PNG write fails
     "out-file-named-as-a-directory",  # a usage error: through the CLI's main, in a subprocess
     "six-model-three-column-log",  # fits a six-axis model (also test_six_axis.py, not slow)
+    "cal-huge-off-axis-output",  # fits twice (plain, then --force) before gamma overflows
 }
 
 

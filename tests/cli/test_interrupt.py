@@ -12,13 +12,9 @@ import numpy as np
 import pytest
 from conftest import ROOT, SAMPLE
 
-from fsdecouple import load_calibration, load_config
-from fsdecouple.core.modelfile import save_model
-from fsdecouple.fitting.fit import fit
-
 
 @pytest.fixture(scope="module")
-def big_log(tmp_path_factory):
+def big_log(tmp_path_factory, sample_model):
     """2 million rows (~70 MB): long enough to be caught mid-write on any machine."""
     d = tmp_path_factory.mktemp("big")
     rng = np.random.default_rng(0)
@@ -29,9 +25,7 @@ def big_log(tmp_path_factory):
         fh.write("t,ux,uy,uz\n")
         for _ in range(100):
             fh.write(body)
-    model = d / "model.json"
-    save_model(fit(load_calibration(SAMPLE / "calibration", load_config())), model)
-    return log, model
+    return log, sample_model  # apply only reads it
 
 
 @pytest.mark.slow
@@ -124,3 +118,54 @@ def test_sigterm_stops_fit_many_and_its_worker_processes(tmp_path):
     alive = subprocess.run(["pgrep", "-f", str(sensors)], capture_output=True, text=True).stdout
     assert alive == "", alive
     assert not models.exists()  # the directory it made is not left behind, empty
+
+
+_SLOW_FITS = """
+import pathlib
+
+import pytest
+from typer.testing import CliRunner
+
+from fsdecouple.cli import app
+
+
+@pytest.mark.parametrize("i", range(20))
+def test_fit(i, tmp_path):
+    pathlib.Path({mark!r}).write_text(str(i))
+    r = CliRunner().invoke(app, ["fit", {calib!r}, "-c", {slow!r}, "--no-verdict",
+                                 "-o", str(tmp_path / "model.json")])
+    assert r.exit_code == 0, r.output
+"""
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_pytest_while_a_command_runs_in_process(tmp_path):
+    """CliRunner runs the app in pytest's process, where typer turned the Ctrl-C into
+    exit code 130: the running test failed and the suite went on, for minutes.  Now the
+    KeyboardInterrupt reaches pytest, which stops (its exit code 2, "interrupted")."""
+    slow = tmp_path / "slow.yaml"
+    slow.write_text("svr: {C: 1000000, tolerance: 1.0e-9}\n")  # seconds per SVR: 20 fits take minutes
+    mark = tmp_path / "started"
+    (tmp_path / "test_fits.py").write_text(_SLOW_FITS.format(
+        mark=str(mark), calib=str(SAMPLE / "calibration"), slow=str(slow)))
+    proc = subprocess.Popen([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                             str(tmp_path / "test_fits.py")],
+                            cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, preexec_fn=_default_sigint)
+    deadline = time.monotonic() + 120
+    while not mark.exists():
+        assert proc.poll() is None, proc.communicate()[0].decode()[-3000:]
+        assert time.monotonic() < deadline, "the first test never started"
+        time.sleep(0.05)
+    time.sleep(2)  # inside the first fit command
+    proc.send_signal(signal.SIGINT)
+    sent = time.monotonic()
+    try:
+        out, _ = proc.communicate(timeout=15)
+    finally:
+        proc.kill()
+    out = out.decode()
+    assert time.monotonic() - sent < 15
+    assert proc.returncode == 2, out[-3000:]  # pytest's ExitCode.INTERRUPTED
+    assert "KeyboardInterrupt" in out and mark.read_text() == "0", out[-3000:]
+    assert "failed" not in out and "passed" not in out, out[-3000:]

@@ -156,6 +156,7 @@ def test_a_table_holding_a_newline_or_an_escape_stays_aligned(capsys):
     assert sum(line.startswith("│") for line in out.splitlines()) == 3  # one line a row
 
 
+@pytest.mark.slow  # fits of the sample: seconds of CPU; the not-slow run stays under a minute
 def test_a_newline_in_an_output_or_sensor_name_never_splits_a_line(tmp_path):
     out = tmp_path / "a\nb.json"
     cfg = tmp_path / "cfg.yaml"

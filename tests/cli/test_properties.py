@@ -14,11 +14,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import SAMPLE
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from fsdecouple import FsdecoupleError, load_calibration, load_config
+from fsdecouple import FsdecoupleError, load_calibration
 from fsdecouple.config import Settings
 from fsdecouple.data.calibration import from_table
 from fsdecouple.fitting.fit import fit
@@ -36,8 +35,10 @@ ROWS = Settings(min_repetitions=1, zero="rows")
 
 
 @pytest.fixture(scope="module")
-def model():
-    return fit(load_calibration(SAMPLE / "calibration", load_config()), load_config())
+def model(sample_model):
+    from fsdecouple import load_model
+
+    return load_model(sample_model)  # the suite's sample fit
 
 
 numbers = st.one_of(

@@ -204,8 +204,7 @@ def test_binary_that_is_not_utf8_is_refused_for_csv_and_kept_for_parquet(tmp_pat
 
 
 @pytest.fixture(scope="module")
-def sample_model_obj():
-    from fsdecouple import load_calibration, load_config
-    from fsdecouple.fitting.fit import fit
+def sample_model_obj(sample_model):
+    from fsdecouple import load_model
 
-    return fit(load_calibration(SAMPLE / "calibration", load_config()), load_config())
+    return load_model(sample_model)  # the suite's sample fit

@@ -54,7 +54,8 @@ def test_noise_free_sensor_with_coupling(tmp_path):
     assert np.isfinite(f).all() and np.abs(f - truth).max() < 0.75
 
 
-def test_duplicate_points(tmp_path, sim_dir):
+@pytest.mark.slow  # a fit on twice the points: seconds of CPU; the not-slow run stays under a minute
+def test_duplicate_points(tmp_path, sim_dir, model):
     """Every calibration row twice (a copy-paste slip): fits, and barely moves the model."""
     d = tmp_path / "dup"
     d.mkdir()
@@ -63,7 +64,7 @@ def test_duplicate_points(tmp_path, sim_dir):
         pd.concat([df, df]).to_csv(d / f.name, index=False)
     settings = load_config()
     dup = fit(load_calibration(d, settings), settings)
-    once = fit(load_calibration(sim_dir / "calibration", settings), settings)
+    once = model  # conftest's: the same set, fitted once a session with the same settings
     assert_finite_model(dup)
     u = pd.read_csv(sim_dir / "task_voltages.csv")[["ux", "uy", "uz"]].to_numpy()
     u = u - u[:200].mean(axis=0)  # inside the calibrated range

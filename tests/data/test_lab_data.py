@@ -148,6 +148,7 @@ def test_a_gross_error_is_flagged_with_file_row_and_size(lab, tmp_path):
     assert gross_errors(calib.points, np.array([812.5, k_y, 415.0]), settings.full_scale) == []
 
 
+@pytest.mark.slow  # two fits: seconds of CPU; the not-slow run stays under a minute
 def test_exclude_drops_a_point_and_the_provenance_records_it(tmp_path):
     out = tmp_path / "m.json"
     invoke(["simulate", tmp_path / "sim", "--gross-error", "x:1:5:0.2"])
@@ -166,6 +167,7 @@ def test_help_does_not_offer_a_value_for_flags():
     assert "--force" in r.stdout and "<bool>" not in r.stdout
 
 
+@pytest.mark.slow  # a whole cv run: seconds of CPU; the not-slow run stays under a minute
 def test_redirected_cv_output_keeps_every_column():
     """Also seen: rich cut the cv tables at 80 columns in a CI log."""
     r = invoke(["cv", SAMPLE / "calibration", "--folds", "1,2"])

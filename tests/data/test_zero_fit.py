@@ -122,6 +122,7 @@ def test_unknown_zero_mode_is_one_line(tmp_path, value):
     assert "zero: expected one of rows, fit" in r.stderr and not out.exists()
 
 
+@pytest.mark.slow  # two fits: seconds of CPU; the not-slow run stays under a minute
 def test_zero_fit_moves_points_but_not_raw_outputs():
     table = _table(SimulatedSensor(), seed=1)
     rows, fitted = from_table(table, Settings()), from_table(table, FIT)

@@ -60,7 +60,6 @@ def _readings(table: pd.DataFrame, axis: str):
     """X[rep][load] on the way up and X'[rep][load] on the way down, zero-corrected by
     the mean of the sweep's zero rows, and (i_0, i_f, X_N) per repetition."""
     up, down, zero = {}, {}, {}
-    a = "xyz".index(axis)
     col, fcol = f"u{axis}", f"f{axis}"
     for rep, g in table[table["axis"] == axis].groupby("repetition"):
         f, u = g[fcol].tolist(), g[col].tolist()
@@ -75,8 +74,11 @@ def _readings(table: pd.DataFrame, axis: str):
                 up[rep][ff] = x[i]
             elif i > peak:
                 down[rep].setdefault(ff, x[i])
+        # i_0 and i_f are read at zero load, and every load read on the way down was
+        # also read on the way up (else its reversibility error would have no reference)
+        assert f[0] == 0.0 == f[-1] and abs(f[peak]) == max(LOADS), (rep, f)
+        assert set(down[rep]) <= set(up[rep]) and down[rep], (rep, down[rep])
         zero[rep] = (x[0], x[-1], x[peak])
-    assert a >= 0
     return up, down, zero
 
 
@@ -326,6 +328,7 @@ def certified(calib, settings):
     return model, certificate(model, calib)
 
 
+@pytest.mark.slow  # a fit with the held-out verdict: seconds of CPU; the not-slow run stays under a minute
 def test_certificate_on_a_simulated_sensor_matches_the_definitions(certified, calib):
     model, doc = certified
     recs = pd.DataFrame(doc["records"])

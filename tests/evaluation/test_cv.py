@@ -36,6 +36,7 @@ def test_gamma_by_hand():
     assert interference_error(forces, 1, 150.0) == pytest.approx(102.0 / 150.0)
 
 
+@pytest.mark.slow  # a whole cv run: seconds of CPU; the not-slow run stays under a minute
 def test_records_are_gamma_of_the_decoupled_held_out_points(doc, settings):
     """Recompute every gamma record from the decoupled points in the same document."""
     pts = pd.DataFrame(doc["points"])
@@ -128,6 +129,7 @@ def test_parallel_training_equals_sequential(doc, calib, settings):
     assert doc["timing"]["parallel"]["workers"] == 2
 
 
+@pytest.mark.slow  # every cv model twice: seconds of CPU; the not-slow run stays under a minute
 def test_parallel_models_decouple_bit_for_bit_like_sequential_ones(calib, settings):
     """Every method trained on threads gives the same forces, to the last bit, as alone."""
     from fsdecouple.fitting.baselines import train_all

@@ -45,6 +45,7 @@ def tuned():
     return calib, settings, chosen, record
 
 
+@pytest.mark.slow  # a tuning grid of fits: seconds of CPU; the not-slow run stays under a minute
 def test_table2_is_candidate_zero_and_its_figure_is_rederived(tuned):
     calib, settings, _, record = tuned
     t2 = record["candidates"][0]
@@ -184,6 +185,7 @@ def test_every_candidate_better_inside_is_not_given_up_for_the_edge(monkeypatch)
     assert record["chosen"] == 0  # kernel sum beyond the range: the edge still decides
 
 
+@pytest.mark.slow  # a tuning grid of fits: seconds of CPU; the not-slow run stays under a minute
 def test_a_candidate_worse_than_table2_on_any_axis_is_never_chosen(monkeypatch):
     # a grid of one bad candidate (far too narrow a kernel): Table 2 stays.  C = 10: the
     # held-out figure is 3.9x Table 2's (C = 1000: 106x, and 6x the libsvm time)
@@ -211,6 +213,7 @@ def test_fit_tune_round_trips_through_the_model_file(tmp_path):
     assert model_to_dict(model)["report"]["tune"] == printed
 
 
+@pytest.mark.slow  # fits with the held-out verdict: seconds of CPU; the not-slow run stays under a minute
 def test_untuned_models_have_no_tune_record(tmp_path):
     out = tmp_path / "m.json"
     r = runner.invoke(app, ["fit", SAMPLE, "-o", str(out), "--json"])

@@ -59,6 +59,7 @@ def test_mimo_on_calibration_data_fits_training_points_and_is_deterministic(cali
     assert err.max() < 0.005
 
 
+@pytest.mark.slow  # RBF networks trained twice: seconds of CPU; the not-slow run stays under a minute
 def test_siso_interpolates_and_is_deterministic(calib):
     x = np.linspace(-1.4, 1.4, 15)
     y = 0.02 * np.sin(3 * x)

@@ -64,6 +64,7 @@ OURS_LIMIT, REFERENCE_LIMIT = 3.0, 1.5  # from the scatter over seeds 0-29: see 
 FULL_SCALE_LIMIT = 2.35
 
 
+@pytest.mark.slow  # two six-axis fits: seconds of CPU; the not-slow run stays under a minute
 def test_zero_rows_decouples_as_the_straightforward_reference(case):
     sensor, table, u, _, ref, ref_forces = case
     settings = replace(SETTINGS, zero="rows")
@@ -115,6 +116,7 @@ def test_full_scale_scaling_keeps_six_axis_defaults_near_the_floor(case):
     assert 1e-4 <= model.settings.svr.tolerance <= 2.5e-4, model.settings.svr.tolerance
 
 
+@pytest.mark.slow  # six-axis fits: seconds of CPU; the not-slow run stays under a minute
 def test_six_axis_volts_keep_the_configured_tolerance_and_three_axes_solve_to_the_noise(
         default_model):
     """Six-axis fits in volts keep Table 2's tolerance (fit's 10 s budget); three axes are

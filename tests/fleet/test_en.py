@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from conftest import invoke
 
-from fsdecouple import save_model
+from fsdecouple import load_model, save_model
 from fsdecouple.evaluation.calibrate import fit as calibrate
 from fsdecouple.fleet.drift import compare
 from fsdecouple.fleet.en import en_figures
@@ -24,8 +24,9 @@ def _scaled(calib, factor: float):
 
 
 @pytest.fixture(scope="module")
-def pair(calib, settings):
-    return calibrate(calib, settings), calibrate(_scaled(calib, 1.01), settings)
+def pair(calib, settings, sim_model_file):
+    # the first: `fsdecouple fit` of the same set (conftest's, once a session), as a file holds it
+    return load_model(sim_model_file), calibrate(_scaled(calib, 1.01), settings)
 
 
 def test_en_is_the_difference_of_both_models_on_the_same_outputs_over_both_us(pair):

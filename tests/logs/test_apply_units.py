@@ -75,6 +75,7 @@ def per_unit(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow  # three fits in normalised units: seconds of CPU; the not-slow run stays under a minute
 @pytest.mark.parametrize("unit", ["count", "mV"])
 def test_volts_millivolts_and_counts_give_the_same_forces(per_unit, unit):
     ref_model, ref_summary, ref = per_unit["V"]
@@ -141,7 +142,7 @@ def test_zero_line_shows_the_output_unit(tmp_path):
     _scaled_csv(LOG, tmp_path / "log.csv", 1e3)
     (tmp_path / "cfg.yaml").write_text("units: {output: mV}\n")  # scaling follows: full_scale
     m = tmp_path / "m.json"
-    invoke(["fit", cal, "-o", m, "-c", tmp_path / "cfg.yaml"])
+    invoke(["fit", cal, "-o", m, "-c", tmp_path / "cfg.yaml", "--no-verdict"])  # apply's line is tested
     r = invoke(["apply", m, tmp_path / "log.csv", "-o", tmp_path / "f.csv", "--tare", "200"])
     assert "zero removed [mV]: ux=+13.8" in r.stdout  # 0.013846 V of the volts log
 
@@ -180,7 +181,7 @@ def test_limits_round_trip_through_the_model_file(tmp_path):
     settings = load_config(cfg)
     assert settings.limits == {"ux": (-2.5, 2.5), "uz": (-10.0, 0.25)}
     m = tmp_path / "m.json"
-    invoke(["fit", SAMPLE / "calibration", "-o", m, "-c", cfg])
+    invoke(["fit", SAMPLE / "calibration", "-o", m, "-c", cfg, "--no-verdict"])  # the settings are tested
     model = load_model(m)
     assert model.settings.limits == settings.limits
     assert model_from_dict(model_to_dict(model)).settings == model.settings
@@ -257,9 +258,9 @@ def test_config_limits_take_precedence_over_the_models(sample_model_file, tmp_pa
 
 @pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 @needs_cc
-def test_apply_and_c_saturation_agree_without_a_tare(tmp_path):
+def test_apply_and_c_saturation_agree_without_a_tare(tmp_path, sample_model):
     """The C compares the values passed in, apply the raw ones: the same without a tare."""
-    base = fit(SAMPLE / "calibration")
+    base = load_model(sample_model)  # the suite's sample fit
     lo, hi = np.asarray(base.calibrated_range).T
     span = hi - lo
     limits = {"ux": (lo[0] - 0.2 * span[0], hi[0] + 0.2 * span[0]),

@@ -363,9 +363,9 @@ def test_bad_cv_file_is_one_line_error(tmp_path, sample_model, content, match):
     assert match in r.stderr and not (tmp_path / "r.html").exists()
 
 
-def test_fit_mentions_the_report_command(tmp_path):
-    r = invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "m.json"])
-    assert "fsdecouple report" in r.stdout
+def test_fit_mentions_the_report_command(sample_fit):
+    _, r = sample_fit  # the suite's `fsdecouple fit sample_data/calibration -o model.json`
+    assert "calibration report: fsdecouple report model.json -o report.html" in r.stdout
 
 
 def test_readme_ends_its_main_command_with_a_report_and_shows_a_figure():

@@ -206,6 +206,7 @@ def six_model_file(tmp_path_factory):
     return model
 
 
+@pytest.mark.slow  # a six-axis fit with its verdict: seconds of CPU; the not-slow run stays under a minute
 def test_cli_fit_show_apply(tmp_path, six_model_file):
     model = six_model_file
     shown = invoke(["show", model]).stdout
