@@ -88,12 +88,29 @@ def _standard_streams() -> None:
 _standard_streams()
 
 
-def _stdout_gone() -> None:
-    """Point stdout at /dev/null, so the interpreter's last flush cannot fail again."""
+def _stdout_gone(stream=None) -> None:
+    """Point stdout (or ``stream``) at /dev/null, so the interpreter's last flush cannot
+    fail again."""
     with contextlib.suppress(OSError, ValueError):
         devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
+        os.dup2(devnull, (stream or sys.stdout).fileno())
         os.close(devnull)
+
+
+def _last_flush(code: int) -> int:
+    """Flush stdout and stderr before the interpreter does, and send a stream that cannot
+    be written to /dev/null: without PYTHONUNBUFFERED (cron, systemd) an error line to a
+    full stderr stayed in its buffer, and Python's own flush at exit made the code 120."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError) as err:
+            _stdout_gone(stream)
+            with contextlib.suppress(OSError, ValueError):
+                stream.flush()  # what stayed in the buffer goes to /dev/null
+            if code == 0 and isinstance(err, OSError):
+                code = 128 + signal.SIGPIPE if isinstance(err, BrokenPipeError) else 2
+    return code
 
 
 def _literal(text, keep: str = ""):
@@ -311,7 +328,7 @@ def main() -> None:
             sys.stdout.flush()
             sys.stderr.flush()
         os._exit(code)
-    sys.exit(code if isinstance(code, int) else 0)
+    sys.exit(_last_flush(code if isinstance(code, int) else 0))
 
 
 def _run() -> int:
