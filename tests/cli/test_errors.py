@@ -62,10 +62,23 @@ def test_nan_inf_empty(cal, tmp_path, value):
     fails(["fit", cal], tmp_path, "rep1.csv", "row 5", "column 'fx'")
 
 
+def test_a_row_contradicting_its_own_axis_label_is_refused_and_excludable(cal, tmp_path):
+    """Issue 34: in a single-axis file with an axis column, an x row with fy = 10 is a
+    data-entry error, not a lever arm: refused naming the file, the row and both loads;
+    ``--exclude`` drops it."""
+    edit(cal / "rep4.csv", 3, "fy", "10.000")
+    fails(["fit", cal, "--no-verdict"], tmp_path, "rep4.csv, row 3", "'x' sweep",
+          "fx = -90", "fy = 10", "--exclude rep4.csv:3")
+    r = invoke(["fit", cal, "-o", tmp_path / "m.json", "--no-verdict", "--exclude", "rep4.csv:3"])
+    assert "several components" not in r.stderr
+
+
 @pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_row_loading_two_axes_is_fitted_jointly_and_named(cal, tmp_path):
-    """Issue 22: such a row is a lever arm's or a multi-axis rig's, fitted, not refused;
-    the warning names it, in case it is a typo."""
+    """Issue 22: without axis labels such a row may be a lever arm's or a multi-axis
+    rig's, fitted, not refused; the warning names it, in case it is a typo."""
+    for p in cal.glob("rep*.csv"):  # the same set without its axis column
+        p.write_text("\n".join(ln.split(",", 1)[1] for ln in p.read_text().splitlines()) + "\n")
     edit(cal / "rep4.csv", 3, "fy", "10.000")
     r = invoke(["fit", cal, "-o", tmp_path / "m.json", "--no-verdict"])
     assert "1 row loads several components (" in r.stderr
