@@ -33,6 +33,7 @@ from rich.text import Text
 from .. import __version__
 from ..errors import FsdecoupleError, InputError, printable
 from ..files import names_a_directory
+from ..reporting.narrow import fit_width
 
 # Each command imports what only it needs (pandas, libsvm, scipy, matplotlib),
 # so that `apply` and `show` start in a fraction of a second.
@@ -141,7 +142,10 @@ class _Console(Console):
     escaped as it is written (its own line breaks kept)."""
 
     def print(self, *objects, **kw) -> None:
-        super().print(*(_literal_table(o) if isinstance(o, Table) else o for o in objects), **kw)
+        shown = []
+        for o in objects:  # a table wider than the terminal: in parts that fit, never cut
+            shown += fit_width(_literal_table(o), self) if isinstance(o, Table) else [o]
+        super().print(*shown, **kw)
 
     def _render_buffer(self, buffer) -> str:  # rich's last step before writing (private)
         return super()._render_buffer(

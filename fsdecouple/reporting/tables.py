@@ -21,6 +21,7 @@ from ..data.columns import shown as shown_name
 from ..errors import printable
 from ..evaluation.cv_results import gamma_index, test_name
 from ..units import Units, output_display
+from .narrow import KEY_COLUMNS
 
 # --- ingest, fit, show, apply ------------------------------------------------------
 
@@ -180,6 +181,7 @@ def gamma_table(doc: dict[str, Any], records=None, title=None, clean=None) -> Ta
               pad_edge=False, padding=(0, 0, 0, 1))
     t.add_column("round", no_wrap=True)
     t.add_column("test (level)" if levels else "test (rep)", no_wrap=True)
+    setattr(t, KEY_COLUMNS, 2)  # a narrow terminal's parts repeat round and test (narrow.py)
     cell_width = 5 if ref is not None else 4
     axes = labels_in(doc["records"] if records is None else records)
     for m in doc["methods"]:
