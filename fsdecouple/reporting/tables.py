@@ -149,6 +149,14 @@ def apply_warnings(summary) -> list[str]:
         w.append(f"{summary.out_of_range_rows} rows have a voltage more than 1 % of the span "
                  "outside the calibrated range; their forces are extrapolated (status "
                  "'extrapolated')")
+    untared = getattr(summary, "untared", None)
+    if untared:
+        out, median, lo, hi = untared
+        unit = summary.output_unit
+        w.append(f"most rows ({summary.out_of_range_rows} of {summary.rows}) lie outside the "
+                 f"calibrated range by about a constant offset ({out}: median {median:.6g} "
+                 f"{unit}, calibrated {lo:.6g} to {hi:.6g} {unit}): the log looks unzeroed; "
+                 "give --tare N (its first N rows unloaded) or --zero")
     if summary.status_counts.get("not_converged"):
         w.append(f"{summary.status_counts['not_converged']} rows did not settle in the "
                  "second-order refinement (refine: K); kept with empty forces and status "
