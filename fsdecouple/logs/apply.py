@@ -18,7 +18,6 @@ import itertools
 import os
 import queue
 import threading
-import warnings
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
@@ -41,6 +40,7 @@ from ..units import LOAD_UNITS, load_factor
 from .columns import Dropped, kept_fields, passed_columns
 from .reader import Block, LogFile, is_parquet
 from .sinks import CsvSink, ParquetSink, force_decimals
+from .untared import block_median, untared
 
 CHUNK_ROWS = 1 << 20  # rows per block at most; blocks are cut at ~4 MB anyway
 MAX_WORKERS = 4
@@ -88,29 +88,7 @@ class ApplySummary:
     outputs: tuple[str, ...] = VOLTAGE_COLUMNS  # the names of ``offsets``
     force_columns: tuple[str, ...] = FORCE_COLUMNS  # the columns written (force_columns)
     dropped: list[Dropped] = field(default_factory=list)  # log columns not passed through
-    zeroed: bool = False  # a tare or a zero was given
-    # each block's median output (zero-corrected) and the calibrated range, for
-    # :attr:`untared` (in ``output_unit``)
-    block_medians: list[np.ndarray] = field(default_factory=list)
-    calibrated: tuple[np.ndarray, np.ndarray] | None = None
-
-    @property
-    def untared(self) -> tuple[str, float, float, float] | None:
-        """``(output, median, lo, hi)`` when most rows lie outside the calibrated range by
-        about a constant offset: no tare or zero was given, most rows are extrapolated, and
-        an output's median over the log lies outside its calibrated range lo..hi (a count
-        log's raw zero, 750,112 counts where the calibration spans +-10,000)."""
-        if self.zeroed or self.calibrated is None or not self.block_medians \
-                or 2 * self.out_of_range_rows <= self.rows:
-            return None
-        with np.errstate(invalid="ignore"):
-            median = np.nanmedian(np.vstack(self.block_medians), axis=0)
-        lo, hi = self.calibrated
-        beyond = np.maximum(lo - median, median - hi) / np.maximum(hi - lo, 1e-300)
-        if not (np.isfinite(beyond) & (beyond > 0)).any():
-            return None
-        c = int(np.nanargmax(np.where(np.isfinite(beyond), beyond, -np.inf)))
-        return self.outputs[c], float(median[c]), float(lo[c]), float(hi[c])
+    untared: tuple[str, float, float, float] | None = None  # untared.py: (output, median, lo, hi)
 
     def to_dict(self) -> dict:
         """The ``apply --json`` document of one log."""
@@ -353,10 +331,7 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
         jobs = itertools.chain((lambda block=block: block for block in kept), jobs)
     elif zero is not None:
         summary.offsets = np.asarray(zero, dtype=float)
-    summary.zeroed = tare is not None or zero is not None
-    rows = RowRules(*model.extrapolation_limits().T, sat_lo, sat_hi)
-    if model.projection is None:  # M > N: the calibrated range is v's, not the outputs'
-        summary.calibrated = (rows.lo, rows.hi)
+    rows, medians = RowRules(*model.extrapolation_limits().T, sat_lo, sat_hi), []
     # blocks in flight bound the memory (~60 MB each), so not every core of a big box
     workers = workers or min(MAX_WORKERS, os.cpu_count() or 1)
 
@@ -386,10 +361,8 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
             first = np.flatnonzero(code == MISSING_)[:10] + block.first_row if counts[MISSING_] \
                 else ()
             status = pc.take(STATUS_NAMES, pa.array(code))
-            if not summary.zeroed and len(block):
-                with np.errstate(invalid="ignore"), warnings.catch_warnings():
-                    warnings.simplefilter("ignore", RuntimeWarning)  # an all-empty column
-                    summary.block_medians.append(np.nanmedian(block.u * scale, axis=0))
+            if tare is None and zero is None and len(block):
+                medians.append(block_median(block.u * scale))
             return len(block), counts, first, block.done, block.total, \
                 sink.encode(block, f, empty, (status,))
 
@@ -411,6 +384,7 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
         sink.close()
         if summary.rows == 0:
             raise InputError(f"{path}: header only, no data rows")
+    summary.untared = untared(summary, medians, None if model.projection is not None else rows)
     return summary
 
 

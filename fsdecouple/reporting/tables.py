@@ -149,9 +149,8 @@ def apply_warnings(summary) -> list[str]:
         w.append(f"{summary.out_of_range_rows} rows have a voltage more than 1 % of the span "
                  "outside the calibrated range; their forces are extrapolated (status "
                  "'extrapolated')")
-    untared = getattr(summary, "untared", None)
-    if untared:
-        out, median, lo, hi = untared
+    if getattr(summary, "untared", None):
+        out, median, lo, hi = summary.untared
         unit = summary.output_unit
         w.append(f"most rows ({summary.out_of_range_rows} of {summary.rows}) lie outside the "
                  f"calibrated range by about a constant offset ({out}: median {median:.6g} "
