@@ -400,3 +400,47 @@ def validate(raw: Any, source: str, base: Settings) -> tuple[Settings, frozenset
         kw["scaling"] = "full_scale"  # Table 2's kernel width assumes outputs of order 1 V
     kw.update(lab_from_dict(raw, source))
     return replace(s, **kw), frozenset(raw)
+
+
+# keys a command takes from the model that change what apply writes: refused when a
+# config states them otherwise; the fit-only rest (svr, scaling, checks, ...) is warned about
+CHANGES_FORCES = ("rotation", "frame", "refine", "extrapolation", "full_scale")
+
+
+def unused_keys(settings: Settings, model_settings: Settings) -> list[str]:
+    """The keys a config wrote that ``apply`` does not read from a config (the model's own,
+    :attr:`Key.applies` false) and whose values differ from the model's."""
+    out = []
+    for name in sorted(settings.given - set(APPLY_KEYS)):
+        if name == "svr":
+            mine, theirs = settings.svr, model_settings.svr
+            fields = ["C", "epsilon", "gamma"] + ([] if mine.tolerance is None else ["tolerance"])
+            same = all(getattr(mine, f) == getattr(theirs, f) for f in fields)
+        else:
+            attr = "min_r2" if name == "checks" else "lab" if name in LAB_KEYS else name
+            same = getattr(settings, attr) == getattr(model_settings, attr)
+        if not same:
+            out.append(name)
+    return out
+
+
+def _unused(names: list[str], command: str) -> str:
+    return (f"the config's {', '.join(names)} differ{'s' if len(names) == 1 else ''} from the "
+            f"model's: {command} decouples with the model's own settings and reads only "
+            f"{', '.join(APPLY_KEYS)} from a config")
+
+
+def refuse_unused(settings: Settings, model_settings: Settings, command: str = "apply") -> None:
+    """Refuse a config that states a key changing the forces (:data:`CHANGES_FORCES`)
+    otherwise than the model: ``apply -c rot.yaml`` with a rotation the model lacks
+    decoupled without it, in silence."""
+    names = [n for n in unused_keys(settings, model_settings) if n in CHANGES_FORCES]
+    if names:
+        raise ConfigError(f"{_unused(names, command)}; refit with this config, or leave "
+                          f"{' and '.join(names)} out")
+
+
+def unused_warning(settings: Settings, model_settings: Settings, command: str = "apply") -> list[str]:
+    """The warning for fit-only keys a config states otherwise than the model (not used)."""
+    names = [n for n in unused_keys(settings, model_settings) if n not in CHANGES_FORCES]
+    return [f"{_unused(names, command)}; not used here"] if names else []

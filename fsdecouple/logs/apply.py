@@ -36,6 +36,7 @@ from ..data.csv_text import HEADER_ROW, require_columns
 from ..data.zero import tare_offsets
 from ..errors import InputError, where
 from ..files import atomic_write, refuse_overwriting_input
+from ..schema import refuse_unused, unused_warning
 from ..units import LOAD_UNITS, load_factor
 from .columns import Dropped, kept_fields, passed_columns
 from .reader import Block, LogFile, is_parquet
@@ -89,6 +90,7 @@ class ApplySummary:
     force_columns: tuple[str, ...] = FORCE_COLUMNS  # the columns written (force_columns)
     dropped: list[Dropped] = field(default_factory=list)  # log columns not passed through
     untared: tuple[str, float, float, float] | None = None  # untared.py: (output, median, lo, hi)
+    notes: list[str] = field(default_factory=list)  # config keys not used (schema.unused_warning)
 
     def to_dict(self) -> dict:
         """The ``apply --json`` document of one log."""
@@ -187,6 +189,7 @@ def check_options(model: CouplingErrorModel, settings: Settings | None, tare, ze
                   unit: str | None) -> tuple[Settings, str]:
     """``apply``'s settings and force unit, with the defaults; refused if they cannot be used."""
     settings = settings or model.settings
+    refuse_unused(settings, model.settings, "apply")
     if settings.units != model.settings.units:
         # the model's k and ranges are in its calibration's units: a log in others
         # would be decoupled silently wrong by a factor of 1000 or more
@@ -320,9 +323,9 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
     scale = np.array([settings.scale[c] for c in layout.outputs])
     jobs: Iterator[Callable[[], Block]] = log.blocks(names, chunk_rows=chunk_rows,
                                                      want_table=is_parquet(out), keep=keep)
-    summary = ApplySummary(force_unit=unit, output_unit=model.settings.output_unit,
-                           outputs=layout.outputs, offsets=np.zeros(layout.m),
-                           force_columns=forces, dropped=dropped)
+    summary = ApplySummary(force_unit=unit, output_unit=model.settings.output_unit, outputs=layout.outputs,
+                           offsets=np.zeros(layout.m), force_columns=forces, dropped=dropped,
+                           notes=unused_warning(settings, model.settings))
     to_unit = load_factor(model.settings.load_unit, unit)
     sat_lo, sat_hi = _limit_bounds(settings, model)
     if tare is not None:

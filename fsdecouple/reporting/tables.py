@@ -123,7 +123,7 @@ def apply_lines(summary, out) -> list[str]:
 
 
 def apply_warnings(summary) -> list[str]:
-    w, groups = [], {}
+    w, groups = list(getattr(summary, "notes", ())), {}
     for d in getattr(summary, "dropped", ()):
         groups.setdefault(d.reason, []).append(f"{d.column} '{d.name}'" if d.name else str(d.column))
     if groups:
