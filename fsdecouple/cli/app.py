@@ -256,6 +256,19 @@ def _given(*paths):
     return [p for p in paths if p is not None]
 
 
+def ascii_digits(ctx: typer.Context, param: typer.CallbackParam, value):
+    """An option holding numbers as text (``--folds``, ``--zero``, ``FILE:ROW``): its digits
+    are ASCII.  Python's int() and float() read '٣' (Arabic-Indic three) as 3, so a digit
+    the user may not have meant to type was obeyed; option types refuse it already."""
+    for text in value if isinstance(value, list | tuple) else [value]:
+        number = text.rsplit(":", 1)[-1] if param.name == "exclude" and text else text
+        bad = next((c for c in number or "" if c.isdigit() and not c.isascii()), None)
+        if bad is not None:
+            raise typer.BadParameter(f"{text!r}: {bad!r} (U+{ord(bad):04X}) is not an ASCII digit "
+                                     "0-9")
+    return value
+
+
 def _parse_zero(text: str) -> tuple[float, ...]:
     """``--zero``'s comma-separated finite outputs; their count is checked against the model
     (:func:`fsdecouple.logs.apply.check_options`), which knows its outputs."""

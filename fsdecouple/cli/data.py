@@ -18,6 +18,7 @@ from .app import (
     _given,
     _read,
     app,
+    ascii_digits,
     console,
     output_file,
     print_json,
@@ -32,7 +33,8 @@ def simulate(
     seed: Annotated[int, typer.Option(help="Random seed (>= 0).")] = 0,
     gross_error: Annotated[
         str | None,
-        typer.Option(help="Move one point: AXIS:REP:POINT:OFFSET (in the output unit), e.g. x:1:5:0.2"),
+        typer.Option(help="Move one point: AXIS:REP:POINT:OFFSET (in the output unit), e.g. x:1:5:0.2",
+                     callback=ascii_digits),
     ] = None,
     layout: Annotated[
         str,

@@ -22,6 +22,7 @@ from .app import (
     _given,
     _read,
     app,
+    ascii_digits,
     console,
     err_console,
     output_file,
@@ -57,7 +58,7 @@ def fit(
     exclude: Annotated[
         list[str] | None,
         typer.Option(metavar="FILE:ROW", help="Drop the calibration point FILE:ROW (repeatable), "
-                                            "e.g. a gross error fit flagged.")
+                                            "e.g. a gross error fit flagged.", callback=ascii_digits)
     ] = None,
     refine: Annotated[
         int | None, typer.Option(help="Second-order refinement steps K stored in the model "
@@ -69,7 +70,8 @@ def fit(
     ] = False,
     tune_grid: Annotated[
         str | None, typer.Option(help='The --tune grid, e.g. "gamma=1,2,4,8;C=1,10;'
-                                      'epsilon=0.25,0.5,1" (epsilon: multiples of the noise).')
+                                      'epsilon=0.25,0.5,1" (epsilon: multiples of the noise).',
+                                 callback=ascii_digits)
     ] = None,
     extrapolation: Annotated[
         str | None, typer.Option(help="chi beyond its calibrated range: tangent (continued "

@@ -153,3 +153,20 @@ def test_no_numpy_warning_from_a_pool_thread_after_the_error(tmp_path):
                        env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert r.returncode == 2 and len(r.stderr.splitlines()) == 1, r.stderr
     assert "RuntimeWarning" not in r.stderr and "too large" in r.stderr
+
+
+@pytest.mark.parametrize("args", [
+    ["apply", "{m}", SAMPLE / "task_voltages.csv", "--tare", "\u0663"],
+    ["apply", "{m}", SAMPLE / "task_voltages.csv", "--zero", "\u0660,\u0660,\u0660"],
+    ["cv", CAL, "--folds", "\u0661,\u0662;\u0663,\u0664;\u0665,\u0666"],
+    ["fit", CAL, "--exclude", "rep1.csv:\u0663", "--no-verdict"],
+    ["cv", CAL, "--gross-error", "x:\u0661:5:0.2"],
+    ["fit", CAL, "--tune", "--tune-grid", "gamma=\u0661"],
+])
+def test_numbers_in_other_scripts_digits_are_refused(sample_model, tmp_path, args):
+    """Issue 34: int() reads '\u0663' (Arabic-Indic three) as 3; --tare took it as 3 rows."""
+    out = tmp_path / "out"
+    r = invoke([str(a).format(m=sample_model) for a in args] + ["-o", out], code=2)
+    # in-process the usage error is click's own text; the command prints it as one line
+    assert "not an ASCII digit" in r.stderr or "valid integer" in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr and not out.exists()
