@@ -130,7 +130,8 @@ def fit(
         if model.report.verdict is not None:
             console.print(verdict_line(model.report.verdict))
         console.print(f"model written to {printable(output)} (decouples by {model.method})")
-        console.print(f"calibration report: fsdecouple report {printable(output)} -o report.html")
+        if not model.layout.overdetermined:  # report refuses M > N outputs (docs/rigs.md)
+            console.print(f"calibration report: fsdecouple report {printable(output)} -o report.html")
     warn(model.warnings)
     if max_gamma is not None:
         worst = max(model.report.gamma_after.values())

@@ -1,0 +1,42 @@
+"""Messages a user can act on (issue 34, unclear messages and smaller problems)."""
+
+from __future__ import annotations
+
+import pytest
+from conftest import SAMPLE, assert_one_line_error, invoke
+
+
+@pytest.fixture(scope="module")
+def gauges_model(tmp_path_factory):
+    """A rig of eight gauges for six components (M > N), fitted as the docs say."""
+    d = tmp_path_factory.mktemp("g8")
+    invoke(["simulate", d / "rig", "--rig", "lever-arm", "--gauges", "8"])
+    cal = d / "rig" / "calibration.csv"
+    invoke(["init", cal, "-o", d / "cfg.yaml"])
+    r = invoke(["fit", cal, "-c", d / "cfg.yaml", "-o", d / "m.json", "--no-verdict"])
+    return d / "m.json", cal, r
+
+
+def test_fit_of_m_gt_n_suggests_no_report_that_would_refuse_it(gauges_model):
+    model, _, r = gauges_model
+    invoke(["report", model, "-o", model.parent / "r.html"], 2)  # report refuses M > N
+    assert "fsdecouple report" not in r.stdout + r.stderr
+
+
+def test_the_joint_rows_warning_names_its_file_once(gauges_model):
+    model, cal, r = gauges_model
+    line = next(ln for ln in r.stderr.splitlines() if "several components" in ln)
+    assert line.count(str(cal)) == 1, line
+
+
+def test_interval_on_m_gt_n_says_it_is_not_supported(gauges_model, tmp_path):
+    model, cal, _ = gauges_model
+    r = invoke(["apply", model, cal, "--interval", "0.9", "-o", tmp_path / "f.csv"], 2)
+    msg = assert_one_line_error(r, "not supported", "M > N")
+    assert "older fsdecouple" not in msg and "refit" not in msg
+
+
+def test_the_coverage_is_quoted_as_written(sample_model, tmp_path):
+    r = invoke(["apply", sample_model, SAMPLE / "task_voltages.csv", "--tare", "2",
+                "--interval", "0.9999999", "-o", tmp_path / "f.csv"], 2)
+    assert_one_line_error(r, "--interval 0.9999999:")
