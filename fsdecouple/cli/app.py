@@ -33,7 +33,7 @@ from rich.text import Text
 from .. import __version__
 from ..errors import FsdecoupleError, InputError, printable
 from ..files import names_a_directory
-from ..reporting.narrow import fit_width
+from ..reporting.narrow import REDIRECTED, fit_width, needed_width
 
 # Each command imports what only it needs (pandas, libsvm, scipy, matplotlib),
 # so that `apply` and `show` start in a fraction of a second.
@@ -142,10 +142,16 @@ class _Console(Console):
     escaped as it is written (its own line breaks kept)."""
 
     def print(self, *objects, **kw) -> None:
-        shown = []
+        if not any(isinstance(o, Table) for o in objects):
+            return super().print(*objects, **kw)
         for o in objects:  # a table wider than the terminal: in parts that fit, never cut
-            shown += fit_width(_literal_table(o), self) if isinstance(o, Table) else [o]
-        super().print(*shown, **kw)
+            if not isinstance(o, Table):
+                super().print(o, **kw)
+                continue
+            limit = REDIRECTED if self.width >= WIDE else self.width  # a file or a pipe
+            for part in fit_width(_literal_table(o), self, limit):
+                width = max(limit, needed_width(self, part)) if self.width >= WIDE else None
+                super().print(part, **{**kw, "width": width} if width else kw)
 
     def _render_buffer(self, buffer) -> str:  # rich's last step before writing (private)
         return super()._render_buffer(

@@ -7,6 +7,10 @@ instead splits such a table by columns into parts that each fit.  Every part rep
 the table's key columns (``round`` and ``test``: :data:`KEY_COLUMNS`, 1 unless a table
 says otherwise), and a column group (a header whose first line names the group, its
 followers' first lines empty, as the gamma table's methods) is kept whole in one part.
+
+Output that goes to a file or a pipe has no width; its tables are kept to REDIRECTED
+columns the same way (cells that may wrap wrap, the rest split), so a guessed reason in
+``init``'s table no longer makes a CI log 396 characters wide.
 """
 
 from __future__ import annotations
@@ -17,10 +21,11 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
+REDIRECTED = 160  # [columns] tables in a file or a pipe: a wide terminal's width
 KEY_COLUMNS = "fsdecouple_key_columns"  # attribute a table sets: how many leading key columns
 
 
-def _width(console: Console, table: Table) -> int:
+def needed_width(console: Console, table: Table) -> int:
     """The narrowest the table renders without cutting a cell that may not wrap: such a
     column at its widest, any other at its narrowest (rich's own column measure, private;
     measured on a wide console, as rich clamps a measure to the console's width)."""
@@ -61,14 +66,14 @@ def _part(table: Table, columns: list[int], first: bool, last: bool) -> Table:
 def fit_width(table: Table, console: Console, width: int | None = None) -> list[Table]:
     """``table`` as it is when it fits ``width`` (default: the console's), else its parts."""
     width = console.width if width is None else width
-    if _width(console, table) <= width:
+    if needed_width(console, table) <= width:
         return [table]
     keys = min(getattr(table, KEY_COLUMNS, 1), len(table.columns) - 1)
     parts: list[list[int]] = []
     current: list[int] = []
     for group in _groups(table, keys):
         trial = [*range(keys), *current, *group]
-        if current and _width(console, _part(table, trial, True, True)) > width:
+        if current and needed_width(console, _part(table, trial, True, True)) > width:
             parts.append(current)
             current = list(group)
         else:

@@ -91,3 +91,21 @@ def test_every_command_table_at_80_columns_is_whole(sample_model, tmp_path, args
     r = invoke([str(a).format(tmp=tmp_path / "wide", model=sample_model) for a in args])
     assert_whole(text.replace(str(tmp_path / "narrow"), str(tmp_path / "wide")),
                  r.stdout + r.stderr)
+
+
+@pytest.mark.slow  # an interpreter starting up
+def test_a_redirected_table_stays_within_a_wide_terminal(tmp_path):
+    """init's table, redirected to a file, was 396 characters wide (a guessed reason in one
+    row): a file or a pipe gets tables of at most REDIRECTED columns, cells wrapped, whole."""
+    from fsdecouple.reporting.narrow import REDIRECTED
+
+    r = subprocess.run([sys.executable, "-m", "fsdecouple", "init",
+                        SAMPLE / "loadcell" / "calibration.csv", "-o", tmp_path / "c.yaml"],
+                       capture_output=True, text=True, timeout=120,
+                       env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    assert r.returncode == 0, r.stderr
+    table = [ln for ln in r.stdout.splitlines() if ln[:1] in "┏┃┡│└"]
+    assert table and max(map(len, table)) <= REDIRECTED, max(map(len, table))
+    # every guessed reason is there, wrapped or not
+    text = " ".join(" ".join(ln.split("│")[-2].split()) for ln in table if ln.startswith("│"))
+    assert "numbered channel 0 of ch0..ch2" in text and "largest |output| 1.56261e+06" in text
