@@ -66,7 +66,8 @@ app = typer.Typer(
     add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
     # plain help: the rich formatter labels every flag "<bool>", as if it took a value
     rich_markup_mode=None,
-    help="Static decoupling of 3-axis force sensors: coupling error model + six eps-SVRs.",
+    help="Static decoupling of multi-axis force sensors (three axes, six, or more gauges than "
+         "components): the coupling error model of eq. (11), an eps-SVR per coupling.",
 )
 
 

@@ -25,6 +25,10 @@ section.component:first-of-type{page-break-before:auto}.noprint{display:none}}
 .ident td{text-align:left}.ident td:first-child{font-weight:600}.class{font-size:1.2em;font-weight:700}
 """
 
+# the standard's name never wraps inside (a no-break space): the printed titles and the
+# terminal's split "ISO" from "376"
+ISO = "ISO\u00a0376"
+
 
 def _fmt(v: float | None, digits: int = 4) -> str:
     return "—" if v is None else f"{v:.{digits}g}"
@@ -79,7 +83,7 @@ def certificate_html(doc: dict) -> str:
              .replace("<table ", '<table class="ident" ', 1)]
     cls_rows = [tr(cell(c["axis"]), cell("positive" if c["sign"] == "+" else "negative"),
                    f'<td class="class">{escape(c["class"])}</td>') for c in doc["classes"]]
-    parts.append(table("classes", "Class per component and load sign (ISO 376)",
+    parts.append(table("classes", f"Class per component and load sign ({ISO})",
                        [tr(th("component"), th("loads"), th("class"))], cls_rows))
     for n in doc["notes"]:
         parts.append(note(n))
@@ -102,7 +106,7 @@ def certificate_html(doc: dict) -> str:
         parts.append(
             f'<section class="component"><h2>Component {escape(axis)} (full scale '
             f"{doc['full_scale'][axis]:g} {escape(unit)})</h2>\n"
-            + table(f"figures-{axis}", f"ISO 376 figures of {axis} [%], U [{unit}]", head, rows)
+            + table(f"figures-{axis}", f"{ISO} figures of {axis} [%], U [{unit}]", head, rows)
             + table(f"budget-{axis}", f"Uncertainty budget of {axis}: relative standard "
                                       "uncertainties [%] (EURAMET cg-4)", bhead, brows)
             + fig + "</section>\n")
@@ -130,7 +134,8 @@ def certificate_html(doc: dict) -> str:
 def certificate_tables(doc: dict) -> list[Table]:
     """The terminal's view: classes, and per component its figures and U."""
     out = []
-    t = Table(title=f"Certificate of {doc['sensor']}: class (ISO 376)")
+    title = f"Certificate of {doc['sensor']}: class ({ISO})"
+    t = Table(title=title, min_width=len(title))  # a title as wide as its table never wraps
     for col in ("component", "loads", "class"):
         t.add_column(col)
     for c in doc["classes"]:

@@ -40,3 +40,27 @@ def test_the_coverage_is_quoted_as_written(sample_model, tmp_path):
     r = invoke(["apply", sample_model, SAMPLE / "task_voltages.csv", "--tare", "2",
                 "--interval", "0.9999999", "-o", tmp_path / "f.csv"], 2)
     assert_one_line_error(r, "--interval 0.9999999:")
+
+
+def test_the_top_level_help_says_what_the_tool_is_now():
+    text = " ".join(invoke(["--help"]).stdout.split())
+    assert "3-axis" not in text and "six eps-SVRs" not in text
+    assert "multi-axis force sensors" in text and "eq. (11)" in text
+
+
+def test_certificate_titles_keep_iso_376_together(sample_model):
+    """A title wrapped between 'ISO' and '376' (a no-break space holds them together), and the
+    terminal's class table is as wide as its title."""
+    r = invoke(["certificate", sample_model, SAMPLE / "calibration"], 0, terminal_width=40)
+    assert "ISO\u00a0376" in r.stdout and "ISO\n" not in r.stdout
+
+
+def test_the_levels_report_speaks_of_load_levels(sample_model, tmp_path):
+    from fsdecouple.core.modelfile import load_model
+    from fsdecouple.evaluation.cv_results import load_cv_results
+    from fsdecouple.reporting.report import build_report
+
+    cv = tmp_path / "cv.json"
+    invoke(["cv", SAMPLE / "calibration", "--protocol", "levels", "-o", cv])
+    html = build_report(load_model(sample_model), load_cv_results(cv)).html
+    assert "same held-out load level" in html and "same held-out repetition" not in html
