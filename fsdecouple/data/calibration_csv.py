@@ -153,7 +153,7 @@ def read_calibration_table(path: str | Path, settings: Settings,
                 f"{where(f, HEADER_ROW)}: this is the output of 'fsdecouple ingest -o' (it has "
                 f"{layout.outputs[0]}_raw), not a repetition; move it out of the calibration directory"
             )
-        require_columns(header, numeric, f)
+        require_columns(header, numeric, f, calibration=True)
         for c in layout.outputs:  # a reading mapped to a reference column: a swapped config
             if applied_load(cols[c]):
                 raise InputError(f"{where(f, HEADER_ROW, cols[c])}: output {c} is mapped to "

@@ -64,3 +64,10 @@ def test_the_levels_report_speaks_of_load_levels(sample_model, tmp_path):
     invoke(["cv", SAMPLE / "calibration", "--protocol", "levels", "-o", cv])
     html = build_report(load_model(sample_model), load_cv_results(cv)).html
     assert "same held-out load level" in html and "same held-out repetition" not in html
+
+
+def test_a_rig_file_without_a_config_points_to_init(tmp_path):
+    invoke(["simulate", tmp_path / "rig", "--rig", "lever-arm"])
+    cal = tmp_path / "rig" / "calibration.csv"
+    r = invoke(["fit", cal, "-o", tmp_path / "m.json"], 2)
+    assert_one_line_error(r, "missing column", f"fsdecouple init {cal}")
