@@ -71,3 +71,20 @@ def test_a_rig_file_without_a_config_points_to_init(tmp_path):
     cal = tmp_path / "rig" / "calibration.csv"
     r = invoke(["fit", cal, "-o", tmp_path / "m.json"], 2)
     assert_one_line_error(r, "missing column", f"fsdecouple init {cal}")
+
+
+def test_six_axis_units_are_each_rows_own(tmp_path):
+    """Issue 34: 'k [N / N·m/load]', '1/k [load/N / N·m]' and 'outputs peak at 22.892 mixed':
+    a wrench's figures carry each component's units in its own row."""
+    invoke(["simulate", tmp_path / "rig", "--rig", "lever-arm"])
+    cal, cfg = tmp_path / "rig" / "calibration.csv", tmp_path / "cfg.yaml"
+    r = invoke(["init", cal, "-o", cfg])
+    text = " ".join(r.stdout.split())
+    assert " mixed" not in text and "peak at fx_out" in text and "mz_out" in text
+    r = invoke(["fit", cal, "-c", cfg, "-o", tmp_path / "m.json", "--no-verdict"])
+    assert "/load" not in r.stdout and "load/" not in r.stdout and "N / N·m" not in r.stdout
+    rows = {ln.split("│")[1].strip(): ln for ln in r.stdout.splitlines()
+            if ln.startswith("│") and "[" in ln.split("│")[1]}
+    assert "N/N" in rows["fx [N]"] and "N·m/N·m" in rows["mz [N·m]"], rows
+    chi = [ln for ln in r.stdout.splitlines() if ln.startswith("│ chi_")]
+    assert all(ln.rstrip(" │").endswith((" N", " N·m")) for ln in chi), chi
