@@ -170,3 +170,25 @@ def test_numbers_in_other_scripts_digits_are_refused(sample_model, tmp_path, arg
     # in-process the usage error is click's own text; the command prints it as one line
     assert "not an ASCII digit" in r.stderr or "valid integer" in r.stderr, r.stderr
     assert "Traceback" not in r.stderr and not out.exists()
+
+
+def test_a_file_name_that_is_not_utf8_is_read_and_shown_with_its_byte(cal, tmp_path):
+    """Issue 34: legal on Linux (a Latin-1 file share), it was refused ('rename the file').
+    It is read, its repetition is its place in the set (rep3 as before), and messages and
+    the model file show the byte as \\xff."""
+    import os
+
+    latin = os.path.join(os.fsencode(cal), b"rep3\xff.csv")
+    os.rename(os.path.join(os.fsencode(cal), b"rep3.csv"), latin)
+    out = tmp_path / "m.json"
+    invoke(["fit", cal, "-o", out, "--no-verdict"])
+    files = [f["path"] for f in json.loads(out.read_text())["provenance"]["files"]]
+    assert files[2].endswith("rep3\\xff.csv") and len(files) == 6, files
+    with open(latin, "rb") as fh:
+        lines = fh.read().split(b"\n")
+    cells = lines[4].split(b",")
+    cells[5] = b"n/a"
+    lines[4] = b",".join(cells)
+    with open(latin, "wb") as fh:
+        fh.write(b"\n".join(lines))
+    fails(["fit", cal, "--no-verdict"], tmp_path, "rep3\\xff.csv, row 5, column 'uy'")
