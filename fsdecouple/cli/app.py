@@ -23,8 +23,10 @@ import typer
 from rich.console import Console
 from rich.progress import (
     BarColumn,
+    MofNCompleteColumn,
     Progress,
     TextColumn,
+    TimeElapsedColumn,
 )
 from rich.segment import Segment
 from rich.table import Table
@@ -298,10 +300,22 @@ def _bar(*columns) -> Progress:
                     disable=not interactive(), transient=True)
 
 
+class _CountOnceKnown(MofNCompleteColumn):
+    """``done/total`` once the library has said how many steps there are; until then (or
+    for good: fit without --tune reports no steps) the time elapsed, not a ``0/?`` that
+    never moves."""
+
+    def render(self, task):
+        if task.total is None:
+            return TimeElapsedColumn().render(task)
+        return super().render(task)
+
+
 @contextlib.contextmanager
 def progress_bar(label: str, *columns):
     """:func:`_bar` with one task of unknown length; yields the ``progress(done, total)``
     callback that the library's long calls take."""
+    columns = tuple(_CountOnceKnown() if type(c) is MofNCompleteColumn else c for c in columns)
     with _bar(*columns) as bar:
         task = bar.add_task(label, total=None)
         yield lambda done, total: bar.update(task, completed=done, total=total)

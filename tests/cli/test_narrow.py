@@ -109,3 +109,11 @@ def test_a_redirected_table_stays_within_a_wide_terminal(tmp_path):
     # every guessed reason is there, wrapped or not
     text = " ".join(" ".join(ln.split("│")[-2].split()) for ln in table if ln.startswith("│"))
     assert "numbered channel 0 of ch0..ch2" in text and "largest |output| 1.56261e+06" in text
+
+
+@pytest.mark.slow  # an interpreter in a terminal
+def test_the_fit_progress_bar_never_shows_an_unknown_count(tmp_path):
+    """fit without --tune reports no steps: its bar showed '0/?' and never advanced; it
+    shows the time elapsed instead."""
+    text = in_terminal(["fit", SAMPLE / "calibration", "-o", tmp_path / "m.json", "--no-verdict"])
+    assert "0/?" not in text
