@@ -151,10 +151,14 @@ class _Console(Console):
             if not isinstance(o, Table):
                 super().print(o, **kw)
                 continue
-            limit = REDIRECTED if self.width >= WIDE else self.width  # a file or a pipe
-            for part in fit_width(_literal_table(o), self, limit):
-                width = max(limit, needed_width(self, part)) if self.width >= WIDE else None
-                super().print(part, **{**kw, "width": width} if width else kw)
+            table = _literal_table(o)
+            if self.width < WIDE:  # a terminal: split to its width
+                for part in fit_width(table, self):
+                    super().print(part, **kw)
+                continue
+            # a file or a pipe (a CI log read with grep): never split, so each table stays
+            # one; cells that may wrap do so at REDIRECTED columns (init's reasons)
+            super().print(table, **{**kw, "width": max(REDIRECTED, needed_width(self, table))})
 
     def _render_buffer(self, buffer) -> str:  # rich's last step before writing (private)
         return super()._render_buffer(

@@ -8,9 +8,9 @@ the table's key columns (``round`` and ``test``: :data:`KEY_COLUMNS`, 1 unless a
 says otherwise), and a column group (a header whose first line names the group, its
 followers' first lines empty, as the gamma table's methods) is kept whole in one part.
 
-Output that goes to a file or a pipe has no width; its tables are kept to REDIRECTED
-columns the same way (cells that may wrap wrap, the rest split), so a guessed reason in
-``init``'s table no longer makes a CI log 396 characters wide.
+Output that goes to a file or a pipe has no width, and its tables are never split (a CI
+log is read with grep): their cells that may wrap wrap at REDIRECTED columns, so a guessed
+reason in ``init``'s table no longer makes a CI log 396 characters wide.
 """
 
 from __future__ import annotations
