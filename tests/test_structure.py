@@ -9,7 +9,9 @@ from pathlib import Path
 import fsdecouple
 
 PACKAGE = Path(fsdecouple.__file__).parent
-MAX_LINES = 450
+# ~400 lines is a guideline (STYLE.md: past it a module is usually two ideas), not a cap
+# to squeeze code under (issue 30): only a module far past it fails.
+MAX_LINES = 700
 
 
 def _module_name(path: Path) -> str:

@@ -23,8 +23,10 @@ import typer
 from rich.console import Console
 from rich.progress import (
     BarColumn,
+    MofNCompleteColumn,
     Progress,
     TextColumn,
+    TimeElapsedColumn,
 )
 from rich.segment import Segment
 from rich.table import Table
@@ -34,6 +36,7 @@ from typer.core import TyperGroup
 from .. import __version__
 from ..errors import FsdecoupleError, InputError, printable
 from ..files import names_a_directory
+from ..reporting.narrow import REDIRECTED, fit_width, needed_width
 
 # Each command imports what only it needs (pandas, libsvm, scipy, matplotlib),
 # so that `apply` and `show` start in a fraction of a second.
@@ -95,7 +98,8 @@ app = typer.Typer(
     add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
     # plain help: the rich formatter labels every flag "<bool>", as if it took a value
     rich_markup_mode=None,
-    help="Static decoupling of 3-axis force sensors: coupling error model + six eps-SVRs.",
+    help="Static decoupling of multi-axis force sensors (three axes, six, or more gauges than "
+         "components): the coupling error model of eq. (11), an eps-SVR per coupling.",
 )
 
 
@@ -118,12 +122,29 @@ def _standard_streams() -> None:
 _standard_streams()
 
 
-def _stdout_gone() -> None:
-    """Point stdout at /dev/null, so the interpreter's last flush cannot fail again."""
+def _stdout_gone(stream=None) -> None:
+    """Point stdout (or ``stream``) at /dev/null, so the interpreter's last flush cannot
+    fail again."""
     with contextlib.suppress(OSError, ValueError):
         devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
+        os.dup2(devnull, (stream or sys.stdout).fileno())
         os.close(devnull)
+
+
+def _last_flush(code: int) -> int:
+    """Flush stdout and stderr before the interpreter does, and send a stream that cannot
+    be written to /dev/null: without PYTHONUNBUFFERED (cron, systemd) an error line to a
+    full stderr stayed in its buffer, and Python's own flush at exit made the code 120."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError) as err:
+            _stdout_gone(stream)
+            with contextlib.suppress(OSError, ValueError):
+                stream.flush()  # what stayed in the buffer goes to /dev/null
+            if code == 0 and isinstance(err, OSError):
+                code = 128 + signal.SIGPIPE if isinstance(err, BrokenPipeError) else 2
+    return code
 
 
 def _literal(text, keep: str = ""):
@@ -154,7 +175,20 @@ class _Console(Console):
     escaped as it is written (its own line breaks kept)."""
 
     def print(self, *objects, **kw) -> None:
-        super().print(*(_literal_table(o) if isinstance(o, Table) else o for o in objects), **kw)
+        if not any(isinstance(o, Table) for o in objects):
+            return super().print(*objects, **kw)
+        for o in objects:  # a table wider than the terminal: in parts that fit, never cut
+            if not isinstance(o, Table):
+                super().print(o, **kw)
+                continue
+            table = _literal_table(o)
+            if self.width < WIDE:  # a terminal: split to its width
+                for part in fit_width(table, self):
+                    super().print(part, **kw)
+                continue
+            # a file or a pipe (a CI log read with grep): never split, so each table stays
+            # one; cells that may wrap do so at REDIRECTED columns (init's reasons)
+            super().print(table, **{**kw, "width": max(REDIRECTED, needed_width(self, table))})
 
     def _render_buffer(self, buffer) -> str:  # rich's last step before writing (private)
         return super()._render_buffer(
@@ -265,6 +299,19 @@ def _given(*paths):
     return [p for p in paths if p is not None]
 
 
+def ascii_digits(ctx: typer.Context, param: typer.CallbackParam, value):
+    """An option holding numbers as text (``--folds``, ``--zero``, ``FILE:ROW``): its digits
+    are ASCII.  Python's int() and float() read '٣' (Arabic-Indic three) as 3, so a digit
+    the user may not have meant to type was obeyed; option types refuse it already."""
+    for text in value if isinstance(value, list | tuple) else [value]:
+        number = text.rsplit(":", 1)[-1] if param.name == "exclude" and text else text
+        bad = next((c for c in number or "" if c.isdigit() and not c.isascii()), None)
+        if bad is not None:
+            raise typer.BadParameter(f"{text!r}: {bad!r} (U+{ord(bad):04X}) is not an ASCII digit "
+                                     "0-9")
+    return value
+
+
 def _parse_zero(text: str) -> tuple[float, ...]:
     """``--zero``'s comma-separated finite outputs; their count is checked against the model
     (:func:`fsdecouple.logs.apply.check_options`), which knows its outputs."""
@@ -287,10 +334,22 @@ def _bar(*columns) -> Progress:
                     disable=not interactive(), transient=True)
 
 
+class _CountOnceKnown(MofNCompleteColumn):
+    """``done/total`` once the library has said how many steps there are; until then (or
+    for good: fit without --tune reports no steps) the time elapsed, not a ``0/?`` that
+    never moves."""
+
+    def render(self, task):
+        if task.total is None:
+            return TimeElapsedColumn().render(task)
+        return super().render(task)
+
+
 @contextlib.contextmanager
 def progress_bar(label: str, *columns):
     """:func:`_bar` with one task of unknown length; yields the ``progress(done, total)``
     callback that the library's long calls take."""
+    columns = tuple(_CountOnceKnown() if type(c) is MofNCompleteColumn else c for c in columns)
     with _bar(*columns) as bar:
         task = bar.add_task(label, total=None)
         yield lambda done, total: bar.update(task, completed=done, total=total)
@@ -341,7 +400,7 @@ def main() -> None:
             sys.stdout.flush()
             sys.stderr.flush()
         os._exit(code)
-    sys.exit(code if isinstance(code, int) else 0)
+    sys.exit(_last_flush(code if isinstance(code, int) else 0))
 
 
 def _run() -> int:

@@ -18,6 +18,7 @@ from .app import (
     _given,
     _read,
     app,
+    ascii_digits,
     console,
     output_file,
     print_json,
@@ -32,7 +33,8 @@ def simulate(
     seed: Annotated[int, typer.Option(help="Random seed (>= 0).")] = 0,
     gross_error: Annotated[
         str | None,
-        typer.Option(help="Move one point: AXIS:REP:POINT:OFFSET (in the output unit), e.g. x:1:5:0.2"),
+        typer.Option(help="Move one point: AXIS:REP:POINT:OFFSET (in the output unit), e.g. x:1:5:0.2",
+                     callback=ascii_digits),
     ] = None,
     layout: Annotated[
         str,
@@ -56,9 +58,10 @@ def simulate(
                                         "too.")
     ] = None,
     components: Annotated[
-        int, typer.Option(help="3: the paper's force sensor; 6: a six-axis force/torque sensor "
-                               "(fx..mz, u1..u6) with its config sensor.yaml.")
-    ] = 3,
+        int | None, typer.Option(help="3: the paper's force sensor (the default); 6: a six-axis "
+                                      "force/torque sensor (fx..mz, u1..u6) with its config "
+                                      "sensor.yaml (--rig: always 6).")
+    ] = None,
     rig: Annotated[
         str | None, typer.Option(help="lever-arm: a six-axis rig's calibration.csv whose moments "
                                       "come from a force on a lever arm (known_Fx.. headers); "
@@ -88,10 +91,11 @@ def simulate(
 
             given = [o for o, v in (("--repetitions", repetitions), ("--coupling", coupling),
                                     ("--gross-error", gross_error)) if v is not None]
-            given += [o for o, v, d in (("--layout", layout, "paper"), ("--components", components, 3))
-                      if v != d]
+            given += [o for o, v, d in (("--layout", layout, "paper"), ("--components", components, 6))
+                      if v not in (d, None)]
             if given:  # never ignored in silence
-                raise InputError(f"--rig: {', '.join(given)}: not with --rig (a rig file has its own layout)")
+                raise InputError(f"--rig: {', '.join(given)}: not with --rig (a rig file has its own "
+                                 "layout: six components)")
             if rig == "poses":
                 from ..sim.poses import write_poses
 
@@ -106,6 +110,7 @@ def simulate(
             return
         if gauges is not None:
             raise InputError("--gauges: only with --rig (a rig's output channels)")
+        components = 3 if components is None else components
         if components not in (3, 6):
             raise InputError(f"--components {components}: expected 3 or 6")
         named = Layout.named(COMPONENTS, OUTPUTS) if components == 6 else DEFAULT

@@ -20,6 +20,7 @@ from .app import (
     _given,
     _read,
     app,
+    ascii_digits,
     console,
     err_console,
     output_file,
@@ -35,7 +36,8 @@ def cv(
     config: ConfigOpt = None,
     folds: Annotated[
         str | None,
-        typer.Option(help='Held-out repetitions per round, e.g. "1,2;3,4;5,6" (the default).'),
+        typer.Option(help='Held-out repetitions per round, e.g. "1,2;3,4;5,6" (the default).',
+                     callback=ascii_digits),
     ] = None,
     output: Annotated[
         Path | None, output_file("Write the cv.json document.")
@@ -52,7 +54,7 @@ def cv(
     gross_error: Annotated[
         str | None,
         typer.Option(help="Move one training point: AXIS:REP:POINT:OFFSET (in the output unit), "
-                          "e.g. x:1:5:0.2"),
+                          "e.g. x:1:5:0.2", callback=ascii_digits),
     ] = None,
     max_gamma: Annotated[
         float | None,
@@ -72,7 +74,7 @@ def cv(
                                           "chooses them (on the whole set).")
     ] = False,
     tune_grid: Annotated[
-        str | None, typer.Option(help="The --tune grid (as for fit).")
+        str | None, typer.Option(help="The --tune grid (as for fit).", callback=ascii_digits)
     ] = None,
     force: ForceOpt = False,
     json_out: JsonOpt = False,

@@ -22,6 +22,7 @@ from .app import (
     _given,
     _read,
     app,
+    ascii_digits,
     console,
     err_console,
     output_file,
@@ -58,7 +59,8 @@ def fit(
         list[str] | None,
         typer.Option(metavar="FILE:LINE", help="Drop line LINE of FILE (header = line 1; "
                                              "repeatable), e.g. a gross error fit flagged, "
-                                             "even a line that cannot be read.")
+                                             "even a line that cannot be read.",
+                     callback=ascii_digits)
     ] = None,
     refine: Annotated[
         int | None, typer.Option(help="Second-order refinement steps K stored in the model "
@@ -70,7 +72,8 @@ def fit(
     ] = False,
     tune_grid: Annotated[
         str | None, typer.Option(help='The --tune grid, e.g. "gamma=1,2,4,8;C=1,10;'
-                                      'epsilon=0.25,0.5,1" (epsilon: multiples of the noise).')
+                                      'epsilon=0.25,0.5,1" (epsilon: multiples of the noise).',
+                                 callback=ascii_digits)
     ] = None,
     extrapolation: Annotated[
         str | None, typer.Option(help="chi beyond its calibrated range: tangent (continued "
@@ -136,7 +139,8 @@ def fit(
         if model.report.verdict is not None:
             console.print(verdict_line(model.report.verdict))
         console.print(f"model written to {printable(output)} (decouples by {model.method})")
-        console.print(f"calibration report: fsdecouple report {printable(output)} -o report.html")
+        if not model.layout.overdetermined:  # report refuses M > N outputs (docs/rigs.md)
+            console.print(f"calibration report: fsdecouple report {printable(output)} -o report.html")
     warn(model.warnings)
     if max_gamma is not None:
         worst = max(model.report.gamma_after.values())

@@ -20,6 +20,7 @@ from .app import (
     _given,
     _parse_zero,
     app,
+    ascii_digits,
     console,
     print_json,
     progress_bar,
@@ -47,7 +48,8 @@ def apply(
         int | None, typer.Option(help="Subtract the mean voltages of the first N rows.")
     ] = None,
     zero: Annotated[
-        str | None, typer.Option(help="Subtract offsets ux,uy,uz (the model's output unit).")
+        str | None, typer.Option(help="Subtract offsets ux,uy,uz (the model's output unit).",
+                                 callback=ascii_digits)
     ] = None,
     unit: Annotated[
         str | None,

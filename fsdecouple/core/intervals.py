@@ -164,7 +164,7 @@ def interval_names(loads) -> tuple[str, ...]:
 def _quantile(scores: list[float], p: float, axis: str) -> float:
     k = math.ceil((len(scores) + 1) * p)
     if k > len(scores):
-        raise InputError(f"--interval {p:g}: {len(scores)} held-out points of {axis} calibrate "
+        raise InputError(f"--interval {p!r}: {len(scores)} held-out points of {axis} calibrate "
                          f"intervals up to P = {len(scores) / (len(scores) + 1):.3f}")
     return float(scores[k - 1])
 
@@ -175,6 +175,10 @@ def half_widths(model, p: float, f: np.ndarray | None = None) -> np.ndarray:
     p = check_coverage(p)
     cert = (model.report.certificate if model.report is not None else None) or {}
     cal = cert.get("interval")
+    if not cal and model.layout.overdetermined:
+        raise InputError(f"--interval: not supported for a model of more outputs than components "
+                         f"({model.layout.m} for {model.n_components}, M > N): fit keeps no "
+                         "held-out residuals for it; decouple without --interval")
     if not cal:
         raise InputError("--interval: the model file has no held-out residuals to calibrate "
                          "intervals on (fitted by an older fsdecouple, or with --no-verdict); "

@@ -174,7 +174,7 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
             "non-zero number"
         )
     report = doc.get("report")
-    _check_report(report, source, () if imported else labels)
+    _check_report(report, source, () if imported else labels, settings.full_scale)
     method, matrix = _method(doc, len(k), source, layout.m)
     if imported and not np.array_equal(matrix, projection):
         raise ModelFileError(f"{source}: malformed model file (an imported model's projection is "
@@ -332,7 +332,7 @@ def _method(doc: dict[str, Any], n: int, source: str, m: int | None = None
     return method, matrix
 
 
-def _check_report(report: Any, source: str, labels) -> None:
+def _check_report(report: Any, source: str, labels, full_scale) -> None:
     """The fit figures ``show`` prints: per-axis numbers and a list of warnings."""
     def number(v):
         return isinstance(v, int | float) and not isinstance(v, bool)
@@ -348,32 +348,64 @@ def _check_report(report: Any, source: str, labels) -> None:
     warnings = report.get("warnings", [])
     if not (isinstance(warnings, list) and all(isinstance(w, str) for w in warnings)):
         raise ModelFileError(f"{source}: malformed model file (report: warnings is not a list of text)")
-    if report.get("certificate") is not None and not _certificate_ok(report["certificate"], labels):
-        raise ModelFileError(f"{source}: malformed model file (report: certificate needs steps and "
-                             "interval scores per component)")
+    problem = None if report.get("certificate") is None else \
+        _certificate_problem(report["certificate"], labels, full_scale)
+    if problem:
+        raise ModelFileError(f"{source}: malformed model file (report: {problem}); refit it")
 
 
-def _certificate_ok(cert: Any, labels) -> bool:
-    """The step data compare reads and the scores apply --interval reads (evaluation.budget)."""
+# [full scales of the component] a held-out score times its sigma, an expanded uncertainty
+# U or a model error beyond this is no calibration: an edited file (issue 34: sigma 1e300,
+# scores 1e308 gave interval bounds of 1e300 with status ok)
+MAX_FULL_SCALES = 1e3
+
+
+def _certificate_problem(cert: Any, labels, full_scale) -> str | None:
+    """What is wrong with the step data compare and certificate read and the scores apply
+    --interval reads (evaluation.budget), or None.
+
+    The digest proves the file is as written, not that its numbers can be: every number a
+    result depends on is checked as the chi tables are (negative or unsorted scores gave
+    intervals with lo > hi, sigma = 0 intervals of zero width, U = 0 an E_n of 0/0).
+    """
     def numbers(v, n=None):
         return isinstance(v, list) and (n is None or len(v) == n) and all(
             isinstance(x, int | float) and not isinstance(x, bool) for x in v)
 
     try:
-        for a in labels:
+        for a, fs in zip(labels, full_scale, strict=True):
             st = cert["steps"][a]
             n = len(st["load"])
             if not (numbers(st["load"]) and numbers(st["U"], n) and numbers(st["model_error"], n)
                     and isinstance(st["outputs"], list) and len(st["outputs"]) == n
                     and all(numbers(o, len(labels)) for o in st["outputs"])):
-                return False
+                return "certificate needs steps and interval scores per component"
+            limit = MAX_FULL_SCALES * fs
+            for key, low in (("U", "positive"), ("model_error", "non-negative")):
+                bad = [x for x in st[key] if not (0.0 < x <= limit if low == "positive"
+                                                  else 0.0 <= x <= limit)]
+                if bad:
+                    return (f"certificate: {a}: {key} = {bad[0]!r}; expected a {low} number of at "
+                            f"most {MAX_FULL_SCALES:g} full scales ({limit:g})")
             c = cert["interval"]["components"][a]
             own = c["scores"] if c["scores"] is not None else cert["interval"]["scores"]
             if not (numbers([c["sigma"]]) and numbers(own) and own):
-                return False
+                return "certificate needs steps and interval scores per component"
+            sigma = c["sigma"]
+            if not 0.0 < sigma <= limit:
+                return (f"interval: {a}: sigma = {sigma!r}; expected a positive number of at "
+                        f"most {MAX_FULL_SCALES:g} full scales ({limit:g})")
+            unsorted = [y for x, y in zip(own[:-1], own[1:], strict=True) if y < x]
+            if own[0] < 0.0 or unsorted:
+                bad = own[0] if own[0] < 0.0 else unsorted[0]
+                return (f"interval: {a}: held-out score {bad!r} out of place; expected "
+                        "non-negative scores in ascending order")
+            if own[-1] * sigma > limit:
+                return (f"interval: {a}: held-out score {own[-1]!r} times sigma {sigma!r} is "
+                        f"more than {MAX_FULL_SCALES:g} full scales ({limit:g})")
     except (KeyError, TypeError):
-        return False
-    return True
+        return "certificate needs steps and interval scores per component"
+    return None
 
 
 def _settings_yaml_form(d: dict[str, Any]) -> dict[str, Any]:

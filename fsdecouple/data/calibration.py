@@ -190,10 +190,13 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
                         "zero rows")
     if several and not intercept:  # a typo in a single-axis set reads the same: say where, once
         rows = table[(table[list(layout.loads)].to_numpy() != 0.0).sum(axis=1) > 1]
-        first = ", ".join(f"{f}, row {r}" for f, r in zip(rows["file"][:3], rows["row"][:3],
-                                                          strict=True))
+        first = {}  # each file named once, with its first rows
+        for f, r in zip(rows["file"][:3], rows["row"][:3], strict=True):
+            first.setdefault(f, []).append(str(r))
+        shown = "; ".join(f"{f}, row{'s' if len(r) > 1 else ''} {', '.join(r)}"
+                          for f, r in first.items())
         many = "rows load" if len(rows) > 1 else "row loads"
-        warnings.append(f"{len(rows)} {many} several components ({first}"
+        warnings.append(f"{len(rows)} {many} several components ({shown}"
                         f"{', ...' if len(rows) > 3 else ''}): fitted jointly (docs/rigs.md)")
     cs = CalibrationSet(points, offsets, tuple(files), tuple(skipped), layout=layout)
     for axis in layout.labels:

@@ -141,12 +141,13 @@ def read_calibration_table(path: str | Path, settings: Settings,
     layout = settings.layout
     numeric = {c: cols[c] for c in (*layout.loads, *layout.outputs)}
     for rep_index, f in enumerate(files, start=1):
-        if not str(f).isascii():
+        name = str(f)
+        if not name.isascii():
             try:  # the name is recorded in tables, model files and messages as text
-                str(f).encode("utf-8")
-            except UnicodeEncodeError:
-                shown = printable(os.fsencode(f).decode("utf-8", "backslashreplace"))
-                raise InputError(f"{shown}: the file's name is not UTF-8 text; rename the file") from None
+                name.encode("utf-8")
+            except UnicodeEncodeError:  # legal on Linux (a Latin-1 file share): read it, and
+                # record its name with the byte that is not UTF-8 shown as \xff
+                name = os.fsencode(f).decode("utf-8", "backslashreplace")
         with reading(f):  # a FIFO: read once, never waited on for ever
             data = read_bounded(f, CALIBRATION_LIMIT, "a calibration file")
         nul = data.find(b"\x00")
@@ -154,7 +155,7 @@ def read_calibration_table(path: str | Path, settings: Settings,
             row = data.count(b"\n", 0, nul) + 1
             raise InputError(f"{where(f, row)}: a NUL byte: not a UTF-8 text file (binary, "
                              "UTF-16, or padding from a crashed writer?)")
-        digests.append((str(f), hashlib.sha256(data).hexdigest()))
+        digests.append((name, hashlib.sha256(data).hexdigest()))
         header = read_header(f, settings, data, strict=False)
         if {f"{c}_raw" for c in layout.outputs} <= set(header):
             # the tidy CSV of `ingest -o`: zero-corrected already, and every repetition
@@ -163,7 +164,7 @@ def read_calibration_table(path: str | Path, settings: Settings,
                 f"{layout.outputs[0]}_raw), not a repetition; move it out of the calibration directory"
             )
         _suggest_init(header, settings, numeric, f, path)
-        require_columns(header, numeric, f)
+        require_columns(header, numeric, f, calibration=True)
         for c in layout.outputs:  # a reading mapped to a reference column: a swapped config
             if applied_load(cols[c]):
                 raise InputError(f"{where(f, HEADER_ROW, cols[c])}: output {c} is mapped to "
@@ -235,7 +236,7 @@ def read_calibration_table(path: str | Path, settings: Settings,
             raw, rows = raw[~partial], rows[~partial]
         if raw.empty:
             raise InputError(f"{f}: header only, no data rows")
-        out = pd.DataFrame({"file": str(f), "row": rows})
+        out = pd.DataFrame({"file": name, "row": rows})
         if numbered:
             out["repetition"] = _repetition_labels(raw[cols["repetition"]], f,
                                                    cols["repetition"], rows, settings.decimal)

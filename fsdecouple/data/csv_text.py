@@ -219,8 +219,10 @@ def require_utf8(body: bytes, path: Path, first_row: int, header: list[str], sep
         ) from None
 
 
-def require_columns(header: list[str], wanted: dict[str, str], path: Path) -> None:
-    """Every column the config maps is in the header, once."""
+def require_columns(header: list[str], wanted: dict[str, str], path: Path,
+                    calibration: bool = False) -> None:
+    """Every column the config maps is in the header, once.  ``calibration``: the file is a
+    calibration file, for which ``fsdecouple init`` guesses a config (a rig's, say)."""
     for canonical, name in wanted.items():
         if header.count(name) > 1:
             raise InputError(f"{where(path, HEADER_ROW, name)}: appears {header.count(name)} times "
@@ -232,9 +234,11 @@ def require_columns(header: list[str], wanted: dict[str, str], path: Path) -> No
             mean = f" (did you mean '{close[0]}'? map it under columns: in the config)" if close else ""
             unnamed = [i + 1 for i, h in enumerate(header) if not h]
             blank = f"; column {unnamed[0]} has no name" if unnamed and not close else ""
+            init = (f"; 'fsdecouple init {printable(path)}' guesses a config that maps them"
+                    if calibration else "")
             raise InputError(
                 f"{where(path, HEADER_ROW)}: missing column '{name}'{hint}{mean}; "
-                f"found {', '.join(h or '(no name)' for h in header) or 'no columns'}{blank}"
+                f"found {', '.join(h or '(no name)' for h in header) or 'no columns'}{blank}{init}"
             )
 
 

@@ -283,8 +283,9 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
                                   {f"c{j}": shown(names[i]) for j, i in enumerate(channels)},
                                   keys=list(hints), bits=adc_bits(u) if integers else None)
     mixed = len(set(load_units.values())) > 1
+    shown_out = ", ".join(f"{o} {v}" for o, v in out_units.items()) if out_units else out_unit
     reasons["units"] = (f"load {', '.join(f'{c} {v}' for c, v in load_units.items())}: header hints, "
-                        f"else N and N·m; output {out_unit}: {out_why}")
+                        f"else N and N·m; output {shown_out}: {out_why}")
     peaks = np.abs(f).max(axis=0)
     full_scale = {c: full_scale_of(p) if p else 1.0 for c, p in zip(components, peaks, strict=True)}
     notes += [f"full_scale {c}: no load on {c} in the data; 1 is a placeholder"
@@ -296,8 +297,12 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
                                   if "repetition" in columns else
                                   "no repetition column: one repetition in this file")
     in_volts = out_unit in ("V", "mV/V") and 0.1 <= peak_out <= 10
-    reasons["scaling"] = (f"outputs peak at {peak_out:g} {out_unit}, of order 1 as Table 2's gamma "
-                          "assumes" if in_volts else f"outputs peak at {peak_out:g} {out_unit}, not "
+    peak = f"{peak_out:g} {out_unit}"
+    if out_units:  # outputs in several units: each output's own peak, in its own unit
+        peak = ", ".join(f"{o} {float(np.abs(u[:, j]).max()):g} {out_units[o]}"
+                         for o, j in zip(outputs, prime, strict=True))
+    reasons["scaling"] = (f"outputs peak at {peak}, of order 1 as Table 2's gamma "
+                          "assumes" if in_volts else f"outputs peak at {peak}, not "
                           "volts of order 1 as Table 2's gamma assumes: divide by each full-scale output")
     reasons["csv"] = (f"{'the default' if sep == ',' else 'detected'}: \"{sep}\"-separated"
                       f"{', decimal comma' if decimal == ',' else ''}")

@@ -7,12 +7,13 @@ voltages of its zero-load rows; task data are zeroed by a tare or by given offse
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..axes import DEFAULT, Layout
-from ..errors import InputError, where
+from ..errors import InputError, printable, where
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -98,6 +99,8 @@ def assign_sweeps(table: pd.DataFrame, layout: Layout = DEFAULT,
                 f"{where(table['file'].iat[i], int(table['row'].iat[i]), col)}: "
                 f"row loads {col} but its axis is '{table['axis'].iat[i]}'"
             )
+        if not combined:
+            _refuse_contradicting_rows(table, forces, labelled, loads)
         return table
     axis = np.empty(len(table), dtype=object)
     for _, idx in table.groupby("repetition", sort=False).indices.items():
@@ -122,6 +125,37 @@ def assign_sweeps(table: pd.DataFrame, layout: Layout = DEFAULT,
             axis[j] = labels[last]
     table["axis"] = axis
     return table
+
+
+def _refuse_contradicting_rows(table: pd.DataFrame, forces: np.ndarray, labelled: np.ndarray,
+                               loads) -> None:
+    """A row loading several components in a sweep whose other rows load its label alone.
+
+    Joint fitting is for sweeps that load several components by design (a force on a
+    lever arm is a moment too: every row of that sweep loads both).  In a single-axis
+    sweep, an x row with fy = 10 contradicts its own axis label: a data-entry error,
+    refused naming both loads (``--exclude FILE:ROW`` drops it).
+    """
+    multi = np.flatnonzero((forces != 0.0).sum(axis=1) > 1)
+    if not multi.size:
+        return
+    alone = (forces != 0.0).sum(axis=1) == 1
+    sweep = table["repetition"].astype(str).to_numpy() + "\0" + table["axis"].astype(str).to_numpy()
+    for i in multi:
+        mine = sweep == sweep[i]
+        n_alone, n_multi = int((mine & alone).sum()), int((mine & ~alone & (forces != 0.0).any(axis=1)).sum())
+        if n_alone <= n_multi:
+            continue  # the sweep loads several components by design
+        own = loads[labelled[i]]
+        other = [c for c, v in zip(loads, forces[i], strict=True) if v != 0.0 and c != own]
+        shown = " and ".join(f"{c} = {forces[i, loads.index(c)]:g}" for c in (own, *other))
+        raise InputError(
+            f"{where(table['file'].iat[i], int(table['row'].iat[i]))}: the "
+            f"'{table['axis'].iat[i]}' sweep's row loads {shown}, but the other {n_alone} "
+            f"loaded rows of that sweep load {own} alone: a row that contradicts its own axis "
+            f"label (a typo?); correct it, or drop it with --exclude "
+            f"{printable(Path(str(table['file'].iat[i])).name)}:{int(table['row'].iat[i])}"
+        )
 
 
 def zero_correct(table: pd.DataFrame, layout: Layout = DEFAULT,

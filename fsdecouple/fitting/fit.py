@@ -318,7 +318,9 @@ def _establish_gauges(calib: CalibrationSet, settings: Settings, workers: int | 
     fs = np.asarray(settings.full_scale, dtype=float)
     check_separable(f, fs, layout.loads, calib.source)
     k_fwd, p = projection(f, u, fs, layout.outputs, layout.loads, calib.source)
-    svr = replace(settings.svr, tolerance=min(settings.svr.tolerance, SOLVE_FRACTION))
+    if settings.svr.tolerance is None:  # a tolerance written is obeyed; the model records it
+        settings = replace(settings, svr=replace(settings.svr, tolerance=SOLVE_FRACTION))
+    svr = settings.svr
     n_workers = max(1, workers or min(layout.m, os.cpu_count() or 1))
     with thread_pool(n_workers) as pool:
         v, merged, _ = fit_forward(f, u, fs, p, k_fwd, svr, fit_svr, pool.map, calib.noise)

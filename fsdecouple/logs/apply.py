@@ -36,12 +36,14 @@ from ..data.csv_text import HEADER_ROW, require_columns
 from ..data.zero import tare_offsets
 from ..errors import InputError, where
 from ..files import atomic_write, refuse_overwriting_input
+from ..schema import refuse_unused, unused_warning
 from ..units import LOAD_UNITS, load_factor
 from .arrow import numbers, strings
 from .columns import Dropped, kept_fields, passed_columns
 from .outputs import log_outputs
 from .reader import Block, LogFile, is_parquet
 from .sinks import CsvSink, ParquetSink, force_decimals
+from .untared import block_median, untared
 
 CHUNK_ROWS = 1 << 20  # rows per block at most; blocks are cut at ~4 MB anyway
 MAX_WORKERS = 4
@@ -89,6 +91,8 @@ class ApplySummary:
     outputs: tuple[str, ...] = VOLTAGE_COLUMNS  # the names of ``offsets``
     force_columns: tuple[str, ...] = FORCE_COLUMNS  # the columns written (force_columns)
     dropped: list[Dropped] = field(default_factory=list)  # log columns not passed through
+    untared: tuple[str, float, float, float] | None = None  # untared.py: (output, median, lo, hi)
+    notes: list[str] = field(default_factory=list)  # config keys not used (schema.unused_warning)
 
     def to_dict(self) -> dict:
         """The ``apply --json`` document of one log."""
@@ -191,6 +195,7 @@ def check_options(model: CouplingErrorModel, settings: Settings | None, tare, ze
                   unit: str | None) -> tuple[Settings, str]:
     """``apply``'s settings and force unit, with the defaults; refused if they cannot be used."""
     settings = settings or model.settings
+    refuse_unused(settings, model.settings, "apply")
     if settings.units != model.settings.units:
         # the model's k and ranges are in its calibration's units: a log in others
         # would be decoupled silently wrong by a factor of 1000 or more
@@ -328,9 +333,9 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
     jobs: Iterator[Callable[[], Block]] = log.blocks(names, chunk_rows=chunk_rows,
                                                      want_table=is_parquet(out), keep=keep)
     jobs = with_temperature(jobs)
-    summary = ApplySummary(force_unit=unit, output_unit=model.settings.output_unit,
-                           outputs=layout.outputs, offsets=np.zeros(layout.m),
-                           force_columns=forces, dropped=dropped)
+    summary = ApplySummary(force_unit=unit, output_unit=model.settings.output_unit, outputs=layout.outputs,
+                           offsets=np.zeros(layout.m), force_columns=forces, dropped=dropped,
+                           notes=unused_warning(settings, model.settings))
     to_unit = load_factor(model.settings.load_unit, unit)
     sat_lo, sat_hi = _limit_bounds(settings, model)
     if tare is not None:
@@ -341,7 +346,7 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
         summary.offsets = np.asarray(zero, dtype=float)
     elif model.zero is not None:  # zero: intercept: the offsets fitted with the loads
         summary.offsets = np.asarray(model.zero, dtype=float)
-    rows = RowRules(*model.extrapolation_limits().T, sat_lo, sat_hi)
+    rows, medians = RowRules(*model.extrapolation_limits().T, sat_lo, sat_hi), []
     # blocks in flight bound the memory (~60 MB each), so not every core of a big box
     workers = workers or min(MAX_WORKERS, os.cpu_count() or 1)
     # a long log (or a pipe) pays back the compiled kernel's import (core/table_path.py)
@@ -374,6 +379,8 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
             first = np.flatnonzero(code == MISSING_)[:10] + block.first_row if counts[MISSING_] \
                 else ()
             status = pc.take(STATUS_NAMES, numbers(code))
+            if tare is None and zero is None and len(block):
+                medians.append(block_median(block.u * scale))
             return len(block), counts, first, block.done, block.total, \
                 sink.encode(block, f, empty, (status,))
 
@@ -395,6 +402,7 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
         sink.close()
         if summary.rows == 0:
             raise InputError(f"{path}: header only, no data rows")
+    summary.untared = untared(summary, medians, None if model.projection is not None else rows)
     return summary
 
 

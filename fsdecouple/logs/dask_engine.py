@@ -66,6 +66,27 @@ def _dask():
 
 
 @contextlib.contextmanager
+def _no_interrupt_in_children():
+    """Start the cluster's worker processes with SIGINT ignored: a Ctrl-C in the terminal
+    reaches the whole process group, and each worker printed its own traceback and leaked
+    semaphores (84 lines under the one exit 130).  An ignored signal stays ignored across
+    exec, and Python then installs no KeyboardInterrupt handler, so they never see it; the
+    client stops them as it unwinds, as after SIGTERM.  A Ctrl-C during the cluster's
+    start-up (a second or two) is not seen either; one after it stops the run."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield  # signals are the main thread's: nothing to hold
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+@contextlib.contextmanager
 def dask_client(scheduler: str | None = None, workers: int | None = None):
     """A client of the cluster at ``scheduler``, or of a new LocalCluster of ``workers`` processes."""
     _, distributed = _dask()
@@ -81,7 +102,7 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
     import dask
 
     n = workers or os.cpu_count() or 1
-    with dask.config.set(WORKER_CONFIG):  # read as the nannies start the workers
+    with dask.config.set(WORKER_CONFIG), _no_interrupt_in_children():
         try:
             cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                                dashboard_address=":0", silence_logs=logging.CRITICAL)

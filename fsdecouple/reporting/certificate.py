@@ -39,6 +39,10 @@ section.component:first-of-type{page-break-before:auto}.noprint{display:none}}
 .ident td{text-align:left}.ident td:first-child{font-weight:600}.class{font-size:1.2em;font-weight:700}
 """
 
+# the standard's name never wraps inside (a no-break space): the printed titles and the
+# terminal's split "ISO" from "376"
+ISO = "ISO\u00a0376"
+
 
 @dataclass
 class Block:
@@ -109,7 +113,7 @@ def certificate_blocks(doc: dict) -> list[Block]:
         ident.append(("Environment", "not stated (config: environment)"))
     out = [Block("title", f"Calibration certificate: {doc['sensor']}"),
            Block("table", "Identity", "identity", [], [[k, str(v)] for k, v in ident])]
-    out.append(Block("table", "Class per component and load sign (ISO 376:2011)", "classes",
+    out.append(Block("table", f"Class per component and load sign ({ISO}:2011)", "classes",
                      ["component", "loads", "class", "limited by", f"class range from [{unit}]"],
                      [[c["axis"], "positive" if c["sign"] == "+" else "negative", c["class"],
                        _limited(c), f"{c['from']:.4g}" if "from" in c else "—"]
@@ -121,7 +125,7 @@ def certificate_blocks(doc: dict) -> list[Block]:
         metrics = [m for m in METRIC_NAMES if any(m in s for s in steps.values())]
         out.append(Block("heading", f"Component {axis} (full scale {doc['full_scale'][axis]:g} "
                                     f"{unit})", axis))
-        out.append(Block("table", f"ISO 376 figures of {axis} [%], U [{unit}]", f"figures-{axis}",
+        out.append(Block("table", f"{ISO} figures of {axis} [%], U [{unit}]", f"figures-{axis}",
                          [f"load [{unit}]", *[METRIC_NAMES[m] for m in metrics], f"U [{unit}]"],
                          [[f"{load:g}", *[fmt(s.get(m)) for m in metrics], fmt(s.get("U"))]
                           for load, s in steps.items()]))
@@ -205,7 +209,8 @@ def certificate_html(doc: dict) -> str:
 def certificate_tables(doc: dict) -> list[Table]:
     """The terminal's view: classes and what limits them, and per component its figures and U."""
     out = []
-    t = Table(title=f"Certificate of {doc['sensor']}: class (ISO 376)")
+    title = f"Certificate of {doc['sensor']}: class ({ISO})"
+    t = Table(title=title, min_width=len(title))  # a title as wide as its table never wraps
     for col in ("component", "loads", "class", "limited by"):
         t.add_column(col)
     for c in doc["classes"]:

@@ -298,9 +298,9 @@ def build_report(model, cv: dict | None = None, calib=None) -> Report:
     figs: dict[str, bytes] = {}
     body = [f"<h1>Calibration report: {escape(model.settings.sensor)}</h1>\n",
             _header(model, cv),
-            '<p id="certificate-link">Calibration certificate (ISO 376 figures, class, uncertainty '
-            'budget): <a href="certificate.html">certificate.html</a>, written beside this report '
-            "by <code>fsdecouple certificate MODEL CALIB -o certificate.html</code>.</p>\n"]
+            '<p id="certificate-link">Calibration certificate (ISO&nbsp;376 figures, class, '
+            "uncertainty budget): written by <code>fsdecouple certificate MODEL CALIB -o "
+            "FILE.html</code>.</p>\n"]
     if model.warnings:
         body.append("<ul>" + "".join(f"<li>warning: {escape(w)}</li>" for w in model.warnings) + "</ul>\n")
 
@@ -336,8 +336,9 @@ def build_report(model, cv: dict | None = None, calib=None) -> Report:
 
     body.append("<h2>Interference error γ (Tables 1, 3 and 5)</h2>\n")
     if cv:
+        held = "held-out load level" if cv.get("protocol") == "levels" else "held-out repetition"
         body.append(note("Cells marked ▲ (bold, boxed) are worse than the initial data of the same "
-                         "held-out repetition."))
+                         f"{held}."))
         body.append(gamma_tables(cv))
         body.append(gross_tables(cv))
         body.append("<h2>Combined loads</h2>\n")

@@ -21,6 +21,7 @@ from ..data.columns import shown as shown_name
 from ..errors import printable
 from ..evaluation.cv_results import gamma_index, test_name
 from ..units import Units, output_display
+from .narrow import KEY_COLUMNS
 
 # --- ingest, fit, show, apply ------------------------------------------------------
 
@@ -102,17 +103,23 @@ def fit_tables(model) -> list:
     t = Table(title=("Least-squares loads v = P u of M > N outputs (docs/rigs.md)" if getattr(
         model, "projection", None) is not None else "Non-coupling functions omega (eq. 2)")
         + f", sensor {model.settings.sensor}")
-    mixed = bool(units.loads)  # forces and moments: each row says its load unit
-    slope, inverse_slope = ((f"{units.output}/load", f"load/{units.output}") if mixed
-                            else (units.slope(), units.inverse_slope()))
-    for col in ("axis", f"k [{slope}]", f"1/k [{inverse_slope}] (eq. 13)", "R^2", "points"):
-        t.add_column(col, justify="right")
+    # forces and moments, or outputs in several units: each row says its own units, as
+    # the report does (a header 'k [N / N·m/load]' said none)
+    mixed = bool(units.loads or units.outputs)
     layout = model.layout
+    heads = ("k", "1/k (eq. 13)") if mixed else (f"k [{units.slope()}]",
+                                                  f"1/k [{units.inverse_slope()}] (eq. 13)")
+    for col in ("axis", *heads, "R^2", "points"):
+        t.add_column(col, justify="right")
     for a, axis in enumerate(layout.labels):
         r2 = rep.r2[axis]
         r2_text = Text(f"{r2:.6f}", style="" if r2 >= model.settings.min_r2 else "bold red")
         inverse = f"{1.0 / model.k[a]:.5f}" if volts else f"{1.0 / model.k[a]:.6g}"
-        t.add_row(f"{axis} [{units.load_of(a)}]" if mixed else axis, f"{model.k[a]:.6g}", inverse,
+        k = f"{model.k[a]:.6g}"
+        if mixed:  # k of eq. (2): component a's prime output per its load
+            out, load = units.output_of(a), units.load_of(a)
+            k, inverse = f"{k} {out}/{load}", f"{inverse} {load}/{out}"
+        t.add_row(f"{axis} [{units.load_of(a)}]" if mixed else axis, k, inverse,
                   r2_text, str(rep.n_points[axis]))
     s = model.settings.svr
     c = Table(title=f"Corrected coupling functions chi (eq. 4): eps-SVR, gamma={s.gamma:g} "
@@ -121,14 +128,17 @@ def fit_tables(model) -> list:
                       f"zero offsets: {model.settings.zero_method}; refinement steps K = "
                       f"{model.settings.refine}")
     gauges = getattr(model, "projection", None) is not None  # M > N: inputs v = P u (gauges.py)
-    for col in ("chi", "input", "support vectors", f"input range [{'load' if gauges else units.output}]"):
+    each = gauges and bool(units.loads) or not gauges and bool(units.outputs)  # a unit per row
+    shown = "" if each else f" [{'load' if gauges else units.output}]"
+    for col in ("chi", "input", "support vectors", f"input range{shown}"):
         c.add_column(col, justify="right")
     span = "{:+.4f} .. {:+.4f}" if volts else "{:+.6g} .. {:+.6g}"
     for name, chi in model.chi.items():
-        c.add_row(f"chi_{name}", f"{layout.labels[chi.input_axis]}_ls" if gauges
-                  else layout.outputs[chi.input_axis],
+        b = chi.input_axis
+        unit = f" {units.load_of(b) if gauges else units.output_of(b)}" if each else ""
+        c.add_row(f"chi_{name}", f"{layout.labels[b]}_ls" if gauges else layout.outputs[b],
                   f"{chi.support_vectors.size} / {chi.n_points}",
-                  span.format(*chi.input_range))
+                  span.format(*chi.input_range) + unit)
     g = Table(title="Interference error gamma (eq. 12) on the calibration data, % F.S.")
     for col in ("loaded axis", "before (omega^-1 only)", "after (eq. 11)"):
         g.add_column(col, justify="right")
@@ -150,7 +160,7 @@ def apply_lines(summary, out) -> list[str]:
 
 
 def apply_warnings(summary) -> list[str]:
-    w, groups = [], {}
+    w, groups = list(getattr(summary, "notes", ())), {}
     for d in getattr(summary, "dropped", ()):
         groups.setdefault(d.reason, []).append(f"{d.column} '{d.name}'" if d.name else str(d.column))
     if groups:
@@ -176,6 +186,13 @@ def apply_warnings(summary) -> list[str]:
         w.append(f"{summary.out_of_range_rows} rows have a voltage more than 1 % of the span "
                  "outside the calibrated range; their forces are extrapolated (status "
                  "'extrapolated')")
+    if getattr(summary, "untared", None):
+        out, median, lo, hi = summary.untared
+        unit = summary.output_unit
+        w.append(f"most rows ({summary.out_of_range_rows} of {summary.rows}) lie outside the "
+                 f"calibrated range by about a constant offset ({out}: median {median:.6g} "
+                 f"{unit}, calibrated {lo:.6g} to {hi:.6g} {unit}): the log looks unzeroed; "
+                 "give --tare N (its first N rows unloaded) or --zero")
     if summary.status_counts.get("not_converged"):
         w.append(f"{summary.status_counts['not_converged']} rows did not settle in the "
                  "second-order refinement (refine: K); kept with empty forces and status "
@@ -208,6 +225,7 @@ def gamma_table(doc: dict[str, Any], records=None, title=None, clean=None) -> Ta
               pad_edge=False, padding=(0, 0, 0, 1))
     t.add_column("round", no_wrap=True)
     t.add_column("test (level)" if levels else "test (rep)", no_wrap=True)
+    setattr(t, KEY_COLUMNS, 2)  # a narrow terminal's parts repeat round and test (narrow.py)
     cell_width = 5 if ref is not None else 4
     axes = labels_in(doc["records"] if records is None else records)
     for m in doc["methods"]:

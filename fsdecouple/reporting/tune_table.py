@@ -30,7 +30,7 @@ def tune_table(record: dict[str, Any], load_unit: str) -> Table:
     for i, c in enumerate(cands):
         rms = [f"{c['rms'][a]:.4g}" if c["rms"][a] is not None else "–" for a in axes]
         units = "Table 2, as configured" if c["table2"] else "full scale"
-        if "tolerance" in c:  # records from before the tuned tolerance have none
+        if c.get("tolerance") is not None:  # before the tuned tolerance: none; None: fit's rule
             units += f", tol {c['tolerance']:g}"
         note = Text("chosen", "bold green") if i == record["chosen"] else Text(
             "clearly better" if c["clearly_better"] else "")

@@ -70,10 +70,23 @@ def test_a_blank_load_cell_is_skipped_or_refused_with_strict(cal, tmp_path):
     fails(["fit", cal, "--strict"], tmp_path, "rep1.csv", "row 5", "column 'fx'", "--strict")
 
 
+def test_a_row_contradicting_its_own_axis_label_is_refused_and_excludable(cal, tmp_path):
+    """Issue 34: in a single-axis file with an axis column, an x row with fy = 10 is a
+    data-entry error, not a lever arm: refused naming the file, the row and both loads;
+    ``--exclude`` drops it."""
+    edit(cal / "rep4.csv", 3, "fy", "10.000")
+    fails(["fit", cal, "--no-verdict"], tmp_path, "rep4.csv, row 3", "'x' sweep",
+          "fx = -90", "fy = 10", "--exclude rep4.csv:3")
+    r = invoke(["fit", cal, "-o", tmp_path / "m.json", "--no-verdict", "--exclude", "rep4.csv:3"])
+    assert "several components" not in r.stderr
+
+
 @pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_row_loading_two_axes_is_fitted_jointly_and_named(cal, tmp_path):
-    """Issue 22: such a row is a lever arm's or a multi-axis rig's, fitted, not refused;
-    the warning names it, in case it is a typo."""
+    """Issue 22: without axis labels such a row may be a lever arm's or a multi-axis
+    rig's, fitted, not refused; the warning names it, in case it is a typo."""
+    for p in cal.glob("rep*.csv"):  # the same set without its axis column
+        p.write_text("\n".join(ln.split(",", 1)[1] for ln in p.read_text().splitlines()) + "\n")
     edit(cal / "rep4.csv", 3, "fy", "10.000")
     r = invoke(["fit", cal, "-o", tmp_path / "m.json", "--no-verdict"])
     assert "1 row loads several components (" in r.stderr
@@ -148,3 +161,42 @@ def test_no_numpy_warning_from_a_pool_thread_after_the_error(tmp_path):
                        env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert r.returncode == 2 and len(r.stderr.splitlines()) == 1, r.stderr
     assert "RuntimeWarning" not in r.stderr and "too large" in r.stderr
+
+
+@pytest.mark.parametrize("args", [
+    ["apply", "{m}", SAMPLE / "task_voltages.csv", "--tare", "\u0663"],
+    ["apply", "{m}", SAMPLE / "task_voltages.csv", "--zero", "\u0660,\u0660,\u0660"],
+    ["cv", CAL, "--folds", "\u0661,\u0662;\u0663,\u0664;\u0665,\u0666"],
+    ["fit", CAL, "--exclude", "rep1.csv:\u0663", "--no-verdict"],
+    ["cv", CAL, "--gross-error", "x:\u0661:5:0.2"],
+    ["fit", CAL, "--tune", "--tune-grid", "gamma=\u0661"],
+])
+def test_numbers_in_other_scripts_digits_are_refused(sample_model, tmp_path, args):
+    """Issue 34: int() reads '\u0663' (Arabic-Indic three) as 3; --tare took it as 3 rows."""
+    out = tmp_path / "out"
+    r = invoke([str(a).format(m=sample_model) for a in args] + ["-o", out], code=2)
+    # in-process the usage error is click's own text; the command prints it as one line
+    assert "not an ASCII digit" in r.stderr or "valid integer" in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr and not out.exists()
+
+
+def test_a_file_name_that_is_not_utf8_is_read_and_shown_with_its_byte(cal, tmp_path):
+    """Issue 34: legal on Linux (a Latin-1 file share), it was refused ('rename the file').
+    It is read, its repetition is its place in the set (rep3 as before), and messages and
+    the model file show the byte as \\xff."""
+    import os
+
+    latin = os.path.join(os.fsencode(cal), b"rep3\xff.csv")
+    os.rename(os.path.join(os.fsencode(cal), b"rep3.csv"), latin)
+    out = tmp_path / "m.json"
+    invoke(["fit", cal, "-o", out, "--no-verdict"])
+    files = [f["path"] for f in json.loads(out.read_text())["provenance"]["files"]]
+    assert files[2].endswith("rep3\\xff.csv") and len(files) == 6, files
+    with open(latin, "rb") as fh:
+        lines = fh.read().split(b"\n")
+    cells = lines[4].split(b",")
+    cells[5] = b"n/a"
+    lines[4] = b",".join(cells)
+    with open(latin, "wb") as fh:
+        fh.write(b"\n".join(lines))
+    fails(["fit", cal, "--no-verdict"], tmp_path, "rep3\\xff.csv, row 5, column 'uy'")

@@ -84,3 +84,18 @@ def test_a_usage_error_or_a_bare_command_on_a_full_stderr_is_exit_2():
             assert r.returncode == 2, args
     r = _run([], capture_output=True, text=True)
     assert r.returncode == 2 and r.stderr.startswith("Usage: ") and "\n  fit " in r.stderr
+
+
+@pytest.mark.slow  # interpreters starting up
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full")
+def test_a_bare_environment_keeps_exit_2_on_a_full_stream(sample_model):
+    """Only PATH and HOME (cron, systemd): without PYTHONUNBUFFERED the error line stayed
+    in stderr's buffer and Python's own flush at exit turned exit 2 into 120."""
+    env = {"PATH": os.environ.get("PATH", "/usr/bin:/bin"), "HOME": os.environ.get("HOME", "/"),
+           "PYTHONPATH": os.pathsep.join(sys.path)}
+    with open("/dev/full", "w") as full:
+        r = _run(["show", SAMPLE / "no-such-model.json"], env=env, stdout=subprocess.PIPE,
+                 stderr=full)
+        assert r.returncode == 2
+        r = _run(["show", sample_model], env=env, stdout=full, stderr=subprocess.PIPE)
+        assert r.returncode == 2 and b"Traceback" not in r.stderr, r.stderr

@@ -8,6 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from conftest import SAMPLE, assert_one_line_error, invoke
 
 from fsdecouple.core.intervals import (
     check_coverage,
@@ -168,3 +169,57 @@ def test_a_model_file_with_a_broken_certificate_block_is_refused(model):
     doc["integrity"]["digest"] = content_digest(doc)  # digest-valid, so only the shape is wrong
     with pytest.raises(ModelFileError, match="certificate needs steps"):
         model_from_dict(doc, "m.json")
+
+
+def _edited(path, tmp_path, edit):
+    """The model file at ``path`` with ``edit(doc)`` applied and its digest recomputed."""
+    import json
+
+    from fsdecouple.core.modelfile import content_digest
+
+    doc = json.loads(path.read_text())
+    edit(doc["report"]["certificate"])
+    doc["integrity"]["digest"] = content_digest(doc)
+    out = tmp_path / "edited.json"
+    out.write_text(json.dumps(doc))
+    return out
+
+
+def _scores(cert, a="x"):
+    c = cert["interval"]["components"][a]
+    return c["scores"] if c["scores"] is not None else cert["interval"]["scores"]
+
+
+@pytest.mark.parametrize("edit, needle", [
+    (lambda c: _scores(c).__setitem__(0, -5.0), "held-out score -5.0"),  # lo > hi on every row
+    (lambda c: _scores(c).reverse(), "ascending"),  # the quantile read the wrong score
+    (lambda c: c["interval"]["components"]["x"].__setitem__("sigma", 0.0), "sigma = 0.0"),
+    (lambda c: c["interval"]["components"]["x"].__setitem__("sigma", 1e300), "sigma = 1e+300"),
+    (lambda c: _scores(c).__setitem__(-1, 1e308), "times sigma"),
+    (lambda c: c["steps"]["y"]["U"].__setitem__(0, 0.0), "y: U = 0.0"),  # E_n of x/0
+    (lambda c: c["steps"]["z"]["model_error"].__setitem__(1, 1e300), "model_error = 1e+300"),
+    (lambda c: c["steps"]["z"]["model_error"].__setitem__(1, -1.0), "model_error = -1.0"),
+])
+def test_edited_interval_and_step_data_are_refused_at_load_even_with_a_digest(
+        sample_model, tmp_path, edit, needle):
+    """The digest says the file is as written, not that its numbers can be (issue 34)."""
+    from fsdecouple.core.modelfile import load_model
+    from fsdecouple.errors import ModelFileError
+
+    load_model(_edited(sample_model, tmp_path, lambda c: None))  # the untouched file loads
+    with pytest.raises(ModelFileError, match=re.escape(needle)):
+        load_model(_edited(sample_model, tmp_path, edit))
+
+
+@pytest.mark.parametrize("args, edit", [
+    (["compare", "{m}", "{e}", "--json"], lambda c: c["steps"]["x"]["U"].__setitem__(2, 0.0)),
+    (["certificate", "{e}", str(SAMPLE / "calibration"), "--json"],
+     lambda c: c["steps"]["x"]["model_error"].__setitem__(0, 1e300)),
+])
+def test_compare_and_certificate_json_refuse_an_edited_model_in_one_line(
+        sample_model, tmp_path, args, edit):
+    """Issue 34: E_n of x/0 and a model error of 1e300 were JSON ValueError tracebacks."""
+
+    e = _edited(sample_model, tmp_path, edit)
+    r = invoke([a.format(m=sample_model, e=e) for a in args], 2)
+    assert_one_line_error(r, str(e), "refit it")

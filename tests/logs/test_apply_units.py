@@ -9,12 +9,17 @@
 from __future__ import annotations
 
 import dataclasses
+import sys
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 from conftest import SAMPLE, invoke
+
+# the C helpers of tests/export, also when tests/logs runs alone
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "export"))
 from test_export import NOT_FINITE, SATURATED, apply_statuses, build, needs_cc, vectors
 
 from fsdecouple import fit, load_config, load_model

@@ -251,7 +251,7 @@ def test_only_safe_loaders_in_the_package():
     import yaml
 
     import fsdecouple
-    from fsdecouple.config import SafeUniqueLoader
+    from fsdecouple.yamlfile import SafeUniqueLoader
 
     package = Path(fsdecouple.__file__).parent
     files = {p.relative_to(package).as_posix(): p.read_text() for p in package.rglob("*.py")}

@@ -100,6 +100,17 @@ def test_an_unknown_rig_is_refused_in_one_line(tmp_path):
     assert not (tmp_path / "calibration.csv").exists()
 
 
+def test_a_rig_is_six_axis_so_components_3_is_refused_and_6_accepted(tmp_path):
+    """Issue 34: --components 3 wrote a six-axis rig in silence, while 6 was refused."""
+    res = invoke(["simulate", str(tmp_path / "three"), "--rig", "lever-arm", "--components", "3"],
+                 code=2)
+    assert "--components" in res.stderr and "six components" in res.stderr
+    assert not (tmp_path / "three").exists()
+    invoke(["simulate", str(tmp_path / "six"), "--rig", "lever-arm", "--components", "6"])
+    header = (tmp_path / "six" / "calibration.csv").read_text().splitlines()[0]
+    assert header.lower().count("known_") == 6  # Fx .. Mz, as without --components
+
+
 @pytest.mark.slow  # over ~1 s: two fits
 def test_the_cli_fits_applies_and_exports_a_model_with_own_load_chi(tmp_path):
     invoke(["simulate", str(tmp_path), "--rig", "quadratic", "--seed", "2"])

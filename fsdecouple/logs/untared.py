@@ -1,0 +1,45 @@
+"""A log that looks unzeroed: most rows outside the calibrated range by about one offset.
+
+A load cell's raw zero is hundreds of thousands of counts (750,112 on
+``sample_data/loadcell``), while its calibration spans the zero-corrected outputs
+(+-10,000 counts about zero): a log applied without a tare or a zero decodes zero load
+to hundreds of gram-force and marks every row 'extrapolated'.  ``apply`` keeps the median
+of each output over each block; when no tare or zero was given, most rows are
+extrapolated and an output's median over the log lies outside its calibrated range,
+the log is taken as unzeroed and the warning says so.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+
+def block_median(u: np.ndarray) -> np.ndarray:
+    """The median of each output over a block's rows (NaN for an all-empty column)."""
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # an all-empty column
+        return np.nanmedian(u, axis=0)
+
+
+def untared(summary, medians: list[np.ndarray], rules) -> tuple[str, float, float, float] | None:
+    """``(output, median, lo, hi)``: the output farthest outside its calibrated range lo..hi
+    (relative to its span) by its median over the log, for a log that looks unzeroed;
+    None otherwise.  ``summary``: the log's :class:`~fsdecouple.logs.apply.ApplySummary`;
+    ``medians``: each block's :func:`block_median` (none when a tare or zero was given);
+    ``rules``: the :class:`~fsdecouple.logs.apply.RowRules` (None: M > N, whose calibrated
+    range is the projection's, not the outputs')."""
+    if rules is None or not medians or 2 * summary.out_of_range_rows <= summary.rows:
+        return None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        median = np.nanmedian(np.vstack(medians), axis=0)
+    lo, hi = rules.lo, rules.hi
+    with np.errstate(invalid="ignore", divide="ignore"):
+        beyond = np.maximum(lo - median, median - hi) / (hi - lo)
+    beyond = np.where(np.isfinite(beyond), beyond, -np.inf)
+    if not (beyond > 0).any():
+        return None
+    c = int(np.argmax(beyond))
+    return summary.outputs[c], float(median[c]), float(lo[c]), float(hi[c])
