@@ -181,7 +181,7 @@ SIX_METHODS: dict[str, Callable] = {
 def run_six(seeds: int, methods=SIX_METHODS, progress=print) -> dict[str, dict[str, float]]:
     """The six-axis simulator's sensors: method -> mean over seeds of the worst component's
     RMS / floor RMS, and the largest over seeds (the hidden check bounds every component)."""
-    import fsdecouple.simulate_six as six
+    import fsdecouple.sim.six_axis as six
 
     settings = load_config(ROOT / "configs" / "six-axis.yaml")
     ratios: dict[str, list[float]] = {m: [] for m in methods}

@@ -36,7 +36,7 @@ from libsvm import svmutil
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-import fsdecouple.simulate_six as six  # noqa: E402
+import fsdecouple.sim.six_axis as six  # noqa: E402
 
 TABLE2 = "-s 3 -t 2 -g 0.5 -c 1000 -p 0.0001 -e 0.001 -q"  # gamma = 1 / (2 delta^2), delta^2 = 1
 

@@ -32,11 +32,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from run import machine, median_child, write_log  # noqa: E402
 
 from fsdecouple import load_config
-from fsdecouple.core.model import refine_advice
 from fsdecouple.core.modelfile import save_model
 from fsdecouple.data.calibration import from_table
 from fsdecouple.evaluation.checks import assumption_checks
 from fsdecouple.fitting.fit import fit
+from fsdecouple.reporting.advice import refine_advice
 from fsdecouple.sim.simulate import SimulatedSensor, simulate_calibration
 
 

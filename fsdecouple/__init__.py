@@ -39,9 +39,6 @@ _PUBLIC = {
 }
 __all__ = sorted(_PUBLIC)  # noqa: F822
 
-# Old module paths (fsdecouple.fit, fsdecouple.apply, ...) still import: _moved.py.
-from . import _moved  # noqa: E402, F401
-
 
 def __getattr__(name: str):
     if name not in _PUBLIC:

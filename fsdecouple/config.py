@@ -17,10 +17,8 @@ from typing import Any
 from .axes import CANONICAL_COLUMNS, DEFAULT, FORCE_COLUMNS, VOLTAGE_COLUMNS, Layout
 from .errors import ConfigError, printable
 from .labinfo import LabInfo
-from .schema import (  # noqa: F401 (the extrapolation names: core/extrapolation.py, modelfile.py)
+from .schema import (
     DEFAULT_EXTRAPOLATION,
-    EXTRAPOLATIONS,
-    LEGACY_EXTRAPOLATION,
     SCALINGS,
     SVR_KEYS,
     check_extrapolation,

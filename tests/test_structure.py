@@ -6,6 +6,8 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+import pytest
+
 import fsdecouple
 
 PACKAGE = Path(fsdecouple.__file__).parent
@@ -125,15 +127,18 @@ def test_tests_mirror_the_package():
     assert not (tests / "data" / "golden").exists()  # test data live in tests/fixtures/
 
 
-def test_old_module_paths_still_import():
+def test_no_shims_for_old_module_paths():
+    """Issue 30: no meta-path finder answers old flat names (fsdecouple.surrogate, ...);
+    each module has one name, and fsdecouple.fit is the full fit, a function."""
     import importlib
+    import subprocess
+    import sys
 
-    from fsdecouple._moved import MOVED
-
-    for old, new in MOVED.items():
-        assert importlib.import_module(f"fsdecouple.{old}") is importlib.import_module(f"fsdecouple.{new}")
-    assert callable(fsdecouple.fit) and callable(fsdecouple.validate)  # not the old modules
-    from fsdecouple.export import export_header  # old modules, now packages
-    from fsdecouple.fleet import fit_many
-
-    assert callable(export_header) and callable(fit_many)
+    code = ("import sys; before = list(sys.meta_path); import fsdecouple; "
+            "assert sys.meta_path == before, sys.meta_path")
+    subprocess.run([sys.executable, "-c", code], check=True)
+    assert not (PACKAGE / "_moved.py").exists()
+    for old in ("surrogate", "iotools", "batch", "guess"):
+        with pytest.raises(ModuleNotFoundError):
+            importlib.import_module(f"fsdecouple.{old}")
+    assert callable(fsdecouple.fit) and callable(fsdecouple.validate)

@@ -42,10 +42,10 @@ def certificate(
 ) -> None:
     """ISO 376 figures (b, b', f_c, f_0, v, c), class and uncertainty budget (U, k = 2) per step."""
     from ..data.calibration import load_calibration
-    from ..evaluation.certificate import certificate as build
-    from ..evaluation.certificate import read_drift
-    from ..reporting.certificate import certificate_tables
+    from ..evaluation.certificate_doc import certificate as build
+    from ..evaluation.certificate_doc import read_drift
     from ..reporting.certificate_file import check_certificate_path, write_certificate
+    from ..reporting.certificate_html import certificate_tables
 
     with user_errors():
         model = load_model(model_file)

@@ -10,7 +10,7 @@ import typer
 from ..config import load_config
 from ..errors import printable
 from ..files import atomic_write, check_output, refuse_overwriting_input
-from ..reporting.tables import ingest_tables
+from ..reporting.console import ingest_tables
 from .app import (
     ConfigOpt,
     ForceOpt,
@@ -169,7 +169,7 @@ def init(
 ) -> None:
     """Start a config: guess columns, units, full scale and scaling from a calibration file."""
     from ..data.init_config import init_config
-    from ..reporting.tables import guess_renderables
+    from ..reporting.console import guess_renderables
 
     with user_errors():
         guess = init_config(data_file, output, force=force)

@@ -85,7 +85,7 @@ def cv(
     from ..evaluation.cv_results import cv_text, save_cv_results
     from ..evaluation.heldout import parse_folds
     from ..evaluation.tune import grid_option
-    from ..reporting.tables import cv_renderables
+    from ..reporting.console import cv_renderables
     from ..reporting.tune_table import tune_table
 
     with user_errors():

@@ -14,7 +14,7 @@ from ..core.metrics import check_max_gamma
 from ..core.modelfile import load_model, save_model
 from ..errors import ConfigError, printable
 from ..files import check_output, refuse_overwriting_input
-from ..reporting.tables import fit_checks_table, fit_tables
+from ..reporting.console import fit_checks_table, fit_tables
 from .app import (
     ConfigOpt,
     ForceOpt,
@@ -97,13 +97,13 @@ def fit(
     json_out: JsonOpt = False,
 ) -> None:
     """Fit the coupling error model, judge it on held-out points, write one JSON model file."""
-    from ..core.model import refine_advice, tune_advice
     from ..data.calibration import load_calibration
     from ..evaluation.calibrate import fit as fit_model
     from ..evaluation.calibrate import fit_document
     from ..evaluation.checks import assumption_checks
     from ..evaluation.tune import grid_option
     from ..evaluation.verdict import verdict_line
+    from ..reporting.advice import refine_advice, tune_advice
     from ..reporting.tune_table import tune_table
 
     with user_errors():

@@ -31,11 +31,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..config import DEFAULT_EXTRAPOLATION as DEFAULT  # noqa: F401  (names of the old home)
-from ..config import EXTRAPOLATIONS as MODES  # noqa: F401
-from ..config import LEGACY_EXTRAPOLATION as LEGACY  # noqa: F401
-from ..config import check_extrapolation  # noqa: F401
-
 # The tables of a tangent model start on MIN_INTERVALS = 256 intervals (surrogate.py),
 # EDGE_KNOT of them before lo and as many after hi, so lo and hi are knots of every
 # level of the refinement (which doubles the count): the table reaches

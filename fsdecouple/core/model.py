@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 
 from ..axes import Layout, NamedChi, chi_labels
-from ..config import Settings, check_refine
-from .advice import REFINE_TARGET, recommend_refine, refine_advice, tune_advice  # noqa: F401
+from ..config import Settings
+from ..schema import check_refine
 from .decouple import coupling_errors as _coupling_errors
 from .decouple import exact as _exact_plan
 from .decouple import initial_forces

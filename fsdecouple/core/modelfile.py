@@ -15,9 +15,10 @@ from typing import Any
 import numpy as np
 
 from .. import __version__
-from ..config import LEGACY_EXTRAPOLATION, settings_from_dict
+from ..config import settings_from_dict
 from ..errors import ModelFileError, excerpt
 from ..files import MODEL_LIMIT, atomic_write, read_bounded
+from ..schema import LEGACY_EXTRAPOLATION
 from .decouple import MAX_SURROGATE_ERROR, usable
 from .model import Chi, CouplingErrorModel, FitReport
 from .surrogate import spot_check

@@ -81,7 +81,7 @@ def import_cal(path: str | Path, index: int = 1, frame: Any = None, frame_source
         "units": {"load": loads, "output": "V"},
     }
     if frame is not None:
-        from ..config import ConfigError
+        from ..errors import ConfigError
         from ..wrench import parse_frame
 
         try:

@@ -16,8 +16,8 @@ import numpy as np
 from ..config import Settings
 from ..errors import InputError, excerpt, printable, where
 from ..files import CALIBRATION_LIMIT, TASK_LIMIT, natural_key, read_bounded, reading
-from .columns import applied_load
 from .csv_text import HEADER_ROW, read_csv_text, read_header, require_columns, to_numbers
+from .guesses import applied_load
 from .magnitudes import adc_bits
 from .poses import average_poses, pose_note, timestamp_column
 from .rails import at_rail, ranges

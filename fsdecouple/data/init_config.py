@@ -1,4 +1,4 @@
-"""``fsdecouple init`` for any sensor: three axes (:mod:`fsdecouple.data.columns`) or N components.
+"""``fsdecouple init`` for any sensor: three axes (:mod:`fsdecouple.data.guesses`) or N components.
 
 A header that names a moment (``Mx``, ``Tz [N·mm]``, ``torque_y`` ...) is a
 force/torque sensor.  Its load columns become ``components`` (fx, fy, fz, mx,
@@ -24,7 +24,7 @@ from ..config import load_config
 from ..errors import ConfigError, InputError, printable
 from ..files import atomic_write, check_output, refuse_overwriting_input
 from ..units import LOAD_UNITS, MOMENT_UNITS, unit_key
-from .columns import (
+from .guesses import (
     _AXIS,
     _INTEGER,
     _LOAD_HINTS,

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .columns import _parse_name
+from .guesses import _parse_name
 
 TIMESTAMP_NAMES = {"time", "timestamp", "datetime", "date", "t", "timesec", "elapsed",
                    "elapsedtime"}

@@ -41,8 +41,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..core.intervals import interval_calibration
 from ..data.calibration import CalibrationSet
+from .intervals import interval_calibration
 from .iso376 import ComponentSteps, component_steps, resolution
 
 CONTRIBUTIONS = ("reference", "reproducibility", "repeatability", "resolution", "reversibility",
@@ -202,7 +202,7 @@ def certificate_data(calib: CalibrationSet, model, points: pd.DataFrame,
     every component at each step [output unit], u_model and U per step [load unit];
     and the held-out residuals' conformal scores (``trained``: the fraction of the
     repetitions each held-out round was fitted on; ``centred``: the same points' forces
-    where the intervals centre them, default ``predicted``) (:mod:`fsdecouple.core.intervals`).
+    where the intervals centre them, default ``predicted``) (:mod:`fsdecouple.evaluation.intervals`).
     """
     layout, settings = calib.layout, model.settings
     u_models = {axis: model_errors(component_steps(calib, a), points, predicted, layout)
@@ -227,7 +227,7 @@ def heldout_predictions(rounds, models: dict, method: str,
     fitted without them.
 
     ``forces(model, u)``: how a model's forces are computed; default eq. (11) without
-    rotation (the intervals pass their centre, :func:`fsdecouple.core.intervals.centre`).
+    rotation (the intervals pass their centre, :func:`fsdecouple.evaluation.intervals.centre`).
     """
     frames, preds = [], []
     for rnd in rounds:

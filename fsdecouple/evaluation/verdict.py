@@ -25,7 +25,6 @@ from typing import Any
 import numpy as np
 
 from ..config import Settings
-from ..core.intervals import centre
 from ..core.metrics import interference_error, pct
 from ..data.calibration import CalibrationSet
 from ..fitting.baselines import train_all
@@ -33,6 +32,7 @@ from ..fitting.joint import multi_load
 from ..fitting.noise import VERDICT_NOISE_FRACTION
 from .budget import heldout_predictions
 from .heldout import HeldOutRound, choose_protocol, rounds_for
+from .intervals import centre
 
 VERDICT_METHODS = ("initial", "linear", "svr")
 

@@ -37,7 +37,7 @@ from ..files import atomic_write
 from .c_function import MAX_CHANNELS
 from .c_source import render
 from .plan import ExportPlan, ExportResult
-from .tables import coarsest_tables, table_bound
+from .resample import coarsest_tables, table_bound
 
 PRECISIONS = ("double", "float")
 # The double header promises forces within PROMISE of the exact model (a fraction

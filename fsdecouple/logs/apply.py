@@ -2,7 +2,7 @@
 
 Every input row is kept, in order, and every named input column is passed through
 as text, unchanged (unnamed columns, repeated names and a side table are dropped:
-:func:`~fsdecouple.logs.columns.passed_columns`); ``fx, fy, fz`` and ``status`` are
+:func:`~fsdecouple.logs.passthrough.passed_columns`); ``fx, fy, fz`` and ``status`` are
 appended.  Forces are in the calibration's load unit, or in the one asked for (``unit``); voltages are in
 the data's output unit (:mod:`fsdecouple.units`).  ``status`` says what the
 forces of the row are worth (:data:`STATUSES`); rows that cannot be decoupled
@@ -29,18 +29,18 @@ import pyarrow.compute as pc
 
 from ..axes import FORCE_COLUMNS, VOLTAGE_COLUMNS
 from ..config import Settings
-from ..core.intervals import half_widths, interval_names, with_intervals
 from ..core.model import FORCE_LIMIT, CouplingErrorModel
 from ..core.table_path import COMPILED_BYTES, COMPILED_ROWS
 from ..data.csv_text import HEADER_ROW, require_columns
 from ..data.zero import tare_offsets
 from ..errors import InputError, where
+from ..evaluation.intervals import half_widths, interval_names, with_intervals
 from ..files import atomic_write, refuse_overwriting_input
 from ..schema import refuse_unused, unused_warning
 from ..units import LOAD_UNITS, load_factor
 from .arrow import numbers, strings
-from .columns import Dropped, kept_fields, passed_columns
 from .outputs import log_outputs
+from .passthrough import Dropped, kept_fields, passed_columns
 from .reader import Block, LogFile, is_parquet
 from .sinks import CsvSink, ParquetSink, force_decimals
 from .untared import block_median, untared
@@ -170,7 +170,7 @@ def apply_file(
     interval : float, optional
         Add ``<component>_lo`` and ``<component>_hi``: bounds holding the true force
         with probability ``interval`` (0 < P < 1), by conformal prediction on the
-        fit's held-out residuals (:mod:`fsdecouple.core.intervals`).
+        fit's held-out residuals (:mod:`fsdecouple.evaluation.intervals`).
 
     Notes
     -----

@@ -30,8 +30,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..core.intervals import interval_names
 from ..errors import FsdecoupleError, InputError, excerpt, printable
+from ..evaluation.intervals import interval_names
 from ..units import load_factor
 from .apply import (
     FORCE_UNIT_KEY,

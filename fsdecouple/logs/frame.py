@@ -20,10 +20,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..core.intervals import half_widths, interval_names, with_intervals
 from ..core.model import CouplingErrorModel
 from ..data.zero import tare_offsets
 from ..errors import InputError
+from ..evaluation.intervals import half_widths, interval_names, with_intervals
 from .apply import STATUS_COLUMN, STATUSES, RowRules, check_options, decouple_rows
 
 if TYPE_CHECKING:
@@ -101,7 +101,7 @@ def decouple_frame(model: CouplingErrorModel, frame: pd.DataFrame, *, tare: int 
         default: the model's.  Its units must be the model's.
     interval : float, optional
         Also ``fx_lo, fx_hi, ...``: bounds holding the true force with probability
-        ``interval`` (0 < P < 1), as ``apply --interval`` (:mod:`fsdecouple.core.intervals`).
+        ``interval`` (0 < P < 1), as ``apply --interval`` (:mod:`fsdecouple.evaluation.intervals`).
 
     Returns
     -------

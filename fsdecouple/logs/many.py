@@ -250,7 +250,7 @@ def apply_many(model_path: str | Path, inputs, out_dir: str | Path, *, engine: s
     Only :class:`~fsdecouple.errors.FsdecoupleError` of a log is caught and
     recorded (a bug raises); bad arguments raise before any log is read.
     """
-    from ..core.intervals import half_widths
+    from ..evaluation.intervals import half_widths
     from .apply import check_options
 
     if engine not in ENGINES:

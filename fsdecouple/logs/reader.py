@@ -34,7 +34,7 @@ from ..data.csv_text import HEADER_ROW, MAX_HEADER_CHARS, MISSING_CELLS, read_he
 from ..errors import InputError, excerpt, printable, where
 from ..files import open_input, reading
 from .arrow import column_floats
-from .columns import kept_fields, kept_lines
+from .passthrough import kept_fields, kept_lines
 
 BLOCK_BYTES = 4 << 20  # ~100 K rows of a 4-column log; a block in flight costs ~15x this
 MAX_LINE_BYTES = 16 << 20  # a log line is tens of bytes
@@ -188,7 +188,8 @@ class LogFile:
         CSV blocks are cut here and parsed when the job runs (on a worker thread);
         Parquet blocks are decoded here.  ``want_table``: the output is Parquet;
         otherwise it is CSV, and a Parquet log's columns must be writable as text.
-        ``keep``: the columns passed through (:func:`~fsdecouple.logs.columns.passed_columns`); default all.
+        ``keep``: the columns passed through
+        (:func:`~fsdecouple.logs.passthrough.passed_columns`); default all.
         """
         if self.parquet:
             for b in parquet_blocks(self.path, names, self.settings, chunk_rows=chunk_rows,
@@ -382,7 +383,7 @@ def parquet_blocks(path: Path, names: list[str], settings: Settings, *,
     ``to_csv``: the blocks go to a CSV output, so every column must have a text
     form: nested types are refused before the first row, and binary values must be
     UTF-8 (the row is named).  A list or struct voltage column is refused either way.
-    ``keep``: the columns passed through (:func:`~fsdecouple.logs.columns.passed_columns`); default all.
+    ``keep``: the columns passed through (:func:`~fsdecouple.logs.passthrough.passed_columns`); default all.
     """
     try:
         pf = pq.ParquetFile(path, pre_buffer=False, buffer_size=PARQUET_READ_BUFFER)

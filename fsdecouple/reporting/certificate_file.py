@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import InputError
-from .certificate import certificate_html
+from .certificate_html import certificate_html
 from .certificate_pdf import certificate_pdf
 
 FORMATS = {".html": "HTML", ".htm": "HTML", ".pdf": "PDF"}

@@ -16,7 +16,7 @@ from xml.sax.saxutils import escape
 
 import matplotlib
 
-from .certificate import Block, certificate_blocks, u_figure
+from .certificate_html import Block, certificate_blocks, u_figure
 from .plots import to_png
 
 FONT, BOLD = "DejaVuSans", "DejaVuSans-Bold"

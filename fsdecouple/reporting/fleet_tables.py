@@ -1,6 +1,6 @@
 """The tables of the fleet commands: ``compare`` (drift) and ``fit-many``.
 
-Apart from :mod:`fsdecouple.reporting.tables` to keep each module one screenful of ideas;
+Apart from :mod:`fsdecouple.reporting.console` to keep each module one screenful of ideas;
 like it, built from documents, with no computation beyond picking numbers.
 """
 

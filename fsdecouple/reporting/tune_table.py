@@ -1,6 +1,6 @@
 """The table of ``fit --tune`` and ``cv --tune``: every candidate's held-out figure.
 
-Apart from :mod:`fsdecouple.reporting.tables` to keep each module one screenful of ideas;
+Apart from :mod:`fsdecouple.reporting.console` to keep each module one screenful of ideas;
 built from the ``tune`` record of :mod:`fsdecouple.evaluation.tune`, in the data's load unit.
 """
 

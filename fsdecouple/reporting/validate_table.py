@@ -1,7 +1,7 @@
 """What ``fsdecouple validate`` prints: the model, the least-squares matrix and ``initial``
 side by side, per range and loaded axis, from the validation document.
 
-Apart from :mod:`fsdecouple.reporting.tables` to keep each module one screenful of ideas.
+Apart from :mod:`fsdecouple.reporting.console` to keep each module one screenful of ideas.
 """
 
 from __future__ import annotations

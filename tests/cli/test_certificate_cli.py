@@ -14,7 +14,7 @@ import pytest
 from conftest import assert_one_line_error, invoke
 
 from fsdecouple import decouple_frame, load_model
-from fsdecouple.reporting.certificate import fmt
+from fsdecouple.reporting.certificate_html import fmt
 from fsdecouple.sim.simulate import simulate
 
 

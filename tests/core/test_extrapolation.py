@@ -18,13 +18,13 @@ from conftest import ROOT, SAMPLE, assert_one_line_error, invoke
 
 from fsdecouple import load_calibration, load_config, load_model
 from fsdecouple.core.decouple import PROMISE
-from fsdecouple.core.extrapolation import check_extrapolation
 from fsdecouple.core.kernel import rbf_sum
 from fsdecouple.core.model import Chi
 from fsdecouple.core.modelfile import model_from_dict, model_to_dict, save_model
 from fsdecouple.errors import ConfigError
 from fsdecouple.fitting.fit import fit
 from fsdecouple.logs.apply import apply_file
+from fsdecouple.schema import check_extrapolation
 from fsdecouple.sim.simulate import SimulatedSensor, simulate, simulate_task
 
 GOLDEN = ROOT / "tests" / "fixtures" / "golden" / "model-v2.json"

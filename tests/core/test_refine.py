@@ -15,12 +15,12 @@ from fsdecouple.axes import NamedChi
 from fsdecouple.config import Settings, settings_from_dict
 from fsdecouple.core import plan as plan_module
 from fsdecouple.core.decouple import PROMISE, decouple_exact
-from fsdecouple.core.model import refine_advice
 from fsdecouple.data.calibration import from_table
 from fsdecouple.errors import ConfigError
 from fsdecouple.evaluation.checks import assumption_checks
 from fsdecouple.fitting.fit import fit
 from fsdecouple.logs.apply import STATUSES, apply_file
+from fsdecouple.reporting.advice import refine_advice
 from fsdecouple.sim.simulate import SimulatedSensor, simulate_calibration
 
 GOLDEN = SAMPLE.parent / "tests" / "fixtures" / "golden"
@@ -312,7 +312,7 @@ def _record(figures, chosen):
 
 
 def test_tune_advice_untuned_from_the_coupling_tuned_from_the_held_out_figures():
-    from fsdecouple.core.model import tune_advice
+    from fsdecouple.reporting.advice import tune_advice
 
     coupled, weak, diverging = ({"recommended": k} for k in (2, 0, None))
     # untuned: --tune is advised wherever refinement is (eq. 6 above the target)
@@ -329,7 +329,7 @@ def test_tune_advice_untuned_from_the_coupling_tuned_from_the_held_out_figures()
 
 def test_fit_line_recommends_tune_with_refinement():
     from fsdecouple.cli.model import _refine_line
-    from fsdecouple.core.model import tune_advice
+    from fsdecouple.reporting.advice import tune_advice
 
     base = {"second_order": 0.004, "chi": "yx", "slope": 0.1, "target": 5e-4, "recommended": 2}
     untuned = {**base, "tune": tune_advice(base, None)}

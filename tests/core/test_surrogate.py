@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-import fsdecouple.model as model_module
-import fsdecouple.surrogate as surrogate
 import numpy as np
 
+import fsdecouple.core.model as model_module
+import fsdecouple.core.surrogate as surrogate
 from fsdecouple.core.decouple import MAX_SURROGATE_ERROR, usable
 from fsdecouple.core.kernel import rbf_sum_slope
 from fsdecouple.core.model import Chi

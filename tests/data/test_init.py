@@ -12,7 +12,7 @@ import yaml
 from conftest import ROOT, SAMPLE, assert_one_line_error, invoke
 
 from fsdecouple.config import settings_from_dict
-from fsdecouple.data.columns import guess_config, nice_ceil
+from fsdecouple.data.guesses import guess_config, nice_ceil
 from fsdecouple.errors import InputError
 
 LAB_HEADER = "Fx [gf],Fy [gf],Fz [gf],ch0,ch1,ch2,,,orientation,load on x"

@@ -19,7 +19,7 @@ from fsdecouple.data.calibration import from_table
 from fsdecouple.errors import InputError
 from fsdecouple.evaluation.budget import budget, reading_noise
 from fsdecouple.evaluation.calibrate import fit as calibrate
-from fsdecouple.evaluation.certificate import certificate, check_matches
+from fsdecouple.evaluation.certificate_doc import certificate, check_matches
 from fsdecouple.evaluation.iso376 import (
     classify,
     classing,
@@ -491,7 +491,7 @@ def test_the_set_must_be_the_fitted_one_by_name_and_repetition(certified, calib)
 
 
 def test_drift_between_calibrations_from_compare_json_or_the_config():
-    from fsdecouple.evaluation.certificate import check_drift_document, drift_fractions
+    from fsdecouple.evaluation.certificate_doc import check_drift_document, drift_fractions
     loads = np.array([-100.0, -50.0, 50.0, 100.0])
     doc = {"format": "fsdecouple.drift", "components": {"x": {"force_max_pct": 0.2}},
            "en_steps": [{"axis": "x", "load": -100.0, "F_old": -100.0, "F_new": -100.3},

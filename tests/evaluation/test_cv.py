@@ -249,7 +249,7 @@ def test_fewer_than_three_repetitions_hold_out_load_levels(tmp_path):
 def test_cells_worse_than_initial_are_marked(doc):
     from rich.console import Console
 
-    from fsdecouple.reporting.tables import gamma_table, summary_lines, task_table
+    from fsdecouple.reporting.console import gamma_table, summary_lines, task_table
 
     bad = json.loads(json.dumps(doc))
     for r in bad["records"]:

@@ -25,7 +25,7 @@ from fsdecouple.core.modelfile import model_to_dict
 from fsdecouple.core.surrogate import hermite
 from fsdecouple.errors import ConfigError, FsdecoupleError
 from fsdecouple.export.header import emulate_float, export_header, plan_export
-from fsdecouple.export.tables import resample
+from fsdecouple.export.resample import resample
 from fsdecouple.logs.apply import apply_file
 from fsdecouple.units import Units
 

@@ -27,7 +27,7 @@ from fsdecouple.config import Settings
 from fsdecouple.core.modelfile import model_from_dict, model_to_dict
 from fsdecouple.errors import ConfigError, InputError
 from fsdecouple.logs.apply import FORCE_UNIT_KEY, OUTPUT_UNIT_KEY, STATUSES, apply_file
-from fsdecouple.reporting.tables import apply_warnings
+from fsdecouple.reporting.console import apply_warnings
 
 LOG = SAMPLE / "task_voltages.csv"
 OUTPUTS = ["ux", "uy", "uz"]

@@ -112,7 +112,7 @@ def test_our_local_cluster_keeps_glibcs_malloc_thresholds(monkeypatch):
 
 
 def test_unreachable_scheduler_is_one_line(sample_model, tmp_path, monkeypatch):
-    import fsdecouple.batch_dask as engine
+    import fsdecouple.logs.dask_engine as engine
 
     monkeypatch.setattr(engine, "CONNECT_TIMEOUT", 2.0)
     logs = make_logs(tmp_path)

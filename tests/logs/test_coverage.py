@@ -27,8 +27,8 @@ import pandas as pd
 import pytest
 
 from fsdecouple import load_calibration, load_config
-from fsdecouple.core.intervals import with_intervals
 from fsdecouple.evaluation.calibrate import fit as calibrate
+from fsdecouple.evaluation.intervals import with_intervals
 from fsdecouple.sim.simulate import SimulatedSensor, simulate, with_coupling
 
 pytestmark = pytest.mark.slow

@@ -14,7 +14,7 @@ from conftest import SAMPLE, invoke
 
 from fsdecouple.core.modelfile import load_model
 from fsdecouple.logs.apply import apply_file
-from fsdecouple.logs.columns import passed_columns
+from fsdecouple.logs.passthrough import passed_columns
 from fsdecouple.logs.reader import CsvParser
 
 LOG = SAMPLE / "task_voltages.csv"

@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 from conftest import SAMPLE, assert_one_line_error, invoke
 
-from fsdecouple.core.intervals import (
+from fsdecouple.errors import InputError
+from fsdecouple.evaluation.intervals import (
     check_coverage,
     half_widths,
     interval_calibration,
     interval_names,
     with_intervals,
 )
-from fsdecouple.errors import InputError
 
 
 def _with_scores(model, scores, sigma=(1.0, 2.0, 3.0)):
@@ -93,7 +93,7 @@ def test_without_excess_the_model_share_keeps_its_floor_and_zero_fit_drops_the_z
 
 
 def test_a_combined_load_row_carries_one_model_share_per_loaded_component(model):
-    from fsdecouple.core.intervals import row_sigma
+    from fsdecouple.evaluation.intervals import row_sigma
 
     cal = {"scores": [1.0], "first_step": {"x": 10.0, "y": 10.0, "z": 5.0},
            "components": {a: {"sigma": 0.1, "scores": None, "load_variance": 0.02} for a in "xyz"}}
@@ -111,7 +111,7 @@ def test_intervals_hold_on_combined_loads_whose_errors_add():
     model error tau to every component.  Held-out single-axis points show one tau; rows
     loading all three show three.  Scores pooled as before the load term (the point's
     noise alone) cover too few rows; with it, P of them."""
-    from fsdecouple.core.intervals import _quantile, row_sigma
+    from fsdecouple.evaluation.intervals import _quantile, row_sigma
 
     rng = np.random.default_rng(2)
     s, m, n, nt, tau, p = 0.1, 1.0, 6, 4.0, 0.12, 0.95

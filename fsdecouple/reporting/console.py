@@ -16,8 +16,8 @@ from rich.text import Text
 
 from ..axes import labels_in, load_name
 from ..core.metrics import pct
-from ..data.columns import Guess
-from ..data.columns import shown as shown_name
+from ..data.guesses import Guess
+from ..data.guesses import shown as shown_name
 from ..errors import printable
 from ..evaluation.cv_results import gamma_index, test_name
 from ..units import Units, output_display

@@ -12,7 +12,7 @@ from ..config import load_config
 from ..core.modelfile import load_model
 from ..errors import InputError
 from ..files import check_output, refuse_overwriting_input
-from ..reporting.tables import apply_lines, apply_warnings
+from ..reporting.console import apply_lines, apply_warnings
 from .app import (
     ConfigOpt,
     ForceOpt,

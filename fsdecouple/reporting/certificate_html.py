@@ -1,7 +1,7 @@
 """The certificate a lab signs: one self-contained HTML page that prints on A4, the
 PDF (:mod:`.certificate_pdf`) and the terminal's tables, all from the
 ``fsdecouple.certificate`` document
-(:func:`fsdecouple.evaluation.certificate.certificate`).
+(:func:`fsdecouple.evaluation.certificate_doc.certificate`).
 
 :func:`certificate_blocks` lays the certificate out once, as a list of headings,
 tables, notes and figures; the HTML and the PDF each render that list, so both
