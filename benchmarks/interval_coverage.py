@@ -36,7 +36,7 @@ import numpy as np
 import pandas as pd
 
 from fsdecouple import decouple_frame, load_calibration, load_config
-from fsdecouple.evaluation.calibrate import fit as calibrate
+from fsdecouple.evaluation.calibrate import fit
 from fsdecouple.sim.simulate import SimulatedSensor, simulate, with_coupling
 
 TARE_ROWS = 200
@@ -73,7 +73,7 @@ def one_sensor(sc: Scenario, seed: int, p: float, work: Path) -> tuple[np.ndarra
     out = work / f"s{seed}"
     simulate(out, seed=seed, coupling=sc.coupling, hysteresis=sc.hysteresis, force=True)
     settings = load_config()
-    model = calibrate(load_calibration(out / "calibration", settings), settings, workers=1)
+    model = fit(load_calibration(out / "calibration", settings), settings, workers=1)
     frame = pd.read_csv(out / "task_voltages.csv")
     got = decouple_frame(model, frame, tare=TARE_ROWS, interval=p)
     truth = pd.read_csv(out / "task_forces.csv")[["fx", "fy", "fz"]].to_numpy()
