@@ -35,14 +35,12 @@ _PUBLIC = {
     "validate": "evaluation.validate",
     "import_cal": "data.ati_model",
     "export_cal": "export.ati_cal",
+    "fit": "fitting.fit",
 }
-__all__ = sorted([*_PUBLIC, "fit"])  # noqa: F822
+__all__ = sorted(_PUBLIC)  # noqa: F822
 
 # Old module paths (fsdecouple.fit, fsdecouple.apply, ...) still import: _moved.py.
 from . import _moved  # noqa: E402, F401
-
-# Bound now, not on first use.  It needs numpy only until it is called.
-from .fitting.fit import fit as fit  # noqa: E402
 
 
 def __getattr__(name: str):

@@ -17,11 +17,14 @@ import numpy as np
 from ..axes import Layout, NamedChi, chi_labels
 from ..config import Settings, check_refine
 from .advice import REFINE_TARGET, recommend_refine, refine_advice, tune_advice  # noqa: F401
-from .decouple import TableDecoupler, decouple_exact, initial_forces
 from .decouple import coupling_errors as _coupling_errors
+from .decouple import exact as _exact_plan
+from .decouple import initial_forces
 from .extrapolation import Edges, continue_slopes, continue_values, edges
 from .kernel import rbf_sum, rbf_sum_slope
+from .plan import Plan, model_plan
 from .surrogate import ChiSurrogate
+from .table_path import TableDecoupler
 from .temperature import TemperatureTerms
 
 
@@ -276,12 +279,22 @@ class CouplingErrorModel:
         """A linear model without chi: a factory matrix read from a file (data/ati_cal.py)."""
         return self.method == "linear" and not self.chi
 
+    @property
+    def n_inputs(self) -> int:
+        """The raw inputs of a temperature model's plan: the outputs, and the temperature
+        after them when it is not one of them (a fitted model's); else ``n_outputs``."""
+        t = self.temperature
+        return self.n_outputs + (1 if t is not None and t.external else 0)
+
     def zero_corrected(self, raw: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-        """Outputs as eq. (11) takes them: ``raw - offsets``, temperature-corrected first
-        when the model has temperature terms (core/temperature.py)."""
+        """Outputs as eq. (11) takes them (n, M): ``raw - offsets``; for a model with
+        temperature terms, the plan's temperature step on raw inputs (n, ``n_inputs``)
+        and their zero reading ``offsets`` (``n_inputs``; all 0: no zero taken)."""
         if self.temperature is None:
             return np.asarray(raw, dtype=float) - offsets
-        return self.temperature.zero_corrected(raw, offsets)
+        offsets = np.asarray(offsets, dtype=float)
+        step = self.temperature.step(offsets if offsets.any() else None)
+        return step(np.asarray(raw, dtype=float).reshape(-1, step.n_inputs))
 
     @property
     def calibrated_range(self) -> np.ndarray:
@@ -315,12 +328,16 @@ class CouplingErrorModel:
         return _coupling_errors(np.asarray(u, dtype=float).reshape(-1, self.n_components),
                                 [*self.chi.values(), *self.own.values()])
 
-    def _exact(self, u: np.ndarray, rotate: bool, refine: int = 0,
-               converged: np.ndarray | None = None) -> np.ndarray:
-        return decouple_exact(u, self.k, [*self.chi.values(), *self.own.values()],
-                              self.rotation if rotate else None,
-                              refine=refine, full_scale_output=self.full_scale_output,
-                              converged=converged)
+    def plan(self, *, rotate: bool = True, refine: int | None = None, temperature: bool = True,
+             zero=None) -> Plan:
+        """The decoupling plan (:mod:`fsdecouple.core.plan`): what every evaluator reads.
+
+        A model with temperature terms: the plan takes raw inputs (``n_inputs``) and
+        corrects them first, subtracting ``zero`` (a raw zero reading) after; with
+        ``temperature=False`` it takes outputs already at T0 and zero-corrected.
+        """
+        return model_plan(self, rotate=rotate, refine=self._refine(refine),
+                          temperature=temperature, zero=zero)
 
     def _refine(self, refine: int | None) -> int:
         return self.settings.refine if refine is None else check_refine(refine, "refine")
@@ -335,6 +352,7 @@ class CouplingErrorModel:
     def decouple(
         self, u: np.ndarray, *, rotate: bool = True, exact: bool = False, workers: int | None = None,
         refine: int | None = None, converged: np.ndarray | None = None,
+        compiled: bool | None = None, temperature=None, zero=None,
     ) -> np.ndarray:
         """Forces [N] from zero-corrected outputs [V] by eq. (11).
 
@@ -362,56 +380,87 @@ class CouplingErrorModel:
             Set False for rows whose refinement did not settle (last step above
             ``REFINE_TOLERANCE`` of full-scale output, or not finite): their
             forces are NaN.  All True for K = 0 and for linear models.
+        compiled : bool, optional
+            Use the compiled table kernel (numba); default: for calls of at least
+            ``table_path.COMPILED_ROWS`` rows, as ``apply`` asks for on long logs.
+        temperature : array_like, shape (n,) or float, optional
+            A model with temperature terms (:mod:`fsdecouple.core.temperature`): the
+            temperature of each row [the terms' unit]; then ``u`` are raw outputs (not
+            zero-corrected) and the plan's temperature step corrects them to T0 before
+            eq. (11).  None: ``u`` are outputs at T0 already (the step is left out).
+        zero : array_like, shape (M + 1,) or (M,), optional
+            With ``temperature``: a raw zero reading of the outputs and, last for a fitted
+            model (at the thermistor's place for an ATI one), its temperature, corrected
+            at its own temperature and subtracted after (ATIDAQ's bias).
         """
         u_arr = np.asarray(u, dtype=float)
         flat = u_arr.reshape(-1, self.n_outputs)
         shape = (*u_arr.shape[:-1], self.n_components) if u_arr.ndim else u_arr.shape
         refine = self._refine(refine)
+        before: tuple = ()
+        if temperature is not None or zero is not None:
+            flat, before = self._temperature_inputs(flat, temperature, zero)
         tables = None if exact else self.fast_decoupler()
-        if self.method == "linear":
-            f = flat @ self.matrix.T
-            if rotate and self.rotation is not None:
-                f = f @ self.rotation.T
-            if converged is not None:
-                converged[:] = True
-        elif tables is not None:
-            f = tables.decouple(self.project(flat), rotate=rotate, workers=workers, refine=refine,
-                                converged=converged)
+        if tables is not None:
+            f = tables.decouple(flat, rotate=rotate, workers=workers, refine=refine,
+                                converged=converged, compiled=compiled, before=before)
         else:
-            f = self._exact(self.project(flat), rotate, refine, converged)
+            plan = self.plan(rotate=rotate, refine=refine, temperature=False)
+            if before:
+                plan = replace(plan, steps=(*before, *plan.steps), n_outputs=flat.shape[1])
+            f = _exact_plan(plan, flat, converged)
         return f.reshape(shape)
 
+    def _temperature_inputs(self, flat: np.ndarray, temperature, zero) -> tuple[np.ndarray, tuple]:
+        """The plan's raw inputs (outputs and the temperature) and its temperature step."""
+        terms = self.temperature
+        if terms is None:
+            from ..errors import ConfigError
+
+            raise ConfigError("the model has no temperature terms: temperature and zero are "
+                              "for a model fitted or imported with them")
+        if temperature is None:
+            raise TypeError("decouple: zero is the raw zero of a temperature model: give temperature")
+        t = np.broadcast_to(np.asarray(temperature, dtype=float), flat.shape[:1])
+        if terms.external:
+            flat = np.column_stack([flat, t])
+        else:
+            flat = flat.copy()
+            flat[:, terms.channel] = t
+        return flat, (terms.step(zero),)
+
     def fast_decoupler(self) -> TableDecoupler | None:
-        """The table path of :mod:`fsdecouple.core.decouple`, or None without usable surrogates."""
+        """The table path (:mod:`fsdecouple.core.table_path`), or None without usable tables."""
         if self.method == "linear":
             return None
         if self._tables is None:  # own-load chi (joint fit) on their input's grid, or none
-            self._tables = TableDecoupler.from_chis(
-                self.k, [*self.chi.values(), *self.own.values()], self._exact, self.rotation,
-                self.full_scale_output) or False
+            self._tables = TableDecoupler.from_plan(model_plan(self, temperature=False)) or False
         return self._tables or None
 
     def decoupler(self, refine: int | None = None):
         """A plain-Python function ``(ux, uy, uz) -> (fx, fy, fz)`` for control loops.
 
-        About a microsecond per call: no numpy, no allocation beyond the result
-        tuple.  Same tables and arithmetic as :meth:`decouple` (equal to it within
-        1e-12 N); exact kernel sum for inputs outside the tables and for NaN.
-        ``refine`` as for :meth:`decouple`; a vector that does not settle gives NaN.
+        A few microseconds per call: no numpy, no allocation beyond small lists.  Same
+        plan, tables and arithmetic as :meth:`decouple` (equal to it within 1e-12 N);
+        exact kernel sum for inputs outside the tables and for NaN.  ``refine`` as for
+        :meth:`decouple`; a vector that does not settle gives NaN.
 
         >>> f = model.decoupler()
         >>> fx, fy, fz = f(0.5, 0.01, -0.2)
+
+        A model with temperature terms takes its raw inputs (``n_inputs``: the outputs,
+        then the temperature for a fitted model) and corrects them to T0 first, no zero
+        subtracted (``decouple(..., temperature=, zero=)`` takes one).
         """
         refine = self._refine(refine)
         tables = self.fast_decoupler()
-        if tables is not None and self.projection is None:
-            return tables.one(refine=refine)
-        if tables is not None:  # M > N: v = P u in plain Python, then the tables
-            one, rows = tables.one(refine=refine), [tuple(r) for r in self.projection.tolist()]
-            return lambda *u: one(*(sum(p * x for p, x in zip(r, u, strict=True)) for r in rows))
+        before = () if self.temperature is None else (self.temperature.step(),)
+        if tables is not None:
+            return tables.one(refine=refine, before=before)
+        plan = self.plan(refine=refine)
 
         def exact_one(*u: float) -> tuple[float, ...]:
-            return tuple(self.decouple(list(u), exact=True, refine=refine).tolist())
+            return tuple(_exact_plan(plan, np.array([u], dtype=float))[0].tolist())
 
         return exact_one
 

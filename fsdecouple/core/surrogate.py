@@ -17,6 +17,7 @@ the fast path promises, and a table that missed is left to the exact path.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -89,35 +90,35 @@ class ChiSurrogate:
         return self.intervals / (self.hi - self.lo)
 
     def coefficients(self) -> np.ndarray:
-        """Power-basis coefficients c0..c3 per interval, shape (4, intervals).
+        """Power-basis coefficients c0..c3 per interval, shape (4, intervals) (:func:`hermite`).
 
         On interval i, with s = (u - lo) * inv_step - i in [0, 1):
         chi(u) ~ ((c3 s + c2) s + c1) s + c0.
         """
-        h = (self.hi - self.lo) / self.intervals
-        y0, y1 = self.values[:-1], self.values[1:]
-        d0, d1 = h * self.slopes[:-1], h * self.slopes[1:]
-        return np.stack([y0, d0, 3.0 * (y1 - y0) - 2.0 * d0 - d1, 2.0 * (y0 - y1) + d0 + d1])
+        return self._coefficients
+
+    @cached_property
+    def _coefficients(self) -> np.ndarray:
+        return hermite(self.values, self.slopes, (self.hi - self.lo) / self.intervals)
 
     def covers(self, u: np.ndarray) -> np.ndarray:
         """Where the table serves ``u``: 0 <= (u - lo) * inv_step < intervals.
 
-        The evaluators use this very expression, so a voltage a hair below
-        ``hi`` whose index rounds up to ``intervals`` is left to the exact path
+        The evaluators use this very expression (:func:`cell`), so a voltage a hair
+        below ``hi`` whose index rounds up to ``intervals`` is left to the exact path
         here too.
         """
-        t = (np.asarray(u, dtype=float) - self.lo) * self.inv_step
-        return (t >= 0) & (t < self.intervals)
+        return cell(np.asarray(u, dtype=float), self.lo, self.inv_step, self.intervals)[2]
 
-    def __call__(self, u: np.ndarray) -> np.ndarray:
-        """Surrogate chi [V] at prime voltages ``u`` [V] the table covers; NaN elsewhere."""
-        u = np.asarray(u, dtype=float)
-        c = self.coefficients()
-        t = (u - self.lo) * self.inv_step
-        inside = self.covers(u)
-        i = np.where(inside, t, 0).astype(np.intp)
-        s = t - i
-        out = ((c[3, i] * s + c[2, i]) * s + c[1, i]) * s + c[0, i]
+    def __call__(self, u: np.ndarray, dtype=np.float64) -> np.ndarray:
+        """Surrogate chi [V] at prime voltages ``u`` [V] the table covers; NaN elsewhere.
+
+        ``dtype``: the arithmetic's precision (float32: as an exported float header).
+        """
+        u = np.asarray(u, dtype=dtype)
+        c = self.coefficients().astype(dtype)
+        i, s, inside = cell(u, dtype(self.lo), dtype(self.inv_step), self.intervals)
+        out = horner(c[0, i], c[1, i], c[2, i], c[3, i], s)
         return np.where(inside, out, np.nan)
 
     def to_dict(self) -> dict[str, Any]:
@@ -142,6 +143,34 @@ class ChiSurrogate:
         if values.shape != (n + 1,) or slopes.shape != (n + 1,) or not hi > lo:
             raise ValueError("surrogate table does not match its interval count")
         return cls(lo, hi, values, slopes, float(d["max_error"]), int(d["checks_per_interval"]))
+
+
+def hermite(values: np.ndarray, slopes: np.ndarray, h: float) -> np.ndarray:
+    """Power-basis coefficients c0..c3 (4, n) of the cubic Hermite interpolant of ``values``
+    and ``slopes`` at n + 1 knots a step ``h`` apart: the one definition of a table."""
+    y0, y1 = values[:-1], values[1:]
+    d0, d1 = h * slopes[:-1], h * slopes[1:]
+    return np.stack([y0, d0, 3.0 * (y1 - y0) - 2.0 * d0 - d1, 2.0 * (y0 - y1) + d0 + d1])
+
+
+def horner(c0, c1, c2, c3, s):
+    """A table's cubic at offset ``s`` in [0, 1) of its interval: ((c3 s + c2) s + c1) s + c0.
+
+    Scalars (the one-vector path; compiled by numba for the table kernel) or arrays; no
+    fused multiply-add anywhere, so every evaluator rounds alike.
+    """
+    return ((c3 * s + c2) * s + c1) * s + c0
+
+
+def cell(x: np.ndarray, lo, inv_step, intervals: int):
+    """``(interval i, offset s, inside)`` of ``x`` in a table: t = (x - lo) * inv_step,
+    i = int(t), s = t - i; inside where 0 <= t < intervals (False for NaN).  Outside,
+    i = 0, for the caller to replace."""
+    t = (x - lo) * inv_step
+    with np.errstate(invalid="ignore"):
+        inside = (t >= 0) & (t < intervals)
+    i = np.where(inside, t, 0).astype(np.intp)
+    return i, t - i.astype(t.dtype), inside
 
 
 def check_points(lo: float, hi: float, intervals: int, per_interval: int) -> np.ndarray:

@@ -1,5 +1,8 @@
 """Eq. (11) from the chi tables, compiled: one pass over the rows, everything in registers.
 
+The table path (:mod:`fsdecouple.core.table_path`) calls it for large calls only: numba
+and scipy take ~0.4 s to import.
+
     f_a = u_a / k_a + h_a(u_a) + sum_{b != a} g_ab(p_b),   g_ab = -chi_ab / k_a,   eq. (11)
 
 with h_a = -chi_aa / k_a the own-load chi of a joint fit (0 without one; always at the
@@ -8,12 +11,14 @@ p_a <- k_a f_a (second-order refinement, eqs. 5-6; :mod:`fsdecouple.core.decoupl
 A row's table index per input b is t_b = (p_b - lo_b) / step_b, its interval int(t_b)
 and its offset s_b = t_b - int(t_b); each g_ab is the cubic ((c3 s + c2) s + c1) s + c0 of that interval.
 
-The arithmetic is the plain-Python evaluator's (:meth:`TableDecoupler.one`)
-operation for operation, in the same order and without fused multiply-adds
-(numba leaves LLVM's contraction off unless ``fastmath`` is asked), so both give
-the same bits; tests hold them to it.  numba is the standard compiler for numeric
-loops in Python: numpy alone needs one pass over memory per operation, seven per
-chi, and ran six-axis sensors at about half this speed.
+The arithmetic is the numpy kernel's (:func:`fsdecouple.core.table_path.eq11_rows`) and
+the plain-Python evaluator's (:meth:`TableDecoupler.one`), with the same
+:func:`~fsdecouple.core.surrogate.horner` step compiled, operation for operation, in
+the same order and without fused multiply-adds (numba leaves LLVM's contraction off
+unless ``fastmath`` is asked), so all three give the same bits; tests hold them to
+it.  numba is the standard compiler for numeric loops in Python: numpy alone needs
+one pass over memory per operation, seven per chi, and runs at about a third of this
+speed (0.61 against 0.22 us a row, 2 cores).
 """
 
 from __future__ import annotations
@@ -24,6 +29,8 @@ import tempfile
 import numpy as np
 from numba import njit
 from numba.core import config as numba_config
+
+from .surrogate import horner
 
 
 def cache_dir() -> str | None:
@@ -57,6 +64,9 @@ def _compiled(fn):
         return njit(nogil=True, error_model="numpy")(fn)
     finally:
         numba_config.CACHE_DIR = before
+
+
+_horner = _compiled(horner)  # the one definition of the cubic step, compiled
 
 
 @_compiled
@@ -98,15 +108,13 @@ def eq11_rows(u, lo, inv_step, intervals, inv_k, k, step_tol, tab, sum_b, sum_m,
                     base[a] = u[r, a] * inv_k[a]
                     if has_own:
                         i, sa = index[a], s[a]
-                        base[a] += ((own[a, i, 3] * sa + own[a, i, 2]) * sa + own[a, i, 1]) * sa \
-                            + own[a, i, 0]
+                        base[a] += _horner(own[a, i, 0], own[a, i, 1], own[a, i, 2], own[a, i, 3], sa)
             for a in range(dim):
                 fa = base[a]
                 for d in range(fed):
                     b, m = sum_b[a, d], sum_m[a, d]
                     i, sb = index[b], s[b]
-                    fa += ((tab[b, m, i, 3] * sb + tab[b, m, i, 2]) * sb + tab[b, m, i, 1]) * sb \
-                        + tab[b, m, i, 0]
+                    fa += _horner(tab[b, m, i, 0], tab[b, m, i, 1], tab[b, m, i, 2], tab[b, m, i, 3], sb)
                 f[a] = fa
             if step < refine:
                 for a in range(dim):

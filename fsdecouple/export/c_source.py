@@ -2,10 +2,13 @@
 
 :mod:`fsdecouple.export.header` decides every number (tables, ranges, bounds, reference
 vectors) and hands them over as an :class:`~fsdecouple.export.plan.ExportPlan`; this
-module only writes them out.  The generated code mirrors the Python evaluators
-operation for operation (table index ``t = (u - lo) * inv_step``, Horner on the
-power-basis coefficients, the kernel sum as ``(d * d) * -gamma``), so the float
-emulation in ``export.py`` and the compiled header round the same way.
+module only writes them out: the declarations, tables, kernel sums and self-test here,
+the decoupling function's body, the plan's steps, in :mod:`fsdecouple.export.c_function`.
+The generated code mirrors the Python evaluators operation for operation (table index
+``t = (u - lo) * inv_step``, Horner on the power-basis coefficients, eq. (11) as
+:func:`fsdecouple.core.decouple.couple` orders it, the kernel sum as
+``(d * d) * -gamma``), so the float emulation (``export/header.py``) and the
+compiled header round the same way.
 
 Nothing the model file holds is written as C text except numbers and escaped
 string literals (:func:`c_string`): a sensor name cannot end a comment or a
@@ -18,43 +21,20 @@ import math
 
 import numpy as np
 
-from ..core.decouple import REFINE_TOLERANCE
-from ..core.model import FORCE_LIMIT
-from .plan import ChiPlan, ExportPlan
-
-# Status bits above the per-channel range bits (channels 0 .. MAX_CHANNELS - 1).
-MAX_CHANNELS = 16
-BIT_OUTSIDE_TABLE, BIT_INPUT_NOT_FINITE, BIT_NOT_FINITE, BIT_SATURATED = 16, 17, 18, 19
-BIT_NOT_CONVERGED = 20
-
-
-def c_string(text: str) -> str:
-    """``text`` as a C string literal: printable ASCII kept, every other byte octal.
-
-    Octal escapes are always three digits (a hex escape would swallow a following
-    hex digit); ``?`` is escaped so no trigraph can form.
-    """
-    out = []
-    for byte in text.encode("utf-8"):
-        ch = chr(byte)
-        if ch in '"\\?' or not 0x20 <= byte < 0x7F:
-            out.append(f"\\{byte:03o}")
-        else:
-            out.append(ch)
-    return '"' + "".join(out) + '"'
-
-
-def num(x: float) -> str:
-    """A double literal that reads back as exactly ``x`` (shortest round-trip repr)."""
-    x = float(x)
-    if not math.isfinite(x):
-        raise ValueError(f"cannot write {x!r} as a C constant")
-    return repr(x)
-
-
-def numf(x: float) -> str:
-    """A float literal of ``x`` rounded to float32 (its repr reads back as that float)."""
-    return num(float(np.float32(x))) + "f"
+from ..core.plan import Term
+from .c_function import (  # noqa: F401 (the status bits, also for header.py)
+    BIT_INPUT_NOT_FINITE,
+    BIT_NOT_CONVERGED,
+    BIT_NOT_FINITE,
+    BIT_OUTSIDE_TABLE,
+    BIT_SATURATED,
+    MAX_CHANNELS,
+    c_string,
+    decouple_function,
+    num,
+    numf,
+)
+from .plan import ExportPlan
 
 
 def _array(name: str, values, fmt, per_line: int = 4, ctype: str = "double") -> str:
@@ -72,7 +52,7 @@ def render(plan: ExportPlan) -> str:
         parts.append(_kernel(plan, j, chi))
         if chi.table is not None:
             parts.append(_table(plan, j, chi, ctype))
-    parts += [_decouple(plan, ctype), _selftest(plan)]
+    parts += [decouple_function(plan, ctype), _selftest(plan)]
     parts.append(f"#endif /* {P}IMPLEMENTATION */\n\n#ifdef __cplusplus\n}}\n#endif\n"
                  f"#endif /* {P}DECOUPLER_H */\n")
     return "\n".join(parts)
@@ -103,7 +83,7 @@ def _preamble(plan: ExportPlan) -> str:
  * Do not edit: regenerate with `fsdecouple export`.  Model digest, sensor and
  * units are below as {P}MODEL_DIGEST, {P}SENSOR, {P}LOAD_UNIT, {P}OUTPUT_UNIT.
  *
-{_method_note(plan)}{_own_note(plan)}{_projection_note(plan)}\
+{_method_note(plan)}{_own_note(plan)}{_projection_note(plan)}{_temperature_note(plan)}\
  * A rotation to the reference frame, if the model has one, follows.
  *
  * Use: in exactly one C file
@@ -196,16 +176,16 @@ def _implementation_start(plan: ExportPlan) -> str:
     def row(values) -> str:
         return "{" + ", ".join(num(v) for v in values) + "}"
 
-    tables = [(c.lo, c.hi) if c.table is not None else (0.0, 0.0) for c in plan.chis]
+    tables = [(c.table.lo, c.table.hi) if c.table is not None else (0.0, 0.0) for c in plan.chis]
     rotation = np.eye(n) if plan.rotation is None else plan.rotation
     chi = [  # C has no empty arrays: a linear model (no chi) declares none of them
         f"const int {p}chi_axes[{m}][2] = {{{', '.join(f'{{{c.out}, {c.inp}}}' for c in plan.chis)}}};\n",
         f"const double {p}table_range[{m}][2] = {{{', '.join(map(row, tables))}}};\n",
         f"const int {p}table_intervals[{m}] = "
-        f"{{{', '.join(str(0 if c.table is None else c.table.shape[1]) for c in plan.chis)}}};\n",
+        f"{{{', '.join(str(0 if c.table is None else c.table.intervals) for c in plan.chis)}}};\n",
     ] if m else []
     matrix = [] if plan.matrix is None else [
-        f"const double {p}matrix[{n}][{n}] = {{{', '.join(map(row, plan.matrix))}}};\n"]
+        f"const double {p}matrix[{n}][{plan.m}] = {{{', '.join(map(row, plan.matrix))}}};\n"]
     return "".join([
         f"const double {p}full_scale[{n}] = {row(plan.full_scale)};\n",
         f"const double {p}omega_k[{n}] = {row(plan.k)};\n",
@@ -220,7 +200,7 @@ def _implementation_start(plan: ExportPlan) -> str:
 def _chi_declarations(plan: ExportPlan) -> str:
     p, m = plan.prefix, len(plan.chis)
     out = "" if plan.matrix is None else \
-        f"extern const double {p}matrix[{plan.n}][{plan.n}]; /* f = C u, C[a][b] */\n"
+        f"extern const double {p}matrix[{plan.n}][{plan.m}]; /* f = C u, C[a][b] */\n"
     if m:
         out += (f"extern const int {p}chi_axes[{m}][2];\n"
                 f"extern const double {p}table_range[{m}][2];\n"
@@ -247,7 +227,7 @@ def _method_note(plan: ExportPlan) -> str:
 
 def _extrapolation(plan: ExportPlan) -> str:
     """The header's note on chi beyond its calibrated range (fsdecouple.core.extrapolation)."""
-    if any(getattr(c.exact, "edges", None) is not None for c in plan.chis):
+    if any(getattr(c.chi, "edges", None) is not None for c in plan.chis):
         return (" * Beyond its calibrated input range a chi continues along its tangent at\n"
                 " * the range's edge (the model's `extrapolation: tangent`).\n")
     return ""  # extrapolation: kernel, the kernel sum everywhere
@@ -262,6 +242,19 @@ def _projection_note(plan: ExportPlan) -> str:
             " * range bits b < N_COMPONENTS on v_b; the saturation limits on the raw u.\n")
 
 
+def _temperature_note(plan: ExportPlan) -> str:
+    """The header's note on the temperature step (core/temperature.py), if the model has one."""
+    step = plan.temperature
+    if step is None:
+        return ""
+    where = (f"u[{step.channel}], after the outputs (one more input)" if step.external
+             else f"u[{step.channel}], one of the outputs (its matrix column is 0)")
+    return (f" * Temperature: u holds the temperature at {where}.  Each output is first\n"
+            f" * corrected to T0 = {step.t0!r}: u_i(T0) = (u_i - b_i (T - T0)) / (1 + g_i (T - T0))\n"
+            " * (the model's temperature terms): u are raw outputs, no zero subtracted.  A\n"
+            " * linear model's zero taken at T_z: f(u, T) - f(u_zero, T_z), ATIDAQ's bias.\n")
+
+
 def _own_note(plan: ExportPlan) -> str:
     """The header's note on own-load chi_aa (a joint fit of rig rows), if the model has them."""
     if not any(c.out == c.inp for c in plan.chis):
@@ -271,9 +264,9 @@ def _own_note(plan: ExportPlan) -> str:
             " * dividing by k_aa, at every refinement step too; chi_axes lists them as {a, a}.\n")
 
 
-def _tangent(chi: ChiPlan) -> str:
+def _tangent(term: Term) -> str:
     """C lines of chi's tangent continuation beyond its calibrated range, as the Python model."""
-    e = getattr(chi.exact, "edges", None)
+    e = getattr(term.chi, "edges", None)
     if e is None:
         return ""
     return (f"    /* tangent continuation beyond the calibrated range [{num(e.lo)}, {num(e.hi)}] */\n"
@@ -281,41 +274,42 @@ def _tangent(chi: ChiPlan) -> str:
             f"    if (u > {num(e.hi)}) return {num(e.value_hi)} + {num(e.slope_hi)} * (u - {num(e.hi)});\n")
 
 
-def _kernel(plan: ExportPlan, j: int, chi: ChiPlan) -> str:
+def _kernel(plan: ExportPlan, j: int, term: Term) -> str:
     """Exact chi j: the kernel sum (eq. 10), continued by its tangents under ``tangent``
     extrapolation; the reference, and the path outside its table."""
-    p = plan.prefix
+    p, c = plan.prefix, term.chi
+    sv = np.asarray(c.support_vectors, dtype=float)
     return (
-        f"/* chi_{chi.out}{chi.inp}: output {chi.out}, input {chi.inp}; {chi.sv.size} support vectors */\n"
-        + _array(f"{p}sv{j}", chi.sv, num)
-        + _array(f"{p}dc{j}", chi.coef, num)
+        f"/* chi_{term.out}{term.inp}: output {term.out}, input {term.inp}; {sv.size} support vectors */\n"
+        + _array(f"{p}sv{j}", sv, num)
+        + _array(f"{p}dc{j}", c.dual_coef, num)
         + f"""static double {p}kernel{j}(double u)
 {{
-{_tangent(chi)}\
+{_tangent(term)}\
     /* eq. (10): output_scale * (sum_i coef_i exp(-gamma (u/input_scale - sv_i)^2) - rho) */
-    const double x = u / {num(chi.in_scale)};
+    const double x = u / {num(c.input_scale)};
     double s = 0.0;
     size_t i;
-    for (i = 0; i < {chi.sv.size}; ++i) {{
+    for (i = 0; i < {sv.size}; ++i) {{
         const double d = x - {p}sv{j}[i];
-        s += {p}dc{j}[i] * exp((d * d) * {num(-chi.gamma)});
+        s += {p}dc{j}[i] * exp((d * d) * {num(-c.gamma)});
     }}
-    return {num(chi.out_scale)} * (s - {num(chi.rho)});
+    return {num(c.output_scale)} * (s - {num(c.rho)});
 }}
 """)
 
 
-def _table(plan: ExportPlan, j: int, chi: ChiPlan, ctype: str) -> str:
-    p = plan.prefix
+def _table(plan: ExportPlan, j: int, term: Term, ctype: str) -> str:
+    p, tab = plan.prefix, term.table
     f = "f" if ctype == "float" else ""
     fmt = numf if ctype == "float" else num
-    lo, inv, n = chi.lo, chi.inv_step, chi.table.shape[1]
+    lo, inv, n = tab.lo, tab.inv_step, tab.intervals
     # the float path decides "inside" in float too; the thresholds are then floats
     lo_s, inv_s = (numf(lo), numf(inv)) if ctype == "float" else (num(lo), num(inv))
     return (
-        f"/* chi_{chi.out}{chi.inp} on {n} uniform intervals of [{num(chi.lo)}, {num(chi.hi)}] "
+        f"/* chi_{term.out}{term.inp} on {n} uniform intervals of [{num(tab.lo)}, {num(tab.hi)}] "
         "[V]: power-basis Hermite coefficients c0..c3 per interval */\n"
-        + _array(f"{p}tab{f}{j}", chi.table.T, fmt, ctype=ctype)
+        + _array(f"{p}tab{f}{j}", tab.coefficients().T, fmt, ctype=ctype)
         + f"""static {ctype} {p}chi{f}{j}({ctype} u, uint32_t *st)
 {{
     const {ctype} t = (u - {lo_s}) * {inv_s};
@@ -329,78 +323,6 @@ def _table(plan: ExportPlan, j: int, chi: ChiPlan, ctype: str) -> str:
     return ({ctype}){p}kernel{j}((double)u);
 }}
 """)
-
-
-def _chi_call(plan: ExportPlan, j: int, ctype: str, arg: str) -> str:
-    chi = plan.chis[j]
-    f = "f" if ctype == "float" else ""
-    if chi.table is None:
-        return f"({ctype}){plan.prefix}kernel{j}((double){arg})" if ctype == "float" \
-            else f"{plan.prefix}kernel{j}({arg})"
-    return f"{plan.prefix}chi{f}{j}({arg}, &st)"
-
-
-def _coupling(plan: ExportPlan, a: int, ctype: str, x: str) -> str:
-    """sum_(b != a) chi_ab(x_b), in the order of the model's chi; a joint fit's own-load
-    chi_aa (fitting/joint.py) always at the measured u_a."""
-    terms = [_chi_call(plan, j, ctype, f"{'u' if c.inp == c.out else x}[{c.inp}]")
-             for j, c in enumerate(plan.chis) if c.out == a]
-    return " + ".join(terms) if terms else ("0.0f" if ctype == "float" else "0.0")
-
-
-def _decouple(plan: ExportPlan, ctype: str) -> str:
-    p, n = plan.prefix, plan.n
-    fmt = numf if ctype == "float" else num
-    y = "u" if plan.projection is None else "y"  # M > N: the raw outputs y, then u = v = P y
-    name = f"{p}decouple_f(const float *{y}, float *f)" if ctype == "float" \
-        else f"{p}decouple(const double *{y}, double *f)"
-    lines = [f"uint32_t {name}", "{", "    uint32_t st = 0;"]
-    if plan.projection is not None:
-        lines.append(f"    {ctype} u[{n}];")
-        lines += [f"    u[{a}] = " + " + ".join(f"{fmt(plan.projection[a][j])} * y[{j}]"
-                                               for j in range(plan.m)) + ";" for a in range(n)]
-    for b in range(n):
-        lo, hi = plan.range_limits[b] if ctype == "double" else plan.range_limits_f[b]
-        lines.append(f"    if (u[{b}] < {fmt(lo)} || u[{b}] > {fmt(hi)}) st |= (uint32_t)1 << {b};")
-    for b, (lo, hi) in enumerate(plan.limits if ctype == "double" else plan.limits_f):
-        if lo is not None:
-            lines.append(f"    if ({y}[{b}] <= {fmt(lo)} || {y}[{b}] >= {fmt(hi)}) "
-                         f"st |= (uint32_t)1 << {BIT_SATURATED};")
-    finite = " || ".join(f"!isfinite({y}[{b}])" for b in range(plan.m))
-    lines.append(f"    if ({finite}) st |= (uint32_t)1 << {BIT_INPUT_NOT_FINITE};")
-    x = "u"
-    if plan.refine > 0:
-        # second-order refinement: K fixed-point steps p_b <- u_b - sum_(c != b) chi_bc(p_c)
-        # on the prime voltages, then eq. (11) with chi evaluated at p
-        lines += [f"    {ctype} p[{n}], q[{n}];", "    int k, b;",
-                  f"    for (b = 0; b < {n}; ++b) p[b] = u[b];",
-                  f"    for (k = 0; k < {plan.refine}; ++k) {{"]
-        lines += [f"        q[{a}] = u[{a}] - ({_coupling(plan, a, ctype, 'p')});" for a in range(n)]
-        lines += [f"        for (b = 0; b < {n}; ++b) p[b] = q[b];", "    }"]
-        x = "p"
-    for a in range(n):
-        if plan.matrix is not None:  # f = C u, products added left to right
-            terms = " + ".join(f"{fmt(plan.matrix[a][b])} * u[{b}]" for b in range(n))
-            lines.append(f"    const {ctype} g{a} = {terms};")
-            continue
-        lines.append(f"    const {ctype} g{a} = (u[{a}] - ({_coupling(plan, a, ctype, x)})) * "
-                     f"{fmt(1.0 / plan.k[a])};")  # eq. (11)
-    for i in range(n):
-        if plan.rotation is None:
-            expr = f"g{i}"
-        else:  # sensor frame -> reference frame
-            expr = " + ".join(f"{fmt(plan.rotation[i][j])} * g{j}" for j in range(n))
-        lines.append(f"    f[{i}] = {expr};")
-    if plan.refine > 0:  # settled, as decouple.settled decides: |k_a g_a - p_a| <= tol * u_FS,a
-        for a in range(n):
-            tol = REFINE_TOLERANCE * abs(plan.k[a]) * plan.full_scale[a]
-            lines.append(f"    if (!(fabs(g{a} * {fmt(plan.k[a])} - p[{a}]) <= {fmt(tol)})) "
-                         f"st |= (uint32_t)1 << {BIT_NOT_CONVERGED};")
-    # apply's not_finite: NaN, infinite, or beyond FORCE_LIMIT x the largest full scale
-    bound = fmt(FORCE_LIMIT * max(abs(v) for v in plan.full_scale))
-    ffinite = " || ".join(f"!(fabs(f[{a}]) <= {bound})" for a in range(n))
-    lines += [f"    if ({ffinite}) st |= (uint32_t)1 << {BIT_NOT_FINITE};", "    return st;", "}", ""]
-    return "\n".join(lines)
 
 
 def _selftest(plan: ExportPlan) -> str:

@@ -26,14 +26,17 @@ from typing import Any
 
 import numpy as np
 
-from ..core.decouple import PROMISE, decouple_exact
+from ..core.decouple import PROMISE, couple, exact
 from ..core.model import FORCE_LIMIT
 from ..core.modelfile import model_to_dict
+from ..core.plan import Term, walk
+from ..core.surrogate import CHECKS_PER_INTERVAL
 from ..errors import ConfigError, FsdecoupleError
 from ..files import atomic_write
-from .c_source import MAX_CHANNELS, render
-from .plan import ChiPlan, ExportPlan, ExportResult
-from .tables import CHECKS_PER_INTERVAL, coarsest_tables, table_bound
+from .c_function import MAX_CHANNELS
+from .c_source import render
+from .plan import ExportPlan, ExportResult
+from .tables import coarsest_tables, table_bound
 
 PRECISIONS = ("double", "float")
 # The double header promises forces within PROMISE of the exact model (a fraction
@@ -86,7 +89,7 @@ def export_header(
     text = render(plan)
     with atomic_write(out, force=force) as fh:
         fh.write(text)
-    names = {f"{c.out}{c.inp}": (None if c.table is None else c.table.shape[1]) for c in plan.chis}
+    names = {f"{c.out}{c.inp}": (None if c.table is None else c.table.intervals) for c in plan.chis}
     return ExportResult(Path(out), precision, prefix, plan.n, names, plan.table_bytes,
                         plan.kernel_bytes, plan.table_max_error,
                         plan.float_max_error if precision == "float" else None, plan.method)
@@ -101,49 +104,28 @@ def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",
         raise ConfigError(f"the model has {n} channels; the status word holds at most {MAX_CHANNELS}")
     settings = model.settings
     doc = _model_document(model)
-    linear = model.method == "linear"  # f = C u: the matrix, no chi and no tables
-    rotation = None if settings.rotation is None else np.asarray(settings.rotation, dtype=float)
     fs = np.asarray(settings.full_scale, dtype=float)
     cal = np.asarray(model.calibrated_range, dtype=float)
     plan = ExportPlan(
-        prefix=prefix, precision=precision, n=n, k=k, chis=[], rotation=rotation,
+        prefix=prefix, precision=precision, plan=model.plan(),
         full_scale=fs, calibrated_range=cal,
         range_limits=np.asarray(model.extrapolation_limits()),  # exactly apply's "extrapolated"
-        limits=_limits(model, limits, n if getattr(model, "projection", None) is None
-                       else model.projection.shape[1]),
-        refine=int(getattr(settings, "refine", 0) or 0),
+        limits=_limits(model, limits, model.n_inputs),
         digest=str(doc["integrity"]["digest"]), format_version=int(doc["format_version"]),
         sensor=str(settings.sensor), load_unit=settings.load_unit,
         output_unit=settings.output_unit, version=version, model=model,
-        matrix=np.asarray(model.matrix, dtype=float) if linear else None,
-        projection=getattr(model, "projection", None),
     )
-    if getattr(model, "imported", False):  # a factory matrix (data/ati_cal.py): v = P u are its
-        plan.matrix = np.eye(n)  # forces, so f = I v, and its range is checked on them
-    if getattr(model, "temperature", None) is not None:
-        raise ConfigError("the model corrects its outputs for temperature (core/temperature.py); "
-                          "the C header has no temperature input yet: export it as a .cal "
-                          "(ATIDAQ compensates) or apply it in Python")
-    if linear:
-        plan.refine = 0  # a linear model has no refinement (model.decouple ignores it)
-    # own chi_aa last
-    chis = [] if linear else [*model.chi.values(), *getattr(model, "own", {}).values()]
-    for c in chis:
-        plan.chis.append(ChiPlan(c.output_axis, c.input_axis, float(c.gamma),
-                                 np.asarray(c.support_vectors, float), np.asarray(c.dual_coef, float),
-                                 float(c.rho), float(c.input_scale), float(c.output_scale), c))
     if max_error is None:
         u_fs = np.abs(k) * fs  # the promise is a fraction of each output's full scale
-        terms = plan.terms_per_output
-        for cp in plan.chis:
-            c, s = cp.exact, cp.exact.surrogate
-            if s is not None and s.max_error <= PROMISE / (2 * terms) * u_fs[c.output_axis]:
-                cp.lo, cp.hi, cp.table, cp.table_error = s.lo, s.hi, s.coefficients(), s.max_error
-    elif chis:
+        share = PROMISE / (2 * plan.terms_per_output)
+        plan.plan = plan.plan.with_terms(
+            [t if t.table is not None and t.table.max_error <= share * u_fs[t.out]
+             else Term(t.out, t.inp, t.chi, None) for t in plan.chis])
+    elif plan.chis:
         # float: the measured bound is FLOAT_SAFETY x (table + rounding error), so the
         # tables get a quarter, leaving the rest of E for float rounding
         share = max_error / (2 * FLOAT_SAFETY) if precision == "float" else max_error
-        coarsest_tables(plan, model, share, max_error)
+        coarsest_tables(plan, share, max_error)
     plan.table_max_error = float(np.max(table_bound(plan)))
     if max_error is not None and plan.table_max_error > max_error:
         raise FsdecoupleError(f"--max-error {max_error:g}: the tables reach only "
@@ -198,69 +180,28 @@ def _limits(model, limits, n: int) -> list:
 
 
 def exact_forces(plan: ExportPlan, u: np.ndarray) -> np.ndarray:
-    """Forces [N] by eq. (11) with every chi as its kernel sum (the C's reference).
-
-    Without refinement steps this is ``model.decouple(u, exact=True)`` itself;
-    with them (``settings.refine``), the fixed point on the prime voltages first.
-    """
-    u = np.asarray(u, dtype=float).reshape(-1, plan.m)
-    if plan.refine == 0:
-        return plan.model.decouple(u, exact=True)
-    u = plan.project(u)  # M > N: v = P u, then eq. (11) on v
-    x = u
-    for _ in range(plan.refine):  # p_b <- u_b - sum_(c != b) chi_bc(p_c) - chi_bb(u_b)
-        x = u - _coupling(plan, x, lambda c, v: c.exact(v), u=u)
-    g = (u - _coupling(plan, x, lambda c, v: c.exact(v), u=u)) * (1.0 / plan.k)
-    return g if plan.rotation is None else g @ plan.rotation.T
+    """Forces [N] of the header's plan with every chi exact (the C's reference): the
+    model's own exact evaluator (:func:`fsdecouple.core.decouple.exact`); a row whose
+    refinement does not settle is NaN, as ``model.decouple`` gives it."""
+    return exact(plan.plan, np.asarray(u, dtype=float).reshape(-1, plan.m))
 
 
-def _coupling(plan: ExportPlan, x: np.ndarray, chi, dtype=float, u=None) -> np.ndarray:
-    """sum_b chi_ab(x_b) per output a; an own-load chi_aa at ``u`` (the measured outputs)."""
-    e = np.zeros(x.shape, dtype=dtype)
-    for c in plan.chis:
-        e[:, c.out] += chi(c, (x if u is None or c.out != c.inp else u)[:, c.inp])
-    return e
+def _float_chi(term: Term, v: np.ndarray) -> np.ndarray:
+    """One chi as ``fsd_decouple_f`` evaluates it: the table in float inside it, else the
+    kernel sum in double, rounded to float."""
+    out = term.chi(v.astype(float)).astype(np.float32)
+    if term.table is None:
+        return out
+    tab = term.table(v, dtype=np.float32)
+    return np.where(np.isnan(tab), out, tab)
 
 
 def emulate_float(plan: ExportPlan, u: np.ndarray) -> np.ndarray:
-    """``fsd_decouple_f`` in numpy float32, operation for operation as export_c writes it."""
-    f32 = np.float32
-    u = plan.project(np.asarray(u, dtype=f32).reshape(-1, plan.m), f32)  # v = P u in float
-
-    def chi(c: ChiPlan, v: np.ndarray) -> np.ndarray:
-        out = c.exact(v.astype(float)).astype(f32)  # kernel sum in double, as the C
-        if c.table is None:
-            return out
-        coef = c.table.astype(f32)
-        t = (v - f32(c.lo)) * f32(c.inv_step)
-        inside = (t >= 0) & (t < f32(c.table.shape[1]))
-        i = np.where(inside, t, 0).astype(np.intp)
-        s = t - i.astype(f32)
-        tab = ((coef[3, i] * s + coef[2, i]) * s + coef[1, i]) * s + coef[0, i]
-        return np.where(inside, tab, out)
-
-    def coupling(x):  # the C adds each output's chi left to right, in the model's order
-        return _coupling(plan, x, chi, f32, u=u)
-
-    if plan.matrix is not None:  # f = C u
-        g = _products(plan.matrix.astype(f32), u)
-    else:
-        x = u
-        for _ in range(plan.refine):
-            x = u - coupling(x)
-        g = (u - coupling(x)) * (1.0 / plan.k).astype(f32)
-    return g if plan.rotation is None else _products(plan.rotation.astype(f32), g)
-
-
-def _products(m: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """m @ v for each row of ``v``, each row's products added left to right, as the C."""
-    out = np.empty_like(v)
-    for i in range(m.shape[0]):
-        acc = m[i, 0] * v[:, 0]
-        for j in range(1, m.shape[1]):
-            acc = acc + m[i, j] * v[:, j]
-        out[:, i] = acc
-    return out
+    """``fsd_decouple_f`` in numpy float32, operation for operation as c_source writes it:
+    the header's plan walked in float (:func:`fsdecouple.core.plan.walk`), eq. (11) by
+    :func:`fsdecouple.core.decouple.couple` with each chi as :func:`_float_chi`."""
+    return walk(plan.plan, np.asarray(u, dtype=np.float32), lambda step, x: couple(
+        step, x, _float_chi)[0], dtype=np.float32, evaluator="the float emulation")
 
 
 def float_bound(plan: ExportPlan, seed: int = 0) -> float:
@@ -272,13 +213,13 @@ def float_bound(plan: ExportPlan, seed: int = 0) -> float:
     """
     rng = np.random.default_rng(seed)
     lo, hi = plan.calibrated_range.T
-    m = max([20_001] + [2 * CHECKS_PER_INTERVAL * c.table.shape[1] for c in plan.chis
+    m = max([20_001] + [2 * CHECKS_PER_INTERVAL * c.table.intervals for c in plan.chis
                         if c.table is not None])
     dense = [np.column_stack([rng.permutation(np.linspace(lo[b], hi[b], m)) for b in range(plan.n)])
              for _ in range(2)]
     corners = np.array(np.meshgrid(*plan.calibrated_range)).reshape(plan.n, -1).T
     u = np.concatenate([*dense, lo + (hi - lo) * rng.random((FLOAT_RANDOM_POINTS, plan.n)), corners])
-    u32 = plan.lift(u).astype(np.float32)  # M > N: outputs whose v = P u spans the range
+    u32 = plan.lift(u, rng).astype(np.float32)  # M > N: outputs whose v = P u spans the range
     u = u32.astype(float)
     err = np.abs(emulate_float(plan, u32).astype(float) - exact_forces(plan, u)) / plan.full_scale
     return FLOAT_SAFETY * float(err.max())
@@ -289,7 +230,7 @@ def float_bound(plan: ExportPlan, seed: int = 0) -> float:
 
 def expected_status(plan: ExportPlan, u: np.ndarray, f: np.ndarray) -> int:
     """The C's status word for one double input ``u`` and its forces ``f``."""
-    from .c_source import (
+    from .c_function import (
         BIT_INPUT_NOT_FINITE,
         BIT_NOT_CONVERGED,
         BIT_NOT_FINITE,
@@ -303,22 +244,20 @@ def expected_status(plan: ExportPlan, u: np.ndarray, f: np.ndarray) -> int:
             st |= 1 << BIT_SATURATED
     if not np.isfinite(u).all():
         st |= 1 << BIT_INPUT_NOT_FINITE
-    u = plan.project(np.asarray(u, dtype=float).reshape(1, -1))[0]  # M > N: v = P u
-    for b in range(plan.n):
-        if u[b] < plan.range_limits[b, 0] or u[b] > plan.range_limits[b, 1]:
-            st |= 1 << b
+    row = np.asarray(u, dtype=float).reshape(1, -1)
+    u = plan.prime(row)[0]  # the outputs eq. (11) acts on (M > N: v = P u)
+    if len(u) == plan.n:
+        for b in range(plan.n):
+            if u[b] < plan.range_limits[b, 0] or u[b] > plan.range_limits[b, 1]:
+                st |= 1 << b
     for c in plan.chis:
-        if c.table is not None:
-            t = (u[c.inp] - c.lo) * c.inv_step
-            if not 0 <= t < c.table.shape[1]:
-                st |= 1 << BIT_OUTSIDE_TABLE
+        if c.table is not None and not c.table.covers(u[c.inp]):
+            st |= 1 << BIT_OUTSIDE_TABLE
     if not (np.abs(f) <= FORCE_LIMIT * np.abs(plan.full_scale).max()).all():
         st |= 1 << BIT_NOT_FINITE  # apply's not_finite: NaN, inf or beyond FORCE_LIMIT x F.S.
     if plan.refine > 0:  # the refinement's settle test, as decouple.settled decides it
         converged = np.empty(1, dtype=bool)
-        decouple_exact(np.asarray(u, dtype=float).reshape(1, -1), plan.k,
-                       [c.exact for c in plan.chis], refine=plan.refine,
-                       full_scale_output=np.abs(plan.k) * plan.full_scale, converged=converged)
+        exact(plan.plan, row, converged)
         if not converged[0]:
             st |= 1 << BIT_NOT_CONVERGED
     return st
@@ -332,7 +271,8 @@ def _selftest(plan: ExportPlan) -> None:
     rows = [mid, *(mid + 0.6 * s * half for s in signs), mid + 0.3 * half * (signs[1] - signs[2])]
     if plan.precision == "double":
         # beyond every table (which reach 25 % of the span past the range): the kernel sums
-        far = [max([c.hi for c in plan.chis if c.table is not None and c.inp == b], default=-np.inf)
+        far = [max([c.table.hi for c in plan.chis if c.table is not None and c.inp == b],
+                   default=-np.inf)
                for b in range(plan.n)]
         rows.append(np.maximum(hi + 0.6 * (hi - lo), np.asarray(far) + 0.1 * (hi - lo)))
     u = plan.lift(np.array(rows))  # M > N: outputs whose v = P u are these rows

@@ -1,56 +1,38 @@
-"""What the C header holds: the plan that ``export/header.py`` decides and checks and
-``export/c_source.py`` writes out, and what an export returns."""
+"""What the C header holds: the model's decoupling plan with the header's tables, which
+``export/header.py`` decides and checks and ``export/c_source.py`` writes out, and what an
+export returns."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from itertools import takewhile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..core.model import RANGE_MARGIN
+from ..core.plan import Couple, Linear, Plan, Project, Rotate, TemperatureCorrection, Term, walk
 from ..errors import printable
 
 
 @dataclass
-class ChiPlan:
-    """One chi_ab as the header holds it: kernel sum, and table (4, n) or None."""
-
-    out: int
-    inp: int
-    gamma: float
-    sv: np.ndarray
-    coef: np.ndarray
-    rho: float
-    in_scale: float
-    out_scale: float
-    exact: Any  # the model's Chi: exact kernel sum [V] of prime voltages [V]
-    lo: float = 0.0
-    hi: float = 0.0
-    table: np.ndarray | None = None  # power-basis coefficients c0..c3 per interval
-    table_error: float = 0.0  # measured max |table - kernel sum| [V]
-
-    @property
-    def inv_step(self) -> float:
-        return self.table.shape[1] / (self.hi - self.lo)  # as ChiSurrogate.inv_step
-
-
-@dataclass
 class ExportPlan:
-    """Everything the header holds; see :func:`export_header`."""
+    """Everything the header holds; see :func:`export_header`.
+
+    ``plan`` is the model's decoupling plan (:mod:`fsdecouple.core.plan`) with the
+    header's tables in its terms (each a :class:`~fsdecouple.core.surrogate.ChiSurrogate`,
+    or None for a kernel sum only): what the C text, the float emulation and the exact
+    reference all evaluate.
+    """
 
     prefix: str
     precision: str
-    n: int
-    k: np.ndarray
-    chis: list[ChiPlan]
-    rotation: np.ndarray | None
+    plan: Plan
     full_scale: np.ndarray
     calibrated_range: np.ndarray
     range_limits: np.ndarray  # apply's extrapolation thresholds, (n, 2)
     limits: list  # (lo, hi) or (None, None) per channel: saturation
-    refine: int
     digest: str
     format_version: int
     sensor: str
@@ -67,37 +49,85 @@ class ExportPlan:
     selftest_tol: np.ndarray | None = None
     selftest_status: list = field(default_factory=list)
     selftest_note: str = ""
-    model: Any = None  # the model exported: the reference of every check
-    projection: np.ndarray | None = None  # M > N outputs: v = P u first (fitting/gauges.py)
-    matrix: np.ndarray | None = None  # a linear model's f = C u: no chi, no tables
+    model: Any = None  # the model exported
+
+    @property
+    def n(self) -> int:
+        return self.plan.n_components
+
+    @property
+    def m(self) -> int:
+        """Outputs the function takes: N, or M > N with a projection."""
+        return self.plan.n_outputs
+
+    @property
+    def chis(self) -> list[Term]:
+        """The chi of eq. (11), in the plan's order (own-load chi_aa last)."""
+        return list(self.plan.terms)
+
+    @property
+    def k(self) -> np.ndarray:
+        return np.asarray(self.model.k, dtype=float)
+
+    @property
+    def refine(self) -> int:
+        c = self.plan.couple
+        return 0 if c is None else c.refine
+
+    def _matrix(self, kind) -> np.ndarray | None:
+        step = self.plan.step(kind)
+        return None if step is None else step.matrix
+
+    @property
+    def rotation(self) -> np.ndarray | None:
+        return self._matrix(Rotate)
+
+    @property
+    def projection(self) -> np.ndarray | None:
+        return self._matrix(Project)
+
+    @property
+    def matrix(self) -> np.ndarray | None:
+        """A linear model's f = C u: no chi, no tables."""
+        return self._matrix(Linear)
 
     @property
     def method(self) -> str:
         return "svr" if self.matrix is None else "linear"
 
     @property
-    def m(self) -> int:
-        """Outputs the function takes: N, or M > N with a projection."""
-        return self.n if self.projection is None else self.projection.shape[1]
+    def temperature(self) -> TemperatureCorrection | None:
+        return self.plan.step(TemperatureCorrection)
 
-    def lift(self, v: np.ndarray) -> np.ndarray:
-        """Outputs u (rows, M) whose v = P u is ``v`` (rows, N): u = P^+ v; v itself for M = N."""
+    def lift(self, v: np.ndarray, rng=None) -> np.ndarray:
+        """Inputs u (rows, m) whose v = P u is ``v`` (rows, N): u = P^+ v; v itself for M = N.
+
+        A temperature model: the temperature set to T0 + dt, dt cycling over the calibrated
+        span's half-width each side (random with ``rng``; 0.05 |T0| or 1 without a span),
+        and the outputs made raw at that temperature, so the corrected ones are ``v``'s.
+        """
         v = np.asarray(v, dtype=float)
-        return v if self.projection is None else v @ np.linalg.pinv(self.projection).T
-
-    def project(self, u: np.ndarray, dtype=float) -> np.ndarray:
-        """v = P u as the C computes it: left to right, in ``dtype``; u itself for M = N."""
-        u = np.asarray(u, dtype=dtype)
-        if self.projection is None:
+        u = v if self.projection is None else v @ np.linalg.pinv(self.projection).T
+        step = self.temperature
+        if step is None:
             return u
-        p = self.projection.astype(dtype)
-        v = np.empty((len(u), self.n), dtype=dtype)
-        for a in range(self.n):
-            acc = p[a, 0] * u[:, 0]
-            for j in range(1, self.m):
-                acc = acc + p[a, j] * u[:, j]
-            v[:, a] = acc
-        return v
+        terms = self.model.temperature
+        half = (terms.span[1] - terms.span[0]) / 2 if terms.span is not None else \
+            0.05 * abs(step.t0) or 1.0
+        half = half or 1.0
+        dt = (rng.uniform(-1.5, 1.5, len(u)) if rng is not None
+              else np.resize([0.0, 1.0, -1.0, 1.5, -0.5], len(u))) * half
+        x = np.insert(u, step.channel, 0.0, axis=1) if step.external else u.copy()
+        x = x * (1.0 + step.g * dt[:, None]) + step.b * dt[:, None]  # u_i(T) of u_i(T0)
+        x[:, step.channel] = step.t0 + dt
+        return x
+
+    def prime(self, u: np.ndarray) -> np.ndarray:
+        """The outputs eq. (11) (or f = C u) acts on: the plan's steps before it, in double."""
+        head = Plan(tuple(takewhile(lambda s: not isinstance(s, Couple | Linear), self.plan.steps)),
+                    self.m, self.m)
+        x = walk(head, u, None)
+        return x
 
     @property
     def terms_per_output(self) -> int:
@@ -107,11 +137,11 @@ class ExportPlan:
     @property
     def table_bytes(self) -> int:
         size = 4 if self.precision == "float" else 8
-        return sum(c.table.size * size for c in self.chis if c.table is not None)
+        return sum(4 * c.table.intervals * size for c in self.chis if c.table is not None)
 
     @property
     def kernel_bytes(self) -> int:
-        return sum(16 * c.sv.size for c in self.chis)
+        return sum(16 * c.chi.support_vectors.size for c in self.chis)
 
 
 @dataclass

@@ -25,18 +25,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import pyarrow as pa
 import pyarrow.compute as pc
 
 from ..axes import FORCE_COLUMNS, VOLTAGE_COLUMNS
 from ..config import Settings
 from ..core.intervals import half_widths, interval_names, with_intervals
 from ..core.model import FORCE_LIMIT, CouplingErrorModel
+from ..core.table_path import COMPILED_BYTES, COMPILED_ROWS
 from ..data.csv_text import HEADER_ROW, require_columns
 from ..data.zero import tare_offsets
 from ..errors import InputError, where
 from ..files import atomic_write, refuse_overwriting_input
 from ..units import LOAD_UNITS, load_factor
+from .arrow import numbers, strings
 from .columns import Dropped, kept_fields, passed_columns
 from .outputs import log_outputs
 from .reader import Block, LogFile, is_parquet
@@ -62,7 +63,7 @@ STATUSES = {
     "not_converged": "the model's second-order refinement (refine: K) did not settle "
                      "for this row (decouple.REFINE_TOLERANCE): no forces",
 }
-STATUS_NAMES = pa.array(list(STATUSES), pa.string())
+STATUS_NAMES = strings(STATUSES)
 OK_, EXTRAPOLATED_, SATURATED_, MISSING_, TRUNCATED_, NOT_FINITE_, NOT_CONVERGED_ = range(
     len(STATUSES))
 
@@ -250,16 +251,18 @@ class RowRules:
 
 
 def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarray,
-                  rules: RowRules, *, truncated: bool = False):
+                  rules: RowRules, *, truncated: bool = False, compiled: bool | None = None):
     """Eq. (11) and a status per row: ``(forces, status code, no-forces mask)``.
 
-    ``raw``: outputs as read (after ``scale:``); ``offsets``: the zero subtracted.
+    ``raw``: outputs as read (after ``scale:``); ``offsets``: the zero subtracted;
+    ``compiled``: the table path's compiled kernel (a long log), as ``model.decouple``.
     The one place that decides a row's status (:data:`STATUSES`), for ``apply``'s
     blocks and for :func:`fsdecouple.logs.frame.decouple_frame` alike.
     """
-    u = model.zero_corrected(raw, offsets)  # temperature terms first, if any
+    u = model.zero_corrected(raw, offsets)  # the plan's temperature step, if any
     code = np.zeros(len(u), dtype=np.int8)  # index into STATUSES
     empty = np.isnan(u).any(axis=1)
+    terms = model.temperature
     code[empty] = MISSING_
     if truncated:
         # a writer that crashed mid-line: the fields may look complete but the last
@@ -268,8 +271,15 @@ def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarra
         code[:] = TRUNCATED_
     converged = np.empty(len(u), dtype=bool)
     with np.errstate(over="ignore", invalid="ignore"):
-        f = model.decouple(np.where(empty[:, None], 0.0, u) if empty.any() else u,
-                           workers=1, converged=converged)
+        if terms is None:
+            f = model.decouple(np.where(empty[:, None], 0.0, u) if empty.any() else u,
+                               workers=1, converged=converged, compiled=compiled)
+        else:  # raw outputs, their temperature and the zero: the plan's first step
+            x = np.where(empty[:, None], 0.0, raw) if empty.any() else raw
+            t = x[:, terms.channel]
+            f = model.decouple(x[:, :model.n_outputs], workers=1, converged=converged,
+                               compiled=compiled, temperature=t,
+                               zero=offsets if np.any(offsets) else None)
         unsettled = ~converged & ~empty
         code[unsettled] = NOT_CONVERGED_
         empty |= unsettled
@@ -280,6 +290,8 @@ def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarra
         empty |= huge
         x = u if model.projection is None else model.project(u)  # M > N: the limits are v's
         outside = ((x < rules.lo) | (x > rules.hi)).any(axis=1) & ~empty
+        if terms is not None:  # beyond the calibrated temperatures
+            outside |= terms.outside(raw[:, terms.channel]) & ~empty
         # the limits are the ADC's or amplifier's, so they bound the raw values
         saturated = ((raw <= rules.sat_lo) | (raw >= rules.sat_hi)).any(axis=1) & ~empty
     code[outside] = EXTRAPOLATED_
@@ -340,6 +352,8 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
     rows = RowRules(*model.extrapolation_limits().T, sat_lo, sat_hi)
     # blocks in flight bound the memory (~60 MB each), so not every core of a big box
     workers = workers or min(MAX_WORKERS, os.cpu_count() or 1)
+    # a long log (or a pipe) pays back the compiled kernel's import (core/table_path.py)
+    compiled = log.total is None or log.total >= (COMPILED_ROWS if log.parquet else COMPILED_BYTES)
 
     with atomic_write(out, "wb", force=force) as fh:
         if is_parquet(out):
@@ -358,7 +372,8 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
             # GIL, so blocks overlap on the cores while the main thread writes
             block = job()
             f, code, empty = decouple_rows(model, block.u * scale, summary.offsets, rows,
-                                           truncated=block.truncated)
+                                           truncated=block.truncated,
+                                           compiled=compiled)
             if interval is not None:
                 f = with_intervals(model, f, interval, block.u * scale - summary.offsets)
             if to_unit != 1.0:
@@ -366,7 +381,7 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
             counts = np.bincount(code, minlength=len(STATUSES))
             first = np.flatnonzero(code == MISSING_)[:10] + block.first_row if counts[MISSING_] \
                 else ()
-            status = pc.take(STATUS_NAMES, pa.array(code))
+            status = pc.take(STATUS_NAMES, numbers(code))
             return len(block), counts, first, block.done, block.total, \
                 sink.encode(block, f, empty, (status,))
 

@@ -33,6 +33,7 @@ from ..config import Settings
 from ..data.csv_text import HEADER_ROW, MAX_HEADER_CHARS, MISSING_CELLS, read_header, require_utf8, to_numbers
 from ..errors import InputError, excerpt, printable, where
 from ..files import open_input, reading
+from .arrow import column_floats
 from .columns import kept_fields, kept_lines
 
 BLOCK_BYTES = 4 << 20  # ~100 K rows of a 4-column log; a block in flight costs ~15x this
@@ -74,13 +75,6 @@ class Block:
 
 
 # --- reading ------------------------------------------------------------------
-
-
-def _column_floats(col: pa.ChunkedArray | pa.Array) -> np.ndarray:
-    col = col.cast(pa.float64())
-    if isinstance(col, pa.ChunkedArray):
-        col = col.combine_chunks()
-    return col.to_numpy(zero_copy_only=False)  # nulls become NaN
 
 
 @dataclass
@@ -154,7 +148,7 @@ class LogFile:
         self._fh = None
         self.total: int | None = None
         if self.parquet:
-            self.header = parquet_header(self.path)
+            self.header, self.total = parquet_header(self.path)
             self.header_line, self.eol = b"", b"\n"
             return
         with reading(self.path):
@@ -256,7 +250,7 @@ class CsvParser:
                                 convert_options=self.float_opts)
         except pa.ArrowInvalid:  # short or long rows, junk, an open quote: look closer
             return self.exact(chunk)
-        u = np.column_stack([_column_floats(tab.column(k)) for k in range(len(self.index))])
+        u = np.column_stack([column_floats(tab.column(k)) for k in range(len(self.index))])
         # pyarrow skips blank lines, but each is a row of the log: fewer rows than lines
         if u.shape[0] != chunk.rows or np.isinf(u).any():
             return self.exact(chunk)
@@ -420,7 +414,7 @@ def parquet_blocks(path: Path, names: list[str], settings: Settings, *,
                 cols.append(to_numbers(col.fill_null("").to_pylist(), path, n, row, settings.decimal,
                                        allow_missing=True))
             elif pa.types.is_integer(col.type) or pa.types.is_floating(col.type):
-                cols.append(_column_floats(col))
+                cols.append(column_floats(col))
                 inf = np.flatnonzero(np.isinf(cols[-1]))
                 if inf.size:  # as in a CSV log: an infinite voltage is no reading
                     raise InputError(f"{where(path, row + int(inf[0]), n)}: is "
@@ -433,12 +427,14 @@ def parquet_blocks(path: Path, names: list[str], settings: Settings, *,
         row += len(table)
 
 
-def parquet_header(path: Path) -> list[str]:
+def parquet_header(path: Path) -> tuple[list[str], int]:
+    """The column names of a Parquet log, and its rows (at least 1)."""
     try:
         if not stat.S_ISREG(os.stat(path).st_mode):  # a FIFO would block; its footer comes first
             raise InputError(f"{printable(path)}: a Parquet log must be a regular file "
                              "(its footer is read first), not a pipe or device")
-        return list(pq.read_schema(path).names)
+        with pq.ParquetFile(path) as pf:
+            return list(pf.schema_arrow.names), max(1, pf.metadata.num_rows)
     except FileNotFoundError:
         raise InputError(f"{path}: file not found") from None
     except (pa.ArrowInvalid, OSError) as err:

@@ -11,13 +11,13 @@ import pyarrow.csv as pcsv
 import pyarrow.parquet as pq
 
 from ..axes import FORCE_COLUMNS
+from .arrow import binary, numbers
 from .reader import Block
 
 
 def force_arrays(f: np.ndarray, empty: np.ndarray) -> list[pa.Array]:
     """Forces (n, N) as Arrow doubles, one array a column, null where ``empty``."""
-    mask = empty if empty.any() else None
-    return [pa.array(f[:, k], pa.float64(), mask=mask) for k in range(f.shape[1])]
+    return [numbers(f[:, k].astype(np.float64), empty) for k in range(f.shape[1])]
 
 
 def force_decimals(full_scale, budget: float = 1e-10) -> int:
@@ -76,11 +76,11 @@ class CsvSink:
         if block.lines is not None:
             parts = [a.cast(pa.binary()) for a in (*text, *extra)]
             out = pc.binary_join_element_wise(
-                block.lines, *parts, self.sep.encode(), null_handling="replace",
+                block.lines, *parts, binary(self.sep.encode()), null_handling="replace",
                 null_replacement=b"",
             )
             if not block.joined:
-                out = pc.binary_join_element_wise(out, b"", b"\n")
+                out = pc.binary_join_element_wise(out, binary(b""), binary(b"\n"))
             offsets = np.frombuffer(out.buffers()[1], np.int32)[out.offset:out.offset + len(out) + 1]
             data = memoryview(out.buffers()[2])[offsets[0]:offsets[-1]]
             return [data, b"\n"] if block.joined else [data]

@@ -119,17 +119,22 @@ def test_fast_decouple_equals_exact_in_range(model):
     np.testing.assert_array_less(np.abs(fast - exact) * np.abs(model.k), BOUND_V)
 
 
-def test_fast_decouple_does_not_depend_on_blocks_or_threads(model):
+def test_fast_decouple_does_not_depend_on_blocks_threads_or_compiler(model):
+    """numpy and the compiled kernel (numba) run the same operations in the same order."""
     u = in_range_voltages(model, 100_003)
+    u[::101, 1] = 9.0  # outside a table: the exact path in both
     fd = model.fast_decoupler()
-    ref = fd.decouple(u, workers=1)
+    ref = fd.decouple(u, workers=1, compiled=False)
     np.testing.assert_array_equal(fd.decouple(u, workers=2, block_rows=997), ref)
+    for k in (0, 2):
+        np.testing.assert_array_equal(fd.decouple(u, refine=k, compiled=True),
+                                      fd.decouple(u, refine=k, compiled=False))
     np.testing.assert_array_equal(model.decouple(u[:5]), ref[:5])
 
 
 def test_small_calls_are_bit_identical_to_the_block_path(model):
     """Up to SMALL_ROWS rows go row by row (fast for one vector); same bits as a big call."""
-    from fsdecouple.core.decouple import SMALL_ROWS
+    from fsdecouple.core.table_path import SMALL_ROWS
 
     u = in_range_voltages(model, 200, seed=11)
     u[::9, 2] = 7.5  # outside a table: exact in both
@@ -321,19 +326,27 @@ def test_apply_crlf_blank_lines_and_missing(model, tmp_path):
     np.testing.assert_array_equal(got, np.round(model.decouple(u), decimals))
 
 
-def test_a_control_loop_loads_numpy_only(model, tmp_path):
-    """Loading a model and decoupling needs neither pandas, libsvm, scipy nor pyarrow."""
+HEAVY = ("fsdecouple.fitting", "libsvm", "pandas", "scipy", "matplotlib", "numba", "sklearn")
+
+
+@pytest.mark.parametrize("load", ["import fsdecouple\nload = fsdecouple.load_model",
+                                  "from fsdecouple.core.modelfile import load_model as load"])
+def test_a_control_loop_loads_numpy_only(model, tmp_path, load):
+    """Loading a model and decoupling (an array, a small call and the one-vector function)
+    in a fresh interpreter loads none of the fitting stack, nor numba (large calls only)."""
     import subprocess
     import sys
 
     path = tmp_path / "m.json"
     save_model(model, path)
     code = (
-        "import sys, fsdecouple\n"
-        f"m = fsdecouple.load_model({str(path)!r})\n"
+        f"import sys\n{load}\n"
+        f"m = load({str(path)!r})\n"
+        "r = m.calibrated_range\n"
         "f = m.decoupler()(0.1, 0.0, -0.1), m.decouple([[0.1, 0.0, -0.1]])\n"
-        "print(sorted(n for n in ('pandas', 'libsvm', 'scipy', 'pyarrow', 'matplotlib')"
-        " if n in sys.modules))\n"
+        "f = m.decouple([[0.1, 0.0, -0.1]] * 5000), m.decouple([[0.1, 0.0, 7.0]] * 50, exact=True)\n"
+        f"print(sorted(n for n in sys.modules if n.split('.')[0] in {HEAVY!r} or any("
+        f"n.startswith(h + '.') or n == h for h in {HEAVY!r})))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"

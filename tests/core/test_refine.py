@@ -13,7 +13,7 @@ from conftest import EXACT_TOL, SAMPLE, TABLE_TOL, eq11_from_file, invoke
 from fsdecouple import load_config, load_model
 from fsdecouple.axes import NamedChi
 from fsdecouple.config import Settings, settings_from_dict
-from fsdecouple.core import decouple as decouple_module
+from fsdecouple.core import plan as plan_module
 from fsdecouple.core.decouple import PROMISE, decouple_exact
 from fsdecouple.core.model import refine_advice
 from fsdecouple.data.calibration import from_table
@@ -55,7 +55,7 @@ def test_refinement_with_the_true_chi_solves_eq1(monkeypatch):
     error at least by the contraction factor (N - 1) max|chi'| (finite differences)."""
     # at 3x coupling the last step of K = 1 exceeds the 1 % F.S. settled test (that
     # row would be not_converged); here every step's error is looked at
-    monkeypatch.setattr(decouple_module, "REFINE_TOLERANCE", 1.0)
+    monkeypatch.setattr(plan_module, "REFINE_TOLERANCE", 1.0)
     sensor = strong_sensor(3.0)  # 3x the sample's coupling: the second-order error is large
     chis = [TrueChi(sensor, name) for name in sensor.shapes]
     f = combined_loads(sensor, 5000)
@@ -167,7 +167,7 @@ def test_rows_that_do_not_settle_get_nan_and_a_mask_on_every_path(model, monkeyp
     """With a tolerance at the median size of the last step of K = 1 (~4e-4 F.S.
     on these points), about half the rows cannot settle: every path flags the same
     rows and gives them NaN, not forces."""
-    monkeypatch.setattr(decouple_module, "REFINE_TOLERANCE", 4e-4)
+    monkeypatch.setattr(plan_module, "REFINE_TOLERANCE", 4e-4)
     strict = replace(model)  # fresh tables, built with the patched tolerance
     u = _mixed_voltages(model)
     conv = np.empty(len(u), bool)

@@ -22,9 +22,10 @@ from conftest import ROOT, SAMPLE, invoke
 from fsdecouple import fit, load_config, load_model
 from fsdecouple.core.model import CouplingErrorModel
 from fsdecouple.core.modelfile import model_to_dict
+from fsdecouple.core.surrogate import hermite
 from fsdecouple.errors import ConfigError, FsdecoupleError
 from fsdecouple.export.header import emulate_float, export_header, plan_export
-from fsdecouple.export.tables import hermite, resample
+from fsdecouple.export.tables import resample
 from fsdecouple.logs.apply import apply_file
 from fsdecouple.units import Units
 
@@ -346,6 +347,18 @@ class _NAxisModel:
 
     extrapolation_limits = CouplingErrorModel.extrapolation_limits  # from calibrated_range
 
+    @property
+    def n_outputs(self) -> int:
+        return len(self.k)
+
+    def plan(self):
+        """Eq. (11) alone, every chi a kernel sum (core/plan.py)."""
+        from fsdecouple.core.plan import Couple, Plan, Term
+
+        terms = tuple(Term(c.output_axis, c.input_axis, c) for c in self.chi.values())
+        fs_out = np.abs(self.k) * np.asarray(self.settings.full_scale)
+        return Plan((Couple(self.k, terms, 0, fs_out),), len(self.k), len(self.k))
+
     def decouple(self, u, *, rotate=True, exact=False, workers=None):
         u = np.asarray(u, dtype=float)
         f = u.copy()
@@ -389,19 +402,25 @@ def test_max_error_picks_coarse_tables_within_it(sample_model, tmp_path):
     plan = plan_export(sample_model, max_error=e)
     for cp in plan.chis:  # the coarsest: one interval fewer breaks the chi's share of e
         target = e * plan.full_scale[cp.out] * abs(plan.k[cp.out]) / 2
-        assert resample(cp, cp.table.shape[1] - 1)[1] > target >= cp.table_error
+        assert resample(cp, cp.table.intervals - 1).max_error > target >= cp.table.max_error
 
 
 def test_resampled_table_equals_the_models_surrogate(sample_model):
-    """hermite()/resample() against the model's own ChiSurrogate, built independently."""
+    """resample() on the model's own grid rebuilds its table; the one Hermite formula
+    (surrogate.hermite) checked by its definition: each cubic meets the knot values and
+    slopes at both ends of its interval."""
     plan = plan_export(sample_model)
     for cp, c in zip(plan.chis, sample_model.chi.values(), strict=True):
         s = c.surrogate
         h = (s.hi - s.lo) / s.intervals
-        assert np.array_equal(hermite(s.values, s.slopes, h), s.coefficients())
-        coef, err = resample(cp, s.intervals)
-        assert np.allclose(coef, s.coefficients(), rtol=0, atol=1e-12)
-        assert err == pytest.approx(s.max_error, rel=0.1, abs=1e-12)
+        c0, c1, c2, c3 = hermite(s.values, s.slopes, h)
+        np.testing.assert_allclose(c0, s.values[:-1], rtol=0, atol=0)
+        np.testing.assert_allclose(c0 + c1 + c2 + c3, s.values[1:], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(c1 / h, s.slopes[:-1], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose((c1 + 2 * c2 + 3 * c3) / h, s.slopes[1:], rtol=1e-9, atol=1e-9)
+        again = resample(cp, s.intervals)
+        assert np.allclose(again.coefficients(), s.coefficients(), rtol=0, atol=1e-12)
+        assert again.max_error == pytest.approx(s.max_error, rel=0.1, abs=1e-12)
 
 
 @needs_cc
@@ -625,3 +644,66 @@ def test_eight_gauges_export_the_projection_and_match_the_model(gauge_model, tmp
     f_c, _ = run(inside)
     err = np.abs(f_c - decouple(model, inside.astype(np.float32).astype(float)))
     assert (err / np.asarray(model.settings.full_scale)).max() <= bound
+
+
+@needs_cc
+@pytest.mark.parametrize("precision", ["double", "float"])
+def test_a_step_added_to_the_plan_reaches_the_header(sample_model, tmp_path, monkeypatch, precision):
+    """The plan's per-channel input correction (the slot of the next issue's temperature
+    terms) in the model's plan: the compiled header applies it, checked against eq. (11)
+    written out from the model file with the correction applied first
+    (conftest.eq11_from_file).  An emitter that forgot the step would miss by 1e4 times
+    the tolerance (and its self-test, computed from the plan, would fail)."""
+    from conftest import eq11_from_file
+
+    from fsdecouple.core.plan import InputCorrection
+
+    span = np.ptp(sample_model.calibrated_range, axis=1)
+    step = InputCorrection(span * np.array([0.03, -0.02, 0.025]), np.array([1.02, 0.97, 1.03]))
+    real = CouplingErrorModel.plan
+    monkeypatch.setattr(CouplingErrorModel, "plan", lambda self, **kw: real(self, **kw).inserted(step))
+    run, text = build(sample_model, tmp_path, precision=precision)
+    doc = model_to_dict(sample_model)
+    lo, hi = np.asarray(sample_model.calibrated_range).T
+    u = lo + (hi - lo) * np.random.default_rng(9).random((20_000, 3))
+    u = u.astype(np.float32).astype(float)  # the float header's inputs are floats
+    f_c, _ = run(u)
+    want = eq11_from_file(doc, u, correction=(step.offset, step.gain))
+    fs = np.asarray(sample_model.settings.full_scale)
+    tol = REL_FS if precision == "double" else \
+        2 * float(re.search(r"#define FSD_FLOAT_MAX_ERROR (\S+)", text).group(1))
+    assert (np.abs(eq11_from_file(doc, u) - want) / fs).max() > 1e4 * REL_FS
+    assert (np.abs(f_c - want) / fs).max() <= tol
+
+
+@needs_cc
+@pytest.mark.parametrize("precision", ["double", "float"])
+def test_the_temperature_step_reaches_the_header(sample_model, tmp_path, precision):
+    """A fitted model's temperature terms (core/temperature.py): the header takes the
+    temperature as one more input, u[3], and corrects the outputs to T0 before eq. (11);
+    checked against the terms written out by hand and eq. (11) from the model file.  A
+    header that forgot the step would miss by 1e4 times the tolerance."""
+    from dataclasses import replace as _replace
+
+    from conftest import eq11_from_file
+
+    from fsdecouple.core.temperature import TemperatureTerms
+
+    span = np.ptp(sample_model.calibrated_range, axis=1)
+    t0, b, g = 25.0, 1e-3 * span * np.array([1.0, -0.8, 0.6]), np.array([3e-4, -1.5e-4, 2e-4])
+    model = _replace(sample_model, temperature=TemperatureTerms(3, t0, b, g, "degC", (15.0, 35.0)))
+    run, text = build(model, tmp_path, precision=precision)
+    assert "#define FSD_N_OUTPUTS 4" in text
+    lo, hi = np.asarray(sample_model.calibrated_range).T
+    rng = np.random.default_rng(12)
+    u = np.column_stack([lo + (hi - lo) * rng.random((5000, 3)), rng.uniform(10, 40, 5000)])
+    u = u.astype(np.float32).astype(float)
+    f_c, _ = run(u)
+    dt = u[:, 3:] - t0
+    doc = model_to_dict(sample_model)
+    want = eq11_from_file(doc, (u[:, :3] - b * dt) / (1 + g * dt))
+    fs = np.asarray(sample_model.settings.full_scale)
+    tol = REL_FS if precision == "double" else \
+        2 * float(re.search(r"#define FSD_FLOAT_MAX_ERROR (\S+)", text).group(1))
+    assert (np.abs(eq11_from_file(doc, u[:, :3]) - want) / fs).max() > 1e4 * REL_FS
+    assert (np.abs(f_c - want) / fs).max() <= tol
