@@ -16,6 +16,7 @@ import numpy as np
 from ..config import Settings
 from ..errors import InputError, excerpt, printable, where
 from ..files import CALIBRATION_LIMIT, TASK_LIMIT, natural_key, read_bounded, reading
+from ..temperature_units import to_celsius
 from .columns import applied_load
 from .csv_text import HEADER_ROW, read_csv_text, read_header, require_columns, to_numbers
 from .poses import average_poses, pose_note, timestamp_column
@@ -162,6 +163,9 @@ def read_calibration_table(path: str | Path, settings: Settings,
         # a single CSV without a repetition column is one repetition
         numbered = single and cols["repetition"] in header
         mapped = {name: name for name in numeric.values()}
+        t_name = settings.temperature_column  # columns: {temperature: ...} (issue 31)
+        if t_name is not None:
+            mapped[t_name] = t_name
         mapped.update({cols[c]: cols[c] for c in ("axis", "repetition")
                        if cols[c] in header and (c != "repetition" or numbered)})
         require_columns(header, mapped, f)
@@ -222,6 +226,9 @@ def read_calibration_table(path: str | Path, settings: Settings,
             values = to_numbers(raw[name], f, name, rows, settings.decimal)
             # check each cell before scaling so the message quotes the file's value
             out[canonical] = values * settings.scale[canonical]
+        if t_name is not None:  # in degC, as a fitted model's temperature terms are
+            out["temperature"] = to_celsius(to_numbers(raw[t_name], f, t_name, rows, settings.decimal),
+                                            settings.temperature_unit)
         if timestamp_column(header) is not None:  # a pose log: samples averaged per load
             keys = [*layout.loads, "repetition", "axis"]
             out, ss, dof, runs, inverse = average_poses(out, keys, list(layout.outputs))
@@ -233,7 +240,8 @@ def read_calibration_table(path: str | Path, settings: Settings,
     table = pd.concat(frames, ignore_index=True)
     # training order is file order: repetition, then row (stable)
     table = table.sort_values(["repetition"], kind="stable").reset_index(drop=True)
-    table = table[["repetition", "axis", "file", "row", *layout.loads, *layout.outputs]]
+    table = table[["repetition", "axis", "file", "row", *layout.loads, *layout.outputs,
+                   *(["temperature"] if settings.temperature_column is not None else [])]]
     noise = np.sqrt(pose_ss / pose_dof * pose_inv / pose_n) if pose_dof else None
     return CalibrationTable(table, skipped, tuple(digests), hidden, tuple(warnings), noise)
 
