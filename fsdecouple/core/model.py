@@ -160,10 +160,13 @@ class FitReport:
     tune: dict[str, Any] | None = None  # fit --tune's grid and choice (evaluation.tune); None: untuned
     # per step: outputs, model error and U; held-out scores for intervals (evaluation.budget)
     certificate: dict[str, Any] | None = None
+    # the temperature terms' fit: b, g with uncertainties, the held-out figure (fitting/temperature.py)
+    temperature: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         d = {f.name: getattr(self, f.name) for f in fields(self)}
-        for key in ("surrogate_max_error", "verdict", "outliers", "tune", "certificate"):
+        for key in ("surrogate_max_error", "verdict", "outliers", "tune", "certificate",
+                    "temperature"):
             if d[key] is None:  # files from before these figures
                 del d[key]
         return d

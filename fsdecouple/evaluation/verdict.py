@@ -170,6 +170,7 @@ def calibrate(calib: CalibrationSet, settings: Settings, *, method: str = "svr",
     from ..core.metrics import interference_errors
     from ..fitting.fit import fit
     from ..fitting.linear import fit_calibration_matrix
+    from ..fitting.temperature import compensate
 
     if method not in FIT_METHODS:
         raise InputError(f"--method {method!r}: expected one of {', '.join(FIT_METHODS)}")
@@ -177,6 +178,7 @@ def calibrate(calib: CalibrationSet, settings: Settings, *, method: str = "svr",
         raise InputError("--method auto chooses by the held-out verdict; drop --no-verdict")
     if settings.zero is None and getattr(calib, "zero", None) == "fit" != settings.zero_method:
         settings = dataclasses.replace(settings, zero="fit")  # out-and-back sweeps (zero.py)
+    calib, _ = compensate(calib, settings)  # outputs at T0 for every figure below (issue 31)
     record = None
     if tune:
         from .tune import tune_settings

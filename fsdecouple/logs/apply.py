@@ -204,9 +204,10 @@ def check_options(model: CouplingErrorModel, settings: Settings | None, tare, ze
         raise InputError(
             f"the config names outputs {', '.join(settings.layout.outputs)}, the model "
             f"{', '.join(model.layout.outputs)}; use the calibration's config")
-    if zero is not None and len(zero) != model.n_outputs:
-        raise InputError(f"--zero: {len(zero)} values for the model's {model.n_outputs} "
-                         f"outputs ({', '.join(model.layout.outputs)})")
+    if zero is not None and len(zero) != model.n_inputs:
+        extra = ", then the temperature at the zero" if model.n_inputs > model.n_outputs else ""
+        raise InputError(f"--zero: {len(zero)} values for the model's {model.n_inputs} "
+                         f"inputs ({', '.join(model.layout.outputs)}{extra})")
     if unit is not None and model.settings.units.loads:
         raise InputError(f"--unit {unit}: the model's loads have mixed units "
                          f"({model.settings.load_unit}); they are written in their own")
@@ -293,7 +294,8 @@ def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarra
         if terms is not None:  # beyond the calibrated temperatures
             outside |= terms.outside(raw[:, terms.channel]) & ~empty
         # the limits are the ADC's or amplifier's, so they bound the raw values
-        saturated = ((raw <= rules.sat_lo) | (raw >= rules.sat_hi)).any(axis=1) & ~empty
+        m = len(rules.sat_lo)  # the outputs' limits (a fitted model's temperature has none)
+        saturated = ((raw[:, :m] <= rules.sat_lo) | (raw[:, :m] >= rules.sat_hi)).any(axis=1) & ~empty
     code[outside] = EXTRAPOLATED_
     code[saturated] = SATURATED_
     return f, code, empty
@@ -334,12 +336,15 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
     if clash:
         raise InputError(f"{where(path, HEADER_ROW, clash[0])}: the log already has a column named "
                          f"'{clash[0]}', which the output would overwrite")
-    scale = np.array([settings.scale[c] for c in layout.outputs])
+    # a fitted model's temperature: one more input, after the outputs (logs/outputs.py)
+    scale = np.array([settings.scale[c] for c in layout.outputs] + [1.0] * (model.n_inputs - layout.m))
     jobs: Iterator[Callable[[], Block]] = log.blocks(names, chunk_rows=chunk_rows,
                                                      want_table=is_parquet(out), keep=keep)
     jobs = with_temperature(jobs)
     summary = ApplySummary(force_unit=unit, output_unit=model.settings.output_unit,
-                           outputs=layout.outputs, offsets=np.zeros(layout.m),
+                           outputs=(*layout.outputs,
+                                    *(("temperature",) if model.n_inputs > layout.m else ())),
+                           offsets=np.zeros(model.n_inputs),
                            force_columns=forces, dropped=dropped)
     to_unit = load_factor(model.settings.load_unit, unit)
     sat_lo, sat_hi = _limit_bounds(settings, model)
@@ -375,7 +380,8 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
                                            truncated=block.truncated,
                                            compiled=compiled)
             if interval is not None:
-                f = with_intervals(model, f, interval, block.u * scale - summary.offsets)
+                f = with_intervals(model, f, interval, model.zero_corrected(block.u * scale,
+                                                                            summary.offsets))
             if to_unit != 1.0:
                 f = f * to_unit
             counts = np.bincount(code, minlength=len(STATUSES))

@@ -34,6 +34,8 @@ def log_outputs(model, settings, header, path, temperature: float | None = None
         raise InputError("--temperature: the model has no temperature terms; nothing would use it")
     if terms is None:
         return read, iter
+    if terms.external:  # a fitted model: the temperature column after the outputs
+        return _fitted_temperature(model, settings, header, path, read, temperature)
     t_name = read[layout.outputs[terms.channel]]
     if temperature is None:
         if t_name not in header:
@@ -51,6 +53,46 @@ def log_outputs(model, settings, header, path, temperature: float | None = None
         def add() -> object:
             block = job()
             return dataclasses.replace(block, u=np.insert(block.u, terms.channel, value, axis=1))
+        return add
+
+    return read, lambda jobs: (with_column(job) for job in jobs)
+
+
+def _fitted_temperature(model, settings, header, path, read, temperature):
+    """A fitted model's temperature (``columns: {temperature: ...}``, in the config's unit,
+    read as degC): the log's column, or ``--temperature VALUE`` for every row, appended
+    after the outputs as the plan's one more input."""
+    from ..temperature_units import to_celsius
+
+    name = settings.temperature_column or model.settings.temperature_column
+    unit = settings.temperature_unit if settings.temperature_column else model.settings.temperature_unit
+    if temperature is None:
+        if name is None or name not in header:
+            shown = f"no column '{name}'" if name is not None else "no temperature column mapped"
+            raise InputError(f"{where(path, HEADER_ROW)}: {shown}, the temperature the model "
+                             "corrects for (fitted with temperature terms); map it as columns: "
+                             "{temperature: ...} or give its reading for every row with "
+                             "--temperature VALUE")
+        read = {**read, "temperature": name}
+
+        def converted(job):
+            def run() -> object:
+                block = job()
+                u = block.u.copy()
+                u[:, -1] = to_celsius(u[:, -1], unit)
+                return dataclasses.replace(block, u=u)
+            return run
+
+        return read, lambda jobs: (converted(job) for job in jobs)
+    if name is not None and name in header:
+        raise InputError(f"{where(path, HEADER_ROW, name)}: --temperature: the log has this "
+                         "column, which it would replace; give one or the other")
+    value = float(to_celsius(float(temperature), unit))
+
+    def with_column(job):
+        def add() -> object:
+            block = job()
+            return dataclasses.replace(block, u=np.column_stack([block.u, np.full(len(block.u), value)]))
         return add
 
     return read, lambda jobs: (with_column(job) for job in jobs)

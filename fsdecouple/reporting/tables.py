@@ -21,8 +21,10 @@ from ..data.columns import shown as shown_name
 from ..errors import printable
 from ..evaluation.cv_results import gamma_index, test_name
 from ..units import Units, output_display
+from .temperature_tables import temperature_tables
 
 # --- ingest, fit, show, apply ------------------------------------------------------
+
 
 def _units(settings_or_doc) -> Units:
     u = getattr(settings_or_doc, "units", None)
@@ -136,7 +138,7 @@ def fit_tables(model) -> list:
         before, after = rep.gamma_before.get(axis), rep.gamma_after.get(axis)
         style = "bold red" if after is not None and before is not None and after > before else ""
         g.add_row(axis, pct(before), Text(pct(after), style=style))
-    return [t, c, g]
+    return [t, c, g, *temperature_tables(model)]
 
 
 def apply_lines(summary, out) -> list[str]:
