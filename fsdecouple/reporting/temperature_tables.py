@@ -40,3 +40,36 @@ def temperature_tables(model) -> list:
     return out
 
 
+
+
+def temperature_html(model) -> str:
+    """The temperature terms as an HTML section (report and certificate); '' without."""
+    from .html import cell, table, th, tr
+
+    terms = getattr(model, "temperature", None)
+    if terms is None or not terms.external:
+        return ""
+    units, layout = model.settings.units, model.layout
+    span = "" if terms.span is None else f"; calibrated from {terms.span[0]:.4g} to {terms.span[1]:.4g} degC"
+    rows = []
+    for i, o in enumerate(layout.outputs):
+        sb = "" if terms.b_sigma is None else f" ± {terms.b_sigma[i]:.2g}"
+        sg = "" if terms.g_sigma is None else f" ± {1e6 * terms.g_sigma[i]:.2g}"
+        rows.append(tr(cell(o), cell(f"{terms.b[i]:+.4g}{sb}"), cell(f"{1e6 * terms.g[i]:+.1f}{sg}")))
+    head = [tr(th("output"), th(f"b [{units.output}/K]"), th("g [ppm/K]"))]
+    out = ["<h2>Temperature terms</h2>\n", table(
+        "temperature", f"u = (1 + g (T - T0)) u(T0) + b (T - T0), T0 = {terms.t0:g} degC{span}; "
+        "each output is corrected to T0 before eq. (11), rows beyond the span are 'extrapolated'",
+        head, rows)]
+    rep = getattr(model, "report", None)
+    held = ((rep.temperature or {}).get("heldout") if rep is not None and rep.temperature else None)
+    if held:
+        hrows = [tr(cell(f"{r['temperature']:.4g}"), cell(str(r["points"])),
+                    cell(f"{r['worst_rms_pct_fs_without']:.4f}"),
+                    cell(f"{r['worst_rms_pct_fs_with']:.4f}")) for r in held]
+        out.append(table("temperature-heldout", "Held out by temperature: fitted on the other "
+                         "temperatures, tested on one (tared at T0; least-squares matrix); worst "
+                         "axis RMS error % F.S.",
+                         [tr(th("temperature [degC]"), th("points"), th("without"), th("with"))],
+                         hrows))
+    return "".join(out)

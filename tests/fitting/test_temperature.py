@@ -171,3 +171,17 @@ def test_init_recognises_a_temperature_column(tmp_path, header, unit):
     invoke(["init", data, "-o", tmp_path / "c.yaml"])
     doc = yaml.safe_load((tmp_path / "c.yaml").read_text(encoding="utf-8"))
     assert doc["columns"]["temperature"] == header and doc["units"]["temperature"] == unit
+
+
+def test_report_certificate_and_compare_show_the_terms(drifting, tmp_path):
+    invoke(["report", drifting / "model.json", "-o", tmp_path / "r.html"])
+    html = (tmp_path / "r.html").read_text(encoding="utf-8")
+    assert 'id="temperature"' in html and "ppm/K" in html
+    invoke(["validate", drifting / "model.json", drifting / "calibration", "-c",
+            drifting / "sensor.yaml", "--json", "-o", tmp_path / "v.json"])
+    doc = json.loads((tmp_path / "v.json").read_text())
+    terms = json.loads((drifting / "model.json").read_text())["temperature"]
+    assert doc["temperature"]["b"] == terms["b"]
+    r = invoke(["compare", drifting / "model.json", drifting / "model.json", "--json"])
+    t = json.loads(r.stdout)["temperature"]
+    assert t["b_change"] == {"ux": 0.0, "uy": 0.0, "uz": 0.0}
