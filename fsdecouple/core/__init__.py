@@ -2,7 +2,8 @@
 
 Linear non-coupling slopes omega (eq. 2) and corrected coupling functions chi
 (eq. 4) held as kernel sums (eq. 10) and cubic tables; decoupling by eq. (11),
-exact, through the tables or the compiled kernel; second-order refinement
+written once as a plan (``plan.py``) and evaluated exactly, through the tables (numpy,
+the compiled kernel, one vector); second-order refinement
 (eqs. 5-6); chi beyond the calibrated range; the interference error gamma
 (eq. 12); the model file.
 

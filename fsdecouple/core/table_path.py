@@ -316,6 +316,9 @@ class TableDecoupler:
         refine = self.step.refine if refine is None else int(refine)
         plan = self._plan(rotate, refine, before)
         stages = [self._one_step(s, refine) for s in plan.steps]
+        if len(stages) == 1:  # eq. (11) alone: no loop over steps
+            only = stages[0]
+            return lambda *u: tuple(only(u))
 
         def decouple_one(*u: float) -> tuple[float, ...]:
             x = u
@@ -348,56 +351,62 @@ class TableDecoupler:
         raise UnknownStep(step, "the one-vector path")
 
     def _one_couple(self, step: Couple) -> Callable:
-        n, refine = self.n, step.refine
-        lo, inv = self.lo.tolist(), self.inv_step.tolist()
-        cnt, ik = self.intervals.tolist(), self.inv_k.tolist()
-        kk, tol = self.k.tolist(), self.step_tol.tolist()
-        rows, own = self.rows, self.own_rows if self.has_own else None
-        order = [_sum_order(n, a) for a in range(n)]
-        cols = range(n - 1)
-        nan = math.nan
+        n, refine, nan = self.n, step.refine, math.nan
+        # per input b and interval i: the coefficients (c0, c1, c2, c3) of each fed output
+        tables = [[tuple(r[j:j + 4] for j in range(0, len(r), 4)) for r in rows] for rows in self.rows]
+        grid = list(zip(self.lo.tolist(), self.inv_step.tolist(), self.intervals.tolist(), tables,
+                        strict=True))
+        ik, kk, tol = self.inv_k.tolist(), self.k.tolist(), self.step_tol.tolist()
+        own = self.own_rows if self.has_own else None
+        order = [_sum_order(n, a) for a in range(n)]  # (input b, column m), the array path's
 
-        def forces(base, t):
-            g = []
-            for b in range(n):
-                i = int(t[b])
-                s, r = t[b] - i, rows[b][i]
-                g.append([horner(r[4 * m], r[4 * m + 1], r[4 * m + 2], r[4 * m + 3], s) for m in cols])
+        def cells(x):
+            """Per input at x: the offset s and the g_ab of its fed outputs; None outside a
+            table or NaN."""
             out = []
-            for a in range(n):
-                fa = base[a]
-                for b, m in order[a]:
-                    fa += g[b][m]
-                out.append(fa)
+            for xb, (lo, inv, cnt, table) in zip(x, grid):  # noqa: B905 (len(x) == n)
+                t = (xb - lo) * inv
+                if not 0.0 <= t < cnt:
+                    return None
+                i = int(t)
+                s = t - i
+                out.append((s, [horner(c0, c1, c2, c3, s) for c0, c1, c2, c3 in table[i]]))
             return out
 
-        def inside(t):
-            return all(0.0 <= tb < cb for tb, cb in zip(t, cnt, strict=True))
+        def forces(base, c):
+            f = []
+            for fa, terms in zip(base, order):  # noqa: B905
+                for b, m in terms:
+                    fa += c[b][1][m]
+                f.append(fa)
+            return f
 
         def exact(u):  # outside a table (at u or at a step), or NaN: the exact path
             f, ok = couple(step, np.array([u], dtype=float))
-            return [nan] * n if not ok[0] else f[0].tolist()
+            return f[0].tolist() if ok[0] else [nan] * n
 
         def couple_one(u):
-            t = [(u[b] - lo[b]) * inv[b] for b in range(n)]
-            if not inside(t):
+            c = cells(u)
+            if c is None:
                 return exact(u)
             base = [u[a] * ik[a] for a in range(n)]
             if own is not None:
                 for a in range(n):
-                    i = int(t[a])
-                    c = own[a][i]
-                    base[a] += horner(c[0], c[1], c[2], c[3], t[a] - i)
-            x = u
-            f = forces(base, t)
+                    s = c[a][0]
+                    o = own[a][int((u[a] - grid[a][0]) * grid[a][1])]
+                    base[a] += horner(o[0], o[1], o[2], o[3], s)
+            f = forces(base, c)
+            if not refine:
+                return f
             for _ in range(refine):
                 x = [f[a] * kk[a] for a in range(n)]
-                t = [(x[b] - lo[b]) * inv[b] for b in range(n)]
-                if not inside(t):
+                c = cells(x)
+                if c is None:
                     return exact(u)
-                f = forces(base, t)
-            if refine and not all(abs(f[a] * kk[a] - x[a]) <= tol[a] for a in range(n)):
-                return [nan] * n  # did not settle: no silent forces
+                f = forces(base, c)
+            for a in range(n):
+                if not abs(f[a] * kk[a] - x[a]) <= tol[a]:
+                    return [nan] * n  # did not settle: no silent forces
             return f
 
         return couple_one

@@ -34,15 +34,9 @@ class Check:
 
 
 def chi_slope(chi, u: np.ndarray) -> np.ndarray:
-    """d chi/du at prime voltages u, differentiating eq. (10) analytically.
-
-    chi(u) = s_out (sum_i c_i exp(-g (u/s_in - x_i)^2) - rho), so
-    chi'(u) = (s_out / s_in) sum_i c_i (-2 g (u/s_in - x_i)) exp(-g (u/s_in - x_i)^2).
-    """
-    x = np.asarray(u, dtype=float)[:, None] / chi.input_scale
-    d = x - chi.support_vectors[None, :]
-    k = np.exp(-chi.gamma * d * d)
-    return (chi.output_scale / chi.input_scale) * ((-2.0 * chi.gamma * d * k) @ chi.dual_coef)
+    """d chi/du at prime voltages u: eq. (10) differentiated analytically (``Chi.kernel_slope``,
+    the one slope every table is built from)."""
+    return chi.kernel_slope(np.asarray(u, dtype=float))
 
 
 def _grid(chi) -> np.ndarray:

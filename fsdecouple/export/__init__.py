@@ -11,7 +11,7 @@ still import from here.
 """
 
 
-__all__ = ["ChiPlan", "ExportPlan", "ExportResult", "PRECISIONS", "emulate_float", "exact_forces",
+__all__ = ["ExportPlan", "ExportResult", "PRECISIONS", "emulate_float", "exact_forces",
            "expected_status", "export_header", "float_bound", "plan_export"]  # noqa: F822 (lazy)
 
 

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import io
+import json
+from importlib import metadata
 
 import numpy as np
 import pyarrow as pa
@@ -113,9 +115,39 @@ class CsvSink:
 def pandas_metadata(schema: pa.Schema) -> bytes:
     """The ``pandas`` schema metadata of a table of ``schema`` read as pandas reads it by
     default: the one every engine writes, so that a dataset's parts agree (Dask's own
-    said ``double[pyarrow]``, an input's listed only the input's columns)."""
+    said ``double[pyarrow]``, an input's listed only the input's columns).
+
+    Numbers, booleans and strings (every column of a log and of apply's output) are
+    written here as pyarrow writes them from pandas >= 3, without importing pandas
+    (0.8 s of a Parquet ``apply``); other types, or an older pandas, through pandas.
+    """
+    simple = _plain_pandas_metadata(schema)
+    if simple is not None:
+        return simple
     plain = schema.remove_metadata().empty_table().to_pandas()
     return pa.Schema.from_pandas(plain, preserve_index=False).metadata[b"pandas"]
+
+
+def _plain_pandas_metadata(schema: pa.Schema) -> bytes | None:
+    try:
+        version = metadata.version("pandas")
+    except metadata.PackageNotFoundError:
+        return None
+    if not version.split(".")[0].isdigit() or int(version.split(".")[0]) < 3:
+        return None
+    columns = []
+    for f in schema:
+        if pa.types.is_string(f.type) or pa.types.is_large_string(f.type):
+            kinds = ("object", "str")
+        elif pa.types.is_integer(f.type) or pa.types.is_floating(f.type) or pa.types.is_boolean(f.type):
+            kinds = (str(f.type.to_pandas_dtype().__name__),) * 2
+        else:
+            return None
+        columns.append({"name": f.name, "field_name": f.name, "pandas_type": kinds[0],
+                        "numpy_type": kinds[1], "metadata": None})
+    return json.dumps({"index_columns": [], "column_indexes": [], "columns": columns,
+                       "attributes": {}, "creator": {"library": "pyarrow", "version": pa.__version__},
+                       "pandas_version": version}).encode()
 
 
 class ParquetSink:

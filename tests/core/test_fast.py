@@ -429,3 +429,31 @@ def test_the_kernel_caches_in_the_user_cache_directory_never_in_the_package(tmp_
     finally:
         monkeypatch.undo()
         importlib.reload(kernel)
+
+
+def test_apply_loads_no_pandas_and_writes_pandas_own_metadata(model, tmp_path):
+    """pyarrow imports pandas (0.8 s) for pa.array, pa.scalar and to_numpy; apply avoids all
+    three (logs/arrow.py) and writes the Parquet output's pandas metadata itself: byte for
+    byte what pandas and pyarrow write for the same columns (read back here through pandas)."""
+    import subprocess
+    import sys
+
+    path = tmp_path / "m.json"
+    save_model(model, path)
+    log = tmp_path / "log.csv"
+    log.write_text("t,ux,uy,uz,note\n0,0.1,0,-0.1,a\n1,,0.2,0.1,b\n")
+    code = (
+        "import sys\nfrom fsdecouple.logs.apply import apply_file\n"
+        "from fsdecouple.core.modelfile import load_model\n"
+        f"m = load_model({str(path)!r})\n"
+        f"apply_file(m, {str(log)!r}, {str(tmp_path / 'f.csv')!r})\n"
+        f"apply_file(m, {str(log)!r}, {str(tmp_path / 'f.parquet')!r})\n"
+        "print('pandas' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+    table = pq.read_table(tmp_path / "f.parquet")
+    plain = table.schema.remove_metadata().empty_table().to_pandas()
+    assert table.schema.metadata[b"pandas"] == pa.Schema.from_pandas(
+        plain, preserve_index=False).metadata[b"pandas"]
+    assert pd.read_csv(tmp_path / "f.csv")["status"].tolist() == ["ok", "missing"]
