@@ -212,9 +212,14 @@ def compensate(calib: CalibrationSet, settings) -> tuple[CalibrationSet, Tempera
 def heldout(calib: CalibrationSet, settings, found: TemperatureFit) -> list[dict[str, Any]]:
     """Fit on the other temperatures, test on one: the worst component's RMS error [% F.S.]
     of each level's points, tared at T0 (the offset at T0 the other levels' fit gives),
-    decoupled by the least-squares matrix of the other levels, with the temperature terms
-    of the other levels and without any (the raw readings less that tare)."""
+    decoupled by a least-squares cubic in the outputs (u, u^2, u^3 of every output: the
+    coupling's curvature, cheaper than an SVR fit per level) fitted on the other levels,
+    with the temperature terms of the other levels and without any (the raw readings less
+    that tare)."""
     from .linear import fit_calibration_matrix
+
+    def cubic(u):
+        return np.column_stack([u, u ** 2, u ** 3])
 
     pts = calib.points
     layout = calib.layout
@@ -234,14 +239,15 @@ def heldout(calib: CalibrationSet, settings, found: TemperatureFit) -> list[dict
             continue
         terms = other.terms
         tp = corrected_points(train, terms)
-        c_comp = fit_calibration_matrix(tp[list(layout.outputs)].to_numpy(float), train.forces).C
-        c_raw = fit_calibration_matrix(train.voltages, train.forces).C
+        c_comp = fit_calibration_matrix(cubic(tp[list(layout.outputs)].to_numpy(float)),
+                                        train.forces).C
+        c_raw = fit_calibration_matrix(cubic(train.voltages), train.forces).C
         # the tare at T0: the offset the other levels' fit puts there, u(T0) of no load
         zero_rows = ~np.any(f_all[~test] != 0.0, axis=1)
         z_t0 = _offset_at_t0(raw_all[~test][zero_rows], t_all[~test][zero_rows], terms)
         raw, t, f = raw_all[test], t_all[test], f_all[test]
-        with_terms = (correct(raw, t, terms.t0, terms.b, terms.g) - z_t0) @ c_comp.T
-        without = (raw - z_t0) @ c_raw.T
+        with_terms = cubic(correct(raw, t, terms.t0, terms.b, terms.g) - z_t0) @ c_comp.T
+        without = cubic(raw - z_t0) @ c_raw.T
 
         def worst(pred, f=f):
             return float(100.0 * np.max(np.sqrt(np.mean((pred - f) ** 2, axis=0)) / fs))

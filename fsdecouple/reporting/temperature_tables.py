@@ -16,21 +16,22 @@ def temperature_tables(model) -> list:
     t = Table(title=f"Temperature terms: u = (1 + g (T - T0)) u(T0) + b (T - T0), "
                     f"T0 = {terms.t0:g} degC{span}",
               caption="beyond the calibrated temperatures a row's status is 'extrapolated'")
-    for col in ("output", "b [unit/K]", "b [% F.S./K]", "g [ppm/K]"):
+    for col in ("output", f"b [{units.output}/K]", "b [% F.S./K]", "g [ppm/K]"):
         t.add_column(col, justify="right")
     u_fs = model.full_scale_output if model.projection is None else None
     for i, o in enumerate(layout.outputs):
         sb = "" if terms.b_sigma is None else f" ± {terms.b_sigma[i]:.2g}"
         sg = "" if terms.g_sigma is None else f" ± {1e6 * terms.g_sigma[i]:.2g}"
         pct = "" if u_fs is None else f"{100 * terms.b[i] / u_fs[i]:+.4f}"
-        t.add_row(o, f"{terms.b[i]:+.4g}{sb} {units.output_of(i)}/K", pct,
+        t.add_row(o, f"{terms.b[i]:+.4g}{sb}", pct,
                   f"{1e6 * terms.g[i]:+.1f}{sg}")
     out = [t]
     rep = getattr(model, "report", None)
     held = (rep.temperature or {}).get("heldout") if rep is not None and rep.temperature else None
     if held:
         h = Table(title="Held out by temperature: fitted on the other temperatures, tested on "
-                        "one (tared at T0; least-squares matrix), worst axis RMS error % F.S.")
+                        "one (tared at T0; a least-squares cubic in the outputs), worst axis "
+                        "RMS error % F.S.")
         for col in ("temperature [degC]", "points", "without compensation", "with compensation"):
             h.add_column(col, justify="right")
         for r in held:
@@ -68,8 +69,8 @@ def temperature_html(model) -> str:
                     cell(f"{r['worst_rms_pct_fs_without']:.4f}"),
                     cell(f"{r['worst_rms_pct_fs_with']:.4f}")) for r in held]
         out.append(table("temperature-heldout", "Held out by temperature: fitted on the other "
-                         "temperatures, tested on one (tared at T0; least-squares matrix); worst "
-                         "axis RMS error % F.S.",
+                         "temperatures, tested on one (tared at T0; a least-squares cubic in "
+                         "the outputs); worst axis RMS error % F.S.",
                          [tr(th("temperature [degC]"), th("points"), th("without"), th("with"))],
                          hrows))
     return "".join(out)
