@@ -18,9 +18,7 @@ from typing import Any
 from .axes import CANONICAL_COLUMNS, CHI_SEPARATOR, DEFAULT, FORCE_COLUMNS, VOLTAGE_COLUMNS, Layout
 from .errors import ConfigError, printable
 from .labinfo import LAB_KEYS, LabInfo, lab_from_dict
-from .temperature_units import add_to_dict as add_temperature_keys
-from .temperature_units import split as split_temperature_keys
-from .units import LOAD_UNITS, MOMENT_UNITS, OUTPUT_UNITS, Units
+from .units import LOAD_UNITS, MOMENT_UNITS, OUTPUT_UNITS, Units, temperature_keys
 from .wrench import Frame, parse_frame, parse_rotation
 from .yamlfile import SafeUniqueLoader, read_yaml  # noqa: F401 (the loader, for tests)
 
@@ -51,10 +49,8 @@ class SVRSettings:
         return 1.0 / (2.0 * self.gamma)
 
     def libsvm_options(self) -> str:
-        return (
-            f"-s 3 -t 2 -g {self.gamma!r} -c {self.C!r} -p {self.epsilon!r} "
-            f"-e {self.tolerance!r} -q"
-        )
+        return (f"-s 3 -t 2 -g {self.gamma!r} -c {self.C!r} -p {self.epsilon!r} "
+                f"-e {self.tolerance!r} -q")
 
 
 @dataclass(frozen=True)
@@ -85,9 +81,6 @@ class Settings:
     zero: str | None = None  # ZERO_MODES; None: rows for x, y, z, fit for components
     frame: Frame | None = None  # six axes: the wrench transform after eq. (11) (wrench.py)
     lab: LabInfo = LabInfo()  # the certificate's serial, reference, environment (labinfo.py)
-    # columns: {temperature: ...}, units: {temperature: ...} (temperature_units.py)
-    temperature_column: str | None = None
-    temperature_unit: str = "degC"
 
     @property
     def zero_method(self) -> str:
@@ -134,7 +127,6 @@ class Settings:
             del d["units"]  # the paper's N and V: files from before units keep their bytes
         else:
             d["units"] = self.units.to_dict(layout.loads, layout.outputs)
-        add_temperature_keys(d, self.temperature_column, self.temperature_unit)
         return d
 
 
@@ -309,10 +301,10 @@ def _limits(raw: Any, where: str, outputs=VOLTAGE_COLUMNS) -> dict[str, tuple[fl
 FULL_SCALE_RANGE = (1e-12, 1e12)
 
 
+@temperature_keys  # columns: {temperature: ...}, units: {temperature: ...} (temperature_units.py)
 def settings_from_dict(raw: Any, source: str = "config") -> Settings:
     """Validate a parsed YAML document into :class:`Settings` (unknown keys refused)."""
     raw = _mapping({} if raw is None else raw, source)
-    raw, temperature_kw = split_temperature_keys(raw, source)  # temperature_units.py
     for key in raw:
         if key not in _TOP_KEYS:
             raise _unknown(str(key), _TOP_KEYS, source)
@@ -418,7 +410,7 @@ def settings_from_dict(raw: Any, source: str = "config") -> Settings:
             if key != "min_r2":
                 raise _unknown(str(key), {"min_r2"}, f"{source}: checks")
             kw["min_r2"] = _number(value, f"{source}: checks: min_r2", positive=True)
-    return replace(s, **kw, **temperature_kw)
+    return replace(s, **kw)
 
 
 def load_config(path: str | Path | None = None, **overrides: Any) -> Settings:

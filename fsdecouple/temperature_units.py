@@ -23,8 +23,36 @@ ALIASES = {"°C": "degC", "C": "degC", "celsius": "degC", "kelvin": "K", "°F": 
 MODEL_UNIT = "degC"
 
 
+def config_keys(settings_from_dict):
+    """Wrap config.settings_from_dict: the temperature keys taken out of ``columns:`` and
+    ``units:`` before the rest is validated, and put back into the Settings after, as
+    ``columns["temperature"]`` and ``units.temperature`` (degC unless given)."""
+    import functools
+    from dataclasses import replace
+
+    @functools.wraps(settings_from_dict)
+    def wrapped(raw: Any, source: str = "config"):
+        if not isinstance(raw, dict):
+            return settings_from_dict(raw, source)
+        rest, kw = split(raw, source)
+        settings = settings_from_dict(rest, source)
+        if "column" not in kw:
+            if "unit" in kw:
+                raise ConfigError(f"{source}: units: temperature: no temperature column "
+                                  "(columns: {temperature: ...}) to read in it")
+            return settings
+        taken = {v: k for k, v in settings.columns.items()}
+        if kw["column"] in taken:
+            raise ConfigError(f"{source}: columns: two quantities map to the same file column "
+                              f"('{kw['column']}': {taken[kw['column']]} and temperature)")
+        return replace(settings, columns={**settings.columns, KEY: kw["column"]},
+                       units=replace(settings.units, temperature=kw.get("unit", MODEL_UNIT)))
+
+    return wrapped
+
+
 def split(raw: dict, source: str) -> tuple[dict, dict[str, Any]]:
-    """``raw`` without the temperature keys, and the Settings fields they give."""
+    """``raw`` without the temperature keys, and what they give (``column``, ``unit``)."""
     kw: dict[str, Any] = {}
     out = dict(raw)
     cols = out.get("columns")
@@ -34,18 +62,27 @@ def split(raw: dict, source: str) -> tuple[dict, dict[str, Any]]:
         if not isinstance(name, str) or not name:
             raise ConfigError(f"{source}: columns: temperature: expected a column name, "
                               f"found {name!r}")
-        kw["temperature_column"] = name
+        kw["column"] = name
         out["columns"] = cols
     units = out.get("units")
     if isinstance(units, dict) and KEY in units:
         units = dict(units)
-        unit = units.pop(KEY)
-        kw["temperature_unit"] = check_unit(unit, f"{source}: units: temperature")
+        kw["unit"] = check_unit(units.pop(KEY), f"{source}: units: temperature")
         if units:
             out["units"] = units
         else:
             del out["units"]
     return out, kw
+
+
+def column(settings) -> str | None:
+    """The temperature column's header, or None."""
+    return settings.columns.get(KEY)
+
+
+def unit(settings) -> str:
+    """The temperature column's unit (degC when none is given)."""
+    return settings.units.temperature or MODEL_UNIT
 
 
 def check_unit(unit: Any, where: str) -> str:
@@ -62,13 +99,3 @@ def to_celsius(values, unit: str) -> np.ndarray:
     scale, offset = TEMPERATURE_UNITS[unit]
     v = np.asarray(values, dtype=float)
     return v if (scale, offset) == (1.0, 0.0) else scale * (v + offset)
-
-
-def add_to_dict(d: dict, column: str | None, unit: str) -> None:
-    """Put the keys back where a config writes them (the model file's settings)."""
-    d.pop("temperature_column", None)
-    d.pop("temperature_unit", None)
-    if column is None:
-        return
-    d["columns"] = {**d.get("columns", {}), KEY: column}
-    d["units"] = {**d.get("units", {}), KEY: unit}

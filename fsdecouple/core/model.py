@@ -22,7 +22,7 @@ from .decouple import exact as _exact_plan
 from .decouple import initial_forces
 from .extrapolation import Edges, continue_slopes, continue_values, edges
 from .kernel import rbf_sum, rbf_sum_slope
-from .plan import Plan, model_plan
+from .plan import Plan, model_plan, temperature_inputs, temperature_step
 from .surrogate import ChiSurrogate
 from .table_path import TableDecoupler
 from .temperature import TemperatureTerms
@@ -284,8 +284,7 @@ class CouplingErrorModel:
 
     @property
     def n_inputs(self) -> int:
-        """The raw inputs of a temperature model's plan: the outputs, and the temperature
-        after them when it is not one of them (a fitted model's); else ``n_outputs``."""
+        """A temperature model's raw inputs: the outputs, then a fitted model's temperature."""
         t = self.temperature
         return self.n_outputs + (1 if t is not None and t.external else 0)
 
@@ -296,7 +295,7 @@ class CouplingErrorModel:
         if self.temperature is None:
             return np.asarray(raw, dtype=float) - offsets
         offsets = np.asarray(offsets, dtype=float)
-        step = self.temperature.step(offsets if offsets.any() else None)
+        step = temperature_step(self.temperature, offsets if offsets.any() else None)
         return step(np.asarray(raw, dtype=float).reshape(-1, step.n_inputs))
 
     @property
@@ -335,9 +334,8 @@ class CouplingErrorModel:
              zero=None) -> Plan:
         """The decoupling plan (:mod:`fsdecouple.core.plan`): what every evaluator reads.
 
-        A model with temperature terms: the plan takes raw inputs (``n_inputs``) and
-        corrects them first, subtracting ``zero`` (a raw zero reading) after; with
-        ``temperature=False`` it takes outputs already at T0 and zero-corrected.
+        A temperature model's plan takes raw inputs (``n_inputs``), less ``zero``, to T0
+        first; ``temperature=False``: outputs at T0 already.
         """
         return model_plan(self, rotate=rotate, refine=self._refine(refine),
                           temperature=temperature, zero=zero)
@@ -386,23 +384,18 @@ class CouplingErrorModel:
         compiled : bool, optional
             Use the compiled table kernel (numba); default: for calls of at least
             ``table_path.COMPILED_ROWS`` rows, as ``apply`` asks for on long logs.
-        temperature : array_like, shape (n,) or float, optional
-            A model with temperature terms (:mod:`fsdecouple.core.temperature`): the
-            temperature of each row [the terms' unit]; then ``u`` are raw outputs (not
-            zero-corrected) and the plan's temperature step corrects them to T0 before
-            eq. (11).  None: ``u`` are outputs at T0 already (the step is left out).
-        zero : array_like, shape (M + 1,) or (M,), optional
-            With ``temperature``: a raw zero reading of the outputs and, last for a fitted
-            model (at the thermistor's place for an ATI one), its temperature, corrected
-            at its own temperature and subtracted after (ATIDAQ's bias).
+        temperature, zero : optional
+            A temperature model (core/temperature.py): each row's temperature, ``u`` then
+            raw, and a raw zero reading with its temperature (``n_inputs``), both
+            corrected to T0 by the plan's first step.  None: ``u`` are at T0 already.
         """
         u_arr = np.asarray(u, dtype=float)
         flat = u_arr.reshape(-1, self.n_outputs)
         shape = (*u_arr.shape[:-1], self.n_components) if u_arr.ndim else u_arr.shape
         refine = self._refine(refine)
         before: tuple = ()
-        if temperature is not None or zero is not None:
-            flat, before = self._temperature_inputs(flat, temperature, zero)
+        if temperature is not None or zero is not None:  # raw inputs and the step (plan.py)
+            flat, before = temperature_inputs(self.temperature, flat, temperature, zero)
         tables = None if exact else self.fast_decoupler()
         if tables is not None:
             f = tables.decouple(flat, rotate=rotate, workers=workers, refine=refine,
@@ -413,24 +406,6 @@ class CouplingErrorModel:
                 plan = replace(plan, steps=(*before, *plan.steps), n_outputs=flat.shape[1])
             f = _exact_plan(plan, flat, converged)
         return f.reshape(shape)
-
-    def _temperature_inputs(self, flat: np.ndarray, temperature, zero) -> tuple[np.ndarray, tuple]:
-        """The plan's raw inputs (outputs and the temperature) and its temperature step."""
-        terms = self.temperature
-        if terms is None:
-            from ..errors import ConfigError
-
-            raise ConfigError("the model has no temperature terms: temperature and zero are "
-                              "for a model fitted or imported with them")
-        if temperature is None:
-            raise TypeError("decouple: zero is the raw zero of a temperature model: give temperature")
-        t = np.broadcast_to(np.asarray(temperature, dtype=float), flat.shape[:1])
-        if terms.external:
-            flat = np.column_stack([flat, t])
-        else:
-            flat = flat.copy()
-            flat[:, terms.channel] = t
-        return flat, (terms.step(zero),)
 
     def fast_decoupler(self) -> TableDecoupler | None:
         """The table path (:mod:`fsdecouple.core.table_path`), or None without usable tables."""
@@ -450,14 +425,11 @@ class CouplingErrorModel:
 
         >>> f = model.decoupler()
         >>> fx, fy, fz = f(0.5, 0.01, -0.2)
-
-        A model with temperature terms takes its raw inputs (``n_inputs``: the outputs,
-        then the temperature for a fitted model) and corrects them to T0 first, no zero
-        subtracted (``decouple(..., temperature=, zero=)`` takes one).
+        A temperature model takes raw inputs (``n_inputs``) to T0 first, no zero subtracted.
         """
         refine = self._refine(refine)
         tables = self.fast_decoupler()
-        before = () if self.temperature is None else (self.temperature.step(),)
+        before = () if self.temperature is None else (temperature_step(self.temperature),)
         if tables is not None:
             return tables.one(refine=refine, before=before)
         plan = self.plan(refine=refine)

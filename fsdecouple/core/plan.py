@@ -30,6 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from .temperature import correct
+
 # A refined row has settled when its last step, k_a f_a - p_a^K, is at most this
 # fraction of each full-scale output.  Under Section 2.1's assumptions it is at most
 # (N - 1) 0.05 * 5 % = 0.5 % F.S. at K = 1 (N = 3), tenfold less a step on; above 1 %
@@ -102,20 +104,47 @@ class TemperatureCorrection:
         """The zero reading corrected at its own temperature (inputs,), or None."""
         if self.zero is None:
             return None
-        from .temperature import correct
-
         z = np.asarray(self.zero, dtype=float).astype(dtype)
         return correct(z[None, :], z[None, self.channel], self.t0, self.b, self.g)[0]
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         """The step on inputs ``x`` (n, inputs), in x's dtype."""
-        from .temperature import correct
-
         y = correct(x, x[:, self.channel], self.t0, self.b, self.g)
         z = self.zero_at_t0(x.dtype)
         if z is not None:
             y = y - z
         return np.delete(y, self.channel, axis=1) if self.external else y
+
+
+def temperature_step(terms, zero=None) -> TemperatureCorrection:
+    """The plan's step of a model's :class:`~fsdecouple.core.temperature.TemperatureTerms`;
+    ``zero``: a raw zero reading of the inputs (outputs, and the temperature at its channel)."""
+    b, g = np.asarray(terms.b, float), np.asarray(terms.g, float)
+    if terms.external:
+        b, g = np.append(b, 0.0), np.append(g, 0.0)
+    return TemperatureCorrection(terms.channel, float(terms.t0), b, g,
+                                 None if zero is None else np.asarray(zero, dtype=float),
+                                 terms.external)
+
+
+def temperature_inputs(terms, u: np.ndarray, temperature, zero) -> tuple[np.ndarray, tuple]:
+    """``model.decouple(u, temperature=, zero=)``: the plan's raw inputs (the outputs ``u``
+    (n, M), and the temperature after them or at an ATI thermistor's place) and its
+    temperature step, as the plan's first."""
+    if terms is None:
+        from ..errors import ConfigError
+
+        raise ConfigError("the model has no temperature terms: temperature and zero are for a "
+                          "model fitted or imported with them")
+    if temperature is None:
+        raise TypeError("decouple: zero is the raw zero of a temperature model: give temperature")
+    t = np.broadcast_to(np.asarray(temperature, dtype=float), u.shape[:1])
+    if terms.external:
+        x = np.column_stack([u, t])
+    else:
+        x = u.copy()
+        x[:, terms.channel] = t
+    return x, (temperature_step(terms, zero),)
 
 
 @dataclass(frozen=True, eq=False)
@@ -224,7 +253,7 @@ def model_plan(model, *, rotate: bool = True, refine: int | None = None,
     steps: list = list(corrections)
     terms = getattr(model, "temperature", None)
     if terms is not None and temperature:
-        steps.insert(0, terms.step(zero))
+        steps.insert(0, temperature_step(terms, zero))
         n_in = steps[0].n_inputs
     if model.method == "linear" and getattr(model, "imported", False):
         # a factory matrix (data/ati_model.py): v = P u are its forces (k = 1), f = I v, so

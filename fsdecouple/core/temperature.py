@@ -89,18 +89,6 @@ class TemperatureTerms:
         """The temperature is an input after the outputs (not one of them)."""
         return self.channel >= len(self.b)
 
-    def step(self, zero=None):
-        """The plan's step (:class:`fsdecouple.core.plan.TemperatureCorrection`); ``zero``: a
-        raw zero reading of the inputs (outputs, and the temperature at ``channel``)."""
-        from .plan import TemperatureCorrection
-
-        b, g = np.asarray(self.b, float), np.asarray(self.g, float)
-        if self.external:
-            b, g = np.append(b, 0.0), np.append(g, 0.0)
-        return TemperatureCorrection(self.channel, float(self.t0), b, g,
-                                     None if zero is None else np.asarray(zero, dtype=float),
-                                     self.external)
-
     def outside(self, t: np.ndarray) -> np.ndarray:
         """Rows (n,) whose temperature is beyond the calibrated span (none without one)."""
         t = np.asarray(t, dtype=float)

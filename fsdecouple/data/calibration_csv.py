@@ -16,7 +16,9 @@ import numpy as np
 from ..config import Settings
 from ..errors import InputError, excerpt, printable, where
 from ..files import CALIBRATION_LIMIT, TASK_LIMIT, natural_key, read_bounded, reading
+from ..temperature_units import column as temperature_column
 from ..temperature_units import to_celsius
+from ..temperature_units import unit as temperature_unit
 from .columns import applied_load
 from .csv_text import HEADER_ROW, read_csv_text, read_header, require_columns, to_numbers
 from .poses import average_poses, pose_note, timestamp_column
@@ -163,7 +165,7 @@ def read_calibration_table(path: str | Path, settings: Settings,
         # a single CSV without a repetition column is one repetition
         numbered = single and cols["repetition"] in header
         mapped = {name: name for name in numeric.values()}
-        t_name = settings.temperature_column  # columns: {temperature: ...} (issue 31)
+        t_name = temperature_column(settings)  # columns: {temperature: ...} (issue 31)
         if t_name is not None:
             mapped[t_name] = t_name
         mapped.update({cols[c]: cols[c] for c in ("axis", "repetition")
@@ -228,7 +230,7 @@ def read_calibration_table(path: str | Path, settings: Settings,
             out[canonical] = values * settings.scale[canonical]
         if t_name is not None:  # in degC, as a fitted model's temperature terms are
             out["temperature"] = to_celsius(to_numbers(raw[t_name], f, t_name, rows, settings.decimal),
-                                            settings.temperature_unit)
+                                            temperature_unit(settings))
         if timestamp_column(header) is not None:  # a pose log: samples averaged per load
             keys = [*layout.loads, "repetition", "axis"]
             out, ss, dof, runs, inverse = average_poses(out, keys, list(layout.outputs))
@@ -241,7 +243,7 @@ def read_calibration_table(path: str | Path, settings: Settings,
     # training order is file order: repetition, then row (stable)
     table = table.sort_values(["repetition"], kind="stable").reset_index(drop=True)
     table = table[["repetition", "axis", "file", "row", *layout.loads, *layout.outputs,
-                   *(["temperature"] if settings.temperature_column is not None else [])]]
+                   *(["temperature"] if temperature_column(settings) is not None else [])]]
     noise = np.sqrt(pose_ss / pose_dof * pose_inv / pose_n) if pose_dof else None
     return CalibrationTable(table, skipped, tuple(digests), hidden, tuple(warnings), noise)
 

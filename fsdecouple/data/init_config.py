@@ -41,9 +41,9 @@ from .columns import (
     nice_ceil,
     read_rows,
     shown,
-    with_temperature,
 )
 from .poses import TIMESTAMP_NAMES
+from .temperature_column import with_temperature
 
 COMPONENTS = ("fx", "fy", "fz", "mx", "my", "mz")
 _LOAD = re.compile(r"(?:f|force|load)([xyz])|([xyz])(?:force|load)")
