@@ -185,3 +185,15 @@ def test_report_certificate_and_compare_show_the_terms(drifting, tmp_path):
     r = invoke(["compare", drifting / "model.json", drifting / "model.json", "--json"])
     t = json.loads(r.stdout)["temperature"]
     assert t["b_change"] == {"ux": 0.0, "uy": 0.0, "uz": 0.0}
+
+
+def test_decouple_frame_reads_the_temperature_as_apply_does(drifting):
+    """The Python API on a DataFrame: the same forces and statuses as apply (to its 8
+    written decimals) on the drifting log."""
+    from fsdecouple import decouple_frame, load_model
+
+    model = load_model(drifting / "model.json")
+    got = decouple_frame(model, pd.read_csv(drifting / "task_voltages.csv"), tare=TARE)
+    out = pd.read_csv(drifting / "task_voltages_out.csv")
+    assert np.abs(got[["fx", "fy", "fz"]].to_numpy() - out[["fx", "fy", "fz"]].to_numpy()).max() <= 1e-8
+    assert (got["status"].to_numpy() == out["status"].to_numpy()).all()
