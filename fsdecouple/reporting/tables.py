@@ -175,9 +175,11 @@ def apply_warnings(summary) -> list[str]:
                  "(limits:), so the channel may have clipped; their forces are written "
                  "but flagged (status 'saturated')")
     if summary.out_of_range_rows:
+        temperature = "temperature" in summary.outputs  # a fitted model's (issue 31)
         w.append(f"{summary.out_of_range_rows} rows have a voltage more than 1 % of the span "
-                 "outside the calibrated range; their forces are extrapolated (status "
-                 "'extrapolated')")
+                 "outside the calibrated range" + (", or a temperature outside the calibrated "
+                                                   "temperatures" if temperature else "")
+                 + "; their forces are extrapolated (status 'extrapolated')")
     if summary.status_counts.get("not_converged"):
         w.append(f"{summary.status_counts['not_converged']} rows did not settle in the "
                  "second-order refinement (refine: K); kept with empty forces and status "
