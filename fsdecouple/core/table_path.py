@@ -149,6 +149,7 @@ class TableDecoupler:
         self.n = n
         tables = {(t.out, t.inp): t.table for t in step.terms}
         self._small: dict[int, Callable] = {}
+        self._plans: dict[tuple[bool, int], Plan] = {}
         self.k = np.asarray(step.k, dtype=float)
         self.inv_k = 1.0 / self.k
         self.step_tol = np.asarray(step.step_tol, dtype=float)
@@ -207,12 +208,17 @@ class TableDecoupler:
         return cls(plan)
 
     def _plan(self, rotate: bool, refine: int, before: tuple = ()) -> Plan:
-        steps = tuple(replace(s, refine=int(refine)) if isinstance(s, Couple) else s
-                      for s in self.plan.steps if rotate or not isinstance(s, Rotate))
+        """The plan without its rotation (``rotate`` False) and with K = ``refine``; ``before``:
+        steps on the raw inputs first (a temperature model's correction and zero)."""
+        key = (bool(rotate), int(refine))
+        if key not in self._plans:
+            steps = tuple(replace(s, refine=int(refine)) if isinstance(s, Couple) else s
+                          for s in self.plan.steps if rotate or not isinstance(s, Rotate))
+            self._plans[key] = replace(self.plan, steps=steps)
+        plan = self._plans[key]
         if not before:
-            return replace(self.plan, steps=steps)
-        # steps on the raw inputs first (a temperature model's correction and zero)
-        return replace(self.plan, steps=(*before, *steps), n_outputs=before[0].n_inputs)
+            return plan
+        return replace(plan, steps=(*before, *plan.steps), n_outputs=before[0].n_inputs)
 
     # --- arrays -------------------------------------------------------------------
 

@@ -1,14 +1,15 @@
 """Export a model as one dependency-free C99 header (``fsdecouple export``).
 
-The header evaluates eq. (11), f_a = (u_a - sum_(b != a) chi_ab(u_b)) / k_aa (and a
-joint fit's own-load chi_aa(u_a), always at the measured u_a: fitting/joint.py),
-with each chi (eq. 4) as a cubic Hermite table inside its interval and as the
-exact kernel sum (eq. 10) over the embedded support vectors outside it, so it
-agrees with ``model.decouple`` everywhere.  A ``linear`` model's header evaluates
-its least-squares calibration matrix, f = C u, with the same API, status bits
-and self-test.  This module decides every number the
-header holds and checks what it promises; :mod:`fsdecouple.export.c_source` writes the
-C text.
+The header is the model's decoupling plan (:mod:`fsdecouple.core.plan`: eq. (11),
+f_a = (u_a - sum_(b != a) chi_ab(u_b)) / k_aa, with a joint fit's own-load chi_aa(u_a),
+refinement, the M > N projection and the rotation) with the header's tables in its
+terms: each chi (eq. 4) a cubic Hermite table inside its interval and the exact
+kernel sum (eq. 10) over the embedded support vectors outside it, so it agrees with
+``model.decouple`` everywhere.  A ``linear`` model's plan is f = C u, with the same
+API, status bits and self-test.  This module decides every number the header holds
+and checks what it promises against the plan's own evaluators (the exact path,
+:func:`exact_forces`, and the float emulation, :func:`emulate_float`, which walk the
+same plan as the C); :mod:`fsdecouple.export.c_source` writes the C text.
 
 * Tables: the model's own surrogates when they are within the export's promise,
   or, with ``max_error``, the coarsest uniform tables (resampled from the kernel
