@@ -122,7 +122,7 @@ def validate(
     if settings.layout != model.layout:
         raise InputError(f"the config names components {', '.join(settings.layout.loads)}, the "
                          f"model {', '.join(model.layout.loads)}; use the calibration's config")
-    if settings.units != model.settings.units:
+    if replace(settings.units, temperature=None) != replace(model.settings.units, temperature=None):
         set_u, model_u = settings.units, model.settings.units  # 'N / N·m' where mixed
         raise InputError(f"the config reads the set with loads in {set_u.load}, outputs in "
                          f"{set_u.output}; the model was calibrated with loads in {model_u.load}, "
