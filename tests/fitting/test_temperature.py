@@ -197,3 +197,17 @@ def test_decouple_frame_reads_the_temperature_as_apply_does(drifting):
     out = pd.read_csv(drifting / "task_voltages_out.csv")
     assert np.abs(got[["fx", "fy", "fz"]].to_numpy() - out[["fx", "fy", "fz"]].to_numpy()).max() <= 1e-8
     assert (got["status"].to_numpy() == out["status"].to_numpy()).all()
+
+
+def test_validate_needs_the_temperature_column(drifting, tmp_path):
+    (tmp_path / "plain.yaml").write_text("sensor: plain\n")
+    r = invoke(["validate", drifting / "model.json", drifting / "calibration", "-c",
+                tmp_path / "plain.yaml"], code=2)
+    assert "no temperature column mapped" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("extra", [["--components", "6"], ["--layout", "lab"], ["--hysteresis", "0.01"],
+                                   ["--repetitions", "2"]])
+def test_simulate_temperature_refuses_what_it_cannot_honour(tmp_path, extra):
+    r = invoke(["simulate", tmp_path / "s", "--temperature", *extra], code=2)
+    assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "s").exists()
