@@ -33,6 +33,7 @@ from .c_function import (  # noqa: F401 (the status bits, also for header.py)
     decouple_function,
     num,
     numf,
+    set_zero_function,
 )
 from .plan import ExportPlan
 
@@ -52,7 +53,7 @@ def render(plan: ExportPlan) -> str:
         parts.append(_kernel(plan, j, chi))
         if chi.table is not None:
             parts.append(_table(plan, j, chi, ctype))
-    parts += [decouple_function(plan, ctype), _selftest(plan)]
+    parts += [set_zero_function(plan), decouple_function(plan, ctype), _selftest(plan)]
     parts.append(f"#endif /* {P}IMPLEMENTATION */\n\n#ifdef __cplusplus\n}}\n#endif\n"
                  f"#endif /* {P}DECOUPLER_H */\n")
     return "\n".join(parts)
@@ -163,6 +164,7 @@ extern const double {p}calibrated_range[{n}][2];
 
 uint32_t {fn};
 int {p}selftest(void);
+{f"void {p}set_zero(const double *u);" + chr(10) if plan.temperature is not None else ""}\
 
 #ifdef {P}IMPLEMENTATION
 /* --- implementation ({ctype} tables) --- */
@@ -251,8 +253,9 @@ def _temperature_note(plan: ExportPlan) -> str:
              else f"u[{step.channel}], one of the outputs (its matrix column is 0)")
     return (f" * Temperature: u holds the temperature at {where}.  Each output is first\n"
             f" * corrected to T0 = {step.t0!r}: u_i(T0) = (u_i - b_i (T - T0)) / (1 + g_i (T - T0))\n"
-            " * (the model's temperature terms): u are raw outputs, no zero subtracted.  A\n"
-            " * linear model's zero taken at T_z: f(u, T) - f(u_zero, T_z), ATIDAQ's bias.\n")
+            " * (the model's temperature terms): u are raw outputs.  set_zero(u_zero) keeps a\n"
+            " * zero reading (with its temperature) corrected alike and subtracts it from every\n"
+            " * row after (ATIDAQ's bias); none until then (the self-test runs without one).\n")
 
 
 def _own_note(plan: ExportPlan) -> str:

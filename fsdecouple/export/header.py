@@ -111,7 +111,7 @@ def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",
         prefix=prefix, precision=precision, plan=model.plan(),
         full_scale=fs, calibrated_range=cal,
         range_limits=np.asarray(model.extrapolation_limits()),  # exactly apply's "extrapolated"
-        limits=_limits(model, limits, model.n_inputs),
+        limits=_limits(model, limits, getattr(model, "n_inputs", model.n_outputs)),
         digest=str(doc["integrity"]["digest"]), format_version=int(doc["format_version"]),
         sensor=str(settings.sensor), load_unit=settings.load_unit,
         output_unit=settings.output_unit, version=version, model=model,
