@@ -43,6 +43,9 @@ MIN_SPAN = 5.0  # [K]: two temperatures at least this far apart (issue 31)
 LEVEL_GAP = MIN_SPAN / 2  # sweeps this far apart in temperature are different levels
 POLY_DEGREE = 5
 ITERATIONS = 8
+# sweep-mean residuals within this many times their noise (in variance): the offsets follow
+# z + beta dT, so every row's fit of z zeroes the set better than one zero row a sweep
+STEADY_SCATTER = 4.0
 
 
 @dataclass(frozen=True)
@@ -124,6 +127,9 @@ class TemperatureFit:
     output_unit: str
     outputs: tuple[str, ...]
     heldout: list[dict[str, Any]] | None = None
+    # each output's zero at T0 [output unit] when the sweeps' offsets follow z + beta dT
+    # within their noise (else None: each sweep keeps the zero its rows gave)
+    offset_t0: np.ndarray | None = None
 
     def to_dict(self) -> dict[str, Any]:
         t = self.terms
@@ -161,7 +167,8 @@ def fit_terms(calib: CalibrationSet, settings, *, t0: float | None = None) -> Te
     phi = _design(pts[list(layout.loads)].to_numpy(dtype=float),
                   np.asarray(settings.full_scale, dtype=float))
     m = raw.shape[1]
-    b, g, sb, sg = (np.zeros(m) for _ in range(4))
+    b, g, sb, sg, z = (np.zeros(m) for _ in range(5))
+    steady = True
     for i in range(m):
         c = _fit_channel(raw[:, i] / u_fs[i], dt, phi, sweep)
         # b = beta - g z; var by the delta method, inflated by the sweeps' excess scatter
@@ -169,15 +176,20 @@ def fit_terms(calib: CalibrationSet, settings, *, t0: float | None = None) -> Te
         var_b = float(grad @ c.cov @ grad) * c.sweep_scatter
         b[i], sb[i] = (c.beta - c.g * c.z) * u_fs[i], np.sqrt(var_b) * u_fs[i]
         g[i], sg[i] = c.g, np.sqrt(c.cov[2, 2] * c.sweep_scatter)
+        z[i] = c.z * u_fs[i]
+        steady &= c.sweep_scatter <= STEADY_SCATTER
     span = (float(t.min()), float(t.max()))
     terms = TemperatureTerms(m, float(t0), b, g, MODEL_UNIT, span, sb, sg)
     return TemperatureFit(terms, [float(t_sweep[gr].mean()) for gr in groups],
-                          settings.output_unit, tuple(layout.outputs))
+                          settings.output_unit, tuple(layout.outputs), offset_t0=z if steady else None)
 
 
-def corrected_points(calib: CalibrationSet, terms: TemperatureTerms):
+def corrected_points(calib: CalibrationSet, terms: TemperatureTerms, offset_t0=None):
     """The set's points with outputs at T0: ``correct(raw, T) - correct(zero_s, T_s)`` per
-    sweep s, zero_s the offset the set removed from it and T_s its rows' mean temperature."""
+    sweep s, zero_s the offset the set removed from it and T_s its rows' mean temperature;
+    or, given ``offset_t0`` (the fit's zero at T0, from every row of every sweep, when the
+    sweeps' offsets follow the drift), ``correct(raw, T) - offset_t0``: a single zero row
+    per sweep no longer adds its noise to the sweep's points."""
     pts = calib.points.copy()
     layout = calib.layout
     outs = list(layout.outputs)
@@ -188,7 +200,8 @@ def corrected_points(calib: CalibrationSet, terms: TemperatureTerms):
     t = pts["temperature"].to_numpy(dtype=float)
     t_s = sweep_temperatures(pts, sweep)[sweep]
     b, g = terms.b, terms.g
-    pts[outs] = correct(raw, t, terms.t0, b, g) - correct(offset, t_s, terms.t0, b, g)
+    zero = correct(offset, t_s, terms.t0, b, g) if offset_t0 is None else offset_t0
+    pts[outs] = correct(raw, t, terms.t0, b, g) - zero
     return pts
 
 
@@ -206,7 +219,8 @@ def compensate(calib: CalibrationSet, settings) -> tuple[CalibrationSet, Tempera
                 "temperature terms fitted")
         return replace(calib, warnings=(*calib.warnings, note)), None
     found = replace(found, heldout=heldout(calib, settings, found))
-    return replace(calib, points=corrected_points(calib, found.terms), temperature_fit=found), found
+    points = corrected_points(calib, found.terms, found.offset_t0)
+    return replace(calib, points=points, temperature_fit=found), found
 
 
 def heldout(calib: CalibrationSet, settings, found: TemperatureFit) -> list[dict[str, Any]]:

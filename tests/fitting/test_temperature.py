@@ -211,3 +211,25 @@ def test_validate_needs_the_temperature_column(drifting, tmp_path):
 def test_simulate_temperature_refuses_what_it_cannot_honour(tmp_path, extra):
     r = invoke(["simulate", tmp_path / "s", "--temperature", *extra], code=2)
     assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "s").exists()
+
+
+def test_offsets_jumping_between_sweeps_keep_each_sweeps_zero(drifting, tmp_path):
+    """Sweeps whose zero jumps by 0.02 V (40x the noise) at random: the fit no longer zeroes
+    by its common z (offset_t0 None), and b's uncertainty grows to cover the jumps."""
+    from fsdecouple import load_calibration, load_config
+    from fsdecouple.fitting.temperature import compensate
+
+    settings = load_config(drifting / "sensor.yaml")
+    rng = np.random.default_rng(1)
+    cal = tmp_path / "cal"
+    cal.mkdir()
+    for p in sorted((drifting / "calibration").glob("rep*.csv")):
+        df = pd.read_csv(p)
+        for axis in "xyz":
+            rows = df["axis"] == axis
+            df.loc[rows, ["ux", "uy", "uz"]] += rng.uniform(-0.02, 0.02, 3)
+        df.to_csv(cal / p.name, index=False)
+    steady = compensate(load_calibration(drifting / "calibration", settings), settings)[1]
+    jumpy = compensate(load_calibration(cal, settings), settings)[1]
+    assert steady.offset_t0 is not None and jumpy.offset_t0 is None
+    assert (jumpy.terms.b_sigma > 3 * steady.terms.b_sigma).all()
