@@ -223,16 +223,6 @@ class Plan:
         return replace(self, steps=tuple(replace(s, terms=tuple(terms)) if isinstance(s, Couple)
                                          else s for s in self.steps))
 
-    def without(self, kind: type) -> Plan:
-        """The plan without its steps of ``kind`` (its input count from the first step left)."""
-        steps = tuple(s for s in self.steps if not isinstance(s, kind))
-        first = steps[0] if steps else None
-        n_in = first.n_inputs if isinstance(first, TemperatureCorrection) else (
-            first.matrix.shape[1] if isinstance(first, Project | Linear) else self.n_components)
-        if isinstance(first, InputCorrection):
-            n_in = len(first.offset)
-        return replace(self, steps=steps, n_outputs=n_in)
-
     def inserted(self, step, before: type = Couple) -> Plan:
         """The plan with ``step`` before the first step of kind ``before``."""
         i = next(i for i, s in enumerate(self.steps) if isinstance(s, before | Linear))
