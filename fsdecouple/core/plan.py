@@ -223,9 +223,10 @@ class Plan:
         return replace(self, steps=tuple(replace(s, terms=tuple(terms)) if isinstance(s, Couple)
                                          else s for s in self.steps))
 
-    def inserted(self, step, before: type = Couple) -> Plan:
-        """The plan with ``step`` before the first step of kind ``before``."""
-        i = next(i for i, s in enumerate(self.steps) if isinstance(s, before | Linear))
+    def inserted(self, step) -> Plan:
+        """The plan with ``step`` on the raw outputs, after its other input corrections."""
+        i = next((i for i, s in enumerate(self.steps) if not isinstance(s, InputCorrection)),
+                 len(self.steps))
         return replace(self, steps=(*self.steps[:i], step, *self.steps[i:]))
 
 

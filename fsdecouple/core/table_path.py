@@ -27,6 +27,7 @@ import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
+from operator import mul
 
 import numpy as np
 
@@ -364,26 +365,31 @@ class TableDecoupler:
                         strict=True))
         ik, kk, tol = self.inv_k.tolist(), self.k.tolist(), self.step_tol.tolist()
         own = self.own_rows if self.has_own else None
-        order = [_sum_order(n, a) for a in range(n)]  # (input b, column m), the array path's
+        # per output a, in the array path's order: where its g_ab sit in cells()' list
+        order = [[b * (n - 1) + m for b, m in _sum_order(n, a)] for a in range(n)]
 
-        def cells(x):
-            """Per input at x: the offset s and the g_ab of its fed outputs; None outside a
-            table or NaN."""
-            out = []
+        def cells(x, at=None):
+            """The g_ab at x of every input b and fed output a (b-major); each input's
+            (interval, offset) appended to ``at``, if given.  None outside a table or NaN."""
+            g = []
+            put = g.append
             for xb, (lo, inv, cnt, table) in zip(x, grid):  # noqa: B905 (len(x) == n)
                 t = (xb - lo) * inv
                 if not 0.0 <= t < cnt:
                     return None
                 i = int(t)
                 s = t - i
-                out.append((s, [horner(c0, c1, c2, c3, s) for c0, c1, c2, c3 in table[i]]))
-            return out
+                for c0, c1, c2, c3 in table[i]:
+                    put(horner(c0, c1, c2, c3, s))
+                if at is not None:
+                    at.append((i, s))
+            return g
 
-        def forces(base, c):
+        def forces(base, g):  # f_a = base_a + g_ab + ..., added left to right
             f = []
             for fa, terms in zip(base, order):  # noqa: B905
-                for b, m in terms:
-                    fa += c[b][1][m]
+                for j in terms:
+                    fa += g[j]
                 f.append(fa)
             return f
 
@@ -392,24 +398,23 @@ class TableDecoupler:
             return f[0].tolist() if ok[0] else [nan] * n
 
         def couple_one(u):
-            c = cells(u)
-            if c is None:
+            at = None if own is None else []
+            g = cells(u, at)
+            if g is None:
                 return exact(u)
-            base = [u[a] * ik[a] for a in range(n)]
-            if own is not None:
-                for a in range(n):
-                    s = c[a][0]
-                    o = own[a][int((u[a] - grid[a][0]) * grid[a][1])]
-                    base[a] += horner(o[0], o[1], o[2], o[3], s)
-            f = forces(base, c)
+            base = list(map(mul, u, ik))
+            if at is not None:
+                for a, (i, s) in enumerate(at):
+                    base[a] += horner(*own[a][i], s)
+            f = forces(base, g)
             if not refine:
                 return f
             for _ in range(refine):
-                x = [f[a] * kk[a] for a in range(n)]
-                c = cells(x)
-                if c is None:
+                x = list(map(mul, f, kk))
+                g = cells(x)
+                if g is None:
                     return exact(u)
-                f = forces(base, c)
+                f = forces(base, g)
             for a in range(n):
                 if not abs(f[a] * kk[a] - x[a]) <= tol[a]:
                     return [nan] * n  # did not settle: no silent forces

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import io
 import json
-from importlib import metadata
 
 import numpy as np
 import pyarrow as pa
@@ -129,6 +128,8 @@ def pandas_metadata(schema: pa.Schema) -> bytes:
 
 
 def _plain_pandas_metadata(schema: pa.Schema) -> bytes | None:
+    from importlib import metadata  # 45 ms of imports: for Parquet output only
+
     try:
         version = metadata.version("pandas")
     except metadata.PackageNotFoundError:

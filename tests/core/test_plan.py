@@ -137,3 +137,39 @@ def test_the_temperature_step_is_applied_by_every_form(sample_model):
     want32 = by_hand(doc, x32[:, :3].astype(float), x32[:, 3].astype(float), terms.t0, terms.b, terms.g)
     err = np.abs(emulate_float(export, x32) - want32) / fs
     assert err.max() <= export.float_max_error, err.max(axis=0)
+
+
+@pytest.mark.slow  # a joint fit of eight gauges (~5 s)
+def test_every_form_of_an_m_over_n_model_is_eq11_of_its_file(tmp_path):
+    """M > N outputs (fitting/gauges.py): the projection v = P u is a step of the plan, and
+    an input correction goes on the raw outputs before it, in every form."""
+    from conftest import assert_decouples_by_its_own_numbers
+
+    from fsdecouple import load_calibration, load_config, save_model
+    from fsdecouple.data.init_config import init_config
+    from fsdecouple.fitting.fit import fit
+    from fsdecouple.sim.rig import write_rig
+
+    path = write_rig(tmp_path, seed=0, kind="lever-arm", gauges=8)[0]
+    init_config(path, tmp_path / "cfg.yaml")
+    settings = load_config(tmp_path / "cfg.yaml")
+    model = fit(load_calibration(path, settings), settings)
+    assert model.projection is not None and model.fast_decoupler() is not None
+    file = tmp_path / "m.json"
+    save_model(model, file)
+    r = model.calibrated_range  # of v = P u: outputs u = P^+ v spanning it
+    v = np.random.default_rng(6).uniform(r[:, 0], r[:, 1], (300, model.n_components))
+    u = v @ np.linalg.pinv(model.projection).T
+    assert_decouples_by_its_own_numbers(file, u)
+    gain = 1.0 + 0.02 * np.cos(np.arange(model.n_outputs))
+    step = InputCorrection(0.01 * np.abs(u).max(axis=0), gain)
+    plan = model.plan().inserted(step)
+    assert isinstance(plan.steps[0], InputCorrection)
+    want = eq11_from_file(json.loads(file.read_text()), u, correction=(step.offset, step.gain))
+    tables = TableDecoupler.from_plan(plan)
+    one = tables.one()
+    fs = np.asarray(model.settings.full_scale)
+    for name, got, tol in (("exact", exact(plan, u), EXACT_TOL),
+                           ("tables", tables.decouple(u), TABLE_TOL),
+                           ("decoupler()", np.array([one(*x) for x in u.tolist()]), TABLE_TOL)):
+        assert (np.abs(got - want) / fs).max() <= tol, name
