@@ -16,6 +16,7 @@ import numpy as np
 from .errors import ConfigError
 
 KEY = "temperature"
+DEFAULT_TEMPERATURE = "temperature"  # a file's column of this name is read without a mapping
 # the unit's spellings, and (scale, offset) to degC: T_C = scale * (T + offset)
 TEMPERATURE_UNITS = {"degC": (1.0, 0.0), "K": (1.0, -273.15), "degF": (5.0 / 9.0, -32.0)}
 ALIASES = {"°C": "degC", "C": "degC", "celsius": "degC", "kelvin": "K", "°F": "degF",
@@ -76,7 +77,8 @@ def split(raw: dict, source: str) -> tuple[dict, dict[str, Any]]:
 
 
 def column(settings) -> str | None:
-    """The temperature column's header, or None."""
+    """The temperature column's header as mapped, or None (then a column named
+    DEFAULT_TEMPERATURE is read, in degC, as ``fx`` is read from a column named fx)."""
     return settings.columns.get(KEY)
 
 

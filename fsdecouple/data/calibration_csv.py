@@ -16,8 +16,8 @@ import numpy as np
 from ..config import Settings
 from ..errors import InputError, excerpt, printable, where
 from ..files import CALIBRATION_LIMIT, TASK_LIMIT, natural_key, read_bounded, reading
+from ..temperature_units import DEFAULT_TEMPERATURE, to_celsius
 from ..temperature_units import column as temperature_column
-from ..temperature_units import to_celsius
 from ..temperature_units import unit as temperature_unit
 from .columns import applied_load
 from .csv_text import HEADER_ROW, read_csv_text, read_header, require_columns, to_numbers
@@ -166,6 +166,8 @@ def read_calibration_table(path: str | Path, settings: Settings,
         numbered = single and cols["repetition"] in header
         mapped = {name: name for name in numeric.values()}
         t_name = temperature_column(settings)  # columns: {temperature: ...} (issue 31)
+        if t_name is None and DEFAULT_TEMPERATURE in header:  # the default name, as fx's is fx
+            t_name = DEFAULT_TEMPERATURE
         if t_name is not None:
             mapped[t_name] = t_name
         mapped.update({cols[c]: cols[c] for c in ("axis", "repetition")
@@ -240,10 +242,14 @@ def read_calibration_table(path: str | Path, settings: Settings,
                 warnings.append(pose_note(f, runs, sum(c for *_, c in runs)))
         frames.append(out)
     table = pd.concat(frames, ignore_index=True)
+    if "temperature" in table.columns and table["temperature"].isna().any():  # not in every file
+        f = table.loc[table["temperature"].isna(), "file"].iloc[0]
+        raise InputError(f"{where(f, HEADER_ROW)}: no column 'temperature', which the set's "
+                         "other files have; every repetition needs its temperature")
     # training order is file order: repetition, then row (stable)
     table = table.sort_values(["repetition"], kind="stable").reset_index(drop=True)
     table = table[["repetition", "axis", "file", "row", *layout.loads, *layout.outputs,
-                   *(["temperature"] if temperature_column(settings) is not None else [])]]
+                   *(["temperature"] if "temperature" in table.columns else [])]]
     noise = np.sqrt(pose_ss / pose_dof * pose_inv / pose_n) if pose_dof else None
     return CalibrationTable(table, skipped, tuple(digests), hidden, tuple(warnings), noise)
 

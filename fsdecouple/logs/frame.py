@@ -53,7 +53,8 @@ def frame_outputs(model: CouplingErrorModel, frame: pd.DataFrame,
     layout = model.layout
     names = [settings.columns[c] for c in layout.outputs]
     if model.n_inputs > model.n_outputs:  # a fitted model's temperature (logs/outputs.py)
-        names.append(temperature_column(settings) or temperature_column(model.settings))
+        names.append(temperature_column(settings) or temperature_column(model.settings)
+                     or "temperature")
     absent = [n for n in names if n not in frame.columns]
     if absent:
         raise InputError(f"the frame has no column '{absent[0]}' (columns: "

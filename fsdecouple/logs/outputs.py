@@ -62,10 +62,10 @@ def _fitted_temperature(model, settings, header, path, read, temperature):
     """A fitted model's temperature (``columns: {temperature: ...}``, in the config's unit,
     read as degC): the log's column, or ``--temperature VALUE`` for every row, appended
     after the outputs as the plan's one more input."""
-    from ..temperature_units import column, to_celsius, unit
+    from ..temperature_units import DEFAULT_TEMPERATURE, column, to_celsius, unit
 
     given = settings if column(settings) is not None else model.settings
-    name, unit = column(given), unit(given)
+    name, unit = column(given) or DEFAULT_TEMPERATURE, unit(given)
     if temperature is None:
         if name is None or name not in header:
             shown = f"no column '{name}'" if name is not None else "no temperature column mapped"

@@ -201,8 +201,11 @@ def test_decouple_frame_reads_the_temperature_as_apply_does(drifting):
 
 def test_validate_needs_the_temperature_column(drifting, tmp_path):
     (tmp_path / "plain.yaml").write_text("sensor: plain\n")
-    r = invoke(["validate", drifting / "model.json", drifting / "calibration", "-c",
-                tmp_path / "plain.yaml"], code=2)
+    cal = tmp_path / "cal"
+    cal.mkdir()
+    for p in sorted((drifting / "calibration").glob("rep*.csv")):
+        pd.read_csv(p).drop(columns="temperature").to_csv(cal / p.name, index=False)
+    r = invoke(["validate", drifting / "model.json", cal, "-c", tmp_path / "plain.yaml"], code=2)
     assert "no temperature column mapped" in r.stderr and len(r.stderr.strip().splitlines()) == 1
 
 
@@ -233,3 +236,17 @@ def test_offsets_jumping_between_sweeps_keep_each_sweeps_zero(drifting, tmp_path
     jumpy = compensate(load_calibration(cal, settings), settings)[1]
     assert steady.offset_t0 is not None and jumpy.offset_t0 is None
     assert (jumpy.terms.b_sigma > 3 * steady.terms.b_sigma).all()
+
+
+def test_a_column_named_temperature_needs_no_mapping(drifting, tmp_path):
+    """As fx is read from a column named fx: fit and apply without a config read the column
+    named 'temperature' (degC), and give the forces the config gives."""
+    invoke(["fit", drifting / "calibration", "-o", tmp_path / "m.json", "--no-verdict"])
+    doc = json.loads((tmp_path / "m.json").read_text())
+    mapped = json.loads((drifting / "model.json").read_text())
+    assert doc["temperature"]["b"] == mapped["temperature"]["b"]
+    invoke(["apply", tmp_path / "m.json", drifting / "task_voltages.csv", "-o", tmp_path / "o.csv",
+            "--tare", TARE])
+    a = pd.read_csv(tmp_path / "o.csv")[["fx", "fy", "fz"]].to_numpy()
+    b = pd.read_csv(drifting / "task_voltages_out.csv")[["fx", "fy", "fz"]].to_numpy()
+    assert np.abs(a - b).max() <= 1e-6 * FS.max()
