@@ -26,7 +26,7 @@ from .schema import (
     svr_settings,
     validate,
 )
-from .units import Units
+from .units import Units, temperature_keys
 from .wrench import Frame
 from .yamlfile import read_yaml
 
@@ -149,6 +149,7 @@ class Settings:
 FULL_SCALE_RANGE = (1e-12, 1e12)
 
 
+@temperature_keys  # columns: {temperature: ...}, units: {temperature: ...} (temperature_units.py)
 def settings_from_dict(raw: Any, source: str = "config") -> Settings:
     """Validate a parsed YAML document into :class:`Settings` (the keys: schema.py)."""
     settings, given = validate(raw, source, Settings())

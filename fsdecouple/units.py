@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from .temperature_units import config_keys as temperature_keys  # noqa: F401 (config.py's)
+
 # One unit of each load unit in newtons (gf and kgf: standard gravity, 9.80665 m/s^2;
 # lbf: the avoirdupois pound-force, klbf a thousand of them).
 LOAD_UNITS = {"N": 1.0, "kN": 1000.0, "gf": 9.80665e-3, "kgf": 9.80665, "lbf": 4.4482216152605,
@@ -40,6 +42,8 @@ class Units:
     # (a six-axis sensor's N and N·m); empty when one unit serves all
     loads: tuple[str, ...] = ()
     outputs: tuple[str, ...] = ()
+    # of a temperature column (columns: {temperature: ...}; temperature_units.py), or None
+    temperature: str | None = None
 
     def load_of(self, a: int) -> str:
         """The unit of component a's load."""
@@ -53,7 +57,7 @@ class Units:
         """The config's form: one unit, or a mapping by column name (``loads``, ``outputs``)."""
         return {"load": dict(zip(loads, self.loads, strict=True)) if self.loads else self.load,
                 "output": dict(zip(outputs, self.outputs, strict=True)) if self.outputs
-                else self.output}
+                else self.output, **({"temperature": self.temperature} if self.temperature else {})}
 
     def slope(self) -> str:
         """The unit of k (eq. 2): output per load."""

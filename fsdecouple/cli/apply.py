@@ -78,7 +78,9 @@ def apply(
     ] = None,
     temperature: Annotated[
         float | None, typer.Option(help="A model with temperature terms, a log without the "
-                                        "temperature column: this reading for every row.")
+                                        "temperature column: this reading for every row (an "
+                                        "ATI thermistor's volts; for a fitted model, in the "
+                                        "config's units: temperature, degC by default).")
     ] = None,
     force: ForceOpt = False,
     json_out: JsonOpt = False,

@@ -74,6 +74,13 @@ def simulate(
         int | None, typer.Option(help="--rig only: output channels, 6 to 64 (default 6: readings "
                                       "Fx..Mz; 8: gauges g1..g8, more outputs than components).")
     ] = None,
+    temperature: Annotated[
+        bool, typer.Option("--temperature", help="The paper's sensor drifting with temperature: "
+                                                 "repetitions at 15, 25 and 35 degC (a temperature "
+                                                 "column), a task log drifting through 10-40 degC "
+                                                 "after a tare at 25 degC and its twin at 25 degC, "
+                                                 "sensor.yaml and truth.json (docs/temperature.md).")
+    ] = False,
     force: ForceOpt = False,
 ) -> None:
     """Write a simulated calibration set: the paper's (with a combined-load task log) or a lab's."""
@@ -84,6 +91,24 @@ def simulate(
     from ..sim.six_axis import COMPONENTS, OUTPUTS, write_six_axis
 
     with user_errors():
+        if temperature:
+            from ..sim.simulate import check_count
+            from ..sim.thermal import write_thermal
+
+            given = [o for o, v in (("--rig", rig), ("--gauges", gauges), ("--levels", levels),
+                                    ("--gross-error", gross_error), ("--coupling", coupling),
+                                    ("--hysteresis", hysteresis)) if v is not None]
+            given += [o for o, v, d in (("--layout", layout, "paper"), ("--components", components, 3))
+                      if v != d]
+            if given:  # never ignored in silence
+                raise InputError(f"--temperature: {', '.join(given)}: not with --temperature (the "
+                                 "paper's sensor on its grid, drifting with temperature)")
+            check_count(seed, "seed", 0)
+            if repetitions is not None:
+                check_count(repetitions, "repetitions", 3, 999)
+            files = write_thermal(out_dir, seed=seed, repetitions=repetitions or 6, force=force)
+            console.print(f"wrote {len(files)} files under {printable(out_dir)}")
+            return
         if hysteresis is not None and (components == 6 or rig is not None):
             raise InputError("--hysteresis: only for the three-axis paper layout")
         if rig is not None:

@@ -22,7 +22,7 @@ from .decouple import exact as _exact_plan
 from .decouple import initial_forces
 from .extrapolation import Edges, continue_slopes, continue_values, edges
 from .kernel import rbf_sum, rbf_sum_slope
-from .plan import Plan, model_plan
+from .plan import Plan, model_plan, temperature_inputs, temperature_step
 from .surrogate import ChiSurrogate
 from .table_path import TableDecoupler
 from .temperature import TemperatureTerms
@@ -160,10 +160,13 @@ class FitReport:
     tune: dict[str, Any] | None = None  # fit --tune's grid and choice (evaluation.tune); None: untuned
     # per step: outputs, model error and U; held-out scores for intervals (evaluation.budget)
     certificate: dict[str, Any] | None = None
+    # the temperature terms' fit: b, g with uncertainties, the held-out figure (fitting/temperature.py)
+    temperature: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         d = {f.name: getattr(self, f.name) for f in fields(self)}
-        for key in ("surrogate_max_error", "verdict", "outliers", "tune", "certificate"):
+        for key in ("surrogate_max_error", "verdict", "outliers", "tune", "certificate",
+                    "temperature"):
             if d[key] is None:  # files from before these figures
                 del d[key]
         return d
@@ -284,12 +287,21 @@ class CouplingErrorModel:
         """A linear model without chi: a factory matrix read from a file (data/ati_cal.py)."""
         return self.method == "linear" and not self.chi
 
+    @property
+    def n_inputs(self) -> int:
+        """A temperature model's raw inputs: the outputs, then a fitted model's temperature."""
+        t = self.temperature
+        return self.n_outputs + (1 if t is not None and t.external else 0)
+
     def zero_corrected(self, raw: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-        """Outputs as eq. (11) takes them: ``raw - offsets``, temperature-corrected first
-        when the model has temperature terms (core/temperature.py)."""
+        """Outputs as eq. (11) takes them (n, M): ``raw - offsets``; for a model with
+        temperature terms, the plan's temperature step on raw inputs (n, ``n_inputs``)
+        and their zero reading ``offsets`` (``n_inputs``; all 0: no zero taken)."""
         if self.temperature is None:
             return np.asarray(raw, dtype=float) - offsets
-        return self.temperature.zero_corrected(raw, offsets)
+        offsets = np.asarray(offsets, dtype=float)
+        step = temperature_step(self.temperature, offsets if offsets.any() else None)
+        return step(np.asarray(raw, dtype=float).reshape(-1, step.n_inputs))
 
     @property
     def calibrated_range(self) -> np.ndarray:
@@ -323,9 +335,15 @@ class CouplingErrorModel:
         return _coupling_errors(np.asarray(u, dtype=float).reshape(-1, self.n_components),
                                 [*self.chi.values(), *self.own.values()])
 
-    def plan(self, *, rotate: bool = True, refine: int | None = None) -> Plan:
-        """The decoupling plan (:mod:`fsdecouple.core.plan`): what every evaluator reads."""
-        return model_plan(self, rotate=rotate, refine=self._refine(refine))
+    def plan(self, *, rotate: bool = True, refine: int | None = None, temperature: bool = True,
+             zero=None) -> Plan:
+        """The decoupling plan (:mod:`fsdecouple.core.plan`): what every evaluator reads.
+
+        A temperature model's plan takes raw inputs (``n_inputs``), less ``zero``, to T0
+        first; ``temperature=False``: outputs at T0 already.
+        """
+        return model_plan(self, rotate=rotate, refine=self._refine(refine),
+                          temperature=temperature, zero=zero)
 
     def _refine(self, refine: int | None) -> int:
         return self.settings.refine if refine is None else check_refine(refine, "refine")
@@ -340,7 +358,7 @@ class CouplingErrorModel:
     def decouple(
         self, u: np.ndarray, *, rotate: bool = True, exact: bool = False, workers: int | None = None,
         refine: int | None = None, converged: np.ndarray | None = None,
-        compiled: bool | None = None,
+        compiled: bool | None = None, temperature=None, zero=None,
     ) -> np.ndarray:
         """Forces [N] from zero-corrected outputs [V] by eq. (11).
 
@@ -371,17 +389,27 @@ class CouplingErrorModel:
         compiled : bool, optional
             Use the compiled table kernel (numba); default: for calls of at least
             ``table_path.COMPILED_ROWS`` rows, as ``apply`` asks for on long logs.
+        temperature, zero : optional
+            A temperature model (core/temperature.py): each row's temperature, ``u`` then
+            raw, and a raw zero reading with its temperature (``n_inputs``), both
+            corrected to T0 by the plan's first step.  None: ``u`` are at T0 already.
         """
         u_arr = np.asarray(u, dtype=float)
         flat = u_arr.reshape(-1, self.n_outputs)
         shape = (*u_arr.shape[:-1], self.n_components) if u_arr.ndim else u_arr.shape
         refine = self._refine(refine)
+        before: tuple = ()
+        if temperature is not None or zero is not None:  # raw inputs and the step (plan.py)
+            flat, before = temperature_inputs(self.temperature, flat, temperature, zero)
         tables = None if exact else self.fast_decoupler()
         if tables is not None:
             f = tables.decouple(flat, rotate=rotate, workers=workers, refine=refine,
-                                converged=converged, compiled=compiled)
+                                converged=converged, compiled=compiled, before=before)
         else:
-            f = _exact_plan(self.plan(rotate=rotate, refine=refine), flat, converged)
+            plan = self.plan(rotate=rotate, refine=refine, temperature=False)
+            if before:
+                plan = replace(plan, steps=(*before, *plan.steps), n_outputs=flat.shape[1])
+            f = _exact_plan(plan, flat, converged)
         return f.reshape(shape)
 
     def fast_decoupler(self) -> TableDecoupler | None:
@@ -389,7 +417,7 @@ class CouplingErrorModel:
         if self.method == "linear":
             return None
         if self._tables is None:  # own-load chi (joint fit) on their input's grid, or none
-            self._tables = TableDecoupler.from_plan(model_plan(self)) or False
+            self._tables = TableDecoupler.from_plan(model_plan(self, temperature=False)) or False
         return self._tables or None
 
     def decoupler(self, refine: int | None = None):
@@ -402,11 +430,13 @@ class CouplingErrorModel:
 
         >>> f = model.decoupler()
         >>> fx, fy, fz = f(0.5, 0.01, -0.2)
+        A temperature model takes raw inputs (``n_inputs``) to T0 first, no zero subtracted.
         """
         refine = self._refine(refine)
         tables = self.fast_decoupler()
+        before = () if self.temperature is None else (temperature_step(self.temperature),)
         if tables is not None:
-            return tables.one(refine=refine)
+            return tables.one(refine=refine, before=before)
         plan = self.plan(refine=refine)
 
         def exact_one(*u: float) -> tuple[float, ...]:

@@ -2,9 +2,11 @@
 
 A fitted model decouples by a fixed sequence of steps on the raw outputs u (n, M):
 
-1. :class:`InputCorrection`, per channel, ``u_i <- (u_i - offset_i) / gain_i``: the slot
-   for corrections of the raw outputs before eq. (11) (the temperature terms
-   ``u_i(T0) = (u_i - b_i (T - T0)) / (1 + g_i (T - T0))`` are this kind of step);
+1. :class:`TemperatureCorrection`, per channel, the temperature terms
+   ``u_i(T0) = (u_i - b_i (T - T0)) / (1 + g_i (T - T0))`` (:mod:`fsdecouple.core.temperature`),
+   with the zero read at its own temperature subtracted after (ATIDAQ's bias);
+   :class:`InputCorrection`, per channel, ``u_i <- (u_i - offset_i) / gain_i``: the slot
+   for other fixed corrections of the raw outputs before eq. (11);
 2. :class:`Project`, M > N outputs: v = P u, P = K^+ (:mod:`fsdecouple.fitting.gauges`);
 3. :class:`Couple`, eq. (11) with the omega slopes k, each chi_ab as a :class:`Term`
    (its exact kernel sum, continued by its tangents under ``extrapolation: tangent``,
@@ -27,6 +29,8 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+
+from .temperature import correct
 
 # A refined row has settled when its last step, k_a f_a - p_a^K, is at most this
 # fraction of each full-scale output.  Under Section 2.1's assumptions it is at most
@@ -69,6 +73,78 @@ class InputCorrection:
 
     offset: np.ndarray  # (M,) [output unit]
     gain: np.ndarray  # (M,) [1]
+
+
+@dataclass(frozen=True, eq=False)
+class TemperatureCorrection:
+    """Per raw input i: ``u_i <- (u_i - b_i (T - T0)) / (1 + g_i (T - T0))``, T = u[channel].
+
+    The formula is :func:`fsdecouple.core.temperature.correct` (ATI's form); b and g are 0
+    at ``channel``, which keeps its temperature.  ``zero``: a zero reading of the same
+    inputs (its temperature at ``channel``), corrected alike at its own temperature and
+    subtracted after, as ATIDAQ's bias does (F = W (c(G, T) - c(G_bias, T_bias))); the
+    temperature input becomes T - T_zero.  None: nothing subtracted.  ``external``: the
+    temperature is an input after the model's outputs (a fitted model), dropped after
+    the correction; otherwise it is one of them (an ATI thermistor, whose matrix column
+    is 0).
+    """
+
+    channel: int
+    t0: float  # [temperature unit]
+    b: np.ndarray  # (inputs,) [output unit / temperature unit]
+    g: np.ndarray  # (inputs,) [1 / temperature unit]
+    zero: np.ndarray | None = None  # (inputs,) [output unit; temperature unit at channel]
+    external: bool = False
+
+    @property
+    def n_inputs(self) -> int:
+        return len(self.b)
+
+    def zero_at_t0(self, dtype=np.float64) -> np.ndarray | None:
+        """The zero reading corrected at its own temperature (inputs,), or None."""
+        if self.zero is None:
+            return None
+        z = np.asarray(self.zero, dtype=float).astype(dtype)
+        return correct(z[None, :], z[None, self.channel], self.t0, self.b, self.g)[0]
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        """The step on inputs ``x`` (n, inputs), in x's dtype."""
+        y = correct(x, x[:, self.channel], self.t0, self.b, self.g)
+        z = self.zero_at_t0(x.dtype)
+        if z is not None:
+            y = y - z
+        return np.delete(y, self.channel, axis=1) if self.external else y
+
+
+def temperature_step(terms, zero=None) -> TemperatureCorrection:
+    """The plan's step of a model's :class:`~fsdecouple.core.temperature.TemperatureTerms`;
+    ``zero``: a raw zero reading of the inputs (outputs, and the temperature at its channel)."""
+    b, g = np.asarray(terms.b, float), np.asarray(terms.g, float)
+    if terms.external:
+        b, g = np.append(b, 0.0), np.append(g, 0.0)
+    return TemperatureCorrection(terms.channel, float(terms.t0), b, g,
+                                 None if zero is None else np.asarray(zero, dtype=float),
+                                 terms.external)
+
+
+def temperature_inputs(terms, u: np.ndarray, temperature, zero) -> tuple[np.ndarray, tuple]:
+    """``model.decouple(u, temperature=, zero=)``: the plan's raw inputs (the outputs ``u``
+    (n, M), and the temperature after them or at an ATI thermistor's place) and its
+    temperature step, as the plan's first."""
+    if terms is None:
+        from ..errors import ConfigError
+
+        raise ConfigError("the model has no temperature terms: temperature and zero are for a "
+                          "model fitted or imported with them")
+    if temperature is None:
+        raise TypeError("decouple: zero is the raw zero of a temperature model: give temperature")
+    t = np.broadcast_to(np.asarray(temperature, dtype=float), u.shape[:1])
+    if terms.external:
+        x = np.column_stack([u, t])
+    else:
+        x = u.copy()
+        x[:, terms.channel] = t
+    return x, (temperature_step(terms, zero),)
 
 
 @dataclass(frozen=True, eq=False)
@@ -155,14 +231,26 @@ class Plan:
 
 
 def model_plan(model, *, rotate: bool = True, refine: int | None = None,
-               corrections: tuple = ()) -> Plan:
+               corrections: tuple = (), temperature: bool = True, zero=None) -> Plan:
     """The plan of a :class:`~fsdecouple.core.model.CouplingErrorModel` (its own tables).
 
     ``corrections``: steps applied to the raw outputs first (:class:`InputCorrection`).
+    ``temperature``: a model with temperature terms corrects its raw inputs (outputs and
+    the temperature) first, subtracting ``zero`` (a raw zero reading of the same inputs)
+    after; False: the outputs are taken as corrected already (at T0, zero removed).
     """
     n = model.n_components
+    n_in = model.n_outputs
     steps: list = list(corrections)
-    if model.method == "linear":
+    terms = getattr(model, "temperature", None)
+    if terms is not None and temperature:
+        steps.insert(0, temperature_step(terms, zero))
+        n_in = steps[0].n_inputs
+    if model.method == "linear" and getattr(model, "imported", False):
+        # a factory matrix (data/ati_model.py): v = P u are its forces (k = 1), f = I v, so
+        # the range (+-max) is checked on them, as apply's "extrapolated" does
+        steps += [Project(np.asarray(model.projection, dtype=float)), Linear(np.eye(n))]
+    elif model.method == "linear":
         steps.append(Linear(np.asarray(model.matrix, dtype=float)))
     else:
         if model.projection is not None:
@@ -175,7 +263,7 @@ def model_plan(model, *, rotate: bool = True, refine: int | None = None,
     rotation = model.rotation
     if rotate and rotation is not None:
         steps.append(Rotate(np.asarray(rotation, dtype=float)))
-    return Plan(tuple(steps), model.n_outputs, n)
+    return Plan(tuple(steps), n_in, n)
 
 
 def matrix_product(m: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -197,7 +285,9 @@ def walk(plan: Plan, u, couple, *, dtype=np.float64, evaluator: str = "the numpy
     the :class:`Couple` step (exact, tables or float), the other kinds are matrix products."""
     x = np.asarray(u, dtype=dtype).reshape(-1, plan.n_outputs)
     for step in plan.steps:
-        if isinstance(step, InputCorrection):
+        if isinstance(step, TemperatureCorrection):
+            x = step(x)
+        elif isinstance(step, InputCorrection):
             x = (x - np.asarray(step.offset).astype(dtype)) / np.asarray(step.gain).astype(dtype)
         elif isinstance(step, Project | Linear | Rotate):
             x = matrix_product(step.matrix, x)

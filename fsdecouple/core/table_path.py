@@ -32,7 +32,17 @@ from operator import mul
 import numpy as np
 
 from .decouple import couple, usable
-from .plan import Couple, InputCorrection, Linear, Plan, Project, Rotate, UnknownStep, walk
+from .plan import (
+    Couple,
+    InputCorrection,
+    Linear,
+    Plan,
+    Project,
+    Rotate,
+    TemperatureCorrection,
+    UnknownStep,
+    walk,
+)
 from .surrogate import cell, horner
 
 # Up to this many rows, a call goes row by row through the plain-Python evaluator
@@ -198,14 +208,18 @@ class TableDecoupler:
                 return None  # the evaluator shares one index per input
         return cls(plan)
 
-    def _plan(self, rotate: bool, refine: int) -> Plan:
-        """The plan without its rotation (``rotate`` False) and with K = ``refine``."""
+    def _plan(self, rotate: bool, refine: int, before: tuple = ()) -> Plan:
+        """The plan without its rotation (``rotate`` False) and with K = ``refine``; ``before``:
+        steps on the raw inputs first (a temperature model's correction and zero)."""
         key = (bool(rotate), int(refine))
         if key not in self._plans:
             steps = tuple(replace(s, refine=int(refine)) if isinstance(s, Couple) else s
                           for s in self.plan.steps if rotate or not isinstance(s, Rotate))
             self._plans[key] = replace(self.plan, steps=steps)
-        return self._plans[key]
+        plan = self._plans[key]
+        if not before:
+            return plan
+        return replace(plan, steps=(*before, *plan.steps), n_outputs=before[0].n_inputs)
 
     # --- arrays -------------------------------------------------------------------
 
@@ -259,7 +273,7 @@ class TableDecoupler:
     def decouple(self, u: np.ndarray, *, rotate: bool = True, workers: int | None = None,
                  block_rows: int | None = None, covered: np.ndarray | None = None,
                  refine: int | None = None, converged: np.ndarray | None = None,
-                 compiled: bool | None = None) -> np.ndarray:
+                 compiled: bool | None = None, before: tuple = ()) -> np.ndarray:
         """Forces of the plan for raw outputs ``u``, shape (n, M).
 
         ``covered``, a boolean array of n rows, is set False where a row left the
@@ -267,12 +281,13 @@ class TableDecoupler:
         and took the exact path.  ``refine``: K fixed-point steps (default the
         plan's); ``converged`` (n,), if given, is set False where a row did not
         settle (NaN forces).  ``compiled``: use the numba kernel (default: from
-        COMPILED_ROWS rows; numpy without numba installed).
+        COMPILED_ROWS rows; numpy without numba installed).  ``before``: steps on the raw
+        inputs ahead of the plan's own (a :class:`~fsdecouple.core.plan.TemperatureCorrection`).
         """
         refine = self.step.refine if refine is None else refine
         if int(refine) != refine or refine < 0:  # the CLI and config refuse these first
             raise ValueError(f"refine: K = {refine!r}; expected a whole number >= 0")
-        plan = self._plan(rotate, refine)
+        plan = self._plan(rotate, refine, before)
         u = np.asarray(u, dtype=float).reshape(-1, plan.n_outputs)
         if covered is not None:
             covered[:] = True
@@ -296,7 +311,8 @@ class TableDecoupler:
 
     # --- one vector -----------------------------------------------------------------
 
-    def one(self, rotate: bool = True, refine: int | None = None) -> Callable[..., tuple[float, ...]]:
+    def one(self, rotate: bool = True, refine: int | None = None,
+            before: tuple = ()) -> Callable[..., tuple[float, ...]]:
         """A plain-Python function ``(u_1, ..., u_M) -> (f_1, ..., f_N)``, no numpy per call.
 
         The plan's steps as closures over lists; the coupling step is the array path's
@@ -305,7 +321,7 @@ class TableDecoupler:
         :meth:`decouple`; a vector that does not settle gives NaN forces.
         """
         refine = self.step.refine if refine is None else int(refine)
-        plan = self._plan(rotate, refine)
+        plan = self._plan(rotate, refine, before)
         stages = [self._one_step(s, refine) for s in plan.steps]
         if len(stages) == 1:  # eq. (11) alone: no loop over steps
             only = stages[0]
@@ -322,6 +338,17 @@ class TableDecoupler:
     def _one_step(self, step, refine: int) -> Callable:
         if isinstance(step, Couple):
             return self._one_couple(replace(self.step, refine=refine))
+        if isinstance(step, TemperatureCorrection):
+            c, t0 = step.channel, float(step.t0)
+            bg = list(zip(map(float, step.b), map(float, step.g), strict=True))
+            z = step.zero_at_t0()
+            zs = [0.0] * len(bg) if z is None else z.tolist()
+
+            def temperature(x):
+                dt = x[c] - t0
+                y = [(v - b * dt) / (1.0 + g * dt) - w for v, (b, g), w in zip(x, bg, zs, strict=True)]
+                return y[:c] + y[c + 1:] if step.external else y
+            return temperature
         if isinstance(step, InputCorrection):
             pairs = list(zip(map(float, step.offset), map(float, step.gain), strict=True))
             return lambda x: [(v - o) / g for v, (o, g) in zip(x, pairs, strict=True)]

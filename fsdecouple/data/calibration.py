@@ -58,6 +58,8 @@ class CalibrationSet:
     zero: str | None = None  # how the sweeps were zeroed (data/zero.py); None: not recorded
     zero_auto: bool = False  # zero: fit chosen for out-and-back sweeps (zero.out_and_back)
     noise: np.ndarray | None = None  # pose logs: sigma of each averaged output (poses.py)
+    # a temperature column's drift terms, the outputs corrected to T0 by them (fitting/temperature.py)
+    temperature_fit: Any = None
 
     @property
     def source(self) -> str:

@@ -16,6 +16,9 @@ import numpy as np
 from ..config import Settings
 from ..errors import InputError, excerpt, printable, where
 from ..files import CALIBRATION_LIMIT, TASK_LIMIT, natural_key, read_bounded, reading
+from ..temperature_units import DEFAULT_TEMPERATURE, to_celsius
+from ..temperature_units import column as temperature_column
+from ..temperature_units import unit as temperature_unit
 from .csv_text import HEADER_ROW, read_csv_text, read_header, require_columns, to_numbers
 from .guesses import applied_load
 from .magnitudes import adc_bits
@@ -173,6 +176,11 @@ def read_calibration_table(path: str | Path, settings: Settings,
         # a single CSV without a repetition column is one repetition
         numbered = single and cols["repetition"] in header
         mapped = {name: name for name in numeric.values()}
+        t_name = temperature_column(settings)  # columns: {temperature: ...} (issue 31)
+        if t_name is None and DEFAULT_TEMPERATURE in header:  # the default name, as fx's is fx
+            t_name = DEFAULT_TEMPERATURE
+        if t_name is not None:
+            mapped[t_name] = t_name
         mapped.update({cols[c]: cols[c] for c in ("axis", "repetition")
                        if cols[c] in header and (c != "repetition" or numbered)})
         require_columns(header, mapped, f)
@@ -264,6 +272,9 @@ def read_calibration_table(path: str | Path, settings: Settings,
             out[canonical] = values * settings.scale[canonical]
         if settings.output_unit == "count":  # the converter's range, from the samples (rails.py)
             counts.append(out[list(layout.outputs)].to_numpy())
+        if t_name is not None:  # in degC, as a fitted model's temperature terms are
+            out["temperature"] = to_celsius(to_numbers(raw[t_name], f, t_name, rows, settings.decimal),
+                                            temperature_unit(settings))
         if timestamp_column(header) is not None:  # a pose log: samples averaged per load
             keys = [*layout.loads, "repetition", "axis"]
             out, ss, dof, runs, inverse = average_poses(out, keys, list(layout.outputs))
@@ -291,9 +302,14 @@ def read_calibration_table(path: str | Path, settings: Settings,
         keep[posed], notes = at_rail(table[posed], layout.outputs, known, strict)
         warnings.extend(notes)
         table = table[keep].reset_index(drop=True)
+    if "temperature" in table.columns and table["temperature"].isna().any():  # not in every file
+        f = table.loc[table["temperature"].isna(), "file"].iloc[0]
+        raise InputError(f"{where(f, HEADER_ROW)}: no column 'temperature', which the set's "
+                         "other files have; every repetition needs its temperature")
     # training order is file order: repetition, then row (stable)
     table = table.sort_values(["repetition"], kind="stable").reset_index(drop=True)
-    table = table[["repetition", "axis", "file", "row", *layout.loads, *layout.outputs]]
+    table = table[["repetition", "axis", "file", "row", *layout.loads, *layout.outputs,
+                   *(["temperature"] if "temperature" in table.columns else [])]]
     noise = np.sqrt(pose_ss / pose_dof * pose_inv / pose_n) if pose_dof else None
     return CalibrationTable(table, skipped, tuple(digests), hidden, tuple(warnings), noise,
                             tuple(excluded))

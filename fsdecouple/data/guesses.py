@@ -124,10 +124,11 @@ class Guess:
             "{" + ", ".join(f"{c}: {u}" for c, u in self.load_units.items()) + "}"
         output = self.units["output"] if not self.output_units else \
             "{" + ", ".join(f"{o}: {u}" for o, u in self.output_units.items()) + "}"
+        temp = f", temperature: {self.units['temperature']}" if "temperature" in self.units else ""
         values = {
             **({"components": f"[{', '.join(self.components)}]",
                 "outputs": f"[{', '.join(self.outputs)}]"} if self.components else {}),
-            "units": f"{{load: {load}, output: {output}}}",
+            "units": f"{{load: {load}, output: {output}{temp}}}",
             "full_scale": f"{{{fs}}}", "min_repetitions": str(self.min_repetitions),
             "csv": f"{{sep: {json.dumps(self.sep)}, decimal: {json.dumps(self.decimal)}}}",
             "scaling": self.scaling,

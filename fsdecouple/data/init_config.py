@@ -45,6 +45,7 @@ from .guesses import (
     shown,
 )
 from .poses import TIMESTAMP_NAMES
+from .temperature_column import with_temperature
 
 COMPONENTS = ("fx", "fy", "fz", "mx", "my", "mz")
 # Poses of a known mass (issue 32): no row unloaded and POSE_SHARE of the rows loading
@@ -133,12 +134,12 @@ def guess_layout(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
     # (Fx_ref and Fx: a rig's reference and the sensor's own reading) take the component path
     rig = any(_applied(n) for n in names) and any(_component(n) and not _applied(n) for n in names)
     if not rig and not any((_component(n) or _applied(n) or " ")[0] == "m" for n in names):
-        return guess_rows(path, names, rows, sep, truncated)
+        return with_temperature(guess_rows(path, names, rows, sep, truncated), names)
     try:
-        return guess_components(path, names, rows, sep, truncated)
+        return with_temperature(guess_components(path, names, rows, sep, truncated), names)
     except InputError as err:  # a 3-axis file with moment columns beside it reads as before
         try:
-            return guess_rows(path, names, rows, sep, truncated)
+            return with_temperature(guess_rows(path, names, rows, sep, truncated), names)
         except InputError:
             raise err from None
 

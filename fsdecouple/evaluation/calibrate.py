@@ -86,7 +86,10 @@ def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
         calib = load_calibration(calib, settings)
     if settings.zero is None and getattr(calib, "zero", None) == "fit" != settings.zero_method:
         settings = dataclasses.replace(settings, zero="fit")  # out-and-back sweeps (zero.py)
+    from ..fitting.temperature import compensate
     from ..fitting.threads import single_threaded_libraries
+
+    calib, _ = compensate(calib, settings)  # outputs at T0 for every figure below (issue 31)
     with single_threaded_libraries():
         return _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress)
 

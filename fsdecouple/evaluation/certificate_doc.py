@@ -256,4 +256,7 @@ def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str
         "drift_source": drift_source,
         "coverage_factor": 2,
         "notes": notes,
+        # the model's temperature terms (issue 31): the outputs were corrected to T0 by them
+        **({"temperature": model.temperature.to_dict(layout.outputs)}
+           if getattr(model, "temperature", None) is not None else {}),
     }

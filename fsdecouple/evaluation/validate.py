@@ -115,18 +115,21 @@ def validate(
     if model_path is not None:
         model = load_model(model_path)
     settings = settings or model.settings
-    if getattr(model, "temperature", None) is not None:  # core/temperature.py
+    terms = getattr(model, "temperature", None)
+    if terms is not None and not terms.external:  # an ATI thermistor (core/temperature.py)
         raise InputError("validate: the model corrects its outputs for temperature, which a set "
                          "zero-corrected sweep by sweep does not carry; apply it to a log instead")
     if settings.layout != model.layout:
         raise InputError(f"the config names components {', '.join(settings.layout.loads)}, the "
                          f"model {', '.join(model.layout.loads)}; use the calibration's config")
-    if settings.units != model.settings.units:
+    if replace(settings.units, temperature=None) != replace(model.settings.units, temperature=None):
         set_u, model_u = settings.units, model.settings.units  # 'N / N·m' where mixed
         raise InputError(f"the config reads the set with loads in {set_u.load}, outputs in "
                          f"{set_u.output}; the model was calibrated with loads in {model_u.load}, "
                          f"outputs in {model_u.output}: use the calibration's config")
     cs = load_calibration(set_path, replace(settings, min_repetitions=1), combined=True)
+    if terms is not None:  # a fitted model's terms: the set's outputs at T0 by them
+        cs = _at_t0(cs, terms, set_path)
     refuse_meaningless(cs, model)
     points = cs.points
     u, loads = cs.voltages.astype(float), cs.forces.astype(float)
@@ -203,6 +206,8 @@ def validate(
         "gate": _gate(records, max_gamma),
         "warnings": warnings,
     }
+    if terms is not None:  # the model's temperature terms, by which the set was corrected
+        doc["temperature"] = terms.to_dict(model.layout.outputs)
     if output is not None:
         used = [*([model_path] if model_path is not None else []), *(p for p, _ in cs.files),
                 *calib_files, *inputs]
@@ -255,3 +260,15 @@ def _matrix_of(calib, model: CouplingErrorModel) -> tuple[np.ndarray | None, lis
 def dumps(doc: dict[str, Any]) -> str:
     """The document as written by ``-o`` and printed by ``--json``."""
     return json.dumps(doc, indent=1, sort_keys=True, allow_nan=False)
+
+
+def _at_t0(cs, terms, set_path):
+    """The set's outputs corrected to T0 by the model's temperature terms, sweep by sweep
+    (fitting/temperature.py); a set without the temperature column is refused."""
+    from ..fitting.temperature import corrected_points
+
+    if "temperature" not in cs.points.columns:
+        raise InputError(f"{printable(set_path)}: no temperature column mapped (columns: "
+                         "{temperature: ...}), which the model corrects for; use the "
+                         "calibration's config")
+    return replace(cs, points=corrected_points(cs, terms))

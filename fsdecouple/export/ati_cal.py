@@ -116,6 +116,10 @@ def plan_cal(model, source: str = "model", *, linear_part: bool = False) -> dict
         raise InputError(f"{source}: outputs in {out_unit}; ATIDAQ reads gauges in volts (a model in "
                          f"{', '.join(VOLTS)} is converted)")
     temp = model.temperature
+    if temp is not None and temp.external:  # fitted (fitting/temperature.py), T in degC
+        raise InputError(f"{source}: the model's temperature terms read a temperature column in "
+                         f"{temp.unit}, not a thermistor among the gauges as ATIDAQ does; export "
+                         "the header (fsdecouple export -o sensor.h) or apply it in Python")
     gauges = [i for i in range(model.n_outputs) if temp is None or i != temp.channel]
     if len(gauges) > MAX_GAUGES:
         raise InputError(f"{source}: {len(gauges)} outputs; ATIDAQ reads at most {MAX_GAUGES} gauges")

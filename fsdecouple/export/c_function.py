@@ -16,7 +16,15 @@ import math
 import numpy as np
 
 from ..core.model import FORCE_LIMIT
-from ..core.plan import Couple, InputCorrection, Linear, Project, Rotate, UnknownStep
+from ..core.plan import (
+    Couple,
+    InputCorrection,
+    Linear,
+    Project,
+    Rotate,
+    TemperatureCorrection,
+    UnknownStep,
+)
 from .plan import ExportPlan
 
 # Status bits above the per-channel range bits (channels 0 .. MAX_CHANNELS - 1).
@@ -120,6 +128,18 @@ def _couple(plan: ExportPlan, step: Couple, ctype: str, x: str, out: str) -> lis
 def _step(plan: ExportPlan, step, ctype: str, x: str, dim: int, i: int) -> tuple[list[str], str, int]:
     """C lines of one plan step on the vector ``x`` (``dim`` values): (lines, result, size)."""
     fmt = numf if ctype == "float" else num
+    if isinstance(step, TemperatureCorrection):
+        # core/temperature.py: u_i(T0) = (u_i - b_i (T - T0)) / (1 + g_i (T - T0)), T = x[channel]
+        c = step.channel
+        z = step.zero_at_t0()
+        keep = [j for j in range(dim) if not (step.external and j == c)]
+        lines = [f"    {ctype} c{i}[{len(keep)}];", f"    const {ctype} dt{i} = {x}[{c}] - {fmt(step.t0)};"]
+        zero = f"({ctype}){plan.prefix}zero_t0" if ctype == "float" else f"{plan.prefix}zero_t0"
+        for o, j in enumerate(keep):
+            e = f"({x}[{j}] - {fmt(step.b[j])} * dt{i}) / ({fmt(1.0)} + {fmt(step.g[j])} * dt{i})"
+            # the zero set by set_zero (0 until then), corrected at its own temperature
+            lines.append(f"    c{i}[{o}] = {e} - " + (f"{zero}[{j}];" if z is None else f"{fmt(z[j])};"))
+        return lines, f"c{i}", len(keep)
     if isinstance(step, InputCorrection):  # per raw output, before eq. (11)
         lines = [f"    {ctype} c{i}[{dim}];"]
         lines += [f"    c{i}[{j}] = ({x}[{j}] - {fmt(step.offset[j])}) / {fmt(step.gain[j])};"
@@ -160,3 +180,19 @@ def decouple_function(plan: ExportPlan, ctype: str) -> str:
     ffinite = " || ".join(f"!(fabs(f[{a}]) <= {bound})" for a in range(n))
     lines += [f"    if ({ffinite}) st |= (uint32_t)1 << {BIT_NOT_FINITE};", "    return st;", "}", ""]
     return "\n".join(lines)
+
+
+def set_zero_function(plan: ExportPlan) -> str:
+    """``set_zero(u)``: a raw zero reading (the inputs, its temperature among them) corrected
+    to T0 as the plan's temperature step corrects a row, kept and subtracted from every
+    row after (ATIDAQ's bias); '' for a model without temperature terms."""
+    step, p = plan.temperature, plan.prefix
+    if step is None:
+        return ""
+    c, dim = step.channel, step.n_inputs
+    lines = [f"static double {p}zero_t0[{dim}];  /* 0 until {p}set_zero */",
+             f"void {p}set_zero(const double *u)", "{",
+             f"    const double dt = u[{c}] - {num(step.t0)};"]
+    lines += [f"    {p}zero_t0[{j}] = (u[{j}] - {num(step.b[j])} * dt) / ({num(1.0)} + "
+              f"{num(step.g[j])} * dt);" for j in range(dim)]
+    return "\n".join([*lines, "}", ""])

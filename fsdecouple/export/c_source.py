@@ -33,6 +33,7 @@ from .c_function import (  # noqa: F401 (the status bits, also for header.py)
     decouple_function,
     num,
     numf,
+    set_zero_function,
 )
 from .plan import ExportPlan
 
@@ -52,7 +53,7 @@ def render(plan: ExportPlan) -> str:
         parts.append(_kernel(plan, j, chi))
         if chi.table is not None:
             parts.append(_table(plan, j, chi, ctype))
-    parts += [decouple_function(plan, ctype), _selftest(plan)]
+    parts += [set_zero_function(plan), decouple_function(plan, ctype), _selftest(plan)]
     parts.append(f"#endif /* {P}IMPLEMENTATION */\n\n#ifdef __cplusplus\n}}\n#endif\n"
                  f"#endif /* {P}DECOUPLER_H */\n")
     return "\n".join(parts)
@@ -83,7 +84,7 @@ def _preamble(plan: ExportPlan) -> str:
  * Do not edit: regenerate with `fsdecouple export`.  Model digest, sensor and
  * units are below as {P}MODEL_DIGEST, {P}SENSOR, {P}LOAD_UNIT, {P}OUTPUT_UNIT.
  *
-{_method_note(plan)}{_own_note(plan)}{_projection_note(plan)}\
+{_method_note(plan)}{_own_note(plan)}{_projection_note(plan)}{_temperature_note(plan)}\
  * A rotation to the reference frame, if the model has one, follows.
  *
  * Use: in exactly one C file
@@ -163,6 +164,7 @@ extern const double {p}calibrated_range[{n}][2];
 
 uint32_t {fn};
 int {p}selftest(void);
+{f"void {p}set_zero(const double *u);" + chr(10) if plan.temperature is not None else ""}\
 
 #ifdef {P}IMPLEMENTATION
 /* --- implementation ({ctype} tables) --- */
@@ -240,6 +242,20 @@ def _projection_note(plan: ExportPlan) -> str:
     return (f" * The sensor has {plan.m} outputs for {plan.n} components: u holds all {plan.m}, and\n"
             f" * eq. (11) acts on their least-squares loads v = P u ({plan.prefix}projection), the\n"
             " * range bits b < N_COMPONENTS on v_b; the saturation limits on the raw u.\n")
+
+
+def _temperature_note(plan: ExportPlan) -> str:
+    """The header's note on the temperature step (core/temperature.py), if the model has one."""
+    step = plan.temperature
+    if step is None:
+        return ""
+    where = (f"u[{step.channel}], after the outputs (one more input)" if step.external
+             else f"u[{step.channel}], one of the outputs (its matrix column is 0)")
+    return (f" * Temperature: u holds the temperature at {where}.  Each output is first\n"
+            f" * corrected to T0 = {step.t0!r}: u_i(T0) = (u_i - b_i (T - T0)) / (1 + g_i (T - T0))\n"
+            " * (the model's temperature terms): u are raw outputs.  set_zero(u_zero) keeps a\n"
+            " * zero reading (with its temperature) corrected alike and subtracts it from every\n"
+            " * row after (ATIDAQ's bias); none until then (the self-test runs without one).\n")
 
 
 def _own_note(plan: ExportPlan) -> str:

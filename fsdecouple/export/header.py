@@ -111,7 +111,7 @@ def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",
         prefix=prefix, precision=precision, plan=model.plan(),
         full_scale=fs, calibrated_range=cal,
         range_limits=np.asarray(model.extrapolation_limits()),  # exactly apply's "extrapolated"
-        limits=_limits(model, limits, model.n_outputs),
+        limits=_limits(model, limits, getattr(model, "n_inputs", model.n_outputs)),
         digest=str(doc["integrity"]["digest"]), format_version=int(doc["format_version"]),
         sensor=str(settings.sensor), load_unit=settings.load_unit,
         output_unit=settings.output_unit, version=version, model=model,
@@ -220,7 +220,7 @@ def float_bound(plan: ExportPlan, seed: int = 0) -> float:
              for _ in range(2)]
     corners = np.array(np.meshgrid(*plan.calibrated_range)).reshape(plan.n, -1).T
     u = np.concatenate([*dense, lo + (hi - lo) * rng.random((FLOAT_RANDOM_POINTS, plan.n)), corners])
-    u32 = plan.lift(u).astype(np.float32)  # M > N: outputs whose v = P u spans the range
+    u32 = plan.lift(u, rng).astype(np.float32)  # M > N: outputs whose v = P u spans the range
     u = u32.astype(float)
     err = np.abs(emulate_float(plan, u32).astype(float) - exact_forces(plan, u)) / plan.full_scale
     return FLOAT_SAFETY * float(err.max())

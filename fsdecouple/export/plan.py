@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from ..core.model import RANGE_MARGIN
-from ..core.plan import Couple, Linear, Plan, Project, Rotate, Term, walk
+from ..core.plan import Couple, Linear, Plan, Project, Rotate, TemperatureCorrection, Term, walk
 from ..errors import printable
 
 
@@ -95,10 +95,32 @@ class ExportPlan:
     def method(self) -> str:
         return "svr" if self.matrix is None else "linear"
 
-    def lift(self, v: np.ndarray) -> np.ndarray:
-        """Outputs u (rows, M) whose v = P u is ``v`` (rows, N): u = P^+ v; v itself for M = N."""
+    @property
+    def temperature(self) -> TemperatureCorrection | None:
+        return self.plan.step(TemperatureCorrection)
+
+    def lift(self, v: np.ndarray, rng=None) -> np.ndarray:
+        """Inputs u (rows, m) whose v = P u is ``v`` (rows, N): u = P^+ v; v itself for M = N.
+
+        A temperature model: the temperature set to T0 + dt, dt cycling over the calibrated
+        span's half-width each side (random with ``rng``; 0.05 |T0| or 1 without a span),
+        and the outputs made raw at that temperature, so the corrected ones are ``v``'s.
+        """
         v = np.asarray(v, dtype=float)
-        return v if self.projection is None else v @ np.linalg.pinv(self.projection).T
+        u = v if self.projection is None else v @ np.linalg.pinv(self.projection).T
+        step = self.temperature
+        if step is None:
+            return u
+        terms = self.model.temperature
+        half = (terms.span[1] - terms.span[0]) / 2 if terms.span is not None else \
+            0.05 * abs(step.t0) or 1.0
+        half = half or 1.0
+        dt = (rng.uniform(-1.5, 1.5, len(u)) if rng is not None
+              else np.resize([0.0, 1.0, -1.0, 1.5, -0.5], len(u))) * half
+        x = np.insert(u, step.channel, 0.0, axis=1) if step.external else u.copy()
+        x = x * (1.0 + step.g * dt[:, None]) + step.b * dt[:, None]  # u_i(T) of u_i(T0)
+        x[:, step.channel] = step.t0 + dt
+        return x
 
     def prime(self, u: np.ndarray) -> np.ndarray:
         """The outputs eq. (11) (or f = C u) acts on: the plan's steps before it, in double."""

@@ -98,12 +98,19 @@ def fit(
     # fitting needs pandas (calibration) and libsvm; loading and applying a model do not
     from ..data.calibration import CalibrationSet, load_calibration
     from .svr import fit_svr  # the only libsvm user
+    from .temperature import compensate
 
     settings = settings or Settings()
     if not isinstance(calib, CalibrationSet):
         calib = load_calibration(calib, settings)
+    # a temperature column spanning >= 5 K: the outputs at T0, and the terms (issue 31)
+    calib, drift = compensate(calib, settings)
     with single_threaded_libraries():
-        return _establish(calib, settings, workers, fit_svr, tables, noise_fraction)
+        model = _establish(calib, settings, workers, fit_svr, tables, noise_fraction)
+    if drift is not None:
+        model.temperature = drift.terms
+        model.report.temperature = drift.to_dict()
+    return model
 
 
 def _svr_chi(s) -> Chi:

@@ -39,7 +39,14 @@ from ..files import atomic_write, refuse_overwriting_input
 from ..schema import refuse_unused, unused_warning
 from ..units import LOAD_UNITS, load_factor
 from .arrow import numbers, strings
-from .outputs import log_outputs
+from .outputs import (
+    beyond_temperatures,
+    input_names,
+    input_scale,
+    limit_bounds,
+    log_outputs,
+    row_forces,
+)
 from .passthrough import Dropped, kept_fields, passed_columns
 from .reader import Block, LogFile, is_parquet
 from .sinks import CsvSink, ParquetSink, force_decimals
@@ -54,7 +61,7 @@ FORCE_UNIT_KEY, OUTPUT_UNIT_KEY = "fsdecouple.force_unit", "fsdecouple.output_un
 # not_finite (no forces), saturated, extrapolated, ok.
 STATUSES = {
     "ok": "decoupled by eq. (11), voltages inside the calibrated range",
-    "extrapolated": "decoupled, but a voltage lies outside the calibrated range",
+    "extrapolated": "decoupled, but a voltage (or the temperature) lies outside the calibrated range",
     "saturated": "decoupled, but a raw output is at or beyond its limit (limits:): it may "
                  "have clipped",
     "missing": "a voltage is empty or missing (blank or short row): no forces",
@@ -209,9 +216,9 @@ def check_options(model: CouplingErrorModel, settings: Settings | None, tare, ze
         raise InputError(
             f"the config names outputs {', '.join(settings.layout.outputs)}, the model "
             f"{', '.join(model.layout.outputs)}; use the calibration's config")
-    if zero is not None and len(zero) != model.n_outputs:
-        raise InputError(f"--zero: {len(zero)} values for the model's {model.n_outputs} "
-                         f"outputs ({', '.join(model.layout.outputs)})")
+    if zero is not None and len(zero) != model.n_inputs:
+        raise InputError(f"--zero: {len(zero)} values for the model's {model.n_inputs} "
+                         f"inputs ({', '.join(input_names(model))})")
     if unit is not None and model.settings.units.loads:
         raise InputError(f"--unit {unit}: the model's loads have mixed units "
                          f"({model.settings.load_unit}); they are written in their own")
@@ -251,8 +258,7 @@ class RowRules:
 
     @classmethod
     def for_model(cls, model: CouplingErrorModel, settings: Settings | None = None) -> RowRules:
-        return cls(*model.extrapolation_limits().T,
-                   *_limit_bounds(settings or model.settings, model))
+        return cls(*model.extrapolation_limits().T, *limit_bounds(settings or model.settings, model))
 
 
 def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarray,
@@ -264,7 +270,7 @@ def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarra
     The one place that decides a row's status (:data:`STATUSES`), for ``apply``'s
     blocks and for :func:`fsdecouple.logs.frame.decouple_frame` alike.
     """
-    u = model.zero_corrected(raw, offsets)  # temperature terms first, if any
+    u = model.zero_corrected(raw, offsets)  # the plan's temperature step, if any
     code = np.zeros(len(u), dtype=np.int8)  # index into STATUSES
     empty = np.isnan(u).any(axis=1)
     code[empty] = MISSING_
@@ -275,8 +281,7 @@ def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarra
         code[:] = TRUNCATED_
     converged = np.empty(len(u), dtype=bool)
     with np.errstate(over="ignore", invalid="ignore"):
-        f = model.decouple(np.where(empty[:, None], 0.0, u) if empty.any() else u,
-                           workers=1, converged=converged, compiled=compiled)
+        f = row_forces(model, u, raw, offsets, empty, converged, compiled)  # logs/outputs.py
         unsettled = ~converged & ~empty
         code[unsettled] = NOT_CONVERGED_
         empty |= unsettled
@@ -287,6 +292,7 @@ def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarra
         empty |= huge
         x = u if model.projection is None else model.project(u)  # M > N: the limits are v's
         outside = ((x < rules.lo) | (x > rules.hi)).any(axis=1) & ~empty
+        outside |= beyond_temperatures(model, raw) & ~empty
         # the limits are the ADC's or amplifier's, so they bound the raw values
         saturated = ((raw <= rules.sat_lo) | (raw >= rules.sat_hi)).any(axis=1) & ~empty
     code[outside] = EXTRAPOLATED_
@@ -294,18 +300,8 @@ def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarra
     return f, code, empty
 
 
-def _limit_bounds(settings: Settings, model: CouplingErrorModel) -> tuple[np.ndarray, np.ndarray]:
-    """(lo, hi) per output; +-inf where no limit is given (never saturated)."""
-    limits = settings.limits or model.settings.limits
-    outputs = model.layout.outputs
-    lo = np.array([limits.get(c, (-np.inf, np.inf))[0] for c in outputs])
-    hi = np.array([limits.get(c, (-np.inf, np.inf))[1] for c in outputs])
-    return lo, hi
-
-
 def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit, force,
-           chunk_rows, progress, workers, round_trip, interval=None,
-           temperature=None) -> ApplySummary:
+           chunk_rows, progress, workers, round_trip, interval=None, temperature=None) -> ApplySummary:
     path = log.path
     layout = model.layout
     read, with_temperature = log_outputs(model, settings, log.header, path, temperature)
@@ -329,15 +325,16 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
     if clash:
         raise InputError(f"{where(path, HEADER_ROW, clash[0])}: the log already has a column named "
                          f"'{clash[0]}', which the output would overwrite")
-    scale = np.array([settings.scale[c] for c in layout.outputs])
+    scale = input_scale(model, settings)  # a fitted model's temperature after the outputs
     jobs: Iterator[Callable[[], Block]] = log.blocks(names, chunk_rows=chunk_rows,
                                                      want_table=is_parquet(out), keep=keep)
     jobs = with_temperature(jobs)
-    summary = ApplySummary(force_unit=unit, output_unit=model.settings.output_unit, outputs=layout.outputs,
-                           offsets=np.zeros(layout.m), force_columns=forces, dropped=dropped,
+    summary = ApplySummary(force_unit=unit, output_unit=model.settings.output_unit,
+                           outputs=input_names(model), offsets=np.zeros(model.n_inputs),
+                           force_columns=forces, dropped=dropped,
                            notes=unused_warning(settings, model.settings))
     to_unit = load_factor(model.settings.load_unit, unit)
-    sat_lo, sat_hi = _limit_bounds(settings, model)
+    sat_lo, sat_hi = limit_bounds(settings, model)
     if tare is not None:
         # the tare rows are read once: their blocks are kept and decoupled first
         summary.offsets, kept = read_tare((job() for job in jobs), scale, tare, path)
@@ -369,10 +366,9 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
             # GIL, so blocks overlap on the cores while the main thread writes
             block = job()
             f, code, empty = decouple_rows(model, block.u * scale, summary.offsets, rows,
-                                           truncated=block.truncated,
-                                           compiled=compiled)
+                                           truncated=block.truncated, compiled=compiled)
             if interval is not None:
-                f = with_intervals(model, f, interval, block.u * scale - summary.offsets)
+                f = with_intervals(model, f, interval, model.zero_corrected(block.u * scale, summary.offsets))
             if to_unit != 1.0:
                 f = f * to_unit
             counts = np.bincount(code, minlength=len(STATUSES))

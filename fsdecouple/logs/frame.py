@@ -24,7 +24,11 @@ from ..core.model import CouplingErrorModel
 from ..data.zero import tare_offsets
 from ..errors import InputError
 from ..evaluation.intervals import half_widths, interval_names, with_intervals
+from ..temperature_units import column as temperature_column
+from ..temperature_units import to_celsius
+from ..temperature_units import unit as temperature_unit
 from .apply import STATUS_COLUMN, STATUSES, RowRules, check_options, decouple_rows
+from .outputs import input_names, input_scale
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -48,6 +52,9 @@ def frame_outputs(model: CouplingErrorModel, frame: pd.DataFrame,
     settings = settings or model.settings
     layout = model.layout
     names = [settings.columns[c] for c in layout.outputs]
+    if model.n_inputs > model.n_outputs:  # a fitted model's temperature (logs/outputs.py)
+        names.append(temperature_column(settings) or temperature_column(model.settings)
+                     or "temperature")
     absent = [n for n in names if n not in frame.columns]
     if absent:
         raise InputError(f"the frame has no column '{absent[0]}' (columns: "
@@ -66,9 +73,11 @@ def frame_outputs(model: CouplingErrorModel, frame: pd.DataFrame,
             raise InputError(f"frame row {frame.index[i]!r}, column '{name}': "
                              f"{col.iloc[i]!r}, expected a number")
         cols.append(values)
-    scale = np.array([settings.scale[c] for c in layout.outputs])
+    if model.n_inputs > model.n_outputs:
+        cols[-1] = to_celsius(cols[-1], temperature_unit(settings if temperature_column(settings)
+                                                         else model.settings))
     # C order, as apply's parsed blocks: the tare's mean then sums in the same order
-    return np.ascontiguousarray(np.column_stack(cols)) * scale
+    return np.ascontiguousarray(np.column_stack(cols)) * input_scale(model, settings)
 
 
 def frame_tare(model: CouplingErrorModel, frame: pd.DataFrame, n: int,
@@ -137,17 +146,18 @@ def frame_forces(model: CouplingErrorModel, frame: pd.DataFrame, *, tare: int | 
         raise InputError("give either tare or zero, not both")
     settings, _ = check_options(model, settings, None, None, None)  # its units: the model's
     raw = frame_outputs(model, frame, settings)
-    offsets = np.zeros(model.n_outputs)
+    offsets = np.zeros(model.n_inputs)
     if tare is not None:
         offsets = tare_offsets(raw, tare)
     elif zero is not None:
         offsets = np.asarray(zero, dtype=float)
-        if offsets.shape != (model.n_outputs,) or not np.isfinite(offsets).all():
-            raise InputError(f"zero {zero!r}: expected {model.n_outputs} finite outputs")
+        if offsets.shape != (model.n_inputs,) or not np.isfinite(offsets).all():
+            raise InputError(f"zero {zero!r}: expected {model.n_inputs} finite values "
+                             f"({', '.join(input_names(model))})")
     elif model.zero is not None:  # zero: intercept: the offsets fitted with the loads
         offsets = np.asarray(model.zero, dtype=float)
     f, code, empty = decouple_rows(model, raw, offsets, RowRules.for_model(model, settings))
     if interval is not None:
-        f = with_intervals(model, f, interval, raw - offsets)
+        f = with_intervals(model, f, interval, model.zero_corrected(raw, offsets))
     f[empty] = np.nan
     return f, code

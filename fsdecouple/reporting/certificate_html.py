@@ -152,6 +152,13 @@ def certificate_blocks(doc: dict) -> list[Block]:
                        f"{ref_lim[c]:g}" if c in ref_lim else "—",
                        f"{res[c]:g} r" if c in res else "—"]
                       for c, v in lim["limits_percent"].items()]))
+    t = doc.get("temperature")
+    if t is not None:  # issue 31: the temperature terms the outputs were corrected by
+        span = f", calibrated {t['span'][0]:.4g} .. {t['span'][1]:.4g} {t['unit']}" if "span" in t else ""
+        out.append(Block("table", f"Temperature terms: u = (1 + g (T - T0)) u(T0) + b (T - T0), "
+                                  f"T0 = {t['t0']:g} {t['unit']}{span}", "temperature",
+                         ["output", f"b [{doc['units'].get('output', 'V')}/K]", "g [ppm/K]"],
+                         [[o, f"{t['b'][o]:+.4g}", f"{1e6 * t['g'][o]:+.1f}"] for o in t["b"]]))
     sources = doc.get("budget_sources", {})
     out.append(Block("table", "Sources of the budget's contributions", "sources",
                      ["contribution", "source"],

@@ -22,8 +22,10 @@ from ..errors import printable
 from ..evaluation.cv_results import gamma_index, test_name
 from ..units import Units, output_display
 from .narrow import KEY_COLUMNS
+from .temperature_tables import temperature_tables
 
 # --- ingest, fit, show, apply ------------------------------------------------------
+
 
 def _units(settings_or_doc) -> Units:
     u = getattr(settings_or_doc, "units", None)
@@ -146,7 +148,7 @@ def fit_tables(model) -> list:
         before, after = rep.gamma_before.get(axis), rep.gamma_after.get(axis)
         style = "bold red" if after is not None and before is not None and after > before else ""
         g.add_row(axis, pct(before), Text(pct(after), style=style))
-    return [t, c, g]
+    return [t, c, g, *temperature_tables(model)]
 
 
 def apply_lines(summary, out) -> list[str]:
@@ -183,9 +185,11 @@ def apply_warnings(summary) -> list[str]:
                  "(limits:), so the channel may have clipped; their forces are written "
                  "but flagged (status 'saturated')")
     if summary.out_of_range_rows:
+        temperature = "temperature" in summary.outputs  # a fitted model's (issue 31)
         w.append(f"{summary.out_of_range_rows} rows have a voltage more than 1 % of the span "
-                 "outside the calibrated range; their forces are extrapolated (status "
-                 "'extrapolated')")
+                 "outside the calibrated range" + (", or a temperature outside the calibrated "
+                                                   "temperatures" if temperature else "")
+                 + "; their forces are extrapolated (status 'extrapolated')")
     if getattr(summary, "untared", None):
         out, median, lo, hi = summary.untared
         unit = summary.output_unit

@@ -27,6 +27,7 @@ from ..units import output_display
 from .cv_tables import cv_test_name, gamma_tables, gross_tables, task_table
 from .html import CSS, badge, badge_span, cell, figure_html, note, table, th, tr, worse
 from .plots import chi_figure, omega_figure, residual_figure, to_png
+from .temperature_tables import temperature_html
 
 
 @dataclass
@@ -315,6 +316,7 @@ def build_report(model, cv: dict | None = None, calib=None) -> Report:
         + (f"Points {where}; lower row: deviation from the line [{shown['small']}]." if calib is not None
            else "No calibration points: pass --calib CALIB to plot them.")))
     body.append(_model_tables(model))
+    body.append(temperature_html(model))  # issue 31: '' without temperature terms
 
     body.append("<h2>Corrected coupling functions χ (Figure 7)</h2>\n")
     curves = (cv or {}).get("curves") or {}

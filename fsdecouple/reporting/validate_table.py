@@ -78,6 +78,12 @@ def validation_renderables(doc: dict[str, Any], output=None, *, as_json: bool = 
                     f"{_pct(g['max_gamma'])} % -> {'passed' if g['passed'] else 'FAILED'}",
                     style="" if g["passed"] else "bold red")
         out.append((as_json or not g["passed"], line))
+    t = doc.get("temperature")
+    if t is not None and not as_json:  # a fitted model's terms: the set corrected to T0
+        terms = "; ".join(f"{o} b {t['b'][o]:+.4g} {doc['units']['output']}/K, g "
+                          f"{1e6 * t['g'][o]:+.1f} ppm/K" for o in t["b"])
+        out.append((False, Text(f"outputs corrected to T0 = {t['t0']:g} degC by the model's "
+                                f"temperature terms: {terms}")))
     if output is not None and not as_json:
         out.append((False, Text(f"validation document written to {printable(output)}")))
     out += [(True, Text("warning: ", style="yellow") + Text(w)) for w in doc["warnings"]]

@@ -82,6 +82,63 @@ def test_every_form_refuses_a_step_it_has_no_case_for(sample_model):
             call()
 
 
+def with_temperature(model, zero=None):
+    """The sample model with fitted-style temperature terms (the temperature an input after
+    the outputs): offset drift 0.1 % of each span per K, gain drift 150-300 ppm/K."""
+    from dataclasses import replace
+
+    from fsdecouple.core.temperature import TemperatureTerms
+
+    span = np.ptp(model.calibrated_range, axis=1)
+    terms = TemperatureTerms(3, 25.0, 1e-3 * span * np.array([1.0, -0.8, 0.6]),
+                             np.array([3e-4, -1.5e-4, 2e-4]), "degC", (15.0, 35.0))
+    return replace(model, temperature=terms)
+
+
+def by_hand(doc, u, t, t0, b, g, zero=None):
+    """The temperature terms written out (ATI's form, docs/temperature.md), then eq. (11)
+    from the file: the reference every form is checked against."""
+    c = (u - b * (t[:, None] - t0)) / (1 + g * (t[:, None] - t0))
+    if zero is not None:
+        c = c - (zero[:-1] - b * (zero[-1] - t0)) / (1 + g * (zero[-1] - t0))
+    return eq11_from_file(doc, c)
+
+
+def test_the_temperature_step_is_applied_by_every_form(sample_model):
+    """model.decouple (tables, compiled, small calls, exact), decoupler() and the float
+    emulation all apply the plan's temperature step, with and without a zero."""
+    base = load_model(sample_model)
+    doc = json.loads(sample_model.read_text())
+    model = with_temperature(base)
+    terms = model.temperature
+    r = base.calibrated_range
+    rng = np.random.default_rng(11)
+    u = rng.uniform(r[:, 0], r[:, 1], (400, 3))
+    t = rng.uniform(10.0, 40.0, 400)
+    zero = np.array([*(0.02 * np.ptp(r, axis=1)), 31.0])
+    fs = np.asarray(base.settings.full_scale)
+    for z in (None, zero):
+        want = by_hand(doc, u, t, terms.t0, terms.b, terms.g, z)
+        # left out, the step would miss by far more than any tolerance
+        assert (np.abs(eq11_from_file(doc, u) - want) / fs).max() > 1e4 * TABLE_TOL
+        forms = {"tables": (model.decouple(u, temperature=t, zero=z, compiled=False), TABLE_TOL),
+                 "compiled": (model.decouple(u, temperature=t, zero=z, compiled=True), TABLE_TOL),
+                 "small": (model.decouple(u[:5], temperature=t[:5], zero=z), TABLE_TOL),
+                 "exact": (model.decouple(u, temperature=t, zero=z, exact=True), EXACT_TOL)}
+        for name, (got, tol) in forms.items():
+            err = np.abs(got - want[:len(got)]) / fs
+            assert err.max() <= tol, (name, z is not None, err.max(axis=0))
+    one = model.decoupler()
+    got = np.array([one(*v, tv) for v, tv in zip(u.tolist(), t.tolist(), strict=True)])
+    assert (np.abs(got - by_hand(doc, u, t, terms.t0, terms.b, terms.g)) / fs).max() <= TABLE_TOL
+    export = plan_export(model, precision="float")
+    assert export.m == 4  # one more input: the temperature
+    x32 = np.column_stack([u, t]).astype(np.float32)
+    want32 = by_hand(doc, x32[:, :3].astype(float), x32[:, 3].astype(float), terms.t0, terms.b, terms.g)
+    err = np.abs(emulate_float(export, x32) - want32) / fs
+    assert err.max() <= export.float_max_error, err.max(axis=0)
+
+
 @pytest.mark.slow  # a joint fit of eight gauges (~5 s)
 def test_every_form_of_an_m_over_n_model_is_eq11_of_its_file(tmp_path):
     """M > N outputs (fitting/gauges.py): the projection v = P u is a step of the plan, and

@@ -674,3 +674,74 @@ def test_a_step_added_to_the_plan_reaches_the_header(sample_model, tmp_path, mon
         2 * float(re.search(r"#define FSD_FLOAT_MAX_ERROR (\S+)", text).group(1))
     assert (np.abs(eq11_from_file(doc, u) - want) / fs).max() > 1e4 * REL_FS
     assert (np.abs(f_c - want) / fs).max() <= tol
+
+
+@needs_cc
+@pytest.mark.parametrize("precision", ["double", "float"])
+def test_the_temperature_step_reaches_the_header(sample_model, tmp_path, precision):
+    """A fitted model's temperature terms (core/temperature.py): the header takes the
+    temperature as one more input, u[3], and corrects the outputs to T0 before eq. (11);
+    checked against the terms written out by hand and eq. (11) from the model file.  A
+    header that forgot the step would miss by 1e4 times the tolerance."""
+    from dataclasses import replace as _replace
+
+    from conftest import eq11_from_file
+
+    from fsdecouple.core.temperature import TemperatureTerms
+
+    span = np.ptp(sample_model.calibrated_range, axis=1)
+    t0, b, g = 25.0, 1e-3 * span * np.array([1.0, -0.8, 0.6]), np.array([3e-4, -1.5e-4, 2e-4])
+    model = _replace(sample_model, temperature=TemperatureTerms(3, t0, b, g, "degC", (15.0, 35.0)))
+    run, text = build(model, tmp_path, precision=precision)
+    assert "#define FSD_N_OUTPUTS 4" in text
+    lo, hi = np.asarray(sample_model.calibrated_range).T
+    rng = np.random.default_rng(12)
+    u = np.column_stack([lo + (hi - lo) * rng.random((5000, 3)), rng.uniform(10, 40, 5000)])
+    u = u.astype(np.float32).astype(float)
+    f_c, _ = run(u)
+    dt = u[:, 3:] - t0
+    doc = model_to_dict(sample_model)
+    want = eq11_from_file(doc, (u[:, :3] - b * dt) / (1 + g * dt))
+    fs = np.asarray(sample_model.settings.full_scale)
+    tol = REL_FS if precision == "double" else \
+        2 * float(re.search(r"#define FSD_FLOAT_MAX_ERROR (\S+)", text).group(1))
+    assert (np.abs(eq11_from_file(doc, u[:, :3]) - want) / fs).max() > 1e4 * REL_FS
+    assert (np.abs(f_c - want) / fs).max() <= tol
+
+
+@needs_cc
+def test_the_headers_set_zero_is_the_plans_zero(sample_model, tmp_path):
+    """fsd_set_zero(u_zero): the zero read at its own temperature, corrected alike and
+    subtracted from each row after, as model.decouple(u, temperature=, zero=) does
+    (the plan's temperature step with its zero)."""
+    from dataclasses import replace as _replace
+
+    from fsdecouple.core.temperature import TemperatureTerms
+
+    span = np.ptp(sample_model.calibrated_range, axis=1)
+    terms = TemperatureTerms(3, 25.0, 1e-3 * span * np.array([1.0, -0.8, 0.6]),
+                             np.array([3e-4, -1.5e-4, 2e-4]), "degC", (15.0, 35.0))
+    model = _replace(sample_model, temperature=terms)
+    export_header(model, tmp_path / "d.h")
+    lo, hi = np.asarray(sample_model.calibrated_range).T
+    rng = np.random.default_rng(13)
+    zero = np.array([*(0.05 * span), 31.0])
+    u = np.column_stack([lo + (hi - lo) * rng.random((50, 3)) + zero[:3], rng.uniform(10, 40, 50)])
+    rows = ", ".join("{" + ", ".join(repr(float(v)) for v in r) + "}" for r in u)
+    (tmp_path / "z.c").write_text(
+        '#define FSD_IMPLEMENTATION\n#include "d.h"\n#include <stdio.h>\n'
+        f"static const double U[50][4] = {{{rows}}};\n"
+        "int main(void) { double f[3], z[4] = {" + ", ".join(map(repr, zero.tolist())) + "};\n"
+        "  int r; if (fsd_selftest() != 0) return 3; fsd_set_zero(z);\n"
+        '  for (r = 0; r < 50; ++r) { fsd_decouple(U[r], f); printf("%.17g %.17g %.17g\\n", '
+        "f[0], f[1], f[2]); } return 0; }\n")
+    subprocess.run([CC, *FLAGS, "-O2", str(tmp_path / "z.c"), "-o", str(tmp_path / "z"), "-lm"],
+                   check=True, capture_output=True, text=True)
+    out = subprocess.run([str(tmp_path / "z")], check=True, capture_output=True, text=True).stdout
+    f_c = np.array([[float(v) for v in line.split()] for line in out.splitlines()])
+    want = model.decouple(u[:, :3], temperature=u[:, 3], zero=zero, exact=True)
+    fs = np.asarray(sample_model.settings.full_scale)
+    assert (np.abs(f_c - want) / fs).max() <= REL_FS
+    # the zero matters: without it the forces are off by the offsets' worth
+    without = model.decouple(u[:, :3], temperature=u[:, 3], exact=True)
+    assert (np.abs(without - want) / fs).max() > 1e3 * REL_FS
