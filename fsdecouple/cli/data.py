@@ -99,7 +99,7 @@ def simulate(
                                     ("--gross-error", gross_error), ("--coupling", coupling),
                                     ("--hysteresis", hysteresis)) if v is not None]
             given += [o for o, v, d in (("--layout", layout, "paper"), ("--components", components, 3))
-                      if v != d]
+                      if v not in (d, None)]
             if given:  # never ignored in silence
                 raise InputError(f"--temperature: {', '.join(given)}: not with --temperature (the "
                                  "paper's sensor on its grid, drifting with temperature)")
