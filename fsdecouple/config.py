@@ -26,7 +26,8 @@ from .schema import (
     svr_settings,
     validate,
 )
-from .units import Units, temperature_keys
+from .temperature_units import config_keys as temperature_keys
+from .units import Units
 from .wrench import Frame
 from .yamlfile import read_yaml
 

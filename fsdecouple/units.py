@@ -11,8 +11,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .temperature_units import config_keys as temperature_keys  # noqa: F401 (config.py's)
-
 # One unit of each load unit in newtons (gf and kgf: standard gravity, 9.80665 m/s^2;
 # lbf: the avoirdupois pound-force, klbf a thousand of them).
 LOAD_UNITS = {"N": 1.0, "kN": 1000.0, "gf": 9.80665e-3, "kgf": 9.80665, "lbf": 4.4482216152605,
