@@ -19,7 +19,14 @@ from ..files import CALIBRATION_LIMIT, TASK_LIMIT, natural_key, read_bounded, re
 from ..temperature_units import DEFAULT_TEMPERATURE, to_celsius
 from ..temperature_units import column as temperature_column
 from ..temperature_units import unit as temperature_unit
-from .csv_text import HEADER_ROW, read_csv_text, read_header, require_columns, to_numbers
+from .csv_text import (
+    HEADER_ROW,
+    first_difference,
+    read_csv_text,
+    read_header,
+    require_columns,
+    to_numbers,
+)
 from .guesses import applied_load
 from .magnitudes import adc_bits
 from .poses import average_poses, pose_note, timestamp_column
@@ -334,10 +341,7 @@ def _one_pose_each(poses) -> None:
     first, header0 = poses[0][0], poses[0][1]
     for f, header, _, out in poses[1:]:
         if header != header0:
-            j = next((i for i, (a, b) in enumerate(zip(header, header0, strict=False)) if a != b),
-                     min(len(header), len(header0)))
-            found = repr(header[j]) if j < len(header) else "nothing"
-            want = repr(header0[j]) if j < len(header0) else "nothing"
+            j, found, want = first_difference(header, header0)
             raise InputError(f"{where(f, HEADER_ROW)}: column {j + 1} is {found}, {first.name} has "
                              f"{want} there; the files of a pose directory share one layout")
         if len(out) > 1:

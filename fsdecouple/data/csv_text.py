@@ -245,6 +245,16 @@ def require_columns(header: list[str], wanted: dict[str, str], path: Path,
 _SEPS = (",", ";", "\t")  # what init tries on a file it has never seen
 
 
+def first_difference(header: list[str], first: list[str]) -> tuple[int, str, str]:
+    """Where a file's header parts from the first file's: (0-based column, what this file
+    has there, what the first has; ``nothing`` past a header's end), for the one-line
+    refusal of a directory whose files do not share one layout."""
+    j = next((i for i, (a, b) in enumerate(zip(header, first, strict=False)) if a != b),
+             min(len(header), len(first)))
+    return (j, repr(header[j]) if j < len(header) else "nothing",
+            repr(first[j]) if j < len(first) else "nothing")
+
+
 def _sniff_sep(first_line: str) -> str:
     counts = {s: len(next(csv.reader([first_line], delimiter=s), [])) for s in _SEPS}
     return max(_SEPS, key=lambda s: (counts[s], s == ","))  # a tie is a comma file

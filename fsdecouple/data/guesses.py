@@ -31,12 +31,12 @@ OPTIONAL = ("axis", "repetition")
 KEYS = (*OPTIONAL[::-1], *REQUIRED)  # the order the config lists them
 
 # unit words as they appear in headers ([gf], (kgf), _N, lbf), lower case
-_LOAD_HINTS = {"n": "N", "kn": "kN", "gf": "gf", "g": "gf", "kgf": "kgf", "kg": "kgf",
+LOAD_HINTS = {"n": "N", "kn": "kN", "gf": "gf", "g": "gf", "kgf": "kgf", "kg": "kgf",
                "lbf": "lbf", "lb": "lbf", "lbs": "lbf"}
 _OUTPUT_HINTS = {"v": "V", "mv": "mV", "uv": "uV", "µv": "uV", "μv": "uV", "count": "count",
                  "counts": "count", "cnt": "count", "lsb": "count", "mv/v": "mV/V",
                  "mvv": "mV/V", "mv/v excitation": "mV/V"}
-_HINTS = {**_LOAD_HINTS, **_OUTPUT_HINTS}
+_HINTS = {**LOAD_HINTS, **_OUTPUT_HINTS}
 _MOMENT_WORDS = {unit_key(u) for u in MOMENT_UNITS}
 _UNIT_NAMES = {"N": "newton", "kN": "kilonewton", "gf": "gram-force", "kgf": "kilogram-force",
                "lbf": "pound-force", "V": "volt", "mV": "millivolt", "uV": "microvolt",
@@ -48,11 +48,11 @@ _FORCE = re.compile(r"(?:f|force|load|applied|appliedforce|appliedload|standardl
 _OUTPUT = re.compile(r"(?:u|v|volt|volts|voltage|sensor|out|output|signal|bridge|sg|strain)"
                      r"([xyz])|([xyz])(?:volt|voltage|output|signal|sensor)")
 _CHANNEL = re.compile(r"(ch|chan|channel|adc|ain|ai|v)(\d+)")
-_AXIS = {"axis", "loadaxis", "loadedaxis", "direction", "loaddirection"}
-_REPETITION = {"repetition", "rep", "repeat", "run", "cycle", "trial", "repno", "repetitionno"}
+AXIS_HEADERS = {"axis", "loadaxis", "loadedaxis", "direction", "loaddirection"}
+REPETITION_HEADERS = {"repetition", "rep", "repeat", "run", "cycle", "trial", "repno", "repetitionno"}
 
-_NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
-_INTEGER = re.compile(r"[+-]?\d+")
+NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
+INTEGER = re.compile(r"[+-]?\d+")
 
 # Above this largest |load| a load in newtons is unlikely for a lab force sensor:
 # gram-force is the usual unit of weights-on-a-hanger calibrations.
@@ -140,7 +140,7 @@ class Guess:
     def to_yaml(self) -> str:
         """The commented config: every guessed value with a comment saying why."""
         out = [
-            f"# Started by `fsdecouple init` from {_comment(str(self.path))}",
+            f"# Started by `fsdecouple init` from {one_line(str(self.path))}",
             f"# ({self.rows} data rows read). Values marked 'guessed' come from the header",
             "# and the magnitudes of the data: check each one before fitting.",
             "",
@@ -153,18 +153,18 @@ class Guess:
         for key in self.keys:
             if key in self.columns:
                 out.append(f"  {key}: {_scalar(self.columns[key])}"
-                           f"   # guessed: {_comment(self.reasons[key])}")
+                           f"   # guessed: {one_line(self.reasons[key])}")
             else:
-                out.append(f"  # {key}: not mapped ({_comment(self.reasons[key])})")
+                out.append(f"  # {key}: not mapped ({one_line(self.reasons[key])})")
         if self.ignored:
             out.append("# Ignored columns (not read):")
-            out += [f"#   column {i.column} {_comment(shown(i.name))}: {_comment(i.reason)}"
+            out += [f"#   column {i.column} {one_line(shown(i.name))}: {one_line(i.reason)}"
                     for i in self.ignored]
         for key, value, why in self.settings():
-            out += ["", f"# {'' if key == 'csv' else 'guessed: '}{_comment(why)}",
+            out += ["", f"# {'' if key == 'csv' else 'guessed: '}{one_line(why)}",
                     f"{key}: {value}"]
         if self.notes:
-            out += ["", "# Notes:"] + [f"#   {_comment(n)}" for n in self.notes]
+            out += ["", "# Notes:"] + [f"#   {one_line(n)}" for n in self.notes]
         return "\n".join(out) + "\n"
 
 
@@ -174,7 +174,7 @@ def _scalar(value: str) -> str:
     return text.strip()[1:-1]
 
 
-def _comment(text: str) -> str:
+def one_line(text: str) -> str:
     """Text that stays on one comment line (a header may hold a line break)."""
     return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
@@ -187,7 +187,7 @@ def _num(v: float) -> str:
     return str(int(v)) if float(v).is_integer() else repr(float(v))
 
 
-def _parse_name(header: str) -> tuple[str, str | None]:
+def parse_name(header: str) -> tuple[str, str | None]:
     """(name in lower case without units and separators, unit word found or None)."""
     text = header.strip().lower()
     hints = re.findall(r"[\[(]([^\])]*)[\])]", text)
@@ -210,7 +210,7 @@ def _candidates(names: list[str], usable: list[int]) -> list[_Candidate]:
     found: list[_Candidate] = []
     families: dict[str, list[tuple[int, int]]] = {}
     for i in usable:
-        name, hint = _parse_name(names[i])
+        name, hint = parse_name(names[i])
         unit = f", unit {hint} ({_UNIT_NAMES[_HINTS[hint]]})" if hint else ""
         if name in (*REQUIRED, *OPTIONAL):
             found.append(_Candidate(name, i, 0, f"header names {name}{unit}"))
@@ -222,9 +222,9 @@ def _candidates(names: list[str], usable: list[int]) -> list[_Candidate]:
             key = "u" + (m.group(1) or m.group(2))
             found.append(_Candidate(key, i, 1, f"header names the output along "
                                                f"{key[1]} ({key}){unit}"))
-        elif name in _AXIS:
+        elif name in AXIS_HEADERS:
             found.append(_Candidate("axis", i, 1, "header names the loaded axis"))
-        elif name in _REPETITION:
+        elif name in REPETITION_HEADERS:
             found.append(_Candidate("repetition", i, 1, "header names the repetition"))
         elif m := _CHANNEL.fullmatch(name):
             families.setdefault(m.group(1), []).append((int(m.group(2)), i))
@@ -253,7 +253,7 @@ _APPLIED = re.compile(r"(?:known|applied|reference|ref|true|nominal)[a-z]+\d*"
 
 def applied_load(header: str) -> bool:
     """Whether ``header`` names an applied (reference) load: ``known_Fx``, ``Fz_ref [N]``."""
-    return bool(_APPLIED.fullmatch(_parse_name(header)[0]))
+    return bool(_APPLIED.fullmatch(parse_name(header)[0]))
 
 
 # --- the guess ---------------------------------------------------------------------
@@ -305,8 +305,8 @@ def guess_rows(path: Path, names: list[str], raw_rows: list[list[str]], sep: str
             if key in REQUIRED:
                 what = "load" if key in FORCE_COLUMNS else "output"
                 raise InputError(
-                    f"{_comment(str(path))}: no column found for {key} (the {what} along "
-                    f"{key[1]}); header: {_comment(header_seen)}; name it {key} or map it "
+                    f"{one_line(str(path))}: no column found for {key} (the {what} along "
+                    f"{key[1]}); header: {one_line(header_seen)}; name it {key} or map it "
                     "under columns: in a config"
                 )
             reasons[key] = f"no {key} column: " + (
@@ -327,7 +327,7 @@ def guess_rows(path: Path, names: list[str], raw_rows: list[list[str]], sep: str
 
     # values: rows where every mapped cell is empty (a side table running past the
     # data, a blank line) are not data
-    decimal = _sniff_decimal(sep, raw_rows, list(columns.values()))
+    decimal = sniff_decimal(sep, raw_rows, list(columns.values()))
     values: dict[str, list[float]] = {k: [] for k in REQUIRED}
     skipped = dict.fromkeys(REQUIRED, 0)
     integers, reps, rows = True, set(), 0
@@ -337,31 +337,31 @@ def guess_rows(path: Path, names: list[str], raw_rows: list[list[str]], sep: str
         reps.add(cells.get("repetition", ""))
         for key in REQUIRED if any(cells.values()) else ():
             number = cells[key].replace(decimal, ".")
-            if not _NUMBER.fullmatch(number) or not math.isfinite(float(number)):  # 1e400: inf
+            if not NUMBER.fullmatch(number) or not math.isfinite(float(number)):  # 1e400: inf
                 skipped[key] += 1
                 continue
             values[key].append(float(number))
-            integers &= key in FORCE_COLUMNS or bool(_INTEGER.fullmatch(number))
+            integers &= key in FORCE_COLUMNS or bool(INTEGER.fullmatch(number))
     reps.discard("")
     if truncated:
         notes.append(f"read the first {len(raw_rows):,} data rows only")
     for key in REQUIRED:
         if not values[key]:
             raise InputError(
-                f"{_comment(str(path))}, column {_comment(shown(names[columns[key]]))} "
+                f"{one_line(str(path))}, column {one_line(shown(names[columns[key]]))} "
                 f"(taken as {key}): no numbers in {rows} data rows"
             )
         if skipped[key]:
             notes.append(f"{key}: {skipped[key]} cells of {shown(names[columns[key]])} are "
                          "not numbers and were skipped")
 
-    hints = {k: _parse_name(names[i])[1] for k, i in columns.items()}
+    hints = {k: parse_name(names[i])[1] for k, i in columns.items()}
     labels = {k: shown(names[i]) for k, i in columns.items()}
     peak_load = max(abs(v) for k in FORCE_COLUMNS for v in values[k])
     peak_out = max(abs(v) for k in VOLTAGE_COLUMNS for v in values[k])
-    load, load_why = _unit("load", hints, peak_load, integers, notes, labels)
+    load, load_why = guess_unit("load", hints, peak_load, integers, notes, labels)
     bits = adc_bits([v for k in VOLTAGE_COLUMNS for v in values[k]]) if integers else None
-    output, output_why = _unit("output", hints, peak_out, integers, notes, labels, bits=bits)
+    output, output_why = guess_unit("output", hints, peak_out, integers, notes, labels, bits=bits)
     reasons["units"] = f"load {load}: {load_why}; output {output}: {output_why}"
 
     peaks = {a: max(abs(v) for v in values[k]) for a, k in zip(AXES, FORCE_COLUMNS, strict=True)}
@@ -394,7 +394,7 @@ def guess_rows(path: Path, names: list[str], raw_rows: list[list[str]], sep: str
     )
 
 
-def _sniff_decimal(sep: str, rows: list[list[str]], cols: list[int]) -> str:
+def sniff_decimal(sep: str, rows: list[list[str]], cols: list[int]) -> str:
     """'.' in a comma file; else ',' (European) unless its numbers say otherwise."""
     cells = [row[i].strip() for row in rows[:1000] for i in cols if i < len(row)]
     point = sum(bool(re.fullmatch(r"[+-]?\d*\.\d+([eE][+-]?\d+)?", c)) for c in cells)
@@ -402,14 +402,14 @@ def _sniff_decimal(sep: str, rows: list[list[str]], cols: list[int]) -> str:
     return "." if sep == "," or point > comma else ","
 
 
-def _unit(kind: str, hints: dict[str, str | None], peak: float, integers: bool,
+def guess_unit(kind: str, hints: dict[str, str | None], peak: float, integers: bool,
           notes: list[str], shown: dict[str, str], keys=None,
           bits: int | None = None) -> tuple[str, str]:
     """The ``load`` or ``output`` unit: from header hints, else from the magnitudes.
 
     ``keys``: the columns to look at (default: fx, fy, fz or ux, uy, uz).
     """
-    default, table = ((FORCE_COLUMNS, _LOAD_HINTS) if kind == "load"
+    default, table = ((FORCE_COLUMNS, LOAD_HINTS) if kind == "load"
                       else (VOLTAGE_COLUMNS, _OUTPUT_HINTS))
     keys = default if keys is None else keys
     found = {k: table[h] for k in keys if (h := hints.get(k)) in table}

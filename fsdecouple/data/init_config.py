@@ -24,25 +24,26 @@ from ..config import load_config
 from ..errors import ConfigError, InputError, printable
 from ..files import atomic_write, check_output, refuse_overwriting_input
 from ..units import LOAD_UNITS, MOMENT_UNITS, unit_key
+from .csv_text import first_difference
 from .guesses import (
-    _AXIS,
-    _INTEGER,
-    _LOAD_HINTS,
-    _NUMBER,
-    _REPETITION,
+    AXIS_HEADERS,
+    INTEGER,
+    LOAD_HINTS,
     MAX_ROWS,
+    NUMBER,
+    REPETITION_HEADERS,
     Guess,
     Ignored,
-    _comment,
-    _parse_name,
-    _sniff_decimal,
-    _unit,
     adc_bits,
     full_scale_of,
     full_scale_reason,
     guess_rows,
+    guess_unit,
+    one_line,
+    parse_name,
     read_rows,
     shown,
+    sniff_decimal,
 )
 from .poses import TIMESTAMP_NAMES
 from .temperature_column import with_temperature
@@ -74,7 +75,7 @@ _BRACKETS = re.compile(r"[\[(]([^\])]*)[\])]")
 
 def _component(header: str) -> str | None:
     """fx .. mz when ``header`` names a force or moment component, else None."""
-    name, _ = _parse_name(header)
+    name, _ = parse_name(header)
     if m := _MOMENT.fullmatch(name):
         return "m" + (m.group(1) or m.group(2))
     if m := _LOAD.fullmatch(name):
@@ -84,7 +85,7 @@ def _component(header: str) -> str | None:
 
 def _applied(header: str) -> str | None:
     """fx .. mz when ``header`` names an applied load (``known_Fx``, ``Fz_ref [N]``), else None."""
-    name, _ = _parse_name(header)
+    name, _ = parse_name(header)
     if m := _APPLIED.fullmatch(name):
         return _component(m.group(1) or m.group(2))
     return None
@@ -118,7 +119,7 @@ def _check_loads(text: str, data: str | Path) -> None:
             load_config(trial)
         except ConfigError as err:
             reason = str(err).removeprefix(f"{printable(trial)}")
-            raise InputError(f"{_comment(str(data))}: the guessed config would not load"
+            raise InputError(f"{one_line(str(data))}: the guessed config would not load"
                              f"{reason}; check the data, or write the config by hand") from None
 
 
@@ -158,12 +159,9 @@ def _directory_rows(path: Path, max_rows: int) -> tuple[list[str], list[list[str
             break
         other, more, _, cut = read_rows(f, max_rows - len(rows))
         if other != names:
-            j = next((i for i, (a, b) in enumerate(zip(other, names, strict=False)) if a != b),
-                     min(len(other), len(names)))
-            found = repr(other[j]) if j < len(other) else "nothing"
-            want = repr(names[j]) if j < len(names) else "nothing"
-            raise InputError(f"{_comment(str(f))}, row 1: column {j + 1} is {_comment(found)}, "
-                             f"{_comment(files[0].name)} has {_comment(want)} there; the files "
+            j, found, want = first_difference(other, names)
+            raise InputError(f"{one_line(str(f))}, row 1: column {j + 1} is {one_line(found)}, "
+                             f"{one_line(files[0].name)} has {one_line(want)} there; the files "
                              "of a calibration directory share one layout")
         rows += more
         truncated |= cut
@@ -173,8 +171,8 @@ def _directory_rows(path: Path, max_rows: int) -> tuple[list[str], list[list[str
 def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: str,
                      truncated: bool) -> Guess:
     """The config of a force/torque file: components, their prime outputs, units, full scales."""
-    where = _comment(str(path))
-    header = _comment(", ".join(shown(n) for n in names))
+    where = one_line(str(path))
+    header = one_line(", ".join(shown(n) for n in names))
     count = {n: names.count(n) for n in names}
     ignored = {i: ("no header name" if not n else f"header name repeated ({count[n]} columns)")
                for i, n in enumerate(names) if not n or count[n] > 1}
@@ -189,10 +187,11 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
         if key and key not in loads:
             loads[key] = i
     components = tuple(c for c in COMPONENTS if c in loads)
-    parsed = {i: _parse_name(names[i])[0] for i in usable}
+    parsed = {i: parse_name(names[i])[0] for i in usable}
     special: dict[int, str] = {}  # the first axis and repetition column
     for i in usable:
-        key = "axis" if parsed[i] in _AXIS else "repetition" if parsed[i] in _REPETITION else None
+        key = ("axis" if parsed[i] in AXIS_HEADERS
+               else "repetition" if parsed[i] in REPETITION_HEADERS else None)
         if key and key not in special.values():
             special[i] = key
     stamps = [i for i in usable if parsed[i] in _TIMESTAMP and i not in special]
@@ -223,7 +222,7 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
             f"or ch0..ch{len(components) - 1}; found {len(fits)} such families; header: {header}")
     channels = [i for _, i in fits[0]]
     mapped = [loads[c] for c in components] + channels
-    decimal = _sniff_decimal(sep, rows, mapped)
+    decimal = sniff_decimal(sep, rows, mapped)
     table = _numbers(rows, mapped, decimal)
     if len(table) == 0:
         raise InputError(f"{where}: no row holds a number in every load and output column")
@@ -265,10 +264,10 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
     reasons["outputs"] = ("every output channel, in header order (more than components)" if gauges
                           else "the prime output of each component, in the same order")
     load_units = _load_units(names, loads, components, f, notes)
-    integers = all(_INTEGER.fullmatch(row[i].strip()) for row in rows[:1000] for i in channels
-                   if i < len(row) and _NUMBER.fullmatch(row[i].strip()))
+    integers = all(INTEGER.fullmatch(row[i].strip()) for row in rows[:1000] for i in channels
+                   if i < len(row) and NUMBER.fullmatch(row[i].strip()))
     peak_out = float(np.abs(u).max())
-    hints = {f"c{j}": _parse_name(names[i])[1] for j, i in enumerate(channels)}
+    hints = {f"c{j}": parse_name(names[i])[1] for j, i in enumerate(channels)}
     out_units = None
     if named_as is _applied and len(readings) == len(components):
         # a sensor's own readings named like its components are factory-calibrated
@@ -280,7 +279,7 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
                    "forces and moments): each reading's header unit, else its component's")
         out_units = out_units if out_unit == "mixed" else None
     else:
-        out_unit, out_why = _unit("output", hints, peak_out, integers, notes,
+        out_unit, out_why = guess_unit("output", hints, peak_out, integers, notes,
                                   {f"c{j}": shown(names[i]) for j, i in enumerate(channels)},
                                   keys=list(hints), bits=adc_bits(u) if integers else None)
     mixed = len(set(load_units.values())) > 1
@@ -342,7 +341,7 @@ def _numbers(rows: list[list[str]], cols: list[int], decimal: str) -> np.ndarray
     out = []
     for row in rows:
         cells = [row[i].strip().replace(decimal, ".") if i < len(row) else "" for i in cols]
-        if all(_NUMBER.fullmatch(c) for c in cells):
+        if all(NUMBER.fullmatch(c) for c in cells):
             values = [float(c) for c in cells]
             if all(math.isfinite(v) for v in values):  # 1e400 matches, but is no reading
                 out.append(values)
@@ -393,7 +392,7 @@ def header_unit(header: str, moment: bool) -> tuple[str | None, str | None]:
     (None, None) without one.  ``moment``: a moment's header (a bare ``N`` is then no moment)."""
     words = [h.strip() for h in _BRACKETS.findall(header)]
     tail = re.split(r"[\s_]+", re.sub(r"[\[(][^\])]*[\])]", " ", header).strip())
-    table = _MOMENT_HINTS if moment else _LOAD_HINTS
+    table = _MOMENT_HINTS if moment else LOAD_HINTS
     # Mx_Nm, Fx_gf: a unit after the name (a word there that is no unit is part of the name)
     for w in words + tail[-1:] * (len(tail) > 1):
         unit = table.get(w.lower()) or _SPELLED.get(unit_key(w))

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .guesses import _parse_name
+from .guesses import parse_name
 
 TIMESTAMP_NAMES = {"time", "timestamp", "datetime", "date", "t", "timesec", "elapsed",
                    "elapsedtime"}
@@ -30,7 +30,7 @@ TIMESTAMP_NAMES = {"time", "timestamp", "datetime", "date", "t", "timesec", "ela
 
 def timestamp_column(header) -> str | None:
     """The first header name that names a timestamp (units and separators ignored)."""
-    return next((h for h in header if _parse_name(str(h))[0] in TIMESTAMP_NAMES), None)
+    return next((h for h in header if parse_name(str(h))[0] in TIMESTAMP_NAMES), None)
 
 
 def average_poses(frame, keys: list[str], outputs: list[str]):
