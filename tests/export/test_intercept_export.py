@@ -91,6 +91,17 @@ def test_decouple_and_decoupler_subtract_the_fitted_offsets(intercept):
 
 
 @needs_cc
+def test_float_header_subtracts_the_fitted_offsets(intercept, tmp_path):
+    model, doc, offsets = intercept
+    run, _ = build(model, tmp_path, precision="float")
+    u = raw_outputs(offsets, np.random.default_rng(6)).astype(np.float32)
+    want = eq11_from_file(doc, u.astype(float), raw=True)
+    f_c, _ = run(u)
+    result = export_header(model, tmp_path / "again.h", force=True, precision="float")
+    assert (np.abs(f_c - want) / FS).max() <= result.float_max_error  # its own promise
+
+
+@needs_cc
 def test_c_header_subtracts_the_fitted_offsets_until_set_zero(intercept, tmp_path):
     model, doc, offsets = intercept
     run, text = build(model, tmp_path)
