@@ -80,7 +80,8 @@ def sim_model_file(sim_fit):
     return sim_fit[0]
 
 
-def eq11_from_file(doc: dict, u: np.ndarray, correction=None, refine=None) -> np.ndarray:
+def eq11_from_file(doc: dict, u: np.ndarray, correction=None, refine=None,
+                   raw: bool = False) -> np.ndarray:
     """Forces [load unit] by eq. (11) from a model file's own numbers, sharing no code
     with fsdecouple: the one independent implementation every evaluator is checked
     against.  f_a = [u_a - chi_aa(u_a) - sum_{b != a} chi_ab(p_b)] / k_a, with
@@ -96,11 +97,17 @@ def eq11_from_file(doc: dict, u: np.ndarray, correction=None, refine=None) -> np
     A linear model: f = C u.  ``correction`` = (offset, gain): each raw output first
     becomes (u_i - offset_i) / gain_i.  The golden files' check: decoupling a stored
     model is deterministic arithmetic, unlike re-fitting it (libsvm's last bits differ
-    between machines and grow through a fit).  ``u``: zero-corrected outputs, (n, M).
+    between machines and grow through a fit).  ``u``: zero-corrected outputs, (n, M);
+    ``raw``: raw outputs, less the file's fitted offsets (``zero: {offsets: {name: value}}``
+    of a ``zero: intercept`` model, in the layout's output order) first.
     """
     settings = doc["settings"]
     assert settings.get("frame") is None
     u = np.asarray(u, dtype=float)
+    if raw:
+        offsets = doc["zero"]["offsets"]
+        names = settings.get("outputs") or list(offsets)
+        u = u - np.array([float(offsets[c]) for c in names])
     if correction is not None:
         u = (u - np.asarray(correction[0])) / np.asarray(correction[1])
     rotation = settings.get("rotation")

@@ -231,7 +231,8 @@ def export(
     if model.report is not None and model.report.certificate:
         console.print("note: the header decouples forces only; apply --interval's bounds are not "
                       "in it (docs/certificate.md)", highlight=False, soft_wrap=True)
-    if model.zero is not None:  # zero: intercept (data/zero.py): apply subtracts it, C does not
+    if model.zero is not None and model.temperature is not None:
+        # zero: intercept with temperature terms: the header's zero is set_zero's reading only
         zero = ", ".join(f"{c}={v:.6g}" for c, v in zip(model.layout.outputs, model.zero, strict=True))
         console.print(f"note: the header decouples zero-corrected outputs; subtract this model's "
                       f"fitted offsets first ({zero} {model.settings.output_unit})",

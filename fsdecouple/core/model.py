@@ -22,7 +22,7 @@ from .decouple import exact as _exact_plan
 from .decouple import initial_forces
 from .extrapolation import Edges, continue_slopes, continue_values, edges
 from .kernel import rbf_sum, rbf_sum_slope
-from .plan import Plan, model_plan, temperature_inputs, temperature_step
+from .plan import Plan, model_plan, temperature_inputs, temperature_step, zero_step
 from .surrogate import ChiSurrogate
 from .table_path import TableDecoupler
 from .temperature import TemperatureTerms
@@ -393,13 +393,19 @@ class CouplingErrorModel:
             A temperature model (core/temperature.py): each row's temperature, ``u`` then
             raw, and a raw zero reading with its temperature (``n_inputs``), both
             corrected to T0 by the plan's first step.  None: ``u`` are at T0 already.
+            A model without temperature terms: ``zero`` (M,) [V] makes ``u`` raw outputs,
+            less ``zero`` (the plan's zero step, as ``apply --zero``); ``zero="fitted"``:
+            less a ``zero: intercept`` model's fitted offsets (``model.zero``), as ``apply``
+            with neither ``--tare`` nor ``--zero``.  None: ``u`` are zero-corrected.
         """
         u_arr = np.asarray(u, dtype=float)
         flat = u_arr.reshape(-1, self.n_outputs)
         shape = (*u_arr.shape[:-1], self.n_components) if u_arr.ndim else u_arr.shape
         refine = self._refine(refine)
         before: tuple = ()
-        if temperature is not None or zero is not None:  # raw inputs and the step (plan.py)
+        if self.temperature is None and zero is not None:  # raw outputs less a zero (plan.py)
+            before = (zero_step(self._zero(zero)),)
+        elif temperature is not None or zero is not None:  # raw inputs and the step (plan.py)
             flat, before = temperature_inputs(self.temperature, flat, temperature, zero)
         tables = None if exact else self.fast_decoupler()
         if tables is not None:
@@ -420,7 +426,23 @@ class CouplingErrorModel:
             self._tables = TableDecoupler.from_plan(model_plan(self, temperature=False)) or False
         return self._tables or None
 
-    def decoupler(self, refine: int | None = None):
+    def _zero(self, zero) -> np.ndarray:
+        """``decouple``'s ``zero`` (M,) [V]: given values, or ``"fitted"``: ``model.zero``."""
+        if isinstance(zero, str):
+            if zero != "fitted":
+                raise ValueError(f"decouple: zero={zero!r}; expected offsets or 'fitted'")
+            if self.zero is None:
+                from ..errors import ConfigError
+
+                raise ConfigError("the model has no fitted offsets (zero: intercept): give the "
+                                  "zero reading's values")
+            return np.asarray(self.zero, dtype=float)
+        z = np.asarray(zero, dtype=float).reshape(-1)
+        if len(z) != self.n_outputs:
+            raise ValueError(f"decouple: zero has {len(z)} values for {self.n_outputs} outputs")
+        return z
+
+    def decoupler(self, refine: int | None = None, zero=None):
         """A plain-Python function ``(ux, uy, uz) -> (fx, fy, fz)`` for control loops.
 
         A few microseconds per call: no numpy, no allocation beyond small lists.  Same
@@ -431,13 +453,21 @@ class CouplingErrorModel:
         >>> f = model.decoupler()
         >>> fx, fy, fz = f(0.5, 0.01, -0.2)
         A temperature model takes raw inputs (``n_inputs``) to T0 first, no zero subtracted.
+        A ``zero: intercept`` model (``model.zero``) takes raw outputs and subtracts its
+        fitted offsets first, as the exported C header does until ``set_zero``; ``zero``
+        (M,) [V]: subtract these instead (a zero reading of raw outputs).
         """
         refine = self._refine(refine)
         tables = self.fast_decoupler()
-        before = () if self.temperature is None else (temperature_step(self.temperature),)
+        if self.temperature is not None:
+            before = (temperature_step(self.temperature),)
+        elif zero is not None or self.zero is not None:  # the plan's zero step (plan.py)
+            before = (zero_step(self._zero("fitted" if zero is None else zero)),)
+        else:
+            before = ()
         if tables is not None:
             return tables.one(refine=refine, before=before)
-        plan = self.plan(refine=refine)
+        plan = self.plan(refine=refine, zero=None if zero is None else self._zero(zero))
 
         def exact_one(*u: float) -> tuple[float, ...]:
             return tuple(_exact_plan(plan, np.array([u], dtype=float))[0].tolist())

@@ -69,10 +69,27 @@ class Term:
 
 @dataclass(frozen=True, eq=False)
 class InputCorrection:
-    """Per raw output i: ``u_i <- (u_i - offset_i) / gain_i``, before anything else."""
+    """Per raw output i: ``u_i <- (u_i - offset_i) / gain_i``, before anything else.
+
+    ``zero``: the step is the zero subtracted from raw outputs (gain 1): a ``zero:
+    intercept`` model's fitted offsets by default (:func:`zero_step`), which the C
+    header's ``set_zero(u_zero)`` replaces by a zero reading of the controller's.
+    """
 
     offset: np.ndarray  # (M,) [output unit]
     gain: np.ndarray  # (M,) [1]
+    zero: bool = False
+
+    @property
+    def n_inputs(self) -> int:
+        return len(self.offset)
+
+
+def zero_step(offsets) -> InputCorrection:
+    """The plan's zero on raw outputs: ``u <- u - offsets`` (M,) [output unit], as ``apply``
+    subtracts a tare, ``--zero`` or a ``zero: intercept`` model's fitted offsets."""
+    offsets = np.asarray(offsets, dtype=float)
+    return InputCorrection(offsets, np.ones(len(offsets)), zero=True)
 
 
 @dataclass(frozen=True, eq=False)
@@ -237,7 +254,9 @@ def model_plan(model, *, rotate: bool = True, refine: int | None = None,
     ``corrections``: steps applied to the raw outputs first (:class:`InputCorrection`).
     ``temperature``: a model with temperature terms corrects its raw inputs (outputs and
     the temperature) first, subtracting ``zero`` (a raw zero reading of the same inputs)
-    after; False: the outputs are taken as corrected already (at T0, zero removed).
+    after; a ``zero: intercept`` model (``model.zero``) subtracts ``zero`` (raw outputs),
+    by default its fitted offsets, first (:func:`zero_step`); False: the outputs are taken
+    as corrected already (at T0, zero removed).
     """
     n = model.n_components
     n_in = model.n_outputs
@@ -246,6 +265,8 @@ def model_plan(model, *, rotate: bool = True, refine: int | None = None,
     if terms is not None and temperature:
         steps.insert(0, temperature_step(terms, zero))
         n_in = steps[0].n_inputs
+    elif temperature and (zero is not None or getattr(model, "zero", None) is not None):
+        steps.insert(0, zero_step(model.zero if zero is None else zero))
     if model.method == "linear" and getattr(model, "imported", False):
         # a factory matrix (data/ati_model.py): v = P u are its forces (k = 1), f = I v, so
         # the range (+-max) is checked on them, as apply's "extrapolated" does

@@ -140,6 +140,12 @@ def _step(plan: ExportPlan, step, ctype: str, x: str, dim: int, i: int) -> tuple
             # the zero set by set_zero (0 until then), corrected at its own temperature
             lines.append(f"    c{i}[{o}] = {e} - " + (f"{zero}[{j}];" if z is None else f"{fmt(z[j])};"))
         return lines, f"c{i}", len(keep)
+    if isinstance(step, InputCorrection) and step.zero:
+        # the zero on raw outputs: the model's fitted offsets until set_zero replaces them
+        zero = f"({ctype}){plan.prefix}zero" if ctype == "float" else f"{plan.prefix}zero"
+        lines = [f"    {ctype} c{i}[{dim}];"]
+        lines += [f"    c{i}[{j}] = {x}[{j}] - {zero}[{j}];" for j in range(dim)]
+        return lines, f"c{i}", dim
     if isinstance(step, InputCorrection):  # per raw output, before eq. (11)
         lines = [f"    {ctype} c{i}[{dim}];"]
         lines += [f"    c{i}[{j}] = ({x}[{j}] - {fmt(step.offset[j])}) / {fmt(step.gain[j])};"
@@ -185,8 +191,19 @@ def decouple_function(plan: ExportPlan, ctype: str) -> str:
 def set_zero_function(plan: ExportPlan) -> str:
     """``set_zero(u)``: a raw zero reading (the inputs, its temperature among them) corrected
     to T0 as the plan's temperature step corrects a row, kept and subtracted from every
-    row after (ATIDAQ's bias); '' for a model without temperature terms."""
+    row after (ATIDAQ's bias).  A ``zero: intercept`` model: ``set_zero(u)`` replaces the
+    fitted offsets the header subtracts from raw outputs by default by the reading ``u``.
+    '' for a model with neither."""
     step, p = plan.temperature, plan.prefix
+    zero = plan.zero
+    if step is None and zero is not None:
+        m = len(zero.offset)
+        values = ", ".join(num(v) for v in zero.offset)
+        lines = [f"/* the model's fitted offsets (zero: intercept) until {p}set_zero */",
+                 f"static double {p}zero[{m}] = {{{values}}};",
+                 f"void {p}set_zero(const double *u)", "{", "    int j;",
+                 f"    for (j = 0; j < {m}; ++j) {p}zero[j] = u[j];"]
+        return "\n".join([*lines, "}", ""])
     if step is None:
         return ""
     c, dim = step.channel, step.n_inputs

@@ -12,7 +12,17 @@ from typing import Any
 import numpy as np
 
 from ..core.model import RANGE_MARGIN
-from ..core.plan import Couple, Linear, Plan, Project, Rotate, TemperatureCorrection, Term, walk
+from ..core.plan import (
+    Couple,
+    InputCorrection,
+    Linear,
+    Plan,
+    Project,
+    Rotate,
+    TemperatureCorrection,
+    Term,
+    walk,
+)
 from ..errors import printable
 
 
@@ -99,9 +109,15 @@ class ExportPlan:
     def temperature(self) -> TemperatureCorrection | None:
         return self.plan.step(TemperatureCorrection)
 
+    @property
+    def zero(self) -> InputCorrection | None:
+        """The zero step on raw outputs (a ``zero: intercept`` model's fitted offsets), or None."""
+        return next((s for s in self.plan.steps if isinstance(s, InputCorrection) and s.zero), None)
+
     def lift(self, v: np.ndarray, rng=None) -> np.ndarray:
         """Inputs u (rows, m) whose v = P u is ``v`` (rows, N): u = P^+ v; v itself for M = N.
 
+        A ``zero: intercept`` model: raw outputs, its fitted offsets added.
         A temperature model: the temperature set to T0 + dt, dt cycling over the calibrated
         span's half-width each side (random with ``rng``; 0.05 |T0| or 1 without a span),
         and the outputs made raw at that temperature, so the corrected ones are ``v``'s.
@@ -109,8 +125,8 @@ class ExportPlan:
         v = np.asarray(v, dtype=float)
         u = v if self.projection is None else v @ np.linalg.pinv(self.projection).T
         step = self.temperature
-        if step is None:
-            return u
+        if step is None:  # raw outputs: the default zero (fitted offsets) added back
+            return u if self.zero is None else u + self.zero.offset
         terms = self.model.temperature
         half = (terms.span[1] - terms.span[0]) / 2 if terms.span is not None else \
             0.05 * abs(step.t0) or 1.0

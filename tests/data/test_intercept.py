@@ -250,7 +250,8 @@ def test_fit_without_a_config_on_another_rigs_file_points_to_init(tmp_path):
     assert "did you mean" not in r.stderr
 
 
-def test_export_says_the_header_needs_the_fitted_offsets(tmp_path):
+def test_export_puts_the_fitted_offsets_in_the_header(tmp_path):
+    # the header subtracts them itself (tests/export/test_intercept_export.py): no note
     offsets = np.full(8, 512.0)
     path = tmp_path / "poses.csv"
     linear_poses(path, offsets, noise=0.3)
@@ -258,5 +259,5 @@ def test_export_says_the_header_needs_the_fitted_offsets(tmp_path):
     invoke(["fit", path, "-c", tmp_path / "cfg.yaml", "-o", tmp_path / "m.json", "--no-verdict"])
     r = invoke(["export", tmp_path / "m.json", "-o", tmp_path / "d.h"])
     zero = load_model(tmp_path / "m.json").zero
-    assert "subtract this model's fitted offsets first" in r.stdout
-    assert f"s0={zero[0]:.6g}" in r.stdout
+    assert "subtract this model's fitted offsets first" not in r.stdout
+    assert f"fsd_zero[8] = {{{float(zero[0])!r}, " in (tmp_path / "d.h").read_text()
