@@ -407,11 +407,23 @@ def validate(raw: Any, source: str, base: Settings) -> tuple[Settings, frozenset
 CHANGES_FORCES = ("rotation", "frame", "refine", "extrapolation", "full_scale")
 
 
-def unused_keys(settings: Settings, model_settings: Settings) -> list[str]:
-    """The keys a config wrote that ``apply`` does not read from a config (the model's own,
-    :attr:`Key.applies` false) and whose values differ from the model's."""
+# the keys each command that takes a model and a config (-c) reads from the config; every
+# other key is the model's own: refused (CHANGES_FORCES) or warned about when it differs.
+# validate scores its set in the config's full scale and zeroes its sweeps by its zero;
+# the certificate reads the very set the model was fitted on (zero may be left unsaid,
+# certificate_doc.check_matches) and states the lab's keys
+READS = {
+    "apply": APPLY_KEYS,
+    "validate": (*APPLY_KEYS, "full_scale", "zero"),
+    "certificate": (*APPLY_KEYS, "sensor", "full_scale", "zero", *sorted(LAB_KEYS)),
+}
+
+
+def unused_keys(settings: Settings, model_settings: Settings, command: str = "apply") -> list[str]:
+    """The keys a config wrote that ``command`` does not read from a config (:data:`READS`;
+    the model's own) and whose values differ from the model's."""
     out = []
-    for name in sorted(settings.given - set(APPLY_KEYS)):
+    for name in sorted(settings.given - set(READS[command])):
         if name == "svr":
             mine, theirs = settings.svr, model_settings.svr
             fields = ["C", "epsilon", "gamma"] + ([] if mine.tolerance is None else ["tolerance"])
@@ -427,14 +439,14 @@ def unused_keys(settings: Settings, model_settings: Settings) -> list[str]:
 def _unused(names: list[str], command: str) -> str:
     return (f"the config's {', '.join(names)} differ{'s' if len(names) == 1 else ''} from the "
             f"model's: {command} decouples with the model's own settings and reads only "
-            f"{', '.join(APPLY_KEYS)} from a config")
+            f"{', '.join(READS[command])} from a config")
 
 
 def refuse_unused(settings: Settings, model_settings: Settings, command: str = "apply") -> None:
     """Refuse a config that states a key changing the forces (:data:`CHANGES_FORCES`)
     otherwise than the model: ``apply -c rot.yaml`` with a rotation the model lacks
     decoupled without it, in silence."""
-    names = [n for n in unused_keys(settings, model_settings) if n in CHANGES_FORCES]
+    names = [n for n in unused_keys(settings, model_settings, command) if n in CHANGES_FORCES]
     if names:
         raise ConfigError(f"{_unused(names, command)}; refit with this config, or leave "
                           f"{' and '.join(names)} out")
@@ -442,5 +454,5 @@ def refuse_unused(settings: Settings, model_settings: Settings, command: str = "
 
 def unused_warning(settings: Settings, model_settings: Settings, command: str = "apply") -> list[str]:
     """The warning for fit-only keys a config states otherwise than the model (not used)."""
-    names = [n for n in unused_keys(settings, model_settings) if n not in CHANGES_FORCES]
+    names = [n for n in unused_keys(settings, model_settings, command) if n not in CHANGES_FORCES]
     return [f"{_unused(names, command)}; not used here"] if names else []

@@ -23,6 +23,7 @@ from ..config import Settings
 from ..core.model import CouplingErrorModel
 from ..data.calibration import CalibrationSet
 from ..errors import InputError
+from ..schema import refuse_unused, unused_warning
 from .budget import CONTRIBUTIONS, SOURCES, budget, temperature_term
 from .creep import creep_times
 from .iso376 import (
@@ -67,6 +68,7 @@ def check_matches(model: CouplingErrorModel, calib: CalibrationSet, source: str,
                 else f"it lacks repetition {missing[0]}, which the model was fitted on")
         raise InputError(f"{calib.source}: does not match the model file {source}: {what}")
     if settings is not None:
+        refuse_unused(settings, model.settings, "certificate")
         mine, theirs = settings.to_dict(), model.settings.to_dict()
         for key in READING_KEYS:
             if key == "zero" and settings.zero is None:
@@ -193,6 +195,8 @@ def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str
     lab, layout = s.lab, calib.layout
     times = creep_times(calib, s)
     records, budgets, classes, notes = [], [], [], []
+    if settings is not None:
+        notes += unused_warning(settings, model.settings, "certificate")
     n_reps = len(calib.repetitions)
     if n_reps < 2:
         notes.append(f"one repetition: b (reproducibility) and b' (repeatability) compare "

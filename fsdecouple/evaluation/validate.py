@@ -41,6 +41,7 @@ from ..core.model import FORCE_LIMIT, CouplingErrorModel
 from ..core.modelfile import content_digest, load_model, model_to_dict
 from ..errors import InputError, printable, where
 from ..files import atomic_write, check_output, refuse_overwriting_input
+from ..schema import refuse_unused, unused_warning
 
 FORMAT = "fsdecouple.validation"
 FORMAT_VERSION = 1
@@ -114,6 +115,8 @@ def validate(
     model_path = Path(model) if isinstance(model, str | Path) else None
     if model_path is not None:
         model = load_model(model_path)
+    if settings is not None:
+        refuse_unused(settings, model.settings, "validate")
     settings = settings or model.settings
     terms = getattr(model, "temperature", None)
     if terms is not None and not terms.external:  # an ATI thermistor (core/temperature.py)
@@ -136,6 +139,7 @@ def validate(
     single = (loads != 0.0).sum(axis=1) <= 1
     loaded = (loads != 0.0).any(axis=1)
     warnings = [w for w in cs.warnings if not any(x in w for x in _NOT_FOR_VALIDATION)]
+    warnings += unused_warning(settings, model.settings, "validate")
     forces = {"model": model.decouple(u, rotate=False)}
     matrix, calib_files = (model.matrix, []) if model.matrix is not None else \
         _matrix_of(calib, model)
