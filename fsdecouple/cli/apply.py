@@ -141,6 +141,7 @@ def _apply_many(model_file, inputs, output, config, tare, zero, unit, refine, ro
                 round_trip=round_trip, force=force, interval=interval, progress=progress)
     doc = result.to_dict()
     show(doc, apply_many_table, json_out)
+    warn(doc["warnings"])
     say(apply_many_errors(doc))
     if doc["failed"]:
         raise typer.Exit(2)

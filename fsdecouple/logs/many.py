@@ -40,6 +40,7 @@ from typing import Any
 from ..config import Settings
 from ..errors import FsdecoupleError, InputError, printable
 from ..files import names_a_directory, natural_key, output_directory, place, place_directory
+from ..schema import unused_warning
 from .apply import MAX_WORKERS
 from .jobs import ApplySpec, Job, apply_job
 from .reader import PARQUET_SUFFIXES, is_parquet
@@ -68,6 +69,7 @@ class BatchResult:
     output_dir: str
     files: list[FileResult] = field(default_factory=list)
     force_unit: str | None = None
+    warnings: list[str] = field(default_factory=list)  # config keys not used (schema.unused_warning)
 
     @property
     def failed(self) -> list[FileResult]:
@@ -76,7 +78,7 @@ class BatchResult:
     def to_dict(self) -> dict[str, Any]:
         return {"format": FORMAT, "engine": self.engine, "output_dir": self.output_dir,
                 "force_unit": self.force_unit, "files": [vars(f) for f in self.files],
-                "failed": [f.input for f in self.failed]}
+                "failed": [f.input for f in self.failed], "warnings": self.warnings}
 
 
 # --- which inputs ------------------------------------------------------------------
@@ -314,7 +316,8 @@ def apply_many(model_path: str | Path, inputs, out_dir: str | Path, *, engine: s
         if made:
             with contextlib.suppress(OSError):
                 out.rmdir()  # only if nothing was written
-    return BatchResult(engine, str(out_dir), results, force_unit)
+    notes = unused_warning(settings, model.settings) if settings is not None else []
+    return BatchResult(engine, str(out_dir), results, force_unit, notes)
 
 
 def _run_local(spec: ApplySpec, todo: dict[int, tuple[Job, Path]], workers: int | None,

@@ -69,3 +69,14 @@ def test_apply_to_many_logs_refuses_a_rotation_the_model_lacks(sample_model, tmp
                 _cfg(tmp_path, ROTATION), "--tare", "200", "-o", f"{out}/"], 2)
     assert_one_line_error(r, "rotation", "refit with this config")
     assert not out.exists()
+
+
+def test_apply_to_many_logs_warns_of_svr_and_is_silent_on_the_models_own(sample_model, tmp_path):
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    for name in ("a.csv", "b.csv"):
+        shutil.copy(SAMPLE / "task_voltages.csv", logs / name)
+    for i, (text, news) in enumerate(((SVR, True), (SAME, False))):
+        r = invoke(["apply", sample_model, logs / "a.csv", logs / "b.csv", "-c",
+                    _cfg(tmp_path, text), "--tare", "200", "-o", f"{tmp_path / f'out{i}'}/"])
+        assert ("config's svr differs from the model's" in r.stderr) is news, r.stderr
