@@ -60,6 +60,8 @@ class CalibrationSet:
     noise: np.ndarray | None = None  # pose logs: sigma of each averaged output (poses.py)
     # a temperature column's drift terms, the outputs corrected to T0 by them (fitting/temperature.py)
     temperature_fit: Any = None
+    # soak files (every load zero, temperature varying): rows for the offset drift b_i only
+    soak: pd.DataFrame | None = None
 
     @property
     def source(self) -> str:
@@ -131,6 +133,39 @@ def _source(files) -> str:
     return str(Path(files[0][0]).parent)
 
 
+def split_soak(table: pd.DataFrame, layout: Layout):
+    """The soak files of ``table`` set apart: files whose every row loads nothing, logged over
+    a temperature span (issue 31: they identify the offset drift b_i alone).  Returns the
+    table without them, their rows (None when there are none) and a note per file.  A soak
+    without a temperature column, or spanning less than the temperature fit's minimum, is
+    refused: it could only be a sweep with no loaded point."""
+    from ..fitting.temperature import MIN_SPAN
+
+    if "file" not in table.columns:  # a table built in code: no files to set apart
+        return table, None, []
+    zero = (table[list(layout.loads)].to_numpy() == 0.0).all(axis=1)
+    files = table["file"].to_numpy()
+    soaks = [f for f in pd.unique(files) if zero[files == f].all()]
+    if not soaks or len(soaks) == len(pd.unique(files)):  # nothing loaded at all: zero.py says so
+        return table, None, []
+    notes = []
+    for f in soaks:
+        if "temperature" not in table.columns:
+            raise InputError(f"{f}: every row's loads are zero (a soak), but the set has no "
+                             "temperature column: a soak only serves the offset drift b_i over "
+                             "a temperature span, and it is not a sweep")
+        t = table.loc[files == f, "temperature"].to_numpy(dtype=float)
+        if np.ptp(t) < MIN_SPAN:
+            raise InputError(f"{f}: every row's loads are zero (a soak), but its temperatures "
+                             f"span {np.ptp(t):.3g} K, less than the {MIN_SPAN:g} K the "
+                             "temperature fit needs; it is not a sweep either")
+        notes.append(f"{f}: {int((files == f).sum())} rows with every load zero from "
+                     f"{t.min():.4g} to {t.max():.4g} degC (a soak): used for the offset drift "
+                     "b_i only, not for fitting the decoupling model and not a repetition")
+    is_soak = np.isin(files, soaks)
+    return (table[~is_soak].reset_index(drop=True), table[is_soak].reset_index(drop=True), notes)
+
+
 def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
                combined: bool = False) -> CalibrationSet:
     """Validate a long table (as :func:`read_calibration_table` returns) and zero-correct it.
@@ -140,6 +175,7 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
     """
     layout = settings.layout
     dead_channels(table, layout, _source(files))
+    table, soak, soak_notes = split_soak(table, layout)
     table = assign_sweeps(table, layout, combined, settings.full_scale)
     # no unloaded row (poses of a known mass): each output's offset is fitted (zero.py)
     intercept = settings.zero == "intercept" or (settings.zero is None
@@ -176,7 +212,7 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
         and settings.zero_method == "rows" and out_and_back(table, layout)
     method = "intercept" if intercept else settings.zero or (
         "before" if several else "fit" if back else settings.zero_method)
-    warnings = []
+    warnings = list(soak_notes)
     if intercept:
         points, offsets = intercept_offsets(table, layout, settings.full_scale, _source(files))
         if settings.zero is None:
@@ -231,7 +267,7 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
                             "a repetition copied twice counts twice")
         seen.setdefault(digest, name)
     return CalibrationSet(points, offsets, tuple(files), tuple(skipped), tuple(warnings),
-                          layout=layout, zero=method, zero_auto=back)
+                          layout=layout, zero=method, zero_auto=back, soak=soak)
 
 
 def dead_channels(table: pd.DataFrame, layout: Layout, source: str) -> None:

@@ -7,7 +7,9 @@ working matrix is C itself), ``max`` = the full scale, and ``UserAxis`` rows equ
 to the ``Axis`` rows (consistent by construction).  A model with a frame (config
 ``frame:`` or ``rotation:``) has it folded in: C' = T C, so ATIDAQ's forces are
 ``apply``'s.  Temperature terms become ``BiasSlope`` = -b, ``GainSlope`` = -g and
-``Thermistor`` = T0 (core/temperature.py), the temperature output the last channel.
+``Thermistor`` = T0 (core/temperature.py), the temperature output the last channel; a
+fitted model's temperature column (``external``) becomes the thermistor channel after the
+gauges, read by ATIDAQ unscaled, so in the model's own unit (degC).
 
 Outputs in mV or uV are converted to the volts ATIDAQ reads (C x 1e3, x 1e6).
 A nonlinear (svr) model is refused unless ``linear_part``: then its omega matrix
@@ -116,14 +118,16 @@ def plan_cal(model, source: str = "model", *, linear_part: bool = False) -> dict
         raise InputError(f"{source}: outputs in {out_unit}; ATIDAQ reads gauges in volts (a model in "
                          f"{', '.join(VOLTS)} is converted)")
     temp = model.temperature
-    if temp is not None and temp.external:  # fitted (fitting/temperature.py), T in degC
-        raise InputError(f"{source}: the model's temperature terms read a temperature column in "
-                         f"{temp.unit}, not a thermistor among the gauges as ATIDAQ does; export "
-                         "the header (fsdecouple export -o sensor.h) or apply it in Python")
     gauges = [i for i in range(model.n_outputs) if temp is None or i != temp.channel]
     if len(gauges) > MAX_GAUGES:
         raise InputError(f"{source}: {len(gauges)} outputs; ATIDAQ reads at most {MAX_GAUGES} gauges")
-    if temp is not None and temp.channel != model.n_outputs - 1:
+    if temp is not None and temp.external:  # fitted (fitting/temperature.py), T in degC
+        # ATIDAQ reads the thermistor channel after the gauges as it is, unscaled: the same
+        # correction when that channel carries the temperature in the model's unit
+        notes.append(f"the temperature terms are the fit's, in {temp.unit}: ATIDAQ's thermistor "
+                     f"channel (after the {len(gauges)} gauges) must carry the temperature in "
+                     f"{temp.unit}; a .cal has no place for the calibrated span")
+    elif temp is not None and temp.channel != model.n_outputs - 1:
         raise InputError(f"{source}: the temperature output is not the last; ATIDAQ reads the "
                          "thermistor after the gauges")
     rotation = model.rotation
@@ -147,7 +151,7 @@ def plan_cal(model, source: str = "model", *, linear_part: bool = False) -> dict
         plan["bias_slope"] = [-float(temp.b[i]) * to_volts for i in gauges]  # ATI's BS = -b [V/unit]
         plan["gain_slope"] = [-float(temp.g[i]) for i in gauges]  # GS = -g
         plan["thermistor"] = float(temp.t0)
-        if temp.unit != "V":
+        if temp.unit != "V" and not temp.external:
             notes.append(f"the temperature channel is in {temp.unit}: ATIDAQ's thermistor channel "
                          f"must then read {temp.unit} too")
     sensor = {"Serial": model.settings.sensor, "BodyStyle": "fsdecouple", "Family": "DAQ",

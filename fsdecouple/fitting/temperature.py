@@ -32,6 +32,7 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import pandas as pd
 
 from ..core.temperature import TemperatureTerms, correct
 from ..temperature_units import MODEL_UNIT
@@ -158,14 +159,21 @@ def fit_terms(calib: CalibrationSet, settings, *, t0: float | None = None) -> Te
     if len(groups) < 2 or np.ptp(t_sweep) < MIN_SPAN:
         return None
     t = pts["temperature"].to_numpy(dtype=float)
+    span = (float(t.min()), float(t.max()))  # the sweeps' span: a soak has no gain
     if t0 is None:  # the middle of the calibrated levels, to 0.1 K
         t0 = round(float(np.mean([t_sweep[g].mean() for g in groups])), 1)
-    dt = t - t0
     raw = pts[[f"{c}_raw" for c in layout.outputs]].to_numpy(dtype=float)
     u_fs = np.abs(pts[list(layout.outputs)].to_numpy(dtype=float)).max(axis=0)
     u_fs[~(u_fs > 0)] = 1.0
-    phi = _design(pts[list(layout.loads)].to_numpy(dtype=float),
-                  np.asarray(settings.full_scale, dtype=float))
+    forces = pts[list(layout.loads)].to_numpy(dtype=float)
+    soak = getattr(calib, "soak", None)
+    if soak is not None and len(soak):  # every load zero: one more sweep of offsets only
+        t = np.concatenate([t, soak["temperature"].to_numpy(dtype=float)])
+        raw = np.vstack([raw, soak[list(layout.outputs)].to_numpy(dtype=float)])
+        forces = np.vstack([forces, soak[list(layout.loads)].to_numpy(dtype=float)])
+        sweep = np.concatenate([sweep, sweep.max() + 1 + pd.factorize(soak["file"])[0]])
+    dt = t - t0
+    phi = _design(forces, np.asarray(settings.full_scale, dtype=float))
     m = raw.shape[1]
     b, g, sb, sg, z = (np.zeros(m) for _ in range(5))
     steady = True
@@ -178,7 +186,6 @@ def fit_terms(calib: CalibrationSet, settings, *, t0: float | None = None) -> Te
         g[i], sg[i] = c.g, np.sqrt(c.cov[2, 2] * c.sweep_scatter)
         z[i] = c.z * u_fs[i]
         steady &= c.sweep_scatter <= STEADY_SCATTER
-    span = (float(t.min()), float(t.max()))
     terms = TemperatureTerms(m, float(t0), b, g, MODEL_UNIT, span, sb, sg)
     return TemperatureFit(terms, [float(t_sweep[gr].mean()) for gr in groups],
                           settings.output_unit, tuple(layout.outputs), offset_t0=z if steady else None)

@@ -198,3 +198,39 @@ def test_c_header_of_a_temperature_compensated_matrix(tmp_path):
     assert np.abs(f_c - f_py).max() <= 1e-12 * fs
 
 
+
+
+def test_fitted_temperature_terms_read_back_in_atidaq(six_linear, tmp_path):
+    """A linear six-axis model with fitted temperature terms (degC) -> .cal -> ATIDAQ, its
+    thermistor channel fed the temperature in degC: the forces of the outputs at T0.  The
+    raw readings are made in ATI's form from drawn b, g (u = (1 + g dT) u0 + b dT), so
+    ATIDAQ's correction must undo them exactly (1e-6 F.S.)."""
+    from fsdecouple.core.temperature import TemperatureTerms
+
+    rng = np.random.default_rng(31)
+    b, g = rng.normal(0, 1e-3, 6), rng.normal(0, 1.5e-4, 6)  # [V/K], [1/K]
+    t0 = 25.0
+    model = replace(six_linear, temperature=TemperatureTerms(6, t0, b, g, "degC", (15.0, 35.0)))
+    path = tmp_path / "m.json"
+    save_model(model, path)
+    model = load_model(path)
+    r = invoke(["export", path, "-o", tmp_path / "s.cal"])
+    assert "degC" in r.stdout + r.stderr
+    ref = Atidaq(tmp_path / "s.cal")
+    assert ref.tc and ref.n == 6 and ref.therm == t0
+
+    def raw(u0, t):
+        return (1 + g * (t - t0)) * u0 + b * (t - t0)
+
+    u = random_outputs(model, rng, rows=200)
+    zero, t_bias = rng.normal(0, 0.01, 6), 18.0
+    ref.bias([*raw(zero, t_bias), t_bias])
+    t = rng.uniform(10.0, 40.0, len(u))
+    got = np.array([ref.convert([*raw(row + zero, ti), ti]) for row, ti in zip(u, t, strict=True)])
+    expected = decouple(replace(model, temperature=None), u)  # at T0, zero removed
+    fs = np.asarray(model.settings.full_scale)
+    assert np.all(np.abs(got - expected) <= 1e-6 * fs), np.abs(got - expected).max(axis=0) / fs
+    # and the slopes read back as the model's terms
+    back = import_cal(tmp_path / "s.cal")
+    assert np.allclose(back.temperature.b[:6], b, rtol=1e-15, atol=0)
+    assert np.allclose(back.temperature.g[:6], g, rtol=1e-15, atol=0)

@@ -250,3 +250,63 @@ def test_a_column_named_temperature_needs_no_mapping(drifting, tmp_path):
     a = pd.read_csv(tmp_path / "o.csv")[["fx", "fy", "fz"]].to_numpy()
     b = pd.read_csv(drifting / "task_voltages_out.csv")[["fx", "fy", "fz"]].to_numpy()
     assert np.abs(a - b).max() <= 1e-6 * FS.max()
+
+
+def _soak(truth: dict, n: int = 300, seed: int = 0) -> pd.DataFrame:
+    """A soak from 10 to 40 degC, every load zero: the simulator's true offsets (ATI's form
+    about its t0, truth.json) plus noise of the sensor's own size (sim.sensor's noise)."""
+    from fsdecouple.sim.simulate import SimulatedSensor
+
+    rng = np.random.default_rng(seed)
+    t = np.linspace(10.0, 40.0, n)
+    dt = t - truth["t0"]
+    outs = ("ux", "uy", "uz")
+    sigma = SimulatedSensor().noise
+    u = {o: (1 + truth["g"][o] * dt) * truth["z"][o] + truth["b"][o] * dt
+         + rng.normal(0.0, sigma, n) for o in outs}
+    return pd.DataFrame({"axis": "", "fx": 0.0, "fy": 0.0, "fz": 0.0, **u,
+                         "temperature": t + rng.normal(0.0, 0.02, n)})
+
+
+def test_a_soak_file_pins_the_offset_drift(drifting, tmp_path):
+    """A file of zero-load rows over 10-40 degC beside the repetitions: accepted with a note,
+    not a repetition, and b_i's uncertainty shrinks while b_i stays by the truth."""
+    truth = json.loads((drifting / "truth.json").read_text())
+    cal = tmp_path / "cal"
+    cal.mkdir()
+    for p in sorted((drifting / "calibration").glob("rep*.csv")):
+        (cal / p.name).write_text(p.read_text())
+    _soak(truth).drop(columns="axis").to_csv(cal / "soak.csv", index=False, float_format="%.7f")
+    r = invoke(["fit", cal, "-o", tmp_path / "m.json", "-c", drifting / "sensor.yaml",
+                "--no-verdict"])
+    assert "soak.csv" in r.stdout + r.stderr and "b_i only" in r.stdout + r.stderr
+    doc = json.loads((tmp_path / "m.json").read_text())
+    before = json.loads((drifting / "model.json").read_text())["temperature"]
+    after = doc["temperature"]
+    for o in ("ux", "uy", "uz"):
+        assert after["b_sigma"][o] < 0.8 * before["b_sigma"][o], (o, after, before)
+        assert abs(after["b"][o] - truth["b"][o]) <= 4 * after["b_sigma"][o], (o, after)
+    from fsdecouple import load_calibration, load_config
+
+    calib = load_calibration(cal, load_config(drifting / "sensor.yaml"))
+    assert calib.repetitions == [1, 2, 3, 4, 5, 6] and len(calib.soak) == 300
+
+
+def test_a_soak_without_temperature_is_refused(drifting, tmp_path):
+    truth = json.loads((drifting / "truth.json").read_text())
+    cal = tmp_path / "cal"
+    cal.mkdir()
+    for p in sorted((drifting / "calibration").glob("rep*.csv")):
+        pd.read_csv(p).drop(columns="temperature").to_csv(cal / p.name, index=False)
+    _soak(truth).drop(columns=["axis", "temperature"]).to_csv(cal / "soak.csv", index=False)
+    r = invoke(["fit", cal, "-o", tmp_path / "m.json"], code=2)
+    assert "soak.csv" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert not (tmp_path / "m.json").exists()
+    # a soak spanning less than the fit's minimum: refused too
+    for p in sorted((drifting / "calibration").glob("rep*.csv")):
+        (cal / p.name).write_text(p.read_text())
+    narrow = _soak(truth).drop(columns="axis")
+    narrow["temperature"] = 25.0
+    narrow.to_csv(cal / "soak.csv", index=False)
+    r = invoke(["fit", cal, "-o", tmp_path / "m.json", "-c", drifting / "sensor.yaml"], code=2)
+    assert "soak.csv" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
