@@ -4,6 +4,7 @@ no oversized modules, typer only in the CLI, and tests/ mirroring the package.""
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -142,3 +143,54 @@ def test_no_shims_for_old_module_paths():
         with pytest.raises(ModuleNotFoundError):
             importlib.import_module(f"fsdecouple.{old}")
     assert callable(fsdecouple.fit) and callable(fsdecouple.validate)
+
+
+LIBRARY_STAGES = ("core", "data", "fitting", "evaluation")
+FLAG = re.compile(r"(?<![\w-])--[a-z][a-z-]*")
+# (module, flag) pairs a library string may still spell, each with its reason; empty is best.
+TODO = "not converted yet: evaluation's messages still name the flag (issue 30, Wanted 4)"
+FLAG_ALLOWED: dict[tuple[str, str], str] = {
+    ("fsdecouple.evaluation.calibrate", "--method"): TODO,
+    ("fsdecouple.evaluation.calibrate", "--no-verdict"): TODO,
+    ("fsdecouple.evaluation.calibrate", "--tune"): TODO,
+    ("fsdecouple.evaluation.calibrate", "--tune-grid"): TODO,
+    ("fsdecouple.evaluation.certificate_doc", "--drift"): TODO,
+    ("fsdecouple.evaluation.certificate_doc", "--json"): TODO,
+    ("fsdecouple.evaluation.certificate_doc", "--no-verdict"): TODO,
+    ("fsdecouple.evaluation.cv", "--folds"): TODO,
+    ("fsdecouple.evaluation.cv", "--gross-error"): TODO,
+    ("fsdecouple.evaluation.cv", "--repeats"): TODO,
+    ("fsdecouple.evaluation.heldout", "--folds"): TODO,
+    ("fsdecouple.evaluation.heldout", "--protocol"): TODO,
+    ("fsdecouple.evaluation.intervals", "--interval"): TODO,
+    ("fsdecouple.evaluation.intervals", "--no-verdict"): TODO,
+    ("fsdecouple.evaluation.tune", "--tune"): TODO,
+    ("fsdecouple.evaluation.tune", "--tune-grid"): TODO,
+    ("fsdecouple.evaluation.validate", "--calib"): TODO,
+    ("fsdecouple.evaluation.verdict", "--method"): TODO,
+}
+
+
+def _strings(tree: ast.AST):
+    """Every string literal of ``tree`` but docstrings, with its line (f-strings' parts too)."""
+    docs = {id(node.body[0].value) for node in ast.walk(tree)
+            if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef)
+            and node.body and isinstance(node.body[0], ast.Expr)
+            and isinstance(node.body[0].value, ast.Constant)}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docs:
+            yield node.lineno, node.value
+
+
+def test_library_messages_speak_of_the_data_not_of_flags():
+    # issue 30, Wanted 4: below the CLI an error names the argument by its Python name
+    # (FsdecoupleError.argument) and the CLI adds the flag; a '--flag' in a library string
+    # is a message that reads wrong from Python and drifts when a flag is renamed
+    found = []
+    for stage in LIBRARY_STAGES:
+        for path in sorted((PACKAGE / stage).rglob("*.py")):
+            module = _module_name(path)
+            for line, text in _strings(ast.parse(path.read_text(encoding="utf-8"))):
+                found += [f"{module}:{line}: {flag} in {text!r}" for flag in FLAG.findall(text)
+                          if (module, flag) not in FLAG_ALLOWED]
+    assert not found, "\n".join(found)
