@@ -256,7 +256,8 @@ def user_errors(flags: dict[str, str] | None = None):
         if getattr(err, "argument", None):
             message = f"{flag_of(err.argument, flags)}: {message}"
         if getattr(err, "remedy", None):
-            message = f"{message} with {flag_of(err.remedy[0], flags)} {printable(err.remedy[1])}"
+            flag, value = flag_of(err.remedy[0], flags), printable(err.remedy[1])
+            message = f"{message} with {flag} {value}".rstrip()
         if len(message) > MAX_MESSAGE:
             message = f"{message[:MAX_MESSAGE]}... (cut)"
         err_console.print(Text("error: ", "red") + Text(message), soft_wrap=True)
