@@ -77,7 +77,7 @@ def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
         raise InputError(f"method {method!r}: expected one of {', '.join(FIT_METHODS)}",
                          argument="method")
     if method == "auto" and not verdict:
-        raise InputError("method 'auto' chooses by the held-out verdict, which is off: turn it on",
+        raise InputError("method auto chooses by the held-out verdict, which is off: turn it on",
                          argument="method")
     if isinstance(tune_grid, str):
         from .tune import grid_option
