@@ -11,7 +11,20 @@ from pathlib import Path
 
 
 class FsdecoupleError(Exception):
-    """Bad input or configuration; shown to the user as one line, no traceback."""
+    """Bad input or configuration; shown to the user as one line, no traceback.
+
+    ``argument``: the Python name of the argument at fault (``tare``, ``exclude``), when
+    the message is about one.  The message speaks of the data; the command line adds the
+    flag the user typed (``cli.app.user_errors``), so the library never names a flag.
+    ``remedy``: (argument, value) that would get past the error, when the message ends by
+    suggesting it (``("exclude", "rep3.csv:17")``); the command line spells it as a flag.
+    """
+
+    def __init__(self, *args: object, argument: str | None = None,
+                 remedy: tuple[str, str] | None = None) -> None:
+        super().__init__(*args)
+        self.argument = argument
+        self.remedy = remedy
 
 
 class InputError(FsdecoupleError):

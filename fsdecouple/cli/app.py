@@ -234,12 +234,18 @@ JsonOpt = Annotated[bool, typer.Option("--json", help="Print a JSON document on 
 
 
 @contextlib.contextmanager
-def user_errors():
+def user_errors(flags: dict[str, str] | None = None):
     """Turn library errors into one red line on stderr and exit code 2.
 
     The line is one line whatever it quotes (control characters escaped, cut at
     MAX_MESSAGE characters).  numpy's RuntimeWarnings (overflow near 1e308) are
     not printed: the error, or the row's status, says what happened.
+
+    An error about one argument (``err.argument``, its Python name) is prefixed by the
+    flag the user typed: ``flags[argument]``, else typer's own spelling of the name
+    (``gross_error`` -> ``--gross-error``); a message ending in a remedy (``err.remedy``)
+    gets the flag that applies it.  The library speaks of the data; only here does a
+    message learn the flag's name.
     """
     try:
         with warnings.catch_warnings():
@@ -247,6 +253,11 @@ def user_errors():
             yield
     except FsdecoupleError as err:
         message = printable(err)
+        if getattr(err, "argument", None):
+            message = f"{flag_of(err.argument, flags)}: {message}"
+        if getattr(err, "remedy", None):
+            flag, value = flag_of(err.remedy[0], flags), printable(err.remedy[1])
+            message = f"{message} with {flag} {value}".rstrip()
         if len(message) > MAX_MESSAGE:
             message = f"{message[:MAX_MESSAGE]}... (cut)"
         err_console.print(Text("error: ", "red") + Text(message), soft_wrap=True)
@@ -254,6 +265,11 @@ def user_errors():
 
 
 MAX_MESSAGE = 1000
+
+
+def flag_of(argument: str, flags: dict[str, str] | None = None) -> str:
+    """The command-line flag of library argument ``argument`` (typer's spelling by default)."""
+    return (flags or {}).get(argument) or "--" + argument.replace("_", "-")
 
 
 def interactive() -> bool:

@@ -88,7 +88,7 @@ def cv(
     from ..reporting.console import cv_renderables
     from ..reporting.tune_table import tune_table
 
-    with user_errors():
+    with user_errors(flags={"tare": "--task-tare"}):  # cv zeroes the task log only
         settings = load_config(config)
         if (task is None) != (task_forces is None):
             raise InputError("--task and --task-forces go together: the log and its true forces")

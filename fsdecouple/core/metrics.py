@@ -79,4 +79,5 @@ def pct(fraction: float | None, digits: int = 2) -> str:
 def check_max_gamma(max_gamma: float | None) -> None:
     """A ``--max-gamma`` gate must be a finite fraction of full scale above 0 (NaN never fails)."""
     if max_gamma is not None and not (math.isfinite(max_gamma) and max_gamma > 0):
-        raise InputError(f"--max-gamma {max_gamma}: expected a fraction greater than 0, e.g. 0.016")
+        raise InputError(f"gate on gamma {max_gamma}: expected a fraction greater than 0, e.g. 0.016",
+                         argument="max_gamma")

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..axes import Layout, NamedChi, chi_labels
 from ..config import Settings
+from ..errors import ConfigError
 from ..schema import check_refine
 from .decouple import coupling_errors as _coupling_errors
 from .decouple import exact as _exact_plan
@@ -350,7 +351,11 @@ class CouplingErrorModel:
 
     def refined(self, refine: int) -> CouplingErrorModel:
         """This model with ``settings.refine = refine`` (``apply --refine K``); tables shared."""
-        settings = replace(self.settings, refine=check_refine(refine, "--refine"))
+        try:
+            k = check_refine(refine, "K")
+        except ConfigError as err:
+            raise ConfigError(str(err), argument="refine") from None
+        settings = replace(self.settings, refine=k)
         model = replace(self, settings=settings)
         model._tables = self._tables
         return model

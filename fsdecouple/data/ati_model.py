@@ -102,7 +102,7 @@ def import_cal(path: str | Path, index: int = 1, frame: Any = None, frame_source
     warnings = []
     if cal.count > 1:
         warnings.append(f"{name} holds {cal.count} calibrations; imported calibration {cal.index} "
-                        "(import --index N for another)")
+                        "(choose another by its index)")
     agreement = user_axis_difference(cal, w)
     if agreement is not None and agreement > USER_AXIS_TOLERANCE:
         warnings.append(f"{name}: the UserAxis rows differ from the Axis rows and BasicTransform "
@@ -170,7 +170,7 @@ def summary(model, output) -> dict[str, Any]:
              f"full scale (max): {fs}",
              "temperature compensation: " + (f"yes (thermistor output, T0 = {t.t0:g} V)" if t
                                              else "no"),
-             "bias: apply --zero (one value per output) or --tare N removes it"]
+             "bias: a zero (one value per output) or a tare of the first rows removes it"]
     return {"output": str(output), "sensor": model.settings.sensor, "components": list(comps),
             "outputs": list(model.layout.outputs),
             "full_scale": dict(zip(comps, map(float, model.settings.full_scale), strict=True)),

@@ -218,7 +218,7 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
         if settings.zero is None:
             warnings.append("no row is unloaded (all loads 0): each output's offset is fitted "
                             "with the loads as an intercept (zero: intercept); the model keeps "
-                            "it, so decoupling a log needs no --tare (docs/data.md)")
+                            "it, so decoupling a log needs no tare (docs/data.md)")
     else:
         points, offsets = zero_correct(table, layout, method)
     if back:
@@ -311,12 +311,12 @@ def parse_exclude(spec) -> tuple[str, int]:
     """``FILE:LINE`` of ``--exclude`` as (FILE, LINE); LINE as an editor numbers it, header 1."""
     name, sep, row = str(spec).rpartition(":")
     if not sep or not name or not row.strip().isascii() or not row.strip().isdigit():
-        raise InputError(f"--exclude {spec!r}: expected FILE:LINE, e.g. rep3.csv:17 (lines "
-                         "as an editor numbers them, the header is line 1)")
+        raise InputError(f"excluded point {spec!r}: expected FILE:LINE, e.g. rep3.csv:17 (lines "
+                         "as an editor numbers them, the header is line 1)", argument="exclude")
     line = int(row)
     if line < 2:
-        raise InputError(f"--exclude {spec!r}: line {line} is the header or before it; data "
-                         "rows start at line 2")
+        raise InputError(f"excluded point {spec!r}: line {line} is the header or before it; "
+                         "data rows start at line 2", argument="exclude")
     return name, line
 
 
@@ -338,13 +338,14 @@ def _exclude(table: pd.DataFrame, specs, unread=()) -> tuple[pd.DataFrame, list[
         hit = np.flatnonzero(in_file & (table["row"].to_numpy() == row))
         key = (name if "/" in name else Path(name).name, row)
         if hit.size == 0 and key in gone:
-            dropped.append(f"{gone[key]}, row {row}: excluded (--exclude)")
+            dropped.append(f"{gone[key]}, row {row}: excluded as asked")
             continue
         if hit.size == 0:
             known = "a file of the set" if not in_file.any() else f"a data line of {name}"
-            raise InputError(f"--exclude {spec!r}: line {row} of {name} is not {known}")
+            raise InputError(f"excluded point {spec!r}: line {row} of {name} is not {known}",
+                             argument="exclude")
         drop[hit] = True
-        dropped.append(f"{files[hit[0]]}, row {row}: excluded (--exclude)")
+        dropped.append(f"{files[hit[0]]}, row {row}: excluded as asked")
     return table[~drop].reset_index(drop=True), dropped
 
 
@@ -373,26 +374,27 @@ class GrossError:
             ge = cls(axis, int(rep), int(point), float(offset))
         except ValueError:
             raise InputError(
-                f"--gross-error {spec!r}: expected AXIS:REP:POINT:OFFSET, AXIS one of "
-                f"{', '.join(layout.labels)}, e.g. {layout.labels[0]}:1:5:0.2"
+                f"gross error {spec!r}: expected AXIS:REP:POINT:OFFSET, AXIS one of "
+                f"{', '.join(layout.labels)}, e.g. {layout.labels[0]}:1:5:0.2", argument="gross_error"
             ) from None
         if ge.repetition < 1 or ge.point < 1 or not np.isfinite(ge.offset):
-            raise InputError(f"--gross-error {spec!r}: REP and POINT count from 1")
+            raise InputError(f"gross error {spec!r}: REP and POINT count from 1",
+                             argument="gross_error")
         return ge
 
     def apply(self, table: pd.DataFrame, layout: Layout = DEFAULT) -> pd.DataFrame:
         """A copy of ``table`` with this point's prime voltage moved by ``offset``."""
         if self.axis not in layout.labels:
-            raise InputError(f"--gross-error: no component '{self.axis}' (the sensor has "
-                             f"{', '.join(layout.labels)})")
+            raise InputError(f"gross error: no component '{self.axis}' (the sensor has "
+                             f"{', '.join(layout.labels)})", argument="gross_error")
         idx = np.flatnonzero(
             (table["repetition"] == self.repetition).to_numpy()
             & (table["axis"] == self.axis).to_numpy()
         )
         if self.point > idx.size:
             raise InputError(
-                f"--gross-error: the {self.axis} sweep of repetition {self.repetition} has "
-                f"{idx.size} points, no point {self.point}"
+                f"gross error: the {self.axis} sweep of repetition {self.repetition} has "
+                f"{idx.size} points, no point {self.point}", argument="gross_error"
             )
         out = table.copy()
         col = out.columns.get_loc(layout.outputs[layout.index(self.axis)])

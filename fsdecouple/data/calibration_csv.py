@@ -220,19 +220,20 @@ def read_calibration_table(path: str | Path, settings: Settings,
                            "or a side table running past the data)")
         raw, rows = raw[~blank], rows[~blank]
         # a row whose applied loads are all blank (a load not yet typed in): skipped with
-        # a warning naming its lines, or refused with --strict
+        # a warning naming its lines, or refused in strict mode
         loads = [cols[c] for c in layout.loads]
         noload = np.logical_and.reduce([raw[c].str.strip().eq("").to_numpy() for c in loads])
         if noload.any():
             lines = ("lines " if noload.sum() > 1 else "line ") + ", ".join(map(str, rows[noload]))
             if strict:
                 raise InputError(f"{where(f, int(rows[noload][0]), loads[0])}: the applied loads "
-                                 f"are blank ({lines}); --strict refuses rows without a load")
+                                 f"are blank ({lines}); strict mode refuses rows without a load",
+                                 argument="strict")
             warnings.append(f"{f}, {lines}: applied loads blank; rows skipped "
-                            "(--strict refuses them)")
+                            "(strict mode refuses them)")
             raw, rows = raw[~noload], rows[~noload]
         # some applied loads blank (a cell not typed in): the row cannot be placed, skipped
-        # with a warning naming its lines, or refused with --strict
+        # with a warning naming its lines, or refused in strict mode
         blanks = np.column_stack([raw[c].str.strip().eq("").to_numpy() for c in loads])
         partial = blanks.any(axis=1)
         if partial.any():
@@ -241,13 +242,14 @@ def read_calibration_table(path: str | Path, settings: Settings,
             col = loads[int(np.argmax(blanks[i]))]
             if strict:
                 raise InputError(f"{where(f, int(rows[i]), col)}: an applied load is blank "
-                                 f"({lines}); --strict refuses rows without every load")
+                                 f"({lines}); strict mode refuses rows without every load",
+                                 argument="strict")
             cells = "; ".join(
                 f"line {r}: {', '.join(repr(c) for c, b in zip(loads, bl, strict=True) if b)}"
                 for r, bl in zip(rows[partial][:5], blanks[partial][:5], strict=True))
             warnings.append(f"{f}, {lines}: an applied load is blank ({cells}"
                             f"{'; ...' if partial.sum() > 5 else ''}); rows skipped "
-                            "(--strict refuses them)")
+                            "(strict mode refuses them)")
             raw, rows = raw[~partial], rows[~partial]
         if raw.empty:
             raise InputError(f"{f}: header only, no data rows")

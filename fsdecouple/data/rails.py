@@ -59,7 +59,8 @@ def at_rail(frame, outputs, known: dict, strict: bool) -> tuple[np.ndarray, list
         if strict:
             raise InputError(f"{where(files[i], int(rows[i]), c)}: {u[i]:g} is within {RAIL:.0%} of "
                              f"the {end} end of its range {lo:g} .. {hi:g} ({whence}): a channel "
-                             "at its rail no longer follows the load; --strict refuses it")
+                             "at its rail no longer follows the load; strict mode refuses it",
+                             argument="strict")
         at = [str(r) if single else f"{Path(f).name} {r}"
               for f, r in zip(files[near][:6], rows[near][:6], strict=True)]
         lines = ", ".join(at) + (", ..." if near.sum() > 6 else "")
@@ -67,6 +68,6 @@ def at_rail(frame, outputs, known: dict, strict: bool) -> tuple[np.ndarray, list
         notes.append(f"{path}: output {c} is within {RAIL:.0%} of an end of its range {lo:g} .. "
                      f"{hi:g} ({whence}) on {int(near.sum())} point{'s' if near.sum() > 1 else ''} "
                      f"(lines {lines}): a channel at its rail no longer follows the load, so "
-                     "they are left out (--strict refuses them)")
+                     "they are left out (strict mode refuses them)")
         keep &= ~near
     return keep, notes

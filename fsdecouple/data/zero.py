@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..axes import DEFAULT, Layout
-from ..errors import InputError, printable, where
+from ..errors import InputError, where
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -86,7 +86,7 @@ def assign_sweeps(table: pd.DataFrame, layout: Layout = DEFAULT,
         raise InputError(
             f"{where(table['file'].iat[i], int(table['row'].iat[i]), cols[1])}: "
             f"row loads {' and '.join(cols)} at once{sweep}; a calibration row loads one axis "
-            "(a combined-load sweep cannot be fitted; validate and cv --task accept it)"
+            "(a combined-load sweep cannot be fitted; validating a model, or cv's task log, accepts it)"
         )
     if (table["axis"] != "").all():
         labelled = table["axis"].map({a: k for k, a in enumerate(labels)}).to_numpy()
@@ -153,8 +153,8 @@ def _refuse_contradicting_rows(table: pd.DataFrame, forces: np.ndarray, labelled
             f"{where(table['file'].iat[i], int(table['row'].iat[i]))}: the "
             f"'{table['axis'].iat[i]}' sweep's row loads {shown}, but the other {n_alone} "
             f"loaded rows of that sweep load {own} alone: a row that contradicts its own axis "
-            f"label (a typo?); correct it, or drop it with --exclude "
-            f"{printable(Path(str(table['file'].iat[i])).name)}:{int(table['row'].iat[i])}"
+            "label (a typo?); correct it, or exclude it",
+            remedy=("exclude", f"{Path(str(table['file'].iat[i])).name}:{int(table['row'].iat[i])}")
         )
 
 
@@ -303,15 +303,15 @@ def tare_offsets(u: np.ndarray, n: int, source=None) -> np.ndarray:
     """Mean of the first ``n`` voltage rows, the zero of a task log [V]."""
     src = f"{source}: " if source is not None else ""
     if n < 1:
-        raise InputError(f"--tare: needs at least 1 row, got {n}")
+        raise InputError(f"a tare needs at least 1 row, got {n}", argument="tare")
     if len(u) < n:
-        raise InputError(f"{src}--tare {n}: the log has only {len(u)} rows")
+        raise InputError(f"{src}tare of {n} rows: the log has only {len(u)} rows", argument="tare")
     head = u[:n]
     if not np.isfinite(head).all():
         bad = int(np.argmax(~np.isfinite(head).all(axis=1))) + 2
         raise InputError(
-            f"{src}--tare {n}: the first {n} rows contain missing values (row {bad}); "
-            "the zero needs complete rows"
+            f"{src}tare of {n} rows: the first {n} rows contain missing values (row {bad}); "
+            "the zero needs complete rows", argument="tare"
         )
     return head.mean(axis=0)
 

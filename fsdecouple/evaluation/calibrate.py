@@ -74,14 +74,17 @@ def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
 
     settings = settings or Settings()
     if method not in FIT_METHODS:
-        raise InputError(f"--method {method!r}: expected one of {', '.join(FIT_METHODS)}")
+        raise InputError(f"method {method!r}: expected one of {', '.join(FIT_METHODS)}",
+                         argument="method")
     if method == "auto" and not verdict:
-        raise InputError("--method auto chooses by the held-out verdict; drop --no-verdict")
+        raise InputError("method auto chooses by the held-out verdict, which is off: turn it on",
+                         argument="method")
     if isinstance(tune_grid, str):
         from .tune import grid_option
         tune_grid = grid_option(tune, tune_grid)
     elif tune_grid is not None and not tune:
-        raise InputError("--tune-grid is the grid of --tune: add --tune")
+        raise InputError("a grid for tuning, but tuning is off: turn it on", argument="tune_grid",
+                         remedy=("tune", ""))
     if not isinstance(calib, CalibrationSet):
         calib = load_calibration(calib, settings)
     if settings.zero is None and getattr(calib, "zero", None) == "fit" != settings.zero_method:
@@ -135,8 +138,8 @@ def _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress):
                               for o in outliers]
     if failed is not None:
         if method == "auto":
-            raise InputError(f"--method auto needs a held-out verdict, which cannot run: {failed}"
-                             ) from None
+            raise InputError(f"method 'auto' needs a held-out verdict, which cannot run: {failed}",
+                             argument="method") from None
         model.report.warnings.append(f"no held-out verdict: {failed}")
     chosen = choose(found, method) if found is not None else method
     # the least-squares matrix on the same calibration, kept by an svr model too, so

@@ -104,7 +104,7 @@ def _model_errors(model: CouplingErrorModel, axis: str, loads: np.ndarray, sourc
     steps = data.get("steps", {}).get(axis)
     if steps is None:
         raise InputError(f"{source}: the model file has no certificate data (fitted by an older "
-                         "fsdecouple, or with --no-verdict): refit it")
+                         "fsdecouple, or without the held-out verdict): refit it")
     known = dict(zip(steps["load"], steps["model_error"], strict=True))
     missing = [f for f in loads.tolist() if f not in known]
     if missing:
@@ -232,7 +232,7 @@ def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str
     if not temperature:
         notes.append("temperature: the calibration has no temperature column; its budget term is 0")
     if drift_source is None:
-        notes.append("drift: no compare --json (certificate --drift) and no config drift; the "
+        notes.append("drift: no compare document and no config drift; the "
                      "budget's drift between calibrations is 0")
     return {
         "format": FORMAT, "format_version": FORMAT_VERSION, "fsdecouple_version": __version__,

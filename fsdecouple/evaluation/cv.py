@@ -209,14 +209,15 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
     protocol = choose_protocol(calib, protocol if protocol is not None or folds is None
                                else "repetitions")
     if protocol == "levels" and folds is not None:
-        raise InputError("--folds names held-out repetitions; the levels protocol holds out "
-                         "load levels: drop one of them")
+        raise InputError("folds name held-out repetitions; the levels protocol holds out "
+                         "load levels: drop one of them", argument="folds")
     if protocol == "repetitions":
         folds = folds if folds is not None else default_folds(reps)
         check_folds(folds, reps)
     rounds = rounds_for(calib, protocol, folds)
     if not 1 <= repeats <= MAX_REPEATS:
-        raise InputError(f"--repeats {repeats}: expected 1 to {MAX_REPEATS} timing passes")
+        raise InputError(f"{repeats} repeats: expected 1 to {MAX_REPEATS} timing passes",
+                         argument="repeats")
     check_max_gamma(max_gamma)
     workers = workers or os.cpu_count() or 1
     task_data = None
@@ -235,8 +236,8 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
     if gross_error is not None:
         if gross_error.repetition not in reps:
             raise InputError(
-                f"--gross-error: repetition {gross_error.repetition} is not in the calibration "
-                f"set (it has {', '.join(map(str, reps))})"
+                f"gross error: repetition {gross_error.repetition} is not in the calibration "
+                f"set (it has {', '.join(map(str, reps))})", argument="gross_error"
             )
         gross_calib = CalibrationSet(gross_error.apply(calib.points, calib.layout), calib.offsets,
                                      calib.files,

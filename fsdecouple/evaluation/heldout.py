@@ -46,12 +46,13 @@ def choose_protocol(calib: CalibrationSet, protocol: str | None = None) -> str:
     if protocol is None:
         return "repetitions" if len(calib.repetitions) >= MIN_REPETITIONS else "levels"
     if protocol not in PROTOCOLS:
-        raise InputError(f"--protocol {protocol!r}: expected one of {', '.join(PROTOCOLS)}")
+        raise InputError(f"protocol {protocol!r}: expected one of {', '.join(PROTOCOLS)}",
+                         argument="protocol")
     if protocol == "repetitions" and len(calib.repetitions) < MIN_REPETITIONS:
         raise InputError(
             f"{calib.source}: the repetitions protocol needs at least {MIN_REPETITIONS} "
             f"repetitions (two held out, one to train); the set has {len(calib.repetitions)}: "
-            "use --protocol levels"
+            "use the protocol", remedy=("protocol", "levels")
         )
     return protocol
 
@@ -124,13 +125,13 @@ def parse_folds(text: str) -> list[list[int]]:
             fold = [int(v) for v in part.split(",")]
         except ValueError:
             raise InputError(
-                f"--folds {text!r}: expected repetition numbers, ',' within a round and "
-                "';' between rounds, e.g. '1,2;3,4;5,6'"
+                f"folds {text!r}: expected repetition numbers, ',' within a round and "
+                "';' between rounds, e.g. '1,2;3,4;5,6'", argument="folds"
             ) from None
         folds.append(fold)
     if len(folds) > MAX_ROUNDS:
-        raise InputError(f"--folds: {len(folds)} rounds; at most {MAX_ROUNDS} (each round fits "
-                         "every method once)")
+        raise InputError(f"folds: {len(folds)} rounds; at most {MAX_ROUNDS} (each round fits "
+                         "every method once)", argument="folds")
     return folds
 
 
@@ -163,17 +164,18 @@ def check_folds(folds: list[list[int]], repetitions: list[int]) -> None:
     have = ", ".join(map(str, repetitions))
     for r, fold in enumerate(folds, start=1):
         if not fold:
-            raise InputError(f"--folds: round {r} holds out no repetition")
+            raise InputError(f"folds: round {r} holds out no repetition", argument="folds")
         for rep in fold:
             if rep not in repetitions:
                 raise InputError(
-                    f"--folds: round {r} holds out repetition {rep}, which the calibration "
-                    f"set does not have (it has {have})"
+                    f"folds: round {r} holds out repetition {rep}, which the calibration "
+                    f"set does not have (it has {have})", argument="folds"
                 )
         if len(set(fold)) != len(fold):
-            raise InputError(f"--folds: round {r} names a repetition twice")
+            raise InputError(f"folds: round {r} names a repetition twice", argument="folds")
         if len(set(fold)) >= len(repetitions):
-            raise InputError(f"--folds: round {r} holds out every repetition; none is left to train")
+            raise InputError(f"folds: round {r} holds out every repetition; none is left to train",
+                             argument="folds")
 
 
 def rounds_for(calib: CalibrationSet, protocol: str, folds: list[list[int]] | None = None

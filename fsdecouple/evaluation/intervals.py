@@ -128,9 +128,9 @@ def check_interval_data(cal: Any, labels) -> None:
     """Refuse interval data a fit cannot have written: the fields this module added
     (``load_variance``, ``first_step``) must be finite, >= 0 and > 0 respectively."""
     def bad(what: str, value) -> InputError:
-        return InputError(f"--interval: the model file's interval data are damaged ({what} is "
+        return InputError(f"intervals: the model file's interval data are damaged ({what} is "
                           f"{value!r}, expected a finite number {'>= 0' if 'variance' in what else '> 0'}); "
-                          "refit the model")
+                          "refit the model", argument="interval")
 
     def number(x) -> bool:
         return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
@@ -151,8 +151,8 @@ def check_interval_data(cal: Any, labels) -> None:
 def check_coverage(p: Any) -> float:
     """``--interval P``: a coverage probability strictly between 0 and 1."""
     if isinstance(p, bool) or not isinstance(p, int | float) or not 0.0 < p < 1.0:
-        raise InputError(f"--interval {p!r}: expected the coverage as a probability between 0 "
-                         "and 1, e.g. 0.95")
+        raise InputError(f"coverage {p!r}: expected a probability between 0 and 1, e.g. 0.95",
+                         argument="interval")
     return float(p)
 
 
@@ -164,8 +164,9 @@ def interval_names(loads) -> tuple[str, ...]:
 def _quantile(scores: list[float], p: float, axis: str) -> float:
     k = math.ceil((len(scores) + 1) * p)
     if k > len(scores):
-        raise InputError(f"--interval {p!r}: {len(scores)} held-out points of {axis} calibrate "
-                         f"intervals up to P = {len(scores) / (len(scores) + 1):.3f}")
+        raise InputError(f"coverage {p!r}: {len(scores)} held-out points of {axis} calibrate "
+                         f"intervals up to P = {len(scores) / (len(scores) + 1):.3f}",
+                         argument="interval")
     return float(scores[k - 1])
 
 
@@ -176,13 +177,14 @@ def half_widths(model, p: float, f: np.ndarray | None = None) -> np.ndarray:
     cert = (model.report.certificate if model.report is not None else None) or {}
     cal = cert.get("interval")
     if not cal and model.layout.overdetermined:
-        raise InputError(f"--interval: not supported for a model of more outputs than components "
+        raise InputError(f"intervals: not supported for a model of more outputs than components "
                          f"({model.layout.m} for {model.n_components}, M > N): fit keeps no "
-                         "held-out residuals for it; decouple without --interval")
+                         "held-out residuals for it; decouple without intervals",
+                         argument="interval")
     if not cal:
-        raise InputError("--interval: the model file has no held-out residuals to calibrate "
-                         "intervals on (fitted by an older fsdecouple, or with --no-verdict); "
-                         "refit it")
+        raise InputError("intervals: the model file has no held-out residuals to calibrate "
+                         "intervals on (fitted by an older fsdecouple, or without the held-out "
+                         "verdict); refit it", argument="interval")
     labels = model.layout.labels
     check_interval_data(cal, labels)
     at_rows = f is not None
@@ -220,8 +222,8 @@ def with_intervals(model, f: np.ndarray, p: float, u: np.ndarray | None = None) 
     (None: the intervals are centred on ``f``).
     """
     if model.rotation is not None:
-        raise InputError("--interval: the intervals are calibrated in the sensor's frame; this "
-                         "model rotates its forces (rotation or frame in its config)")
+        raise InputError("intervals: they are calibrated in the sensor's frame; this model "
+                         "rotates its forces (rotation or frame in its config)", argument="interval")
     mid = f if u is None else centre(model, u, f)
     h = half_widths(model, p, mid)
     bounds = np.stack([mid - h, mid + h], axis=2).reshape(len(f), -1)

@@ -95,7 +95,8 @@ def grid_option(tune: bool, text: str | None) -> Grid | None:
     if text is None:
         return None
     if not tune:
-        raise InputError("--tune-grid is the grid of --tune: add --tune")
+        raise InputError("a grid for tuning, but tuning is off: turn it on", argument="tune_grid",
+                         remedy=("tune", ""))
     return parse_grid(text)
 
 
@@ -106,21 +107,24 @@ def parse_grid(text: str) -> Grid:
         key, sep, rest = part.partition("=")
         key = key.strip()
         if not sep or key not in RANGES:
-            raise InputError(f"--tune-grid {text!r}: expected KEY=V1,V2,... with KEY one of "
-                             f"{', '.join(RANGES)}, ';' between keys, e.g. 'gamma=2,4,8;C=1,10'")
+            raise InputError(f"tuning grid {text!r}: expected KEY=V1,V2,... with KEY one of "
+                             f"{', '.join(RANGES)}, ';' between keys, e.g. 'gamma=2,4,8;C=1,10'",
+                             argument="tune_grid")
         if key in values:
-            raise InputError(f"--tune-grid: {key} is given twice")
+            raise InputError(f"tuning grid: {key} is given twice", argument="tune_grid")
         try:
             vals = tuple(float(v) for v in rest.split(","))
         except ValueError:
-            raise InputError(f"--tune-grid: {key}={rest!r}: expected numbers separated by ','"
-                             ) from None
+            raise InputError(f"tuning grid: {key}={rest!r}: expected numbers separated by ','",
+                             argument="tune_grid") from None
         lo, hi = RANGES[key]
         for v in vals:
             if not (math.isfinite(v) and lo <= v <= hi):
-                raise InputError(f"--tune-grid: {key} = {v:g} is outside its range {lo:g} .. {hi:g}")
+                raise InputError(f"tuning grid: {key} = {v:g} is outside its range {lo:g} .. {hi:g}",
+                                 argument="tune_grid")
         if len(vals) > MAX_VALUES or len(set(vals)) != len(vals):
-            raise InputError(f"--tune-grid: {key}: expected 1 to {MAX_VALUES} different values")
+            raise InputError(f"tuning grid: {key}: expected 1 to {MAX_VALUES} different values",
+                             argument="tune_grid")
         values[key] = vals
     return Grid(**values)
 
@@ -160,10 +164,11 @@ def _rounds(calib: CalibrationSet):
         protocol = choose_protocol(calib)
         rounds = rounds_for(calib, protocol)
     except InputError as err:
-        raise InputError(f"--tune chooses by held-out error, which cannot run here: {err}") from None
+        raise InputError(f"tuning chooses by held-out error, which cannot run here: {err}",
+                         argument="tune") from None
     if not any(r.tests for r in rounds):
-        raise InputError(f"{calib.source}: --tune: no held-out point lies inside its sweep's "
-                         "loads; it needs at least three loaded points per sweep")
+        raise InputError(f"{calib.source}: tuning: no held-out point lies inside its sweep's "
+                         "loads; it needs at least three loaded points per sweep", argument="tune")
     return protocol, rounds
 
 
@@ -248,7 +253,7 @@ def tune_settings(
     The record lists every candidate with its held-out RMS per axis [load unit]
     and figure [fraction of F.S.], the grid, sigma, and the index chosen.
     """
-    settings.layout.one_output_each("fit --tune")
+    settings.layout.one_output_each("tuning")
     grid = grid or Grid()
     protocol, rounds = _rounds(calib)
     sigma = noise(calib, settings)

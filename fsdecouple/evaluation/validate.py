@@ -144,13 +144,13 @@ def validate(
     matrix, calib_files = (model.matrix, []) if model.matrix is not None else \
         _matrix_of(calib, model)
     if model.matrix is not None and calib is not None:  # never ignored in silence
-        warnings.append(f"--calib {printable(calib)}: not read; the model file holds the "
+        warnings.append(f"calibration {printable(calib)}: not read; the model file holds the "
                         "least-squares matrix of its own calibration")
     if matrix is not None:
         forces["linear"] = u @ np.asarray(matrix).T
     else:
         warnings.append("the model file holds no least-squares matrix (fitted before "
-                        "fsdecouple kept it): give the calibration (--calib CALIB) to set the "
+                        "fsdecouple kept it): give its calibration set to set the "
                         "matrix fitted on it beside the model")
     forces["initial"] = model.initial_forces(u)
     if getattr(model, "imported", False):  # a factory matrix: its own f = C u, nothing beside

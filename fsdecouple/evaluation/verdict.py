@@ -148,7 +148,7 @@ def verdict_warning(verdict: dict[str, Any], method: str) -> str | None:
         what = "worst gamma" if figure == "worst_gamma" else "worst component's RMS error"
         return (f"the calibration matrix generalizes better than the coupling error model "
                 f"(held-out {what} {pct(h['linear'][figure])} vs "
-                f"{pct(h['svr'][figure])}): consider 'fit --method linear' or '--method auto'")
+                f"{pct(h['svr'][figure])}): consider the method 'linear' or 'auto'")
     return None
 
 

@@ -52,7 +52,7 @@ class Outlier:
         return (f"{self.file}, row {self.row}: possible gross error: {self.output} is "
                 f"{self.size:+.4g} {load_unit} ({100 * self.fraction:+.2f} % F.S.) away from the "
                 f"leave-one-out fit of {other}; check it, and drop it "
-                f"with --exclude '{self.file}:{self.row}' if it is wrong")
+                f"by excluding '{self.file}:{self.row}' if it is wrong")
 
 
 def loo_residuals(x: np.ndarray, y: np.ndarray, degree: int) -> np.ndarray:

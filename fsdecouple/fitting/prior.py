@@ -41,17 +41,18 @@ class PriorChoice:
 
     def line(self) -> str:
         shown = ", ".join(f"{lam}: {100 * s:.3g} %" for lam, s in self.scores.items())
-        return (f"--prior {self.source}: lambda = {self.lam} prior rows per new row, chosen by "
+        return (f"prior model {self.source}: lambda = {self.lam} prior rows per new row, chosen by "
                 f"held-out worst component's RMS error ({shown} F.S.; 0 is a fresh fit)")
 
 
 def check_prior(old, settings, source: str) -> None:
     """The old model must decode the same outputs into the same loads, in the same units."""
     if old.layout != settings.layout or old.settings.units != settings.units:
-        raise InputError(f"--prior {source}: the model's outputs and loads "
+        raise InputError(f"prior model {source}: the model's outputs and loads "
                          f"({', '.join(old.layout.outputs)} -> {', '.join(old.layout.loads)}, "
                          f"{old.settings.output_unit} -> {old.settings.load_unit}) are not the "
-                         "config's; a prior must be a model of the same sensor and layout")
+                         "config's; a prior must be a model of the same sensor and layout",
+                         argument="prior")
 
 
 def zero_shift(old, u: np.ndarray, f: np.ndarray) -> np.ndarray:
@@ -105,8 +106,8 @@ def choose_lambda(calib, settings, old, source: str, *, folds: int = FOLDS,
     check_prior(old, settings, source)
     n = len(calib.points)
     if n < folds:
-        raise InputError(f"--prior {source}: {n} calibration rows; choosing lambda needs at "
-                         f"least {folds} (one per fold)")
+        raise InputError(f"prior model {source}: {n} calibration rows; choosing lambda needs at "
+                         f"least {folds} (one per fold)", argument="prior")
     layout = calib.layout
     order = np.random.default_rng(0).permutation(n)
     fs = np.asarray(settings.full_scale, dtype=float)
@@ -133,7 +134,8 @@ def choose_lambda(calib, settings, old, source: str, *, folds: int = FOLDS,
             e = np.concatenate(errors)
             scores[lam] = float((np.sqrt((e ** 2).mean(axis=0)) / fs).max())
     if not scores:
-        raise InputError(f"--prior {source}: no lambda could be scored held out")
+        raise InputError(f"prior model {source}: no lambda could be scored held out",
+                         argument="prior")
     best = min(scores, key=lambda lam: (scores[lam], lam))
     return PriorChoice(str(Path(source)), best, scores)
 

@@ -82,7 +82,7 @@ def test_interval_outside_0_1_is_one_line_and_writes_nothing(fitted, sim_dir, tm
     out = tmp_path / "f.csv"
     r = invoke(["apply", fitted, sim_dir / "task_voltages.csv", "-o", out, "--tare", 200,
                 "--interval", p], 2)
-    assert_one_line_error(r, f"--interval {float(p)!r}")
+    assert_one_line_error(r, "--interval: coverage", f"{float(p)!r}")
     assert not out.exists()
 
 

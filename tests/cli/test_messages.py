@@ -39,7 +39,7 @@ def test_interval_on_m_gt_n_says_it_is_not_supported(gauges_model, tmp_path):
 def test_the_coverage_is_quoted_as_written(sample_model, tmp_path):
     r = invoke(["apply", sample_model, SAMPLE / "task_voltages.csv", "--tare", "2",
                 "--interval", "0.9999999", "-o", tmp_path / "f.csv"], 2)
-    assert_one_line_error(r, "--interval 0.9999999:")
+    assert_one_line_error(r, "--interval: coverage 0.9999999:")
 
 
 def test_the_top_level_help_says_what_the_tool_is_now():

@@ -285,8 +285,9 @@ def test_bad_refine_in_config_is_one_line(value):
 def test_bad_refine_in_python_calls(model):
     with pytest.raises(ConfigError, match="refine"):
         model.decouple(np.zeros((1, 3)), refine=-1)
-    with pytest.raises(ConfigError, match="--refine"):
+    with pytest.raises(ConfigError, match="K: expected a whole number") as err:
         model.refined(2.5)
+    assert err.value.argument == "refine"  # the CLI names it --refine
 
 
 @pytest.mark.parametrize("value", ["-1", "1.5", "x", "101"])

@@ -157,7 +157,7 @@ def test_rows_with_blank_loads_are_skipped_with_their_lines_or_refused_with_stri
     assert any("blank.csv, lines 14, 30: applied loads blank; rows skipped" in w
                for w in calib.warnings)
     with pytest.raises(InputError, match=r"blank.csv, row 14, column 'known_Fx': the applied "
-                                         r"loads are blank \(lines 14, 30\); --strict"):
+                                         r"loads are blank \(lines 14, 30\); strict mode"):
         load_calibration(bad, settings, strict=True)
 
 

@@ -43,7 +43,7 @@ def test_fit_with_a_prior_says_which_lambda_and_why(tmp_path):
     new.write_text("\n".join(pose_lines(simulate_poses(0, 30, drift=0.01, noise_seed=1))) + "\n")
     r = invoke(["fit", new, "-c", tmp_path / "cfg.yaml", "-o", tmp_path / "new.json",
                 "--prior", tmp_path / "old.json", "--no-verdict"])
-    assert "--prior" in r.stderr and "chosen by held-out worst component's RMS error" in r.stderr
+    assert "prior model" in r.stderr and "chosen by held-out worst component's RMS error" in r.stderr
     settings = load_config(tmp_path / "cfg.yaml")
     choice = choose_lambda(load_calibration(new, settings), settings,
                            load_model(tmp_path / "old.json"), "old.json")

@@ -276,7 +276,7 @@ def test_many_logs_take_interval_and_refuse_a_bad_one_before_reading(sample_mode
     refused --interval), and refuses P outside (0, 1) with one line, nothing written."""
     logs = make_logs(tmp_path)
     r = invoke(["apply", sample_model, logs, "-o", f"{tmp_path / 'bad'}/", "--interval", 1.5], 2)
-    assert_one_line_error(r, "--interval 1.5")
+    assert_one_line_error(r, "--interval: coverage 1.5")
     assert not (tmp_path / "bad").exists()
     invoke(["apply", sample_model, logs, "-o", f"{tmp_path / 'out'}/", "--tare", 200,
             "--interval", 0.95])
