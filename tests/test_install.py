@@ -62,9 +62,14 @@ def test_commands_write_nothing_into_the_installed_package(installed, tmp_path):
     _run([exe, "fit", SAMPLE / "calibration", "-o", tmp_path / "model.json", "--no-verdict"],
          env=env, cwd=tmp_path)
     log = SAMPLE / "task_voltages.csv"
-    assert len(log.read_text().splitlines()) > 33  # more than 32 rows: the compiled kernel runs
+    assert len(log.read_text().splitlines()) > 33  # apply of a real log, tared
     _run([exe, "apply", tmp_path / "model.json", log, "--tare", "200", "-o", tmp_path / "f.csv"],
          env=env, cwd=tmp_path)
+    # a call of COMPILED_ROWS rows or more runs the compiled kernel (core/table_path.py)
+    big = ("import numpy as np, fsdecouple; from fsdecouple.core.table_path import COMPILED_ROWS; "
+           f"m = fsdecouple.load_model({str(tmp_path / 'model.json')!r}); "
+           "m.decouple(np.full((COMPILED_ROWS, 3), 0.1))")
+    _run([venv / "bin" / "python", "-c", big], env=env, cwd=tmp_path)
     assert any((tmp_path / "cache").rglob("*.nbi")), "the kernel's cache went somewhere else"
 
     record = next(site.glob("fsdecouple-*.dist-info")) / "RECORD"

@@ -200,7 +200,7 @@ def test_decouple_frame_bad_input(sample_model):
         fsdecouple.decouple_frame(model, good, tare=1, zero=(0, 0, 0))
     with pytest.raises(InputError, match="the log has only 2 rows"):
         fsdecouple.decouple_frame(model, good, tare=5)
-    with pytest.raises(InputError, match="expected 3 finite outputs"):
+    with pytest.raises(InputError, match="expected 3 finite values"):
         fsdecouple.decouple_frame(model, good, zero=(0, 0))
 
 
