@@ -158,7 +158,7 @@ def test_exclude_drops_a_point_and_the_provenance_records_it(tmp_path):
     r = invoke(["fit", cal, "-o", out, "--no-verdict", "--force", "--exclude", "rep1.csv:6"])
     assert "possible gross error" not in r.stderr
     assert json.loads(out.read_text())["provenance"]["excluded"] == [
-        f"{cal / 'rep1.csv'}, row 6: excluded (--exclude)"]
+        f"{cal / 'rep1.csv'}, row 6: excluded as asked"]
 
 
 def test_help_does_not_offer_a_value_for_flags():
