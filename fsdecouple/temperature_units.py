@@ -22,6 +22,9 @@ TEMPERATURE_UNITS = {"degC": (1.0, 0.0), "K": (1.0, -273.15), "degF": (5.0 / 9.0
 ALIASES = {"°C": "degC", "C": "degC", "celsius": "degC", "kelvin": "K", "°F": "degF",
            "F": "degF", "fahrenheit": "degF"}
 MODEL_UNIT = "degC"
+# [K]: two temperatures at least this far apart fit temperature terms (issue 31; the
+# fitting in fitting/temperature.py, a soak file's check in data/calibration.py)
+MIN_SPAN = 5.0
 
 
 def config_keys(settings_from_dict):

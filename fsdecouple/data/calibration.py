@@ -139,7 +139,7 @@ def split_soak(table: pd.DataFrame, layout: Layout):
     table without them, their rows (None when there are none) and a note per file.  A soak
     without a temperature column, or spanning less than the temperature fit's minimum, is
     refused: it could only be a sweep with no loaded point."""
-    from ..fitting.temperature import MIN_SPAN
+    from ..temperature_units import MIN_SPAN
 
     if "file" not in table.columns:  # a table built in code: no files to set apart
         return table, None, []

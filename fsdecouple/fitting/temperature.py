@@ -35,12 +35,11 @@ import numpy as np
 import pandas as pd
 
 from ..core.temperature import TemperatureTerms, correct
-from ..temperature_units import MODEL_UNIT
+from ..temperature_units import MIN_SPAN, MODEL_UNIT
 
 if TYPE_CHECKING:
     from ..data.calibration import CalibrationSet
 
-MIN_SPAN = 5.0  # [K]: two temperatures at least this far apart (issue 31)
 LEVEL_GAP = MIN_SPAN / 2  # sweeps this far apart in temperature are different levels
 POLY_DEGREE = 5
 ITERATIONS = 8
