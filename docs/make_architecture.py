@@ -92,6 +92,10 @@ def imports(path: Path, name: str) -> set[str]:
     return out
 
 
+# Subpackages that belong to the base: the files in and out, used by every stage.
+BASE_PACKAGES = {"files"}
+
+
 def stage_of(name: str, stages: set[str]) -> str | None:
     """The stage a module belongs to: its subpackage, or 'base' for a top-level module."""
     parts = name.split(".")
@@ -102,7 +106,8 @@ def stage_of(name: str, stages: set[str]) -> str | None:
 
 def structure():
     mods = modules()
-    stages = {n.split(".")[1] for n, p in mods.items() if p.name == "__init__.py" and n.count(".") == 1}
+    packages = {n.split(".")[1] for n, p in mods.items() if p.name == "__init__.py" and n.count(".") == 1}
+    stages = packages - BASE_PACKAGES
     uses: dict[str, set[str]] = {s: set() for s in [*stages, "base"]}
     for name, path in mods.items():
         here = stage_of(name, stages)

@@ -16,7 +16,7 @@ from typing import Any
 import yaml
 
 from .errors import ConfigError, excerpt
-from .files import CONFIG_LIMIT, read_bounded, reading
+from .files.inputs import CONFIG_LIMIT, read_bounded, reading
 
 
 class SafeUniqueLoader(yaml.SafeLoader):

@@ -35,7 +35,7 @@ from typer.core import TyperGroup
 
 from .. import __version__
 from ..errors import FsdecoupleError, InputError, printable
-from ..files import names_a_directory
+from ..files.outputs import names_a_directory
 from ..reporting.narrow import REDIRECTED, fit_width, needed_width
 
 # Each command imports what only it needs (pandas, libsvm, scipy, matplotlib),

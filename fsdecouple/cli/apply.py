@@ -11,7 +11,7 @@ from rich.progress import DownloadColumn, MofNCompleteColumn, TimeRemainingColum
 from ..config import load_config
 from ..core.modelfile import load_model
 from ..errors import InputError
-from ..files import check_output, refuse_overwriting_input
+from ..files.outputs import check_output, refuse_overwriting_input
 from ..reporting.console import apply_lines, apply_warnings
 from .app import (
     ConfigOpt,

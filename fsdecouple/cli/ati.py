@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from ..core.modelfile import save_model
-from ..files import check_output, refuse_overwriting_input
+from ..files.outputs import check_output, refuse_overwriting_input
 from .app import ForceOpt, JsonOpt, app, console, output_file, print_json, user_errors, warn
 
 

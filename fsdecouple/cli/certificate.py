@@ -10,7 +10,7 @@ import typer
 from ..config import load_config
 from ..core.modelfile import load_model
 from ..errors import printable
-from ..files import check_output, refuse_overwriting_input
+from ..files.outputs import check_output, refuse_overwriting_input
 from .app import (
     ConfigOpt,
     ForceOpt,

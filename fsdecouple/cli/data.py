@@ -9,7 +9,7 @@ import typer
 
 from ..config import load_config
 from ..errors import printable
-from ..files import atomic_write, check_output, refuse_overwriting_input
+from ..files.outputs import atomic_write, check_output, refuse_overwriting_input
 from ..reporting.console import ingest_tables
 from .app import (
     ConfigOpt,

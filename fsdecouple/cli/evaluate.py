@@ -12,7 +12,7 @@ from rich.progress import MofNCompleteColumn
 from ..config import load_config
 from ..core.modelfile import load_model
 from ..errors import InputError, printable
-from ..files import atomic_files, check_output, refuse_overwriting_input
+from ..files.outputs import atomic_files, check_output, refuse_overwriting_input
 from .app import (
     ConfigOpt,
     ForceOpt,

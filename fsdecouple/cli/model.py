@@ -13,7 +13,7 @@ from ..config import load_config
 from ..core.metrics import check_max_gamma
 from ..core.modelfile import load_model, save_model
 from ..errors import ConfigError, printable
-from ..files import check_output, refuse_overwriting_input
+from ..files.outputs import check_output, refuse_overwriting_input
 from ..reporting.console import fit_checks_table, fit_tables
 from .app import (
     ConfigOpt,

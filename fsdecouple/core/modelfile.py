@@ -17,7 +17,8 @@ import numpy as np
 from .. import __version__
 from ..config import settings_from_dict
 from ..errors import ModelFileError, excerpt
-from ..files import MODEL_LIMIT, atomic_write, read_bounded
+from ..files.inputs import MODEL_LIMIT, read_bounded
+from ..files.outputs import atomic_write
 from ..schema import LEGACY_EXTRAPOLATION
 from .decouple import MAX_SURROGATE_ERROR, usable
 from .model import Chi, CouplingErrorModel, FitReport

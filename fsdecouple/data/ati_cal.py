@@ -202,7 +202,7 @@ def _axis(elem, n: int, name: str, tag: str, i: int, user: bool) -> AtiAxis:
 
 def read_cal(path: str | Path, index: int = 1) -> AtiCalibration:
     """Read calibration ``index`` (1-based, as ATIDAQ counts) of the ATI file ``path``."""
-    from ..files import read_bounded
+    from ..files.inputs import read_bounded
 
     path = Path(path)
     name = printable(path)

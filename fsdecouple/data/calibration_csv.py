@@ -15,7 +15,7 @@ import numpy as np
 
 from ..config import Settings
 from ..errors import InputError, excerpt, printable, where
-from ..files import CALIBRATION_LIMIT, TASK_LIMIT, natural_key, read_bounded, reading
+from ..files.inputs import CALIBRATION_LIMIT, TASK_LIMIT, natural_key, read_bounded, reading
 from ..temperature_units import DEFAULT_TEMPERATURE, to_celsius
 from ..temperature_units import column as temperature_column
 from ..temperature_units import unit as temperature_unit

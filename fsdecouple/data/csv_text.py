@@ -20,7 +20,7 @@ import numpy as np
 
 from ..config import Settings
 from ..errors import InputError, excerpt, printable, where
-from ..files import CALIBRATION_LIMIT, read_bounded, reading
+from ..files.inputs import CALIBRATION_LIMIT, read_bounded, reading
 
 if TYPE_CHECKING:  # pandas loads on first use: apply and show never need it
     import pandas as pd

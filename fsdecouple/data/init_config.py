@@ -22,7 +22,7 @@ import numpy as np
 
 from ..config import load_config
 from ..errors import ConfigError, InputError, printable
-from ..files import atomic_write, check_output, refuse_overwriting_input
+from ..files.outputs import atomic_write, check_output, refuse_overwriting_input
 from ..units import LOAD_UNITS, MOMENT_UNITS, unit_key
 from .csv_text import first_difference
 from .guesses import (

@@ -19,7 +19,7 @@ from ..config import Settings
 from ..data.calibration import CalibrationSet
 from ..data.csv_text import HEADER_ROW, read_csv_text, read_header, to_numbers
 from ..errors import InputError, where
-from ..files import CALIBRATION_LIMIT, read_bounded, reading
+from ..files.inputs import CALIBRATION_LIMIT, read_bounded, reading
 
 
 def creep_times(calib: CalibrationSet, settings: Settings) -> pd.Series | None:

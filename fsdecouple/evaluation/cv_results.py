@@ -12,7 +12,8 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError, excerpt, printable, where
-from ..files import CV_LIMIT, atomic_write, read_bounded
+from ..files.inputs import CV_LIMIT, read_bounded
+from ..files.outputs import atomic_write
 
 FORMAT = "fsdecouple.cv"
 FORMAT_VERSION = 1

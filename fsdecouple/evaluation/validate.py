@@ -40,7 +40,7 @@ from ..core.metrics import check_max_gamma, interference_error
 from ..core.model import FORCE_LIMIT, CouplingErrorModel
 from ..core.modelfile import content_digest, load_model, model_to_dict
 from ..errors import InputError, printable, where
-from ..files import atomic_write, check_output, refuse_overwriting_input
+from ..files.outputs import atomic_write, check_output, refuse_overwriting_input
 from ..schema import refuse_unused, unused_warning
 
 FORMAT = "fsdecouple.validation"

@@ -27,7 +27,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from ..errors import InputError, printable
-from ..files import atomic_write
+from ..files.outputs import atomic_write
 from ..units import unit_key
 
 AXIS_NAMES = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz")

@@ -33,7 +33,7 @@ from ..core.modelfile import model_to_dict
 from ..core.plan import Term, walk
 from ..core.surrogate import CHECKS_PER_INTERVAL
 from ..errors import ConfigError, FsdecoupleError
-from ..files import atomic_write
+from ..files.outputs import atomic_write
 from .c_function import MAX_CHANNELS
 from .c_source import render
 from .plan import ExportPlan, ExportResult

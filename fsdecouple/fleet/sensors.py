@@ -27,7 +27,8 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import FsdecoupleError, InputError
-from ..files import natural_key, output_directory
+from ..files.inputs import natural_key
+from ..files.outputs import output_directory
 
 FORMAT = "fsdecouple.fleet"
 CONFIG_NAME = "sensor.yaml"
@@ -117,7 +118,7 @@ def fit_sensor(sensor_dir: str | Path, models_dir: str | Path, *, method: str = 
     from ..core.modelfile import load_model, save_model
     from ..data.calibration import load_calibration
     from ..evaluation.calibrate import fit as calibrate
-    from ..files import check_output
+    from ..files.outputs import check_output
     from .drift import compare
 
     d = Path(sensor_dir)

@@ -35,7 +35,7 @@ from ..data.csv_text import HEADER_ROW, require_columns
 from ..data.zero import tare_offsets
 from ..errors import InputError, where
 from ..evaluation.intervals import half_widths, interval_names, with_intervals
-from ..files import atomic_write, refuse_overwriting_input
+from ..files.outputs import atomic_write, refuse_overwriting_input
 from ..schema import refuse_unused, unused_warning
 from ..units import LOAD_UNITS, load_factor
 from .arrow import numbers, strings

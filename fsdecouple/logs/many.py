@@ -39,7 +39,8 @@ from typing import Any
 
 from ..config import Settings
 from ..errors import FsdecoupleError, InputError, printable
-from ..files import names_a_directory, natural_key, output_directory, place, place_directory
+from ..files.inputs import natural_key
+from ..files.outputs import names_a_directory, output_directory, place, place_directory
 from ..schema import unused_warning
 from .apply import MAX_WORKERS
 from .jobs import ApplySpec, Job, apply_job

@@ -32,7 +32,7 @@ import pyarrow.parquet as pq
 from ..config import Settings
 from ..data.csv_text import HEADER_ROW, MAX_HEADER_CHARS, MISSING_CELLS, read_header, require_utf8, to_numbers
 from ..errors import InputError, excerpt, printable, where
-from ..files import open_input, reading
+from ..files.inputs import open_input, reading
 from .arrow import column_floats
 from .passthrough import kept_fields, kept_lines
 

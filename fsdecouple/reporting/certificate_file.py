@@ -29,7 +29,7 @@ def certificate_bytes(doc: dict, path) -> bytes:
 
 def write_certificate(doc: dict, path, *, force: bool = False) -> None:
     """Write the certificate file, HTML or PDF by ``path``'s suffix, atomically."""
-    from ..files import atomic_write
+    from ..files.outputs import atomic_write
 
     data = certificate_bytes(doc, path)
     with atomic_write(Path(path), "wb", force=force) as fh:

@@ -17,7 +17,7 @@ from pathlib import Path
 import pandas as pd
 
 from ..axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
-from ..files import atomic_files, atomic_write
+from ..files.outputs import atomic_files, atomic_write
 
 LOAD_UNIT = "gf"
 LAB_LOAD_COLUMNS = tuple(f"F{a} [{LOAD_UNIT}]" for a in AXES)
@@ -86,7 +86,7 @@ def write_lab_csv(table: pd.DataFrame, path: Path, *, force: bool,
                   group: atomic_files | None = None) -> None:
     """Write ``table`` as a lab spreadsheet export (comma CSV, ``\\n`` line ends).
 
-    Given an :class:`~fsdecouple.files.atomic_files` ``group``, the file
+    Given an :class:`~fsdecouple.files.outputs.atomic_files` ``group``, the file
     is placed with the group's other outputs, together or not at all.
     """
     with (group.open(path) if group is not None else atomic_write(path, force=force)) as fh:

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..files import atomic_files, check_output
+from ..files.outputs import atomic_files, check_output
 from .rig import gauge_mix
 from .simulate import check_count
 

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..files import atomic_files, check_output
+from ..files.outputs import atomic_files, check_output
 from .simulate import MAX_LEVELS, check_count
 
 COMPONENTS = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")

@@ -23,7 +23,7 @@ import pandas as pd
 from ..axes import AXES, DEFAULT, FORCE_COLUMNS, VOLTAGE_COLUMNS, Layout
 from ..data.calibration import GrossError
 from ..errors import InputError
-from ..files import atomic_files, check_output
+from ..files.outputs import atomic_files, check_output
 from .hysteresis import check_hysteresis, lagged, up_and_down
 from .lab import write_lab_csv
 

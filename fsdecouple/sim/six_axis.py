@@ -18,7 +18,7 @@ import pandas as pd
 
 from ..axes import Layout
 from ..errors import InputError
-from ..files import atomic_files, check_output
+from ..files.outputs import atomic_files, check_output
 from .simulate import MAX_REPETITIONS, SimulatedSensor, check_count, one_set, with_coupling, write_csv
 
 COMPONENTS = ("fx", "fy", "fz", "mx", "my", "mz")

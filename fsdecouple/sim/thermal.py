@@ -23,7 +23,7 @@ import pandas as pd
 
 from ..axes import AXES, FORCE_COLUMNS, VOLTAGE_COLUMNS
 from ..core.temperature import correct
-from ..files import atomic_files, check_output
+from ..files.outputs import atomic_files, check_output
 from .simulate import PAPER_GRIDS, SimulatedSensor, write_csv
 
 T0 = 25.0  # [degC]

@@ -16,7 +16,7 @@ from typer.testing import CliRunner
 
 from fsdecouple.cli import app
 from fsdecouple.errors import excerpt, printable, where
-from fsdecouple.files import CONFIG_LIMIT, CV_LIMIT, MODEL_LIMIT
+from fsdecouple.files.inputs import CONFIG_LIMIT, CV_LIMIT, MODEL_LIMIT
 
 pytestmark = pytest.mark.slow  # measures peak memory of subprocesses on hostile inputs
 

@@ -7,7 +7,7 @@ import errno
 import pytest
 from conftest import SAMPLE, assert_one_line_error, invoke
 
-from fsdecouple import files
+from fsdecouple.files import outputs
 from fsdecouple.sim import simulate as simulate_module
 
 
@@ -24,7 +24,7 @@ def test_simulate_failing_late_leaves_nothing(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("layout", ["paper", "lab"])
 def test_simulate_output_appearing_meanwhile_takes_back_all(tmp_path, monkeypatch, layout):
-    real = files.place
+    real = outputs.place
     last = "task_forces.csv" if layout == "paper" else "validation.csv"
 
     def racing(tmp, path, *, force):
@@ -32,7 +32,7 @@ def test_simulate_output_appearing_meanwhile_takes_back_all(tmp_path, monkeypatc
             path.write_text("theirs\n")
         return real(tmp, path, force=force)
 
-    monkeypatch.setattr(files, "place", racing)
+    monkeypatch.setattr(outputs, "place", racing)
     assert_one_line_error(invoke(["simulate", tmp_path / "sim", "--layout", layout], code=2),
               last, "appeared while writing")
     left = sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*"))
@@ -86,7 +86,7 @@ def test_read_only_directory_at_mkstemp(tmp_path, monkeypatch):
     def erofs(*a, **k):
         raise OSError(errno.EROFS, "Read-only file system")
 
-    monkeypatch.setattr(files.tempfile, "mkstemp", erofs)
+    monkeypatch.setattr(outputs.tempfile, "mkstemp", erofs)
     # --no-verdict: the output fails after the fit, whose held-out rounds are not what is tested
     assert_one_line_error(invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "m.json", "--no-verdict"],
                                  code=2), "m.json", "Read-only file system")
@@ -94,8 +94,8 @@ def test_read_only_directory_at_mkstemp(tmp_path, monkeypatch):
 
 
 def test_read_only_directory_refused_before_work(tmp_path, monkeypatch):
-    real = files.os.access
-    monkeypatch.setattr(files.os, "access",
+    real = outputs.os.access
+    monkeypatch.setattr(outputs.os, "access",
                         lambda p, mode, **k: p != tmp_path and real(p, mode, **k))
     assert_one_line_error(invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "m.json"], code=2),
               "m.json", "read-only filesystem or no permission")

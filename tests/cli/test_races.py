@@ -14,26 +14,26 @@ import numpy as np
 import pytest
 from conftest import ROOT, SAMPLE, invoke
 
-from fsdecouple import files
 from fsdecouple.errors import InputError
-from fsdecouple.files import atomic_files, atomic_write
+from fsdecouple.files import outputs
+from fsdecouple.files.outputs import atomic_files, atomic_write
 
 pytestmark = pytest.mark.slow  # runs concurrent commands against one output
 
 
 def _appear_before_placing(monkeypatch, content=b"written by someone else\n"):
     """Make another writer create the output between the start and the final step."""
-    real = files.place
+    real = outputs.place
 
     def racing(tmp, path, *, force):
         path.write_bytes(content)
         return real(tmp, path, force=force)
 
-    monkeypatch.setattr(files, "place", racing)
+    monkeypatch.setattr(outputs, "place", racing)
 
 
 def _no_renameat2(monkeypatch):
-    monkeypatch.setattr(files, "_renameat2", None)
+    monkeypatch.setattr(outputs, "_renameat2", None)
 
 
 def _no_hard_links(monkeypatch):
@@ -42,7 +42,7 @@ def _no_hard_links(monkeypatch):
     def link(*a, **k):
         raise OSError(errno.EPERM, "Operation not permitted")
 
-    monkeypatch.setattr(files.os, "link", link)
+    monkeypatch.setattr(outputs.os, "link", link)
 
 
 MECHANISMS = {
@@ -84,14 +84,14 @@ def test_force_still_replaces(tmp_path, monkeypatch):
 
 def test_group_takes_back_what_it_placed(tmp_path, monkeypatch):
     """The second file appears meanwhile: the first is removed again, and its new directory."""
-    real = files.place
+    real = outputs.place
 
     def racing(tmp, path, *, force):
         if path.name == "b.csv":
             path.write_text("theirs\n")
         return real(tmp, path, force=force)
 
-    monkeypatch.setattr(files, "place", racing)
+    monkeypatch.setattr(outputs, "place", racing)
     with pytest.raises(InputError, match="b.csv: appeared while writing"), \
             atomic_files(force=False) as group:
         for name in ("sub/a.csv", "b.csv"):

@@ -18,7 +18,7 @@ import pyarrow.parquet as pq
 import pytest
 from conftest import SAMPLE, assert_one_line_error, invoke
 
-from fsdecouple import files
+from fsdecouple.files import inputs
 
 LOG = SAMPLE / "task_voltages.csv"
 
@@ -27,7 +27,7 @@ LOG = SAMPLE / "task_voltages.csv"
 
 @pytest.fixture
 def short_wait(monkeypatch):
-    monkeypatch.setattr(files, "FIFO_WAIT", 0.3)
+    monkeypatch.setattr(inputs, "FIFO_WAIT", 0.3)
 
 
 @pytest.mark.parametrize("which", ["log", "config", "model", "calibration"])

@@ -18,7 +18,7 @@ from conftest import SAMPLE, invoke, working_directory
 from fsdecouple import load_config
 from fsdecouple.core.modelfile import load_model
 from fsdecouple.errors import InputError
-from fsdecouple.files import atomic_write
+from fsdecouple.files.outputs import atomic_write
 from fsdecouple.logs.apply import STATUSES, apply_file
 
 LOG = SAMPLE / "task_voltages.csv"

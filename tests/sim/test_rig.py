@@ -139,12 +139,12 @@ def test_a_rig_write_that_fails_leaves_no_directory(tmp_path, monkeypatch):
     """write_rig made its directory before anything could fail, and left it behind."""
     import errno
 
-    from fsdecouple import files
+    from fsdecouple.files import outputs
 
     def full(*a, **k):
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(files, "place", full)
+    monkeypatch.setattr(outputs, "place", full)
     res = invoke(["simulate", str(tmp_path / "new" / "rig"), "--rig", "lever-arm"], code=2)
     assert "No space left" in res.stderr
     assert list(tmp_path.iterdir()) == []
