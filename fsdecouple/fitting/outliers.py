@@ -89,6 +89,16 @@ def joint_loo(s: np.ndarray, y: np.ndarray) -> np.ndarray:
     return out
 
 
+def _limit(fractions: np.ndarray) -> float | None:
+    """The flagging limit over the leave-one-out residuals ``fractions`` [fraction of F.S.]:
+    ``MAD_FACTOR`` robust sigmas (the MAD), never below ``FLOOR``; None without a finite one."""
+    fractions = fractions[np.isfinite(fractions)]
+    if fractions.size == 0:
+        return None
+    mad = MAD_TO_SIGMA * np.median(np.abs(fractions - np.median(fractions)))
+    return max(FLOOR, MAD_FACTOR * mad)
+
+
 def joint_gross_errors(points, k: np.ndarray, full_scale, layout: Layout) -> list[Outlier]:
     """Rows loading several components: each prime output's leave-one-out residual over every
     row, in load space (divided by k_aa: eq. 2), flagged as the per-sweep check flags them."""
@@ -96,11 +106,9 @@ def joint_gross_errors(points, k: np.ndarray, full_scale, layout: Layout) -> lis
     s = points[list(layout.loads)].to_numpy(dtype=float) / fs
     u = points[list(layout.outputs)].to_numpy(dtype=float)
     first = np.column_stack([joint_loo(s, u[:, a]) / abs(k[a]) / fs[a] for a in range(layout.n)])
-    fractions = first[np.isfinite(first)]
-    if fractions.size == 0:
+    limit = _limit(first)
+    if limit is None:
         return []
-    mad = MAD_TO_SIGMA * np.median(np.abs(fractions - np.median(fractions)))
-    limit = max(FLOOR, MAD_FACTOR * mad)
     found = []
     for a in range(layout.n):
         keep = np.ones(len(s), dtype=bool)
@@ -134,12 +142,9 @@ def gross_errors(points, k: np.ndarray, full_scale, layout: Layout = DEFAULT) ->
         if f.size > 2:
             sweeps.append((a, axis, s, f, u))
     fractions = [loo_residuals(f, u, 1) / abs(k[a]) / full_scale[a] for a, _, _, f, u in sweeps]
-    fractions = np.concatenate(fractions) if fractions else np.empty(0)
-    fractions = fractions[np.isfinite(fractions)]
-    if fractions.size == 0:
+    limit = _limit(np.concatenate(fractions) if fractions else np.empty(0))
+    if limit is None:
         return []
-    mad = MAD_TO_SIGMA * np.median(np.abs(fractions - np.median(fractions)))
-    limit = max(FLOOR, MAD_FACTOR * mad)
     found = []
     for a, axis, s, f, u in sweeps:
         keep = np.ones(f.size, dtype=bool)
