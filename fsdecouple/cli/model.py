@@ -218,9 +218,7 @@ def export(
         if linear_part:
             raise ConfigError("--linear-part: for a .cal output only; the C header exports the "
                               "model whole")
-        model = load_model(model_file)
-        check_output(output, force=force)
-        refuse_overwriting_input(output, [model_file])
+        model = _exporting(model_file, output, force)
         result = export_header(model, output, precision=precision, prefix=prefix,
                                max_error=max_error, force=force)
     if json_out:
@@ -239,6 +237,15 @@ def export(
                       highlight=False, soft_wrap=True)
 
 
+def _exporting(model_file: Path, output: Path, force: bool):
+    """The model to export, once ``output`` may be written (not an existing file without
+    ``force``, never the model itself)."""
+    model = load_model(model_file)
+    check_output(output, force=force)
+    refuse_overwriting_input(output, [model_file])
+    return model
+
+
 def _export_cal(model_file: Path, output: Path, linear_part: bool, force: bool, json_out: bool,
                 header_options: bool) -> None:
     from ..export.ati_cal import export_cal
@@ -247,9 +254,7 @@ def _export_cal(model_file: Path, output: Path, linear_part: bool, force: bool, 
         if header_options:
             raise ConfigError("--precision, --prefix and --max-error: for a C header; a .cal holds "
                               "the matrix in full")
-        model = load_model(model_file)
-        check_output(output, force=force)
-        refuse_overwriting_input(output, [model_file])
+        model = _exporting(model_file, output, force)
         result = export_cal(model, output, source=printable(model_file), linear_part=linear_part,
                             force=force)
     if json_out:
