@@ -119,12 +119,13 @@ def correctable(old) -> bool:
             and old.temperature is None)
 
 
-def _decoder(old):
-    """g(v): the old model's eq. (11) at loads v (n, N), through outputs u = P^+ v (P P^+ = I)."""
+def _decoder(old, exact: bool = False):
+    """g(v): the old model's eq. (11) at loads v (n, N), through outputs u = P^+ v (P P^+ = I);
+    by its surrogate tables (as it decouples) unless ``exact``."""
     lift = np.linalg.pinv(old.projection)
 
     def g(v: np.ndarray) -> np.ndarray:
-        return old.decouple(v @ lift.T, rotate=False, exact=True)
+        return old.decouple(v @ lift.T, rotate=False, exact=exact)
     return g
 
 
@@ -144,41 +145,70 @@ def fit_correction(u: np.ndarray, f: np.ndarray, g, p: np.ndarray, fs: np.ndarra
                    intercept: bool) -> Correction:
     """The ridge fit of alpha, D, c (module docstring) to outputs u (n, M) and loads f (n, N).
 
-    ``jac``: eq. (11)'s Jacobian at each row (:func:`_jacobian`), held fixed over the
-    steps; each step evaluates eq. (11) itself, so only the step direction is approximate.
+    ``jac``: eq. (11)'s Jacobian at each row (:func:`_jacobian`).
+    """
+    alpha, d, c = fit_corrections(u, f, g, p, fs, jac, np.ones((1, len(u))),
+                                  np.array([lam_gain]), np.array([lam_load]), intercept)
+    return Correction(alpha[0], d[0], c[0])
+
+
+def _predict(u, g, pn, fs, alpha, d, c) -> tuple[np.ndarray, np.ndarray]:
+    """(w, f): each problem's P diag(1 + alpha) u [F.S.] and eq. (11) at its v', (B, n, N)."""
+    w = np.einsum("bim,am->bia", u[None] * (1.0 + alpha[:, None, :]), pn)
+    v = w + np.einsum("bac,bic->bia", d, w) + c[:, None, :]
+    big_b, n, big_n = v.shape
+    return w, g((v * fs).reshape(-1, big_n)).reshape(big_b, n, big_n)
+
+
+def fit_corrections(u: np.ndarray, f: np.ndarray, g, p: np.ndarray, fs: np.ndarray,
+                    jac: np.ndarray, weights: np.ndarray, lam_gain: np.ndarray,
+                    lam_load: np.ndarray, intercept: bool):
+    """B ridge fits at once (one evaluation of eq. (11) per step for all): problem b weighs
+    row i by ``weights[b, i]`` (0: held out) with the penalties ``lam_gain[b]``,
+    ``lam_load[b]`` (inf: that part fixed at 0).  Returns alpha (B, M), D (B, N, N), c (B, N).
+
+    Gauss-Newton with eq. (11)'s Jacobian ``jac`` (n, N, N) at each row held fixed: each
+    step evaluates eq. (11) itself, so only the step's direction is approximate.
     """
     n, m = u.shape
     big_n = len(fs)
-    alpha, d, c = np.zeros(m), np.zeros((big_n, big_n)), np.zeros(big_n)
+    big_b = len(weights)
+    k = m + big_n * big_n + big_n
     pn = p / fs[:, None]  # P into full-scale units
-    parts = [(lam_gain, m), (lam_load, big_n * big_n), (0.0 if intercept else math.inf, big_n)]
-    free = np.concatenate([np.full(size, math.isfinite(lam)) for lam, size in parts])
-    pen = np.concatenate([np.full(size, lam if math.isfinite(lam) else 0.0)
-                          for lam, size in parts])[free]
-    if not free.any():
-        return Correction(alpha, d, c)
-    rows = np.arange(big_n)
+    alpha, d, c = np.zeros((big_b, m)), np.zeros((big_b, big_n, big_n)), np.zeros((big_b, big_n))
+    sizes = (m, big_n * big_n, big_n)
+    lams = np.column_stack([np.repeat(lam_gain, m).reshape(big_b, m),
+                            np.repeat(lam_load, big_n * big_n).reshape(big_b, -1),
+                            np.zeros((big_b, big_n)) if intercept else np.full((big_b, big_n),
+                                                                               math.inf)])
+    assert lams.shape == (big_b, sum(sizes))
+    free = np.isfinite(lams)
+    pen = np.where(free, lams, 1.0)  # a fixed parameter: no Jacobian column, no gradient
+    sw = np.sqrt(weights / weights.sum(axis=1, keepdims=True))[:, :, None]  # (B, n, 1)
+    eye = np.eye(big_n)
     for _ in range(STEPS):
-        w = (u * (1.0 + alpha)) @ pn.T  # (n, N) [F.S.]
-        r = (g((w + w @ d.T + c) * fs) - f) / fs
-        da = u[:, None, :] * ((np.eye(big_n) + d) @ pn)[None]  # dv/dalpha (n, N, M)
-        dd = np.zeros((n, big_n, big_n * big_n))  # dv_a/dD_ab = w_b
-        for a in rows:
-            dd[:, a, a * big_n:(a + 1) * big_n] = w
-        dc = np.broadcast_to(np.eye(big_n), (n, big_n, big_n))
-        jv = np.concatenate([da, dd, dc], axis=2)[:, :, free]
-        jr = np.einsum("iab,ibk->iak", jac, jv).reshape(n * big_n, -1)
-        theta = np.concatenate([alpha, d.ravel(), c])
-        h = jr.T @ jr / n + np.diag(pen)
-        grad = jr.T @ r.ravel() / n + pen * theta[free]
-        step, *_ = np.linalg.lstsq(h, -grad, rcond=None)
-        if not np.isfinite(step).all():
+        w, pred = _predict(u, g, pn, fs, alpha, d, c)
+        r = (pred - f) / fs * sw
+        jv = np.zeros((big_b, n, big_n, k))
+        jv[..., :m] = u[None, :, None, :] * ((eye + d) @ pn)[:, None]  # dv/dalpha
+        for a in range(big_n):  # dv_a/dD_ab = w_b
+            jv[:, :, a, m + a * big_n:m + (a + 1) * big_n] = w
+        jv[..., m + big_n * big_n:] = eye  # dv/dc
+        jv *= free[:, None, None, :]
+        jr = np.einsum("iac,bick->biak", jac, jv) * sw[..., None]
+        jr = jr.reshape(big_b, n * big_n, k)
+        theta = np.concatenate([alpha, d.reshape(big_b, -1), c], axis=1)
+        h = np.einsum("bjk,bjl->bkl", jr, jr) + pen[:, :, None] * np.eye(k)
+        h += 1e-12 * np.eye(k)  # alpha and D overlap: a direction neither sees stays put
+        grad = np.einsum("bjk,bj->bk", jr, r.reshape(big_b, -1)) + pen * theta
+        step = -np.linalg.solve(h, grad[..., None])[..., 0] * free
+        step[~np.isfinite(step).all(axis=1)] = 0.0
+        theta = theta + step
+        alpha, d, c = (theta[:, :m], theta[:, m:m + big_n * big_n].reshape(big_b, big_n, big_n),
+                       theta[:, m + big_n * big_n:])
+        if np.abs(step).max() < 1e-9:
             break
-        theta[free] += step
-        alpha, d, c = theta[:m], theta[m:m + big_n * big_n].reshape(big_n, big_n), theta[-big_n:]
-        if np.abs(step).max() < 1e-10:
-            break
-    return Correction(alpha, d, c)
+    return alpha, d, c
 
 
 def _folds(n: int, folds: int) -> list[np.ndarray]:
@@ -249,19 +279,21 @@ def choose_prior(calib, settings, old, source: str, *, folds: int = FOLDS,
 
     g = _decoder(old)
     p = np.asarray(old.projection, dtype=float)
-    jac = _jacobian(g, u @ p.T, fs)
+    jac = _jacobian(_decoder(old, exact=True), u @ p.T, fs)  # tables are piecewise
     intercept = calib.zero == "intercept"
     pairs = [(a, b) for a in lambdas for b in lambdas]
-    for lam_gain, lam_load in pairs:
-        errors = []
-        for test in masks:
-            corr = fit_correction(u[~test], f[~test], g, p, fs, jac[~test], lam_gain, lam_load,
-                                  intercept)
-            pred = g(u[test] @ corr.projection(p, fs).T + corr.c * fs)
-            errors.append(pred - f[test])
-        e = np.concatenate(errors)
+    weights = np.array([~test for _ in pairs for test in masks], dtype=float)
+    lam_gain = np.array([a for a, _ in pairs for _ in masks])
+    lam_load = np.array([b for _, b in pairs for _ in masks])
+    alpha, d, c = fit_corrections(u, f, g, p, fs, jac, weights, lam_gain, lam_load, intercept)
+    _, pred = _predict(u, g, p / fs[:, None], fs, alpha, d, c)
+    held = weights == 0
+    for j, pair in enumerate(pairs):
+        e = [pred[j * len(masks) + i][held[j * len(masks) + i]] - f[held[j * len(masks) + i]]
+             for i in range(len(masks))]
+        e = np.concatenate(e)
         if np.isfinite(e).all():
-            scores[_label(lam_gain, lam_load)] = _worst(e, fs)
+            scores[_label(*pair)] = _worst(e, fs)
     fresh = fresh_score(0)
     if fresh is not None:
         scores[FRESH] = fresh
@@ -286,7 +318,8 @@ def corrected_model(calib, settings, old, choice: PriorChoice) -> CouplingErrorM
     p = np.asarray(old.projection, dtype=float)
     g = _decoder(old)
     intercept = calib.zero == "intercept"
-    corr = fit_correction(u, f, g, p, fs, _jacobian(g, u @ p.T, fs), *choice.lambdas, intercept)
+    jac = _jacobian(_decoder(old, exact=True), u @ p.T, fs)
+    corr = fit_correction(u, f, g, p, fs, jac, *choice.lambdas, intercept)
     p_new = corr.projection(p, fs)
     shift = np.linalg.pinv(p_new) @ (corr.c * fs)  # outputs whose P' u is c: the zero moves
     zero = fitted_zero(calib) - shift if intercept else None
