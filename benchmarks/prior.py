@@ -69,7 +69,8 @@ def one(seed: int, n_new: int, drift: float, kind: str, tmp: Path
         fresh = float("inf")  # too few poses to fit at all
     model = fit_with_prior(calib, settings, old, "old.json",
                            lambda c: fit(c, settings, verdict=False))
-    chosen = model.report.warnings[-1].split(": ", 1)[1].split(", chosen")[0]
+    line = next(w for w in model.report.warnings if w.startswith("prior model"))
+    chosen = line.split(": ", 1)[1].split(", chosen")[0]
     # the old model keeps its old zero: the drift of the offsets is part of its error
     return worst(old, test, fs), fresh, worst(model, test, fs), chosen
 
