@@ -266,15 +266,17 @@ def choose_prior(calib, settings, old, source: str, *, folds: int = FOLDS,
         return _worst(np.concatenate(errors), fs)
 
     if not correctable(old):
-        for lam in copies:
+        labels = {FRESH if lam == 0 else f"lambda = {lam} prior rows per new row": lam
+                  for lam in copies}
+        for label, lam in labels.items():
             s = fresh_score(lam)
             if s is not None:
-                scores[FRESH if lam == 0 else f"{lam} prior rows per new row"] = s
+                scores[label] = s
         if not scores:
             raise InputError(f"prior model {source}: no lambda could be scored held out",
                              argument="prior")
         best = min(scores, key=lambda k: (scores[k], k != FRESH))
-        lam = 0 if best == FRESH else int(best.split()[0])
+        lam = labels[best]
         return PriorChoice(str(Path(source)), best, scores, copies=lam)
 
     g = _decoder(old)

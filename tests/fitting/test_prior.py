@@ -160,3 +160,18 @@ def test_with_ten_poses_the_prior_beats_a_fresh_fit_and_the_old_model(kind, tmp_
         ratio = np.log(e[:, 2] / e[:, other])
         assert (ratio < 0).all(), (kind, other, e)
         assert ratio.mean() + 2 * ratio.std(ddof=1) < 0, (kind, other, e)
+
+
+def test_one_output_per_component_leans_on_prior_rows(tmp_path):
+    # no matrix P to correct (a six-output rig): lambda copies of the new rows with the old
+    # model's loads, lambda and a fresh fit scored held out on the same folds
+    rig = write_rig(tmp_path / "rig")[0]
+    init_config(rig, tmp_path / "rig.yaml")
+    settings = load_config(tmp_path / "rig.yaml")
+    calib = load_calibration(rig, settings)
+    model = fit(calib, settings, verdict=False)
+    assert model.projection is None
+    choice = choose_prior(calib, settings, model, "old.json", folds=4, copies=(0, 2))
+    assert set(choice.scores) == {FRESH, "lambda = 2 prior rows per new row"}
+    assert choice.scores[choice.best] == min(choice.scores.values()) and choice.lambdas is None
+    assert choice.copies == (0 if choice.best == FRESH else 2)
