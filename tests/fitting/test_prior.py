@@ -175,3 +175,19 @@ def test_one_output_per_component_leans_on_prior_rows(tmp_path):
     assert set(choice.scores) == {FRESH, "lambda = 2 prior rows per new row"}
     assert choice.scores[choice.best] == min(choice.scores.values()) and choice.lambdas is None
     assert choice.copies == (0 if choice.best == FRESH else 2)
+
+
+def test_a_model_of_another_sensor_loses_to_a_fresh_fit(old, tmp_path):
+    # sensor 1's model as the prior of sensor 0 (same layout, other gauges and chi): no
+    # correction of its matrix makes its chi sensor 0's, and held-out error must see it
+    tmp, _, settings = old
+    other_set = simulate_poses(1, 30)
+    (tmp_path / "other.csv").write_text("\n".join(pose_lines(other_set)) + "\n")
+    other = fit(load_calibration(tmp_path / "other.csv", settings), settings, verdict=False)
+    new = simulate_poses(0, 30, noise_seed=1)
+    few = PoseSet(new.loads[::5], new.samples[::5], new.truth[::5], new.railing)
+    (tmp_path / "new.csv").write_text("\n".join(pose_lines(few)) + "\n")
+    choice = choose_prior(load_calibration(tmp_path / "new.csv", settings), settings, other,
+                          "other.json")
+    assert choice.best == FRESH and choice.fresh, choice.line()
+    assert "a fresh fit of the new rows" in choice.line()
