@@ -107,10 +107,10 @@ def check_prior_options(method: str, tune: bool) -> None:
     """``--prior`` keeps the old chi or refits fresh ones as the held-out error says:
     neither ``--tune`` nor another ``--method`` would be obeyed on the first."""
     if tune or method != "svr":
-        raise InputError("--prior chooses between the previous model, corrected, and a fresh fit "
-                         "by held-out error; it takes neither --tune nor --method "
-                         f"{method if method != 'svr' else 'with --tune'}: fit without --prior "
-                         "for those", argument="prior")
+        asked = "--tune" if tune else f"--method {method}"
+        raise InputError(f"--prior chooses between the previous model, corrected, and a fresh fit "
+                         f"by held-out error, and cannot take {asked} as well: fit without "
+                         "--prior for that", argument="prior")
 
 
 def correctable(old) -> bool:
@@ -176,12 +176,10 @@ def fit_corrections(u: np.ndarray, f: np.ndarray, g, p: np.ndarray, fs: np.ndarr
     k = m + big_n * big_n + big_n
     pn = p / fs[:, None]  # P into full-scale units
     alpha, d, c = np.zeros((big_b, m)), np.zeros((big_b, big_n, big_n)), np.zeros((big_b, big_n))
-    sizes = (m, big_n * big_n, big_n)
     lams = np.column_stack([np.repeat(lam_gain, m).reshape(big_b, m),
                             np.repeat(lam_load, big_n * big_n).reshape(big_b, -1),
                             np.zeros((big_b, big_n)) if intercept else np.full((big_b, big_n),
                                                                                math.inf)])
-    assert lams.shape == (big_b, sum(sizes))
     free = np.isfinite(lams)
     pen = np.where(free, lams, 1.0)  # a fixed parameter: no Jacobian column, no gradient
     sw = np.sqrt(weights / weights.sum(axis=1, keepdims=True))[:, :, None]  # (B, n, 1)
