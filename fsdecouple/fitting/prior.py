@@ -108,7 +108,7 @@ def check_prior_options(method: str, tune: bool) -> None:
     neither ``--tune`` nor another ``--method`` would be obeyed on the first."""
     if tune or method != "svr":
         asked = "--tune" if tune else f"--method {method}"
-        raise InputError(f"--prior chooses between the previous model, corrected, and a fresh fit "
+        raise InputError(f"it chooses between the previous model, corrected, and a fresh fit "
                          f"by held-out error, and cannot take {asked} as well: fit without "
                          "--prior for that", argument="prior")
 
