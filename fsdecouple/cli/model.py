@@ -116,14 +116,18 @@ def fit(
         check_output(output, force=force)
         cs = load_calibration(calib, settings, exclude=exclude or (), strict=strict)
         refuse_overwriting_input(output, [*_read(cs), *_given(config), *_given(prior)])
-        if prior is not None:  # fitting/prior.py: lambda chosen by held-out error
-            from ..core.modelfile import load_model
-            from ..fitting.prior import prior_set
-
-            cs = prior_set(cs, settings, load_model(prior), printable(prior))
         with progress_bar("tuning" if tune else "fitting", MofNCompleteColumn()) as progress:
-            model = fit_model(cs, settings, method=method, verdict=not no_verdict, tune=tune,
-                              tune_grid=grid, progress=progress)
+            def refit(c):
+                return fit_model(c, settings, method=method, verdict=not no_verdict, tune=tune,
+                                 tune_grid=grid, progress=progress)
+            if prior is not None:  # fitting/prior.py: lambda chosen by held-out error
+                from ..core.modelfile import load_model
+                from ..fitting.prior import fit_with_prior
+
+                model = fit_with_prior(cs, settings, load_model(prior), printable(prior), refit,
+                                       method=method, tune=tune)
+            else:
+                model = refit(cs)
         checks = assumption_checks(model)
         advice = refine_advice(checks, model.n_components)
         advice["tune"] = tune_advice(advice, model.report.tune)

@@ -4,45 +4,93 @@ A sensor recalibrated in place (a few poses on the robot it is mounted on) has t
 points for a fresh fit, and its old model has drifted.  robotology's in-situ calibration
 fits the new matrix by ridge regression toward the previous one,
 
-    C = argmin ||F - C U||^2 + lambda ||C - C_old||^2,
+    C = argmin ||F - C U||^2 + lambda ||C - C_old||^2.
 
-which is least squares on the new rows plus lambda times "pseudo-rows" on which the old
-matrix is the truth.  Extended to omega and the chi: the new set's own zero-corrected
-outputs u are given, besides their applied loads, the loads the old model decodes from
-them, f_old = old.decouple(u) (eq. 11), as extra calibration rows; the fit (eqs. 2, 4,
-10) then shrinks every slope and every chi toward the old model's, by as much as lambda
-(prior rows per new row) weighs them.  lambda is chosen from :data:`LAMBDAS` by held-out
-error: K folds of the new rows, each scored on its held-out rows' worst component's RMS
-error (a fraction of full scale) of a fit to the other rows with their pseudo-rows; 0 is
-a fresh fit, so the prior is used only where it measured better.
+For M > N outputs (fitting/gauges.py) the old model is eq. (11) on v = P u: its omega
+(k = 1) and chi act on v, and P is its matrix.  The ridge moves only what drift moves,
+P and the zero, and keeps the old omega and chi, which a few poses cannot re-learn (they
+hold the nonlinearity of the whole old calibration):
+
+    v' = (I + D) P diag(1 + alpha) u + c,     f = eq. (11) of the old model at v',
+
+alpha (M) each output's gain change (a gauge's drift), D (N x N) a linear change of the
+loads v in full-scale units (a change of coupling), c (N) the offset [F.S.].  They are
+fitted to the new rows by Gauss-Newton (the Jacobian of eq. (11) by central
+differences) with the ridge penalty lambda_gain |alpha|^2 + lambda_load |D|^2; lambda
+= inf fixes a part at the old model's, and c is free only where the new set has no zero
+row (``zero: intercept``).  The result is the old model with P' = (I + D) P diag(1 +
+alpha) and its zero moved by c: the same chi, exactly.
+
+Both lambdas are chosen from :data:`LAMBDAS` by held-out error (leave one row out, or
+:data:`FOLDS` folds of more rows), each scored by the held-out rows' worst component's
+RMS error [F.S.], against a fresh fit of the new rows scored on the same folds: the
+fresh fit is kept where it measured better.  A model with one output per component (no
+P) shrinks by *prior rows* instead: lambda copies of the new rows loaded with what the
+old model decodes from them join the fit (:func:`with_prior`), lambda from
+:data:`COPIES`.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from ..core.metrics import interference_errors
+from ..core.model import CouplingErrorModel, FitReport
 from ..errors import InputError
 
-LAMBDAS = (0, 1, 2, 4)  # prior rows per new row: a whole number of copies, 0 a fresh fit
-FOLDS = 5
+# ridge weights per unit of the mean squared held-out residual [F.S.^2] (inf: that part
+# stays the old model's); a 3 % drift costs about 1e-3 of residual, so the grid brackets it
+LAMBDAS = (0.0, 1e-4, 1e-3, 1e-2, 1e-1, 1.0, math.inf)
+COPIES = (0, 1, 2, 4)  # prior rows per new row (one output per component): 0 a fresh fit
+FOLDS = 10  # held-out folds; fewer rows: leave one out
+STEPS = 8  # Gauss-Newton steps of a correction (eq. (11) is nearly linear in v)
+FRESH = "fresh fit"
+
+
+@dataclass(frozen=True)
+class Correction:
+    """The change of an M > N model's matrix and zero (module docstring)."""
+
+    alpha: np.ndarray  # (M,) each output's gain change
+    d: np.ndarray  # (N, N) linear change of the loads v, in full-scale units
+    c: np.ndarray  # (N,) offset of v [F.S.]
+
+    def projection(self, p: np.ndarray, fs: np.ndarray) -> np.ndarray:
+        """P' = (I + D) P diag(1 + alpha), D taken from full-scale to load units."""
+        d = fs[:, None] * self.d / fs[None, :]
+        return (np.eye(len(fs)) + d) @ p * (1.0 + self.alpha)
 
 
 @dataclass(frozen=True)
 class PriorChoice:
-    """lambda chosen, and each candidate's held-out worst component's RMS error [F.S.]."""
+    """The candidate chosen and each one's held-out worst component's RMS error [F.S.]."""
 
     source: str
-    lam: int
-    scores: dict[int, float]
+    best: str
+    scores: dict[str, float]
+    lambdas: tuple[float, float] | None = None  # (lambda_gain, lambda_load) of a correction
+    copies: int = 0  # prior rows per new row (one output per component)
+
+    @property
+    def fresh(self) -> bool:
+        return self.best == FRESH or (self.lambdas is None and self.copies == 0)
 
     def line(self) -> str:
-        shown = ", ".join(f"{lam}: {100 * s:.3g} %" for lam, s in self.scores.items())
-        return (f"prior model {self.source}: lambda = {self.lam} prior rows per new row, chosen by "
-                f"held-out worst component's RMS error ({shown} F.S.; 0 is a fresh fit)")
+        ranked = sorted(self.scores.items(), key=lambda kv: kv[1])
+        shown = "; ".join(f"{k}: {100 * s:.3g} %" for k, s in ranked[:4])
+        if self.best != FRESH and FRESH in self.scores and all(k != FRESH for k, _ in ranked[:4]):
+            shown += f"; {FRESH}: {100 * self.scores[FRESH]:.3g} %"
+        what = ("a fresh fit of the new rows" if self.fresh else
+                f"the previous model with its matrix and zero corrected, {self.best}"
+                if self.lambdas is not None else f"{self.best}")
+        return (f"prior model {self.source}: {what}, chosen by held-out worst component's RMS "
+                f"error over {len(self.scores)} candidates (best: {shown} F.S.)")
 
 
 def check_prior(old, settings, source: str) -> None:
@@ -53,6 +101,265 @@ def check_prior(old, settings, source: str) -> None:
                          f"{old.settings.output_unit} -> {old.settings.load_unit}) are not the "
                          "config's; a prior must be a model of the same sensor and layout",
                          argument="prior")
+
+
+def check_prior_options(method: str, tune: bool) -> None:
+    """``--prior`` keeps the old chi or refits fresh ones as the held-out error says:
+    neither ``--tune`` nor another ``--method`` would be obeyed on the first."""
+    if tune or method != "svr":
+        asked = "--tune" if tune else f"--method {method}"
+        raise InputError(f"it chooses between the previous model, corrected, and a fresh fit "
+                         f"by held-out error, and cannot take {asked} as well: fit without "
+                         "--prior for that", argument="prior")
+
+
+def correctable(old) -> bool:
+    """An M > N coupling error model (a matrix P before eq. (11)) without temperature terms."""
+    return (getattr(old, "projection", None) is not None and old.method == "svr"
+            and old.temperature is None)
+
+
+def _decoder(old, exact: bool = False):
+    """g(v): the old model's eq. (11) at loads v (n, N), through outputs u = P^+ v (P P^+ = I);
+    by its surrogate tables (as it decouples) unless ``exact``."""
+    lift = np.linalg.pinv(old.projection)
+
+    def g(v: np.ndarray) -> np.ndarray:
+        return old.decouple(v @ lift.T, rotate=False, exact=exact)
+    return g
+
+
+def _jacobian(g, v: np.ndarray, fs: np.ndarray) -> np.ndarray:
+    """d(f / fs) / d(v / fs) of eq. (11) at each row, (n, N, N), by central differences."""
+    n, big_n = v.shape
+    jac = np.empty((n, big_n, big_n))
+    for b in range(big_n):
+        step = np.zeros(big_n)
+        step[b] = 1e-4 * fs[b]
+        jac[:, :, b] = (g(v + step) - g(v - step)) / (2 * step[b]) * fs[b] / fs[None, :]
+    return jac
+
+
+def fit_correction(u: np.ndarray, f: np.ndarray, g, p: np.ndarray, fs: np.ndarray,
+                   jac: np.ndarray, lam_gain: float, lam_load: float,
+                   intercept: bool) -> Correction:
+    """The ridge fit of alpha, D, c (module docstring) to outputs u (n, M) and loads f (n, N).
+
+    ``jac``: eq. (11)'s Jacobian at each row (:func:`_jacobian`).
+    """
+    alpha, d, c = fit_corrections(u, f, g, p, fs, jac, np.ones((1, len(u))),
+                                  np.array([lam_gain]), np.array([lam_load]), intercept)
+    return Correction(alpha[0], d[0], c[0])
+
+
+def _predict(u, g, pn, fs, alpha, d, c) -> tuple[np.ndarray, np.ndarray]:
+    """(w, f): each problem's P diag(1 + alpha) u [F.S.] and eq. (11) at its v', (B, n, N)."""
+    w = np.einsum("bim,am->bia", u[None] * (1.0 + alpha[:, None, :]), pn)
+    v = w + np.einsum("bac,bic->bia", d, w) + c[:, None, :]
+    big_b, n, big_n = v.shape
+    return w, g((v * fs).reshape(-1, big_n)).reshape(big_b, n, big_n)
+
+
+def fit_corrections(u: np.ndarray, f: np.ndarray, g, p: np.ndarray, fs: np.ndarray,
+                    jac: np.ndarray, weights: np.ndarray, lam_gain: np.ndarray,
+                    lam_load: np.ndarray, intercept: bool):
+    """B ridge fits at once (one evaluation of eq. (11) per step for all): problem b weighs
+    row i by ``weights[b, i]`` (0: held out) with the penalties ``lam_gain[b]``,
+    ``lam_load[b]`` (inf: that part fixed at 0).  Returns alpha (B, M), D (B, N, N), c (B, N).
+
+    Gauss-Newton with eq. (11)'s Jacobian ``jac`` (n, N, N) at each row held fixed: each
+    step evaluates eq. (11) itself, so only the step's direction is approximate.
+    """
+    n, m = u.shape
+    big_n = len(fs)
+    big_b = len(weights)
+    k = m + big_n * big_n + big_n
+    pn = p / fs[:, None]  # P into full-scale units
+    alpha, d, c = np.zeros((big_b, m)), np.zeros((big_b, big_n, big_n)), np.zeros((big_b, big_n))
+    lams = np.column_stack([np.repeat(lam_gain, m).reshape(big_b, m),
+                            np.repeat(lam_load, big_n * big_n).reshape(big_b, -1),
+                            np.zeros((big_b, big_n)) if intercept else np.full((big_b, big_n),
+                                                                               math.inf)])
+    free = np.isfinite(lams)
+    pen = np.where(free, lams, 1.0)  # a fixed parameter: no Jacobian column, no gradient
+    sw = np.sqrt(weights / weights.sum(axis=1, keepdims=True))[:, :, None]  # (B, n, 1)
+    eye = np.eye(big_n)
+    for _ in range(STEPS):
+        w, pred = _predict(u, g, pn, fs, alpha, d, c)
+        r = (pred - f) / fs * sw
+        jv = np.zeros((big_b, n, big_n, k))
+        jv[..., :m] = u[None, :, None, :] * ((eye + d) @ pn)[:, None]  # dv/dalpha
+        for a in range(big_n):  # dv_a/dD_ab = w_b
+            jv[:, :, a, m + a * big_n:m + (a + 1) * big_n] = w
+        jv[..., m + big_n * big_n:] = eye  # dv/dc
+        jv *= free[:, None, None, :]
+        jr = np.einsum("iac,bick->biak", jac, jv) * sw[..., None]
+        jr = jr.reshape(big_b, n * big_n, k)
+        theta = np.concatenate([alpha, d.reshape(big_b, -1), c], axis=1)
+        h = np.einsum("bjk,bjl->bkl", jr, jr) + pen[:, :, None] * np.eye(k)
+        h += 1e-12 * np.eye(k)  # alpha and D overlap: a direction neither sees stays put
+        grad = np.einsum("bjk,bj->bk", jr, r.reshape(big_b, -1)) + pen * theta
+        step = -np.linalg.solve(h, grad[..., None])[..., 0] * free
+        step[~np.isfinite(step).all(axis=1)] = 0.0
+        theta = theta + step
+        alpha, d, c = (theta[:, :m], theta[:, m:m + big_n * big_n].reshape(big_b, big_n, big_n),
+                       theta[:, m + big_n * big_n:])
+        if np.abs(step).max() < 1e-9:
+            break
+    return alpha, d, c
+
+
+def _folds(n: int, folds: int) -> list[np.ndarray]:
+    """Held-out masks: leave one row out for n <= folds, else ``folds`` interleaved folds."""
+    k = min(n, folds)
+    order = np.random.default_rng(0).permutation(n)
+    out = []
+    for i in range(k):
+        test = np.zeros(n, dtype=bool)
+        test[order[i::k]] = True
+        out.append(test)
+    return out
+
+
+def _worst(e: np.ndarray, fs: np.ndarray) -> float:
+    return float((np.sqrt((e ** 2).mean(axis=0)) / fs).max())
+
+
+def _label(lam_gain: float, lam_load: float) -> str:
+    return f"lambda_gain = {lam_gain:g}, lambda_load = {lam_load:g}"
+
+
+def choose_prior(calib, settings, old, source: str, *, folds: int = FOLDS,
+                 workers: int | None = None, lambdas=LAMBDAS, copies=COPIES) -> PriorChoice:
+    """The candidate of least held-out error: a corrected old model (one per pair of lambdas)
+    or a fresh fit; for a model without P, lambda prior rows per new row (0: fresh)."""
+    from .fit import fit
+
+    check_prior(old, settings, source)
+    n = len(calib.points)
+    if n < 3:
+        raise InputError(f"prior model {source}: {n} calibration rows; choosing lambda needs at "
+                         "least 3 (each held out in turn)", argument="prior")
+    layout = calib.layout
+    outputs, loads = list(layout.outputs), list(layout.loads)
+    fs = np.asarray(settings.full_scale, dtype=float)
+    masks = _folds(n, folds)
+    u, f = calib.voltages, calib.forces
+    scores: dict[str, float] = {}
+
+    def fresh_score(lam: int) -> float | None:
+        errors = []
+        for test in masks:
+            train = with_prior(calib.select(~test), old, lam, source)
+            try:
+                model = fit(train, settings, workers=workers, tables=False)
+            except InputError:
+                return None  # too few rows left to fit without the prior
+            held = calib.points[test]
+            delta = (train.offsets[outputs].to_numpy(dtype=float)
+                     - calib.offsets[outputs].to_numpy(dtype=float)).mean(axis=0)
+            pred = model.decouple(held[outputs].to_numpy(dtype=float) - delta, rotate=False,
+                                  exact=True)
+            errors.append(pred - held[loads].to_numpy(dtype=float))
+        return _worst(np.concatenate(errors), fs)
+
+    if not correctable(old):
+        labels = {FRESH if lam == 0 else f"lambda = {lam} prior rows per new row": lam
+                  for lam in copies}
+        for label, lam in labels.items():
+            s = fresh_score(lam)
+            if s is not None:
+                scores[label] = s
+        if not scores:
+            raise InputError(f"prior model {source}: no lambda could be scored held out",
+                             argument="prior")
+        best = min(scores, key=lambda k: (scores[k], k != FRESH))
+        lam = labels[best]
+        return PriorChoice(str(Path(source)), best, scores, copies=lam)
+
+    g = _decoder(old)
+    p = np.asarray(old.projection, dtype=float)
+    jac = _jacobian(_decoder(old, exact=True), u @ p.T, fs)  # tables are piecewise
+    intercept = calib.zero == "intercept"
+    pairs = [(a, b) for a in lambdas for b in lambdas]
+    weights = np.array([~test for _ in pairs for test in masks], dtype=float)
+    lam_gain = np.array([a for a, _ in pairs for _ in masks])
+    lam_load = np.array([b for _, b in pairs for _ in masks])
+    alpha, d, c = fit_corrections(u, f, g, p, fs, jac, weights, lam_gain, lam_load, intercept)
+    _, pred = _predict(u, g, p / fs[:, None], fs, alpha, d, c)
+    held = weights == 0
+    for j, pair in enumerate(pairs):
+        e = [pred[j * len(masks) + i][held[j * len(masks) + i]] - f[held[j * len(masks) + i]]
+             for i in range(len(masks))]
+        e = np.concatenate(e)
+        if np.isfinite(e).all():
+            scores[_label(*pair)] = _worst(e, fs)
+    fresh = fresh_score(0)
+    if fresh is not None:
+        scores[FRESH] = fresh
+    if not scores:
+        raise InputError(f"prior model {source}: no lambda could be scored held out",
+                         argument="prior")
+    # ties go to the fresh fit, then to the larger lambdas (the smaller change)
+    order = {_label(*pair): (-pair[0], -pair[1]) for pair in pairs}
+    best = min(scores, key=lambda k: (scores[k], k != FRESH, order.get(k, (0, 0))))
+    chosen = None if best == FRESH else next(pr for pr in pairs if _label(*pr) == best)
+    return PriorChoice(str(Path(source)), best, scores, lambdas=chosen)
+
+
+def corrected_model(calib, settings, old, choice: PriorChoice) -> CouplingErrorModel:
+    """The old model with the correction of ``choice.lambdas`` fitted to all of ``calib``."""
+    from .fit import _library_versions, fitted_zero
+    from .linear import fit_calibration_matrix
+
+    layout = settings.layout
+    fs = np.asarray(settings.full_scale, dtype=float)
+    u, f = calib.voltages, calib.forces
+    p = np.asarray(old.projection, dtype=float)
+    g = _decoder(old)
+    intercept = calib.zero == "intercept"
+    jac = _jacobian(_decoder(old, exact=True), u @ p.T, fs)
+    corr = fit_correction(u, f, g, p, fs, jac, *choice.lambdas, intercept)
+    p_new = corr.projection(p, fs)
+    shift = np.linalg.pinv(p_new) @ (corr.c * fs)  # outputs whose P' u is c: the zero moves
+    zero = fitted_zero(calib) - shift if intercept else None
+    model = CouplingErrorModel(replace(settings, svr=old.settings.svr), np.ones(layout.n),
+                               dict(old.chi), own=dict(old.own), projection=p_new, zero=zero)
+    x = u + shift if intercept else u  # the outputs less the model's zero
+    v = x @ p_new.T
+    exact = model.decouple(x, rotate=False, exact=True)
+    units = settings.units.loads or None
+    r2 = 1.0 - ((v - f) ** 2).sum(axis=0) / ((v - v.mean(axis=0)) ** 2).sum(axis=0)
+    before = old.report
+    model.report = FitReport(
+        r2=dict(zip(layout.labels, map(float, r2), strict=True)),
+        n_points={a: int((f[:, i] != 0).sum()) for i, a in enumerate(layout.labels)},
+        gamma_before=interference_errors(calib.points, v, fs, layout, units),
+        gamma_after=interference_errors(calib.points, exact, fs, layout, units),
+        n_support_vectors=dict(before.n_support_vectors) if before else {},
+        surrogate_max_error=before.surrogate_max_error if before else None,
+        repetitions=calib.repetitions, warnings=[*calib.warnings, choice.line()])
+    model.matrix = fit_calibration_matrix(u, f).C
+    model.provenance = {"files": [{"path": q, "sha256": h} for q, h in calib.files],
+                        "prior": {"path": choice.source,
+                                  "created": getattr(old, "created", "")},
+                        "libraries": _library_versions()}
+    if calib.excluded:
+        model.provenance["excluded"] = list(calib.excluded)
+    model.created = datetime.now(UTC).replace(microsecond=0).isoformat()
+    return model
+
+
+def fit_with_prior(calib, settings, old, source: str, refit, *, method: str = "svr",
+                   tune: bool = False, workers: int | None = None) -> CouplingErrorModel:
+    """``fit NEW --prior OLD.json``: the candidate of least held-out error (:func:`choose_prior`);
+    ``refit(calib)`` fits a set as ``fit`` does (a fresh fit, or one with prior rows)."""
+    check_prior_options(method, tune)
+    choice = choose_prior(calib, settings, old, source, workers=workers)
+    if choice.lambdas is not None:
+        return corrected_model(calib, settings, old, choice)
+    out = with_prior(calib, old, choice.copies, source)
+    return refit(replace(out, warnings=(*out.warnings, choice.line())))
 
 
 def zero_shift(old, u: np.ndarray, f: np.ndarray) -> np.ndarray:
@@ -98,51 +405,3 @@ def with_prior(calib, old, lam: int, source: str = "prior"):
     return replace(calib, points=copies)
 
 
-def choose_lambda(calib, settings, old, source: str, *, folds: int = FOLDS,
-                  workers: int | None = None, lambdas=LAMBDAS) -> PriorChoice:
-    """lambda from ``lambdas`` by held-out error over ``folds`` folds of the new rows."""
-    from .fit import fit
-
-    check_prior(old, settings, source)
-    n = len(calib.points)
-    if n < folds:
-        raise InputError(f"prior model {source}: {n} calibration rows; choosing lambda needs at "
-                         f"least {folds} (one per fold)", argument="prior")
-    layout = calib.layout
-    order = np.random.default_rng(0).permutation(n)
-    fs = np.asarray(settings.full_scale, dtype=float)
-    scores = {}
-    for lam in lambdas:
-        errors = []
-        for k in range(folds):
-            test = np.zeros(n, dtype=bool)
-            test[order[k::folds]] = True
-            train = with_prior(calib.select(~test), old, lam, source)
-            try:
-                model = fit(train, settings, workers=workers, tables=False)
-            except InputError:
-                errors = None  # too few rows left to fit without the prior
-                break
-            held = calib.points[test]
-            outputs = list(layout.outputs)
-            delta = (train.offsets[outputs].to_numpy(dtype=float)
-                     - calib.offsets[outputs].to_numpy(dtype=float)).mean(axis=0)
-            f = model.decouple(held[outputs].to_numpy(dtype=float) - delta, rotate=False,
-                               exact=True)
-            errors.append(f - held[list(layout.loads)].to_numpy(dtype=float))
-        if errors is not None:
-            e = np.concatenate(errors)
-            scores[lam] = float((np.sqrt((e ** 2).mean(axis=0)) / fs).max())
-    if not scores:
-        raise InputError(f"prior model {source}: no lambda could be scored held out",
-                         argument="prior")
-    best = min(scores, key=lambda lam: (scores[lam], lam))
-    return PriorChoice(str(Path(source)), best, scores)
-
-
-def prior_set(calib, settings, old, source: str, *, workers: int | None = None):
-    """The calibration set ``fit --prior`` fits: the new rows and lambda copies of them with
-    the old model's loads, lambda chosen by held-out error and said in the set's warnings."""
-    choice = choose_lambda(calib, settings, old, source, workers=workers)
-    out = with_prior(calib, old, choice.lam, source)
-    return replace(out, warnings=(*out.warnings, choice.line()))

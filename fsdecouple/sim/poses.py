@@ -90,12 +90,15 @@ def pose_loads(seed: int) -> np.ndarray:
 
 
 def simulate_poses(seed: int = 0, samples: int = SAMPLES, gauges: int = GAUGES,
-                   dead: int | None = None, drift: float = 0.0, noise_seed: int = 0) -> PoseSet:
+                   dead: int | None = None, drift: float = 0.0, noise_seed: int = 0,
+                   coupling: float = 0.0) -> PoseSet:
     """Draw a pose calibration (module docstring); ``dead``: a channel stuck at one value.
 
     ``drift``: the same sensor later (in-situ recalibration, fitting/prior.py): each gauge's
     gains scaled by 1 + drift N(0, 1) and its offset moved by drift x SPAN N(0, 1), drawn
     from the seed; ``noise_seed`` draws another calibration's noise and misreads.
+    ``coupling``: another drift, every entry of the gauge mix moved by coupling x its RMS
+    entry x N(0, 1) (a change of the coupling, not of a gauge's gain).
     """
     rng = np.random.default_rng([320, seed])
     f = pose_loads(seed)
@@ -108,6 +111,9 @@ def simulate_poses(seed: int = 0, samples: int = SAMPLES, gauges: int = GAUGES,
         moved = np.random.default_rng([321, seed])
         mix = mix * (1.0 + drift * moved.normal(size=(gauges, 1)))
         offset = offset + drift * SPAN * moved.normal(size=gauges)
+    if coupling:
+        moved = np.random.default_rng([323, seed])
+        mix = mix + coupling * np.sqrt((mix ** 2).mean()) * moved.normal(size=mix.shape)
     noise = np.random.default_rng([322, seed, noise_seed]) if noise_seed else rng
     linear = s @ mix.T
     signal = SPAN * (linear + (s ** 2) @ quad.T)
