@@ -73,6 +73,12 @@ def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
     from ..errors import InputError
 
     settings = settings or Settings()
+    note = None
+    if method is None and settings.method == "auto" and not verdict:
+        # the config's auto (init writes it for poses) with the verdict turned off here:
+        # the flag is the more specific, so the paper's method, said once
+        method, note = "svr", ("the config's method auto chooses by the held-out verdict, "
+                               "which is off: the model decouples by svr")
     method = method or settings.method or "svr"
     if method not in FIT_METHODS:
         raise InputError(f"method {method!r}: expected one of {', '.join(FIT_METHODS)}",
@@ -95,7 +101,10 @@ def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
 
     calib, _ = compensate(calib, settings)  # outputs at T0 for every figure below (issue 31)
     with single_threaded_libraries():
-        return _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress)
+        model = _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress)
+    if note:
+        model.report.warnings.append(note)
+    return model
 
 
 def _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress):
