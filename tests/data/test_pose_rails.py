@@ -108,3 +108,23 @@ def test_init_writes_method_auto_for_poses_and_fit_obeys_it(tmp_path):
     bad.write_text(text.replace("method: auto", "method: best"))
     r = invoke(["fit", path, "-c", bad, "-o", tmp_path / "b.json"], code=2)
     assert_one_line_error(r, "method", "best")
+
+
+def test_cv_on_a_pose_set_holds_out_poses_in_five_folds(tmp_path):
+    # before: "the mx sweep of repetition 1 has 1 loaded point; holding out load levels
+    # needs at least 2" (a pose set has no sweeps); now every fifth pose per round, and the
+    # JSON document stays strict JSON where a round has no sweep of an axis to check
+    import json
+
+    poses = simulate_poses(0, 20, gauges=6)
+    path = tmp_path / "six.csv"
+    path.write_text("\n".join(pose_lines(poses)) + "\n")
+    init_config(path, tmp_path / "cfg.yaml")
+    r = invoke(["cv", path, "-c", tmp_path / "cfg.yaml", "--json"])
+    doc = json.loads(r.stdout)
+    assert doc["protocol"] == "poses" and doc["folds"] == [[1], [2], [3], [4], [5]]
+    n = len(poses.loads)
+    scored = {(rec["round"], rec["axis"]) for rec in doc["records"] if rec["method"] == "linear"}
+    assert {rnd for rnd, _ in scored} == {1, 2, 3, 4, 5} and n == 60
+    r = invoke(["cv", path, "-c", tmp_path / "cfg.yaml"])
+    assert "protocol: poses (round k of 5 holds out every fifth pose" in r.stdout
