@@ -289,6 +289,9 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
         out_unit, out_why = guess_unit("output", hints, peak_out, integers, notes,
                                   {f"c{j}": shown(names[i]) for j, i in enumerate(channels)},
                                   keys=list(hints), bits=adc_bits(u) if integers else None)
+    bits = adc_bits(u) if out_unit == "count" and integers else None
+    if bits is not None:  # a misread (459 read as 4598) is no peak of a k-bit ADC's readings
+        peak_out = float(np.abs(u[u <= 2 ** bits - 1]).max())
     mixed = len(set(load_units.values())) > 1
     shown_out = ", ".join(f"{o} {v}" for o, v in out_units.items()) if out_units else out_unit
     reasons["units"] = (f"load {', '.join(f'{c} {v}' for c, v in load_units.items())}: header hints, "

@@ -128,3 +128,19 @@ def test_cv_on_a_pose_set_holds_out_poses_in_five_folds(tmp_path):
     assert {rnd for rnd, _ in scored} == {1, 2, 3, 4, 5} and n == 60
     r = invoke(["cv", path, "-c", tmp_path / "cfg.yaml"])
     assert "protocol: poses (round k of 5 holds out every fifth pose" in r.stdout
+
+
+def test_inits_output_peak_is_no_misread(tmp_path):
+    # a serial misread (459 read as 4598) was quoted as the outputs' peak of a 10-bit ADC
+    import json
+    import re
+
+    poses = simulate_poses(3, 100)
+    assert max(int(x.max()) for x in poses.samples) > 1023  # the set has misreads
+    path = tmp_path / "poses.csv"
+    path.write_text("\n".join(pose_lines(poses)) + "\n")
+    r = invoke(["init", path, "-o", tmp_path / "cfg.yaml", "--json"])
+    why = json.loads(r.stdout)["reasons"]["scaling"]
+    peak = float(re.search(r"outputs peak at ([0-9.]+) count", why).group(1))
+    clean = max(int(x[x <= 1023].max()) for x in poses.samples)
+    assert peak == clean
