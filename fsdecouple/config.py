@@ -92,6 +92,8 @@ class Settings:
     components: tuple[str, ...] | None = None
     outputs: tuple[str, ...] | None = None
     zero: str | None = None  # ZERO_MODES; None: rows for x, y, z, fit for components
+    # what fit's model decouples by (FIT_METHODS: svr, linear, auto); None: svr, the paper's
+    method: str | None = None
     frame: Frame | None = None  # six axes: the wrench transform after eq. (11) (wrench.py)
     lab: LabInfo = LabInfo()  # the certificate's serial, reference, environment (labinfo.py)
     # the top-level keys a config file wrote (schema.py), so a command can tell a value
@@ -125,6 +127,8 @@ class Settings:
         d["full_scale"] = dict(zip(layout.labels, self.full_scale, strict=True))
         if self.zero is None:
             del d["zero"]
+        if self.method is None:
+            del d["method"]
         if self.frame is None:
             del d["frame"]
         else:

@@ -32,6 +32,7 @@ Settings = SVRSettings = Any
 SCALINGS = ("none", "full_scale")
 NOT_CSV = "0123456789eE+-\"\r\n"  # csv: characters that stand inside a number or a quoted cell
 CSV_CHARS = {"decimal": "'.' or ','", "sep": "one character that is no digit, sign, 'e', quote or line break"}
+FIT_METHODS = ("svr", "linear", "auto")  # fit --method, the config's method (evaluation/calibrate.py)
 ZERO_MODES = ("rows", "fit", "intercept")  # Section 3; zero.fitted_offsets; zero.intercept_offsets
 # chi beyond its range (core/extrapolation.py): tangent for new fits, kernel for older files
 EXTRAPOLATIONS = DEFAULT_EXTRAPOLATION, LEGACY_EXTRAPOLATION = ("tangent", "kernel")
@@ -363,6 +364,8 @@ SCHEMA: tuple[Key, ...] = (
         f"second-order refinement steps K (0 .. {MAX_REFINE})"),
     Key("zero", _field("zero", check_zero), "rows (x, y, z) or fit",
         "how sweeps are zeroed: rows or fit"),
+    Key("method", _field("method", Choice(FIT_METHODS)), "svr",
+        "what fit's model decouples by: svr, linear or auto (the lower held-out error)"),
     Key("extrapolation", _field("extrapolation", check_choice), DEFAULT_EXTRAPOLATION,
         "chi beyond its calibrated range: tangent or kernel"),
     Key("units", lambda v, w, s: {"units": units(v, w, s.layout)}, "{load: N, output: V}",

@@ -66,8 +66,9 @@ def cv(
     ] = None,
     repeats: Annotated[int, typer.Option(help="Sequential timing passes (Table 4).")] = 1,
     protocol: Annotated[
-        str | None, typer.Option(help="What a round holds out: repetitions|levels (default: "
-                                      "repetitions with 3 or more, else load levels).")
+        str | None, typer.Option(help="What a round holds out: repetitions|levels|poses "
+                                      "(default: repetitions with 3 or more, else every fifth "
+                                      "pose for poses of a mass, else load levels).")
     ] = None,
     tune: Annotated[
         bool, typer.Option("--tune", help="Cross-validate with SVR settings chosen as fit --tune "

@@ -51,7 +51,9 @@ def fit_many(
     baseline: Annotated[Path | None, typer.Option(
         help="Directory of earlier <sensor>.json models: report each sensor's drift.")] = None,
     max_drift: MaxDriftOpt = None,
-    method: Annotated[str, typer.Option(help="svr, linear or auto, as fit --method.")] = "svr",
+    method: Annotated[str | None, typer.Option(
+        help="svr, linear or auto, as fit --method (default: the config's method, else svr).")
+    ] = None,
     workers: Annotated[int | None, typer.Option(help="Sensors fitted at once (processes); "
                                                      "default: the cores.")] = None,
     force: ForceOpt = False,

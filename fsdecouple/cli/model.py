@@ -52,9 +52,10 @@ def fit(
                           "exceeds this fraction."),
     ] = None,
     method: Annotated[
-        str, typer.Option(help="svr (the paper's), linear (calibration matrix) or auto "
-                               "(the lower held-out worst gamma).")
-    ] = "svr",
+        str | None, typer.Option(help="svr (the paper's), linear (calibration matrix) or auto "
+                                      "(the lower held-out error); default: the config's "
+                                      "method, else svr.")
+    ] = None,
     exclude: Annotated[
         list[str] | None,
         typer.Option(metavar="FILE:LINE", help="Drop line LINE of FILE (header = line 1; "

@@ -308,7 +308,7 @@ def read_calibration_table(path: str | Path, settings: Settings,
     posed = table["file"].isin([str(f) for f, *_ in poses]).to_numpy()
     if known and posed.any():  # a channel at a rail on a pose (rails.py)
         keep = np.ones(len(table), dtype=bool)
-        keep[posed], notes = at_rail(table[posed], layout.outputs, known, strict)
+        keep[posed], notes = at_rail(table[posed], layout.outputs, known, strict, layout.loads)
         warnings.extend(notes)
         table = table[keep].reset_index(drop=True)
     if "temperature" in table.columns and table["temperature"].isna().any():  # not in every file

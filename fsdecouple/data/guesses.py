@@ -99,6 +99,7 @@ class Guess:
     output_units: dict[str, str] | None = None  # per output, where they differ
     zero: str | None = None  # "intercept" for data without an unloaded row (data/zero.py)
     gamma: float | None = None  # svr: gamma for poses of a mass (init_config.POSE_GAMMA)
+    method: str | None = None  # "auto" for poses of a mass (init_config.POSE_METHOD)
 
     def to_dict(self) -> dict[str, Any]:
         """The ``--json`` document."""
@@ -115,6 +116,7 @@ class Guess:
                if self.components else {}),
             **({"zero": self.zero} if self.zero else {}),
             **({"svr": {"gamma": self.gamma}} if self.gamma else {}),
+            **({"method": self.method} if self.method else {}),
         }
 
     def settings(self) -> list[tuple[str, str, str]]:
@@ -134,6 +136,7 @@ class Guess:
             "scaling": self.scaling,
             **({"zero": self.zero} if self.zero else {}),
             **({"svr": f"{{gamma: {self.gamma!r}}}"} if self.gamma else {}),
+            **({"method": self.method} if self.method else {}),
         }
         return [(k, v, self.reasons[k]) for k, v in values.items()]
 

@@ -26,11 +26,11 @@ if TYPE_CHECKING:
     from ..data.calibration import CalibrationSet
     from .tune import Grid
 
-FIT_METHODS = ("svr", "linear", "auto")
+from ..schema import FIT_METHODS
 
 
 def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
-        method: str = "svr", verdict: bool = True, tune: bool = False,
+        method: str | None = None, verdict: bool = True, tune: bool = False,
         tune_grid: Grid | str | None = None, workers: int | None = None,
         progress: Callable[[int, int], None] | None = None) -> CouplingErrorModel:
     """Fit the coupling error model as ``fsdecouple fit`` does; the model it writes.
@@ -41,11 +41,11 @@ def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
         The calibration (:func:`fsdecouple.load_calibration`), or a path to read it from.
     settings : Settings, optional
         The configuration (:func:`fsdecouple.load_config`); default: the built-in one.
-    method : {'svr', 'linear', 'auto'}
+    method : {'svr', 'linear', 'auto'}, optional
         What the model decouples by (``--method``): the coupling error model (eq. 11,
         the paper's), the least-squares calibration matrix, or whichever has the lower
         held-out figure of the verdict (worst gamma, eq. 12; on rig rows the worst
-        component's RMS error).
+        component's RMS error).  Default: the config's ``method:``, else ``svr``.
     verdict : bool
         Judge the model on held-out points against the calibration matrix
         (``verdict=False`` is ``--no-verdict``).  When the protocol cannot run (e.g. a
@@ -73,6 +73,13 @@ def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
     from ..errors import InputError
 
     settings = settings or Settings()
+    note = None
+    if method is None and settings.method == "auto" and not verdict:
+        # the config's auto (init writes it for poses) with the verdict turned off here:
+        # the flag is the more specific, so the paper's method, said once
+        method, note = "svr", ("the config's method auto chooses by the held-out verdict, "
+                               "which is off: the model decouples by svr")
+    method = method or settings.method or "svr"
     if method not in FIT_METHODS:
         raise InputError(f"method {method!r}: expected one of {', '.join(FIT_METHODS)}",
                          argument="method")
@@ -94,7 +101,10 @@ def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
 
     calib, _ = compensate(calib, settings)  # outputs at T0 for every figure below (issue 31)
     with single_threaded_libraries():
-        return _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress)
+        model = _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress)
+    if note:
+        model.report.warnings.append(note)
+    return model
 
 
 def _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress):

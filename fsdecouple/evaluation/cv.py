@@ -208,9 +208,10 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
     reps = calib.repetitions
     protocol = choose_protocol(calib, protocol if protocol is not None or folds is None
                                else "repetitions")
-    if protocol == "levels" and folds is not None:
-        raise InputError("folds name held-out repetitions; the levels protocol holds out "
-                         "load levels: drop one of them", argument="folds")
+    if protocol in ("levels", "poses") and folds is not None:
+        raise InputError(f"folds name held-out repetitions; the {protocol} protocol holds out "
+                         f"{'load levels' if protocol == 'levels' else 'poses'}: drop one of "
+                         "them", argument="folds")
     if protocol == "repetitions":
         folds = folds if folds is not None else default_folds(reps)
         check_folds(folds, reps)
@@ -329,8 +330,10 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
                                        "number of training jobs",
                          "speedup": sequential / wall if wall > 0 else None},
         },
+        # a check with no value (NaN: e.g. no sweep of an axis among a round's poses) is
+        # not in the document, which is strict JSON
         "checks": [{**c.to_dict(), "round": r} for r in trains
-                   for c in assumption_checks(models[(r, "svr")])],
+                   for c in assumption_checks(models[(r, "svr")]) if not np.isnan(c.value)],
         "curves": _curves(rounds, models, protocol),
         "points": points,
         "gate": None,

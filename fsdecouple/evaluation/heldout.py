@@ -8,8 +8,11 @@
   trains on the rest; zero-load rows always stay in training.  A held-out point
   whose load lies beyond the loads left in its sweep (the largest, or the most
   negative) can only be extrapolated, so it is scored apart as an *end* point.
+* ``poses`` (poses of a known mass, issue 32: no unloaded row, so no sweep to take
+  levels from): round k of :data:`POSE_FOLDS` holds out points k, k + 5, k + 10, ...
+  in file order (every fifth pose) and trains on the rest.
 
-Both serve ``cv`` and the verdict of ``fit``.
+All serve ``cv`` and the verdict of ``fit``.
 """
 
 from __future__ import annotations
@@ -21,7 +24,8 @@ import numpy as np
 from ..data.calibration import CalibrationSet
 from ..errors import InputError
 
-PROTOCOLS = ("repetitions", "levels")
+PROTOCOLS = ("repetitions", "levels", "poses")
+POSE_FOLDS = 5  # issue 32: "held out by pose (5 folds)"
 ROUNDS = 3  # Section 4.1: "the cross validation is repeated three times"
 HELD_OUT = 2  # "test data I" and "test data II"
 MIN_REPETITIONS = HELD_OUT + 1  # two held out, at least one to train
@@ -41,10 +45,19 @@ class HeldOutRound:
     end: CalibrationSet | None = None
 
 
+def is_pose_set(calib: CalibrationSet) -> bool:
+    """Averaged poses (data/poses.py) with no unloaded row (``zero: intercept``): a robot
+    arm's poses of a mass, whose sweeps (and so load levels) are no more than file order."""
+    return getattr(calib, "zero", None) == "intercept" and getattr(calib, "noise", None) is not None
+
+
 def choose_protocol(calib: CalibrationSet, protocol: str | None = None) -> str:
-    """``repetitions`` with three or more repetitions, else ``levels``; or check the given one."""
+    """``repetitions`` with three or more repetitions, else ``poses`` for a pose set
+    (:func:`is_pose_set`), else ``levels``; or check the given one."""
     if protocol is None:
-        return "repetitions" if len(calib.repetitions) >= MIN_REPETITIONS else "levels"
+        if len(calib.repetitions) >= MIN_REPETITIONS:
+            return "repetitions"
+        return "poses" if is_pose_set(calib) else "levels"
     if protocol not in PROTOCOLS:
         raise InputError(f"protocol {protocol!r}: expected one of {', '.join(PROTOCOLS)}",
                          argument="protocol")
@@ -112,6 +125,18 @@ def level_rounds(calib: CalibrationSet) -> list[HeldOutRound]:
             calib.select(end) if end.any() else None,
         ))
     return rounds
+
+
+def pose_rounds(calib: CalibrationSet, folds: int = POSE_FOLDS) -> list[HeldOutRound]:
+    """Round k (1 .. ``folds``) holds out points k - 1, k - 1 + folds, ... in file order."""
+    n = len(calib.points)
+    if n < 2 * folds:
+        raise InputError(f"{calib.source}: {n} poses; holding out poses in {folds} folds needs "
+                         f"at least {2 * folds} (each round trains on the other folds)")
+    index = np.arange(n)
+    return [HeldOutRound(k + 1, calib.select(index % folds != k),
+                         ((k + 1, calib.select(index % folds == k)),))
+            for k in range(folds)]
 
 
 # --- folds ------------------------------------------------------------------------
@@ -183,6 +208,8 @@ def rounds_for(calib: CalibrationSet, protocol: str, folds: list[list[int]] | No
     """The rounds of a protocol: ``folds`` (default :func:`default_folds`) for repetitions."""
     if protocol == "levels":
         return level_rounds(calib)
+    if protocol == "poses":
+        return pose_rounds(calib)
     folds = folds if folds is not None else default_folds(calib.repetitions)
     check_folds(folds, calib.repetitions)
     return repetition_rounds(calib, folds)

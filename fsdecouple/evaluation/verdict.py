@@ -111,8 +111,10 @@ def heldout_verdict(calib: CalibrationSet, settings: Settings, *, protocol: str 
         "protocol": protocol,
         "figure": figure,
         "rounds": len(rounds),
-        "points": "held-out interior points; end points (levels protocol) apart, as "
-                  "worst_gamma_end" if protocol == "levels" else "held-out repetitions",
+        "points": {"levels": "held-out interior points; end points (levels protocol) apart, "
+                             "as worst_gamma_end",
+                   "poses": "held-out poses, every fifth in file order"}.get(
+                       protocol, "held-out repetitions"),
         "heldout": heldout,
         "better": better,
         "records": records,

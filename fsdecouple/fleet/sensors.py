@@ -105,7 +105,7 @@ def calibration_path(sensor_dir: Path) -> Path:
     return sub if sub.is_dir() else sensor_dir
 
 
-def fit_sensor(sensor_dir: str | Path, models_dir: str | Path, *, method: str = "svr",
+def fit_sensor(sensor_dir: str | Path, models_dir: str | Path, *, method: str | None = None,
                max_gamma: float | None = None, baseline: str | Path | None = None,
                max_drift: float | None = None, force: bool = False,
                workers: int | None = 1) -> SensorResult:
@@ -162,7 +162,7 @@ def fit_sensor(sensor_dir: str | Path, models_dir: str | Path, *, method: str = 
     return result
 
 
-def fit_many(sensors_dir: str | Path, models_dir: str | Path, *, method: str = "svr",
+def fit_many(sensors_dir: str | Path, models_dir: str | Path, *, method: str | None = None,
              max_gamma: float | None = None, baseline: str | Path | None = None,
              max_drift: float | None = None, force: bool = False, workers: int | None = None,
              executor: str = "process",
@@ -171,8 +171,9 @@ def fit_many(sensors_dir: str | Path, models_dir: str | Path, *, method: str = "
 
     Parameters
     ----------
-    method : str
-        ``svr``, ``linear`` or ``auto``, as ``fit --method``.
+    method : str, optional
+        ``svr``, ``linear`` or ``auto``, as ``fit --method``; default: each sensor's
+        config's ``method:``, else ``svr``.
     max_gamma : float, optional
         Gate: a sensor fails when its held-out worst gamma (eq. 12, of the method
         its model decouples with) exceeds this fraction of full scale.
@@ -193,7 +194,7 @@ def fit_many(sensors_dir: str | Path, models_dir: str | Path, *, method: str = "
 
     check_max_gamma(max_gamma)
     check_max_drift(max_drift)
-    if method not in FIT_METHODS:
+    if method is not None and method not in FIT_METHODS:
         raise InputError(f"--method {method!r}: expected one of {', '.join(FIT_METHODS)}")
     if executor not in EXECUTORS:
         raise InputError(f"executor {executor!r}: expected one of {', '.join(EXECUTORS)}")

@@ -223,12 +223,14 @@ def gamma_table(doc: dict[str, Any], records=None, title=None, clean=None) -> Ta
     idx = gamma_index(doc["records"] if records is None else records)
     ref = gamma_index(clean) if clean is not None else None
     levels = doc.get("protocol") == "levels"
-    held = "load levels (interior points)" if levels else "repetitions"
+    poses = doc.get("protocol") == "poses"
+    held = "load levels (interior points)" if levels else "poses" if poses else "repetitions"
     t = Table(title=title or f"Interference error gamma (eq. 12) on held-out {held}, % F.S. "
                              "(! and bold red: worse than initial)", box=box.SIMPLE_HEAD,
               pad_edge=False, padding=(0, 0, 0, 1))
     t.add_column("round", no_wrap=True)
-    t.add_column("test (level)" if levels else "test (rep)", no_wrap=True)
+    t.add_column("test (level)" if levels else "test (fold)" if poses else "test (rep)",
+                 no_wrap=True)
     setattr(t, KEY_COLUMNS, 2)  # a narrow terminal's parts repeat round and test (narrow.py)
     cell_width = 5 if ref is not None else 4
     axes = labels_in(doc["records"] if records is None else records)
@@ -251,8 +253,8 @@ def gamma_table(doc: dict[str, Any], records=None, title=None, clean=None) -> Ta
                     # "!" keeps the paper's bold visible in plain-text CI logs
                     cells.append(Text(_num(v) + mark + ("!" if worse else ""),
                                       style=WORSE if worse else ""))
-            name = test_name(i)
-            t.add_row(str(r) if i == 0 else "", f"{name} ({rep})", *cells)
+            name = f"poses {rep}, {rep + 5}, ..." if poses else f"{test_name(i)} ({rep})"
+            t.add_row(str(r) if i == 0 else "", name, *cells)
         if r < len(doc["folds"]):
             t.add_section()
     return t
@@ -280,6 +282,9 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
             end[rec["method"]] = max(end[rec["method"]], rec["value"])
         lines += [f"{m:9s} worst gamma {_num(end[m]):>6s} % F.S. on end points (extrapolation)"
                   for m in doc["methods"] if m in end]
+    elif doc.get("protocol") == "poses":
+        lines.insert(0, "protocol: poses (round k of 5 holds out every fifth pose in file order, "
+                        "from the k-th)")
     else:
         lines.insert(0, "protocol: repetitions (each round holds out whole repetitions, Section 4.1)")
     return lines

@@ -91,8 +91,13 @@ def pose_loads(seed: int) -> np.ndarray:
 
 def simulate_poses(seed: int = 0, samples: int = SAMPLES, gauges: int = GAUGES,
                    dead: int | None = None, drift: float = 0.0, noise_seed: int = 0,
-                   coupling: float = 0.0) -> PoseSet:
+                   coupling: float = 0.0, repeatability: float = 0.0) -> PoseSet:
     """Draw a pose calibration (module docstring); ``dead``: a channel stuck at one value.
+
+    ``repeatability``: each pose's gauges also read off their smooth response by
+    repeatability x SPAN N(0, 1), the same for all its samples (creep and hysteresis of a
+    printed flexure: the public eight-gauge set's poses sit ~10 % of a span off any
+    smooth model while their samples scatter by under a count).  The truth keeps it.
 
     ``drift``: the same sensor later (in-situ recalibration, fitting/prior.py): each gauge's
     gains scaled by 1 + drift N(0, 1) and its offset moved by drift x SPAN N(0, 1), drawn
@@ -126,6 +131,9 @@ def simulate_poses(seed: int = 0, samples: int = SAMPLES, gauges: int = GAUGES,
         offset[j] = 0.955 * top - high[-n] + 1.0
         offset[j] = min(offset[j], top - 3 - high[-1])
     truth = offset + signal
+    if repeatability:
+        truth = truth + repeatability * SPAN * np.random.default_rng([323, seed]).normal(
+            size=truth.shape)
     if dead is not None:
         truth[:, dead] = offset[dead]
     out = []
