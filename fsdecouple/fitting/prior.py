@@ -103,14 +103,20 @@ def check_prior(old, settings, source: str) -> None:
                          argument="prior")
 
 
-def check_prior_options(method: str, tune: bool) -> None:
+def check_prior_options(method: str | None, tune: bool, settings) -> str | None:
     """``--prior`` keeps the old chi or refits fresh ones as the held-out error says:
-    neither ``--tune`` nor another ``--method`` would be obeyed on the first."""
-    if tune or method != "svr":
-        asked = "--tune" if tune else f"--method {method}"
+    neither tuning nor another method asked for on the command line would be obeyed on the
+    first, so both are refused.  A config's ``method:`` other than svr (``init`` writes
+    ``auto`` for poses) is not used either: the returned note says so."""
+    if tune or method not in (None, "svr"):
+        asked = "tuning the SVR settings" if tune else f"the method {method}"
         raise InputError(f"it chooses between the previous model, corrected, and a fresh fit "
-                         f"by held-out error, and cannot take {asked} as well: fit without "
-                         "--prior for that", argument="prior")
+                         f"by held-out error, and cannot take {asked} as well: fit without a "
+                         "prior for that", argument="prior")
+    if method is None and settings.method not in (None, "svr"):
+        return (f"config method: {settings.method} not used: with a prior, fit chooses between "
+                "the previous model, corrected, and a fresh svr fit by held-out error")
+    return None
 
 
 def correctable(old) -> bool:
@@ -350,11 +356,13 @@ def corrected_model(calib, settings, old, choice: PriorChoice) -> CouplingErrorM
     return model
 
 
-def fit_with_prior(calib, settings, old, source: str, refit, *, method: str = "svr",
+def fit_with_prior(calib, settings, old, source: str, refit, *, method: str | None = None,
                    tune: bool = False, workers: int | None = None) -> CouplingErrorModel:
     """``fit NEW --prior OLD.json``: the candidate of least held-out error (:func:`choose_prior`);
     ``refit(calib)`` fits a set as ``fit`` does (a fresh fit, or one with prior rows)."""
-    check_prior_options(method, tune)
+    note = check_prior_options(method, tune, settings)
+    if note is not None:
+        calib = replace(calib, warnings=(*calib.warnings, note))
     choice = choose_prior(calib, settings, old, source, workers=workers)
     if choice.lambdas is not None:
         return corrected_model(calib, settings, old, choice)

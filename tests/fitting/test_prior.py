@@ -116,8 +116,23 @@ def test_a_prior_with_tuning_is_refused_not_ignored(old):
     tmp, _, _ = old
     r = invoke(["fit", tmp / "poses.csv", "-c", tmp / "cfg.yaml", "-o", tmp / "t.json",
                 "--prior", tmp / "old.json", "--tune"], code=2)
-    assert_one_line_error(r, "--prior", "--tune")
+    assert_one_line_error(r, "--prior", "tuning")
     assert not (tmp / "t.json").exists()
+    r = invoke(["fit", tmp / "poses.csv", "-c", tmp / "cfg.yaml", "-o", tmp / "t.json",
+                "--prior", tmp / "old.json", "--method", "linear"], code=2)
+    assert_one_line_error(r, "--prior", "method linear")
+    assert not (tmp / "t.json").exists()
+
+
+def test_a_config_method_a_prior_cannot_obey_is_named_not_dropped(old):
+    """init writes method: auto for poses; with a prior the choice is the prior's, and the
+    fit says the config's method was not used (an unused key is warned about)."""
+    tmp, _, _ = old
+    cfg = tmp / "cfg.yaml"
+    assert "method: auto" in cfg.read_text()
+    r = invoke(["fit", tmp / "poses.csv", "-c", cfg, "-o", tmp / "a.json",
+                "--prior", tmp / "old.json", "--no-verdict"])
+    assert "config method: auto not used" in r.output
 
 
 def _errors(seed: int, kind: str, tmp) -> tuple[float, float, float]:
