@@ -14,6 +14,7 @@ import os
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -272,8 +273,10 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
     forces = _decouple_held_out(tests, models)
     points: list[dict] = []
     records = _score(tests, forces, settings, points)
+    # the levels protocol's end points, scored apart (the interior ones are scored above)
+    ends = [replace(rnd, tests=()) for rnd in rounds if rnd.end is not None]
     end_records = [{k: v for k, v in r.items() if k != "points"}
-                   for r in gamma_records(rounds, models, settings, METHODS) if r["points"] == "end"]
+                   for r in gamma_records(ends, models, settings, METHODS)]
 
     # Table 4: each method's time to establish round 1's model alone: first the
     # training run's own (not fitted twice), then `repeats - 1` more sequential fits.
