@@ -23,7 +23,8 @@ from .threads import single_threaded_libraries
 # the 4.5 s of CPU of ``fit`` (numba 0.5 s, scipy.sparse 0.4 s; issue 30).  A library that
 # is already loaded is left to libsvm.  Import this module from the main thread, before
 # threads start (fitting's entry points do): another thread importing scipy or numba
-# while libsvm loads would be refused.
+# while libsvm loads would be refused.  Code calling libsvm directly in the same process
+# then passes lists or dicts too (libsvm reads numpy arrays only when it found scipy).
 _SKIPPED = [name for name in ("scipy", "numba") if name not in sys.modules]
 try:
     for _name in _SKIPPED:
