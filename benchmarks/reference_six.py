@@ -53,13 +53,15 @@ class Reference:
         self.n = n = len(loads)
         self.k = np.array([f[sweep == a, a] @ u[sweep == a, a] / (f[sweep == a, a] @ f[sweep == a, a])
                            for a in range(n)])  # eq. (2)
-        self.svr = {(a, b): svmutil.svm_train(u[sweep == b, a], u[sweep == b, b].reshape(-1, 1), options)
+        # lists: libsvm's input whether or not it found scipy (fsdecouple loads it without)
+        self.svr = {(a, b): svmutil.svm_train(u[sweep == b, a].tolist(),
+                                              u[sweep == b, b].reshape(-1, 1).tolist(), options)
                     for b in range(n) for a in range(n) if a != b}  # eq. (4)
         self.matrix = np.linalg.lstsq(u, f, rcond=None)[0]  # the calibration matrix, F = U M
 
     def chi(self, a: int, b: int, x: np.ndarray) -> np.ndarray:
         x = np.ascontiguousarray(x, dtype=float).reshape(-1, 1)
-        return np.asarray(svmutil.svm_predict(np.zeros(len(x)), x, self.svr[a, b], "-q")[0])
+        return np.asarray(svmutil.svm_predict([0.0] * len(x), x.tolist(), self.svr[a, b], "-q")[0])
 
     def decouple(self, u: np.ndarray) -> np.ndarray:
         e = np.zeros_like(u)

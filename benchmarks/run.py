@@ -389,16 +389,19 @@ def main() -> int:
 
     m_lib = 20_000
     cols = {name: u[:m_lib, "xyz".index(name[1])].reshape(-1, 1) for name in CHI_NAMES}
+    # libsvm's input without scipy (fsdecouple imports libsvm so: fitting/svr.py): lists,
+    # or its native dicts
+    lists = {name: cols[name].tolist() for name in CHI_NAMES}
     dicts = {name: [{1: v} for v in cols[name][:, 0].tolist()] for name in CHI_NAMES}
-    zeros = np.zeros(m_lib)
+    zeros = [0.0] * m_lib
 
     def libsvm_batch(inputs):
         for name in CHI_NAMES:
             svmutil.svm_predict(zeros, inputs[name], libsvm[name], "-q")
 
-    libsvm_batch(cols)  # warm-up: the first numpy call imports scipy
-    # the faster of libsvm's input formats (numpy array or its native dicts)
-    lib_rate = m_lib / min(median_time(lambda: libsvm_batch(cols), 3),
+    libsvm_batch(lists)  # warm-up
+    # the faster of libsvm's input formats (lists or its native dicts)
+    lib_rate = m_lib / min(median_time(lambda: libsvm_batch(lists), 3),
                            median_time(lambda: libsvm_batch(dicts), 3))
     row("1. decouple (N,3), fast path", fast_rate / 1e6, "M vectors/s", lib_rate / 1e6,
         "libsvm batch svm_predict, six chi [M/s]", fast_rate / lib_rate, ">= 20 M/s and >= 1000x",
@@ -413,7 +416,7 @@ def main() -> int:
     lib_err = 0.0
     for name in CHI_NAMES:
         s = model.chi[name].surrogate
-        vals, _, _ = svmutil.svm_predict(zeros, cols[name], libsvm[name], "-q")
+        vals, _, _ = svmutil.svm_predict(zeros, lists[name], libsvm[name], "-q")
         lib_err = max(lib_err, float(np.abs(s(cols[name][:, 0]) - np.asarray(vals)).max()))
     row("1c. max abs(fast - exact) in range", err_v, "V", lib_err,
         "second check, not a baseline: max abs(surrogate - libsvm) [V]",

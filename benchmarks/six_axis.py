@@ -87,7 +87,7 @@ def main() -> int:
     m_lib = 5_000
     cols = {name: u[:m_lib, c.input_axis].reshape(-1, 1) for name, c in model.chi.items()}
     dicts = {name: [{1: v} for v in x[:, 0].tolist()] for name, x in cols.items()}
-    zeros = np.zeros(m_lib)
+    zeros = [0.0] * m_lib  # lists: libsvm as fsdecouple imports it, without scipy
 
     def libsvm_batch(inputs):
         for name in model.chi:

@@ -96,6 +96,7 @@ def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
         calib = load_calibration(calib, settings)
     if settings.zero is None and getattr(calib, "zero", None) == "fit" != settings.zero_method:
         settings = dataclasses.replace(settings, zero="fit")  # out-and-back sweeps (zero.py)
+    from ..fitting import svr  # noqa: F401 (libsvm loads on this thread, before the pool: svr.py)
     from ..fitting.temperature import compensate
     from ..fitting.threads import single_threaded_libraries
 

@@ -81,9 +81,11 @@ def heldout_verdict(calib: CalibrationSet, settings: Settings, *, protocol: str 
     protocol = choose_protocol(calib, protocol)
     rounds = rounds_for(calib, protocol)
     jobs = [((r.index, m), m, r.train) for r in rounds for m in VERDICT_METHODS]
-    # the rounds only judge: their SVRs are solved to the noise, not half of it (noise.py)
+    # the rounds' SVRs are solved as the model's are (VERDICT_NOISE_FRACTION, noise.py)
+    # each round's SVRs on every core too: the last round to start then does not train
+    # alone on one core while the others idle (fit: its SVRs are 90 % of the CPU)
     models, _ = train_all(jobs, settings, workers or 1, None, tables=False,
-                          noise_fraction=VERDICT_NOISE_FRACTION)
+                          noise_fraction=VERDICT_NOISE_FRACTION, svr_workers=workers or 1)
     records = gamma_records(rounds, models, settings)
     heldout = {}
     for m in VERDICT_METHODS:

@@ -74,8 +74,8 @@ def establish(method: str, train: CalibrationSet, settings: Settings, *, workers
 
 
 def train_all(jobs, settings, workers, progress, *, tables: bool = True,
-              noise_fraction: float | None = None,
-              seconds: dict | None = None) -> tuple[dict, float]:
+              noise_fraction: float | None = None, seconds: dict | None = None,
+              svr_workers: int = 1) -> tuple[dict, float]:
     """Fit every (key, method, train) job on a thread pool; (models, wall seconds).
 
     libsvm and LAPACK release the GIL, so threads train in parallel; each model
@@ -83,14 +83,18 @@ def train_all(jobs, settings, workers, progress, *, tables: bool = True,
     ``seconds``, if given, gets each key's time to fit alone: its wall time when
     sequential, else the CPU time of its pool thread (each job runs on one thread,
     with BLAS and OpenMP at one thread, so that is its time alone on an idle core).
+    ``svr_workers``: threads of each svr job's own N(N - 1) SVRs (the verdict's: its last
+    round then trains on every core, not on one); 1 where ``seconds`` is timed.
     """
+    if svr_workers > 1 and seconds is not None:
+        raise ValueError("svr_workers > 1: a job's pool-thread time is not its time alone")
     with single_threaded_libraries():
         return _train_all(jobs, settings, workers, progress, tables, noise_fraction,
-                          {} if seconds is None else seconds)
+                          {} if seconds is None else seconds, svr_workers)
 
 
 def _train_all(jobs, settings, workers, progress, tables, noise_fraction,
-               seconds) -> tuple[dict, float]:
+               seconds, svr_workers=1) -> tuple[dict, float]:
     models = {}
     t0 = time.perf_counter()
     if workers <= 1:
@@ -104,7 +108,8 @@ def _train_all(jobs, settings, workers, progress, tables, noise_fraction,
     else:
         def timed(key, method, train):
             start = time.thread_time()
-            model = establish(method, train, settings, workers=1, tables=tables,
+            model = establish(method, train, settings, tables=tables,
+                              workers=svr_workers if method == "svr" else 1,
                               noise_fraction=noise_fraction)
             seconds[key] = time.thread_time() - start
             return model
@@ -112,7 +117,8 @@ def _train_all(jobs, settings, workers, progress, tables, noise_fraction,
         # the SVR jobs are the long ones: start them first
         order = sorted(jobs, key=lambda j: j[1] != "svr")
         with thread_pool(workers) as pool:
-            # one thread per model: a fit's own pool on top would only oversubscribe
+            # one thread per model (unless svr_workers): a fit's own pool on top only
+            # oversubscribes while every job runs, but spreads the last ones over the cores
             futures = {pool.submit(timed, key, m, tr): key for key, m, tr in order}
             for i, fut in enumerate(as_completed(futures), start=1):
                 models[futures[fut]] = fut.result()

@@ -29,7 +29,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import qr, solve_triangular
 
 from ..axes import DEFAULT, NamedChi
 from ..core.decouple import decouple_exact
@@ -98,6 +97,8 @@ def basic_solution(m: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, int]:
     QR with column pivoting, ``m P = Q R``; rank r = #{|R_ii| > max(rows, cols) eps |R_11|};
     ``x[P[:r]] = R[:r, :r]^-1 Q[:, :r]^T t`` and the other rows of x are zero.
     """
+    from scipy.linalg import qr, solve_triangular  # 0.4 s to import: cv imports it beside the SVRs
+
     q, r, perm = qr(m, mode="economic", pivoting=True)
     diag = np.abs(np.diag(r))
     tol = max(m.shape) * np.finfo(float).eps * (diag[0] if diag.size else 0.0)

@@ -7,15 +7,33 @@ stores the dual coefficients ``a_i - a_i*`` as ``sv_coef`` and ``rho = -b``.
 from __future__ import annotations
 
 import functools
+import sys
 import threading
 from dataclasses import dataclass
 
 import numpy as np
-from libsvm import svmutil
 
 from ..config import SVRSettings
 from ..errors import FsdecoupleError
 from .threads import single_threaded_libraries
+
+# libsvm's Python module imports scipy.sparse and numba if it can, for sparse and numpy
+# input (its jit only converts scipy CSR matrices).  fsdecouple passes plain lists, the
+# input libsvm reads without either, so neither is imported here: on the sample, 0.9 s of
+# the 4.5 s of CPU of ``fit`` (numba 0.5 s, scipy.sparse 0.4 s; issue 30).  A library that
+# is already loaded is left to libsvm.  Import this module from the main thread, before
+# threads start (fitting's entry points do): another thread importing scipy or numba
+# while libsvm loads would be refused.  Code calling libsvm directly in the same process
+# then passes lists or dicts too (libsvm reads numpy arrays only when it found scipy).
+_SKIPPED = [name for name in ("scipy", "numba") if name not in sys.modules]
+try:
+    for _name in _SKIPPED:
+        sys.modules[_name] = None  # an ImportError for libsvm's optional imports
+    from libsvm import svmutil
+finally:
+    for _name in _SKIPPED:
+        if sys.modules.get(_name, 0) is None:
+            del sys.modules[_name]
 
 
 @dataclass(frozen=True)
@@ -49,8 +67,8 @@ def train(x: np.ndarray, y: np.ndarray, params: SVRSettings):
     y = np.ascontiguousarray(y, dtype=float).ravel()
     if x.shape[0] != y.size or y.size < 2:
         raise FsdecoupleError(f"an SVR needs at least 2 points, got {y.size}")
-    with single_threaded_libraries():
-        return _off_the_main_thread(_svm_train, y, x, params.libsvm_options())
+    with single_threaded_libraries():  # lists: libsvm's input without scipy (above)
+        return _off_the_main_thread(_svm_train, y.tolist(), x.tolist(), params.libsvm_options())
 
 
 @functools.cache
@@ -114,5 +132,5 @@ def predict(model, x: np.ndarray) -> np.ndarray:
     """libsvm's own prediction, for checking the numpy evaluator."""
     x = np.ascontiguousarray(x, dtype=float).reshape(-1, 1)
     with single_threaded_libraries():
-        values, _, _ = svmutil.svm_predict(np.zeros(x.shape[0]), x, model, "-q")
+        values, _, _ = svmutil.svm_predict([0.0] * x.shape[0], x.tolist(), model, "-q")
     return np.asarray(values, dtype=float)
