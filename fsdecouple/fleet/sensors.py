@@ -220,6 +220,8 @@ def fit_many(sensors_dir: str | Path, models_dir: str | Path, *, method: str | N
     kw = dict(method=method, max_gamma=max_gamma, baseline=baseline, max_drift=max_drift,
               force=force, workers=1)
     results: dict[str, SensorResult] = {}
+    if executor == "thread":
+        from ..fitting import svr  # noqa: F401 (libsvm loads on this thread, before the pool: svr.py)
     pool = ProcessPoolExecutor if executor == "process" else ThreadPoolExecutor
     ex = pool(workers)
     try:
