@@ -19,9 +19,15 @@ sweep (m = inf with ``zero: fit``), n repetitions (n_t in a round's training set
   log's row, tared over many rows, s^2;
 * the model's own error at one load (chi and slope estimated from noisy sweeps, a lag
   eq. (1) cannot represent) adds v s^2 on a held-out point, which loads one component.
-  v is measured: the mean of r^2 / s^2 - (1 + 1/m) over every held-out point and
-  component, less p = (1 + 1/m) / (2 n_t) (the same order as its own scatter: the
-  rounds are three realisations of the model's error), and never below p;
+  With zero rows its main part is known: every chi_ab inherits the mean of its n_t
+  sweeps' zero readings (data/zero.py, ``fitted_offsets``), so v = 1 / (m n_t).  With
+  offsets fitted (``zero: fit``, a lag) v is measured: the mean of r^2 / s^2 - (1 + 1/m)
+  over every held-out point and component, less p = (1 + 1/m) / (2 n_t) (the same order
+  as its own scatter: the rounds are three realisations of the model's error), and never
+  below p.  Measured with zero rows too, on simulated sensors it scattered from sensor
+  to sensor (0.17-0.63 at m = 1, n_t = 4) without following the final model's error on
+  the log (correlation -0.37 over 55 sensors): the rounds' few realisations of the zero
+  readings' mean are not the final model's one, and a large one widened every row;
 * a combined load carries every loaded component's share at once (the coupling error
   model is additive, eq. 1, so are its errors): on a row with loads f_b the model adds
   v s^2 (n_t / n) sum_b min(1, |f_b| / L_b), L_b the smallest calibrated non-zero
@@ -88,7 +94,9 @@ def interval_calibration(true: np.ndarray, predicted: np.ndarray, labels, noise=
         excess = float(np.mean(np.concatenate(
             [(residuals[a][ok[a]] / noise[a]) ** 2 for a in known]))) - reading
         p = reading / (2.0 * trained)
-        v = max(p, excess - p)
+        # zero rows: the share is known, 1 / (m n_t); measured from a few rounds it
+        # scattered more than it informed (docs/certificate.md, "The model's share")
+        v = 1.0 / (zeros * trained) if math.isfinite(zeros) else max(p, excess - p)
     pooled, comps = [], {}
     for a, axis in enumerate(labels):
         r = residuals[a][ok[a]]

@@ -60,26 +60,43 @@ def _held_out(rng, n, s, m, tau, comps=3, step=10.0):
 
 
 def test_the_model_share_is_the_held_out_excess_over_the_reading_noise():
+    """With offsets fitted (zero: fit, m = inf) the model's share is measured."""
     rng = np.random.default_rng(0)
-    s, m, n, nt, tau = 0.1, 1.0, 6, 4.0, 0.08  # tau^2 / s^2 = 0.64
+    s, m, n, nt, tau = 0.1, np.inf, 6, 4.0, 0.08  # tau^2 / s^2 = 0.64
     true, pred = _held_out(rng, 60_000, s, m, tau)
     cal = interval_calibration(true, pred, ("x", "y", "z"), np.full(3, s), zeros=m,
                                repetitions=n, trained=nt)
     # brute force: the excess of the loaded points' mean squared residual over the
-    # reading's variance, less p = (1 + 1/m) / (2 n_t) = 0.25; scaled to n repetitions
+    # reading's variance, less p = 1 / (2 n_t) = 0.125; scaled to n repetitions
     loaded = (true != 0).any(axis=1)
-    excess = np.mean(((pred - true)[loaded] / s) ** 2) - (1 + 1 / m)
+    excess = np.mean(((pred - true)[loaded] / s) ** 2) - 1.0
     assert excess == pytest.approx(0.64, abs=0.03)  # the simulation's own tau^2 / s^2
-    p = (1 + 1 / m) / (2 * nt)
+    p = 1.0 / (2 * nt)
     for c in cal["components"].values():
         assert c["sigma"] == s
         assert c["load_variance"] == pytest.approx((excess - p) * s * s * nt / n, rel=1e-9)
     # zero-load points score nothing; the rest are |r| / (s sqrt(1 + 1/m + v))
     assert len(cal["scores"]) == 3 * loaded.sum()
     v = excess - p
-    expected = np.sort((np.abs(pred - true)[loaded] / (s * math.sqrt(2 + v))).ravel())
+    expected = np.sort((np.abs(pred - true)[loaded] / (s * math.sqrt(1 + v))).ravel())
     assert cal["scores"] == pytest.approx(expected.tolist())
     assert cal["first_step"] == {"x": 10.0, "y": 10.0, "z": 10.0}
+
+
+def test_with_zero_rows_the_model_share_is_the_zero_readings_whatever_the_rounds_show():
+    """Zero rows: each chi inherits the mean of n_t sweeps' zero readings, s^2 / (m n_t);
+    the rounds' excess (here tau^2 / s^2 = 0.64 or none) does not move it (issue 33)."""
+    s, m, n, nt = 0.1, 2.0, 6, 4.0
+    for seed, tau in ((3, 0.08), (4, 0.0)):
+        true, pred = _held_out(np.random.default_rng(seed), 20_000, s, m, tau)
+        cal = interval_calibration(true, pred, ("x", "y", "z"), np.full(3, s), zeros=m,
+                                   repetitions=n, trained=nt)
+        v = 1.0 / (m * nt)  # 0.125
+        for c in cal["components"].values():
+            assert c["load_variance"] == pytest.approx(v * s * s * nt / n, rel=1e-12)
+        loaded = (true != 0).any(axis=1)
+        expected = np.sort((np.abs(pred - true)[loaded] / (s * math.sqrt(1 + 1 / m + v))).ravel())
+        assert cal["scores"] == pytest.approx(expected.tolist())
 
 
 def test_without_excess_the_model_share_keeps_its_floor_and_zero_fit_drops_the_zero_reading():
@@ -114,7 +131,7 @@ def test_intervals_hold_on_combined_loads_whose_errors_add():
     from fsdecouple.evaluation.intervals import _quantile, row_sigma
 
     rng = np.random.default_rng(2)
-    s, m, n, nt, tau, p = 0.1, 1.0, 6, 4.0, 0.12, 0.95
+    s, m, n, nt, tau, p = 0.1, np.inf, 6, 4.0, 0.12, 0.95  # zero: fit: the share measured
     true, pred = _held_out(rng, 20_000, s, m, tau)
     cal = interval_calibration(true, pred, ("x", "y", "z"), np.full(3, s), zeros=m,
                                repetitions=n, trained=nt)
@@ -125,9 +142,12 @@ def test_intervals_hold_on_combined_loads_whose_errors_add():
     err += rng.normal(scale=tau * math.sqrt(nt / n), size=(rows, 3, 3)).sum(axis=2)
     h = _quantile(cal["scores"], p, "x") * row_sigma(cal, f, "xyz")
     covered = (np.abs(err) <= h).mean(axis=0)
-    # v is tau^2 / s^2 = 1.44 less p = 0.25: q = 1.96 sqrt(3.44 / 3.19) = 2.035 and
-    # sigma' = 0.933 of the rows' sigma, so |N(0, 1)| <= 1.90 holds 0.943 of the rows
-    assert covered == pytest.approx(np.full(3, 0.943), abs=0.006)  # 50 000 rows: sd 0.001
+    # v is tau^2 / s^2 = 1.44 less p = 0.125: q = 1.96 sqrt(2.44 / 2.315) = 2.012 and
+    # sigma' = sqrt(1 + 3 v n_t/n) / sqrt(1 + 3 tau^2/s^2 n_t/n) = 0.967 of the rows'
+    # sigma, so |N(0, 1)| <= 1.946 holds 0.948 of the rows
+    v = 1.44 - 1 / (2 * nt)
+    z = 1.96 * math.sqrt(2.44 / (1 + v)) * math.sqrt((1 + 3 * v * nt / n) / (1 + 3 * 1.44 * nt / n))
+    assert covered == pytest.approx(np.full(3, math.erf(z / math.sqrt(2))), abs=0.006)  # sd 0.001
     without = _quantile(cal["scores"], p, "x") * s  # the reading's noise alone
     assert (np.abs(err) <= without).mean() < 0.75
 
