@@ -299,6 +299,28 @@ def fitted_offsets(points: pd.DataFrame, sweep: np.ndarray, keys: list, layout: 
     return out
 
 
+def mean_offset_variance(points: pd.DataFrame, layout: Layout) -> np.ndarray:
+    """Per loaded component b, the variance of the mean of its sweeps' zero readings, in
+    units of one reading's variance: mean_g(1 / m_g) / G over its G sweeps of m_g zero
+    rows each (NaN: a sweep without one).
+
+    With zero rows every chi_ab (and omega_b) is fitted to the b sweeps less their zero
+    readings, so it inherits their mean error, the same at every loaded point
+    (``fitted_offsets``): one realisation per calibration, which no held-out round shows.
+    """
+    labels = points["axis"].to_numpy()
+    out = np.full(layout.n, np.nan)
+    for b, label in enumerate(layout.labels):
+        mine = points[labels == label]
+        _, sweep = np.unique(mine["repetition"].to_numpy(), return_inverse=True)
+        groups = sweep.max(initial=-1) + 1
+        zero = (mine[list(layout.loads)].to_numpy() == 0.0).all(axis=1)
+        n_zero = np.bincount(sweep[zero], minlength=groups)
+        if groups and n_zero.min() > 0:
+            out[b] = float(np.mean(1.0 / n_zero)) / groups
+    return out
+
+
 def tare_offsets(u: np.ndarray, n: int, source=None) -> np.ndarray:
     """Mean of the first ``n`` voltage rows, the zero of a task log [V]."""
     src = f"{source}: " if source is not None else ""

@@ -42,6 +42,7 @@ import numpy as np
 import pandas as pd
 
 from ..data.calibration import CalibrationSet
+from ..data.zero import mean_offset_variance
 from .intervals import interval_calibration
 from .iso376 import ComponentSteps, component_steps, resolution
 
@@ -215,10 +216,15 @@ def certificate_data(calib: CalibrationSet, model, points: pd.DataFrame,
     noise, zeros = reading_noise(calib, model.k)
     if settings.zero_method == "fit":  # offsets fitted to whole sweeps, not read at zero rows
         zeros = np.inf
+    sweeps = shares = None
+    if calib.zero == "rows" and np.isfinite(zeros) and {"repetition", "axis"} <= set(points.columns):
+        # each held-out sweep's own share apart, and the zero readings' known share
+        sweeps = points.groupby(["repetition", "axis"], sort=False).ngroup().to_numpy()
+        shares = mean_offset_variance(calib.points, layout)
     return {"reference_uncertainty": settings.lab.reference_uncertainty, "steps": steps,
             "interval": interval_calibration(true, predicted if centred is None else centred,
                                              layout.labels, noise, zeros,
-                                             len(calib.repetitions), trained)}
+                                             len(calib.repetitions), trained, sweeps, shares)}
 
 
 def heldout_predictions(rounds, models: dict, method: str,

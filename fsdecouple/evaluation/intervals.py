@@ -71,7 +71,7 @@ EXTRA_STEPS = 3  # refinement steps that estimate eq. (11)'s second-order error
 
 def interval_calibration(true: np.ndarray, predicted: np.ndarray, labels, noise=None,
                          zeros: float = 1.0, repetitions: int = 1,
-                         trained: float = 1.0) -> dict[str, Any]:
+                         trained: float = 1.0, sweeps=None, zero_variance=None) -> dict[str, Any]:
     """The conformal scores of held-out forces (``true``, ``predicted``: shape (n, N)
     [load unit]), and the variance model of a log's row.
 
@@ -89,11 +89,16 @@ def interval_calibration(true: np.ndarray, predicted: np.ndarray, labels, noise=
     known = [a for a in range(n_comp) if np.isfinite(noise[a]) and noise[a] > 0]
     residuals = [np.abs(predicted[:, a] - true[:, a]) for a in range(n_comp)]
     ok = [np.isfinite(predicted[:, a]) & loaded for a in range(n_comp)]
-    v = 0.0
+    v, out = 0.0, {}
     if known:
         excess = float(np.mean(np.concatenate(
             [(residuals[a][ok[a]] / noise[a]) ** 2 for a in known]))) - reading
         p = reading / (2.0 * trained)
+        if sweeps is not None and zero_variance is not None:
+            signed = [predicted[:, a] - true[:, a] for a in range(n_comp)]
+            out["deviations"], _ = within_sweeps(signed, ok, noise, known, np.asarray(sweeps))
+            out["zero_variance"] = {axis: float(c) for axis, c in zip(labels, zero_variance, strict=True)
+                                    if np.isfinite(c)}
         # zero rows: the share is known, 1 / (m n_t); measured from a few rounds it
         # scattered more than it informed (docs/certificate.md, "The model's share")
         v = 1.0 / (zeros * trained) if math.isfinite(zeros) else max(p, excess - p)
@@ -113,7 +118,30 @@ def interval_calibration(true: np.ndarray, predicted: np.ndarray, labels, noise=
         if nonzero.size:
             steps[axis] = float(nonzero.min())
     return {"scores": np.sort(np.concatenate(pooled)).tolist() if pooled else None,
-            "first_step": steps, "components": comps}
+            "first_step": steps, "components": comps, **out}
+
+
+def within_sweeps(residuals, ok, noise, known, sweeps: np.ndarray) -> tuple[list[float], float]:
+    """The held-out residuals less their sweep's mean, over s, pooled and sorted; and the
+    sweeps' mean squared mean residual beyond its own noise [s^2].
+
+    A sweep's mean residual is the part a whole sweep shares (its zero reading, the
+    round's model's inherited zero readings: the between-sweep share); what is left
+    is each reading's own error, the model's shape error along the sweep and, on
+    sweeps out and back, a lag's.  Scaled by sqrt(n_g / (n_g - 1)) for the mean's own
+    share of the n_g points of sweep g; sweeps of one loaded point give none.
+    """
+    out, between = [], []
+    for a in known:
+        r, g = residuals[a][ok[a]] / noise[a], sweeps[ok[a]]
+        _, idx, count = np.unique(g, return_inverse=True, return_counts=True)
+        mean = np.bincount(idx, weights=r) / count
+        several = count[idx] > 1
+        w = (r - mean[idx]) * np.sqrt(count[idx] / np.maximum(count[idx] - 1, 1))
+        out.append(w[several])
+        within = np.bincount(idx, weights=w * w) / count  # each sweep's own noise
+        between.append((mean ** 2 - within / count)[count > 1])
+    return np.sort(np.concatenate(out)).tolist(), float(np.mean(np.concatenate(between)))
 
 
 def row_sigma(cal: dict[str, Any], f: np.ndarray, labels) -> np.ndarray:
@@ -121,20 +149,24 @@ def row_sigma(cal: dict[str, Any], f: np.ndarray, labels) -> np.ndarray:
     (shape (n, N)): the reading's noise and, per loaded component b, one share of the
     model's error (models fitted before the share was stored: sigma' alone)."""
     steps = cal.get("first_step") or {}
+    shares = cal.get("zero_variance")
     loads = np.zeros(len(f))
     for b, axis in enumerate(labels):
         if axis in steps:
-            loads += np.minimum(1.0, np.abs(np.nan_to_num(f[:, b])) / steps[axis])
+            ramp = np.minimum(1.0, np.abs(np.nan_to_num(f[:, b])) / steps[axis])
+            loads += ramp if shares is None else shares.get(axis, 0.0) * ramp
     out = np.empty((len(f), len(labels)))
     for a, axis in enumerate(labels):
         c = cal["components"][axis]
-        out[:, a] = np.sqrt(c["sigma"] ** 2 + c.get("load_variance", 0.0) * loads)
+        share = c["sigma"] ** 2 * loads if shares is not None else c.get("load_variance", 0.0) * loads
+        out[:, a] = np.sqrt(c["sigma"] ** 2 + share)
     return out
 
 
 def check_interval_data(cal: Any, labels) -> None:
     """Refuse interval data a fit cannot have written: the fields this module added
-    (``load_variance``, ``first_step``) must be finite, >= 0 and > 0 respectively."""
+    (``load_variance``, ``first_step``, ``zero_variance``) must be finite, >= 0, > 0 and
+    >= 0 respectively, and ``deviations`` finite and sorted."""
     def bad(what: str, value) -> InputError:
         return InputError(f"intervals: the model file's interval data are damaged ({what} is "
                           f"{value!r}, expected a finite number {'>= 0' if 'variance' in what else '> 0'}); "
@@ -147,6 +179,19 @@ def check_interval_data(cal: Any, labels) -> None:
         c = cal["components"][axis]
         if "load_variance" in c and not (number(c["load_variance"]) and c["load_variance"] >= 0):
             raise bad(f"load_variance of {axis}", c["load_variance"])
+    deviations = cal.get("deviations")
+    if deviations is not None:
+        if not (isinstance(deviations, list) and deviations and all(number(x) for x in deviations)
+                and all(x <= y for x, y in zip(deviations[:-1], deviations[1:], strict=True))):
+            raise InputError("intervals: the model file's interval data are damaged (deviations "
+                             "are not finite numbers in ascending order); refit the model",
+                             argument="interval")
+        shares = cal.get("zero_variance")
+        if not isinstance(shares, dict):
+            raise bad("zero_variance", shares)
+        for axis, value in shares.items():
+            if axis not in labels or not (number(value) and value >= 0):
+                raise bad(f"zero_variance of {axis}", value)
     steps = cal.get("first_step")
     if steps is not None:
         if not isinstance(steps, dict):
@@ -197,12 +242,52 @@ def half_widths(model, p: float, f: np.ndarray | None = None) -> np.ndarray:
     check_interval_data(cal, labels)
     at_rows = f is not None
     f = np.asarray(f, dtype=float) if at_rows else np.zeros((1, len(labels)))
+    if cal.get("deviations") is not None:
+        out = _convolved(cal, p, f, labels)
+        return out if at_rows else out[0]
     q = np.empty(len(labels))
     for a, axis in enumerate(labels):
         c = cal["components"][axis]
         q[a] = _quantile(c["scores"] if c["scores"] is not None else cal["scores"], p, axis)
     out = q * row_sigma(cal, f, labels)
     return out if at_rows else out[0]
+
+
+GRID = 64  # between-sweep ratios rho at which the half-width is solved, then interpolated
+
+
+def _convolved(cal: dict[str, Any], p: float, f: np.ndarray, labels) -> np.ndarray:
+    """Half-widths, shape (n, N), from the within-sweep deviations z_i and a row's
+    between-sweep share.
+
+    A row's error is s z + g: z drawn from the held-out deviations (each reading's own
+    error and the model's along a sweep), g ~ N(0, rho^2 s^2) the share a sweep of
+    calibration points has in common, here the final model's inherited zero readings
+    (rho^2 s^2 = ``load_variance`` per loaded component, :func:`row_sigma`).  The
+    half-width h = s Q(rho) solves mean_i P(|z_i + g / s| <= Q) = P (n + 1) / n, the
+    split-conformal correction; at rho = 0 it is the ceil((n + 1) P)-th smallest |z_i|.
+    """
+    from scipy.special import ndtr
+
+    z = np.asarray(cal["deviations"], dtype=float)
+    n = z.size
+    target = p * (n + 1) / n
+    if target >= 1.0:
+        raise InputError(f"coverage {p!r}: {n} held-out deviations calibrate intervals up to "
+                         f"P = {n / (n + 1):.3f}", argument="interval")
+    sigma = np.array([cal["components"][a]["sigma"] for a in labels])
+    rho = np.sqrt(np.maximum(row_sigma(cal, f, labels) ** 2 / sigma ** 2 - 1.0, 0.0))
+    grid = np.linspace(0.0, max(float(rho.max(initial=0.0)), 1e-12), GRID)
+    q = np.empty(GRID)
+    q[0] = np.sort(np.abs(z))[math.ceil((n + 1) * p) - 1]
+    for j in range(1, GRID):
+        lo, hi = 0.0, float(np.abs(z).max()) + 10.0 * grid[j]
+        for _ in range(60):  # bisection: coverage rises with the half-width
+            mid = 0.5 * (lo + hi)
+            covered = np.mean(ndtr((mid - z) / grid[j]) - ndtr((-mid - z) / grid[j]))
+            lo, hi = (mid, hi) if covered < target else (lo, mid)
+        q[j] = hi
+    return sigma * np.interp(rho, grid, q)
 
 
 def centre(model, u: np.ndarray, f: np.ndarray | None = None) -> np.ndarray:
