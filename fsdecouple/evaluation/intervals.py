@@ -59,6 +59,7 @@ verdict's own rounds and the method is a sort and an index.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -253,7 +254,7 @@ def half_widths(model, p: float, f: np.ndarray | None = None) -> np.ndarray:
     return out if at_rows else out[0]
 
 
-GRID = 64  # between-sweep ratios rho at which the half-width is solved, then interpolated
+GRID = 33  # between-sweep ratios rho at which the half-width is solved, then interpolated
 
 
 def _convolved(cal: dict[str, Any], p: float, f: np.ndarray, labels) -> np.ndarray:
@@ -263,31 +264,44 @@ def _convolved(cal: dict[str, Any], p: float, f: np.ndarray, labels) -> np.ndarr
     A row's error is s z + g: z drawn from the held-out deviations (each reading's own
     error and the model's along a sweep), g ~ N(0, rho^2 s^2) the share a sweep of
     calibration points has in common, here the final model's inherited zero readings
-    (rho^2 s^2 = ``load_variance`` per loaded component, :func:`row_sigma`).  The
+    (rho^2 = sum_b c_b min(1, |f_b| / L_b), c_b = ``zero_variance``, :func:`row_sigma`).  The
     half-width h = s Q(rho) solves mean_i P(|z_i + g / s| <= Q) = P (n + 1) / n, the
     split-conformal correction; at rho = 0 it is the ceil((n + 1) P)-th smallest |z_i|.
     """
+    z = np.asarray(cal["deviations"], dtype=float)
+    shares = cal.get("zero_variance") or {}
+    top = math.sqrt(sum(shares.get(a, 0.0) for a in labels if a in (cal.get("first_step") or {})))
+    grid, q = _q_grid(z.tobytes(), p, top)
+    sigma = np.array([cal["components"][a]["sigma"] for a in labels])
+    rho = np.sqrt(np.maximum(row_sigma(cal, f, labels) ** 2 / sigma ** 2 - 1.0, 0.0))
+    return sigma * np.interp(rho, grid, q)
+
+
+@functools.lru_cache(maxsize=8)
+def _q_grid(deviations: bytes, p: float, top: float) -> tuple[np.ndarray, np.ndarray]:
+    """Q(rho) on ``GRID`` ratios from 0 to ``top`` (every ramp 1: the largest a row has),
+    the same for every chunk of a log; solved once per model and P."""
     from scipy.special import ndtr
 
-    z = np.asarray(cal["deviations"], dtype=float)
+    z = np.frombuffer(deviations, dtype=float)
     n = z.size
     target = p * (n + 1) / n
     if target >= 1.0:
         raise InputError(f"coverage {p!r}: {n} held-out deviations calibrate intervals up to "
                          f"P = {n / (n + 1):.3f}", argument="interval")
-    sigma = np.array([cal["components"][a]["sigma"] for a in labels])
-    rho = np.sqrt(np.maximum(row_sigma(cal, f, labels) ** 2 / sigma ** 2 - 1.0, 0.0))
-    grid = np.linspace(0.0, max(float(rho.max(initial=0.0)), 1e-12), GRID)
-    q = np.empty(GRID)
-    q[0] = np.sort(np.abs(z))[math.ceil((n + 1) * p) - 1]
-    for j in range(1, GRID):
-        lo, hi = 0.0, float(np.abs(z).max()) + 10.0 * grid[j]
-        for _ in range(60):  # bisection: coverage rises with the half-width
-            mid = 0.5 * (lo + hi)
-            covered = np.mean(ndtr((mid - z) / grid[j]) - ndtr((-mid - z) / grid[j]))
-            lo, hi = (mid, hi) if covered < target else (lo, mid)
-        q[j] = hi
-    return sigma * np.interp(rho, grid, q)
+    grid = np.linspace(0.0, top, GRID)
+    q0 = np.sort(np.abs(z))[math.ceil((n + 1) * p) - 1]
+    if not top > 0.0:
+        return grid, np.full(GRID, q0)
+    lo = np.zeros(GRID - 1)
+    hi = np.full(GRID - 1, float(np.abs(z).max()) + 10.0 * top)
+    r = grid[1:, None]
+    for _ in range(50):  # bisection: the coverage rises with the half-width
+        mid = 0.5 * (lo + hi)
+        covered = np.mean(ndtr((mid[:, None] - z) / r) - ndtr((-mid[:, None] - z) / r), axis=1)
+        lo, hi = np.where(covered < target, mid, lo), np.where(covered < target, hi, mid)
+    q = np.concatenate(([q0], hi))
+    return grid, q
 
 
 def centre(model, u: np.ndarray, f: np.ndarray | None = None) -> np.ndarray:

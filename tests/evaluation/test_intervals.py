@@ -152,6 +152,90 @@ def test_intervals_hold_on_combined_loads_whose_errors_add():
     assert (np.abs(err) <= without).mean() < 0.75
 
 
+def _sweeps(rng, n_sweeps, per, s, shared, comps=3, step=10.0):
+    """Held-out single-axis sweeps of ``per`` loaded points: every point's residual is the
+    reading's noise s plus its sweep's shared error N(0, shared^2) (a round's zero
+    readings), the same on every component of the sweep."""
+    axis = np.repeat(np.arange(n_sweeps) % comps, per)
+    true = np.zeros((n_sweeps * per, comps))
+    true[np.arange(true.shape[0]), axis] = step * np.tile(np.arange(1, per + 1), n_sweeps)
+    err = rng.normal(scale=s, size=true.shape)
+    err += np.repeat(rng.normal(scale=shared, size=(n_sweeps, comps)), per, axis=0)
+    return true, true + err, np.repeat(np.arange(n_sweeps), per)
+
+
+def test_zero_row_intervals_take_the_known_share_not_the_rounds_realisation():
+    """Issue 33: the rounds' sweeps share errors (their zero readings' mean) that are not
+    the final model's.  The final model's share on a row is N(0, rho^2 s^2), rho^2 =
+    sum_b c_b ramp_b with c_b the zero readings' known variance.  Held-out sweeps whose
+    shared error is large (2 s) gave the pooled scores' intervals a coverage near 1; the
+    within-sweep deviations, convolved with the known share, cover P of the rows."""
+    from fsdecouple.evaluation.intervals import half_widths
+
+    rng = np.random.default_rng(5)
+    s, shared, c, p = 0.1, 0.2, 1 / 6, 0.95
+    true, pred, sweeps = _sweeps(rng, 60, 20, s, shared)
+    rows = 40_000
+    f = rng.uniform(20, 100, (rows, 3)) * rng.choice([-1, 1], (rows, 3))  # every ramp 1
+    err = rng.normal(scale=s, size=(rows, 3)) + rng.normal(scale=s * math.sqrt(3 * c), size=(rows, 3))
+    covered = {}
+    for label, extra in (("pooled", {}), ("within", {"sweeps": sweeps, "zero_variance": np.full(3, c)})):
+        cal = interval_calibration(true, pred, ("x", "y", "z"), np.full(3, s), zeros=1.0,
+                                   repetitions=6, trained=4.0, **extra)
+        m = type("M", (), {})()  # half_widths reads the model's report and layout only
+        m.report = type("R", (), {"certificate": {"interval": cal}})()
+        m.layout = type("L", (), {"labels": ("x", "y", "z"), "overdetermined": False})()
+        covered[label] = (np.abs(err) <= half_widths(m, p, f)).mean(axis=0)
+    assert (covered["pooled"] > 0.985).all(), covered  # the rounds' shared errors widened it
+    # the rows' error is N(0, s^2 (1 + 3c)) and so is the convolution: P of them, within
+    # the binomial scatter of 40 000 rows (0.001) and the deviations' (1200 of them)
+    assert covered["within"] == pytest.approx(np.full(3, p), abs=0.012), covered
+
+
+def test_the_convolved_half_width_is_the_gaussian_one_for_gaussian_deviations():
+    """For deviations z ~ N(0, 1) and a share N(0, rho^2) the sum is N(0, 1 + rho^2): the
+    half-width is Phi^-1((1 + P)/2) sqrt(1 + rho^2); at rho = 0 the conformal quantile."""
+    from fsdecouple.evaluation.intervals import _convolved
+
+    z = np.sort(np.random.default_rng(6).normal(size=5_000)).tolist()
+    cal = {"deviations": z, "zero_variance": {"x": 0.5, "y": 0.0},
+           "first_step": {"x": 10.0, "y": 10.0},
+           "components": {"x": {"sigma": 2.0, "scores": None}, "y": {"sigma": 1.0, "scores": None}}}
+    f = np.array([[0.0, 0.0], [5.0, 0.0], [50.0, 0.0], [50.0, 50.0]])  # rho^2 = 0, 0.25, 0.5, 0.5
+    h = _convolved(cal, 0.95, f, ("x", "y"))
+    rho2 = np.array([0.0, 0.25, 0.5, 0.5])
+    expected = 1.959964 * np.sqrt(1 + rho2)
+    assert h[:, 0] == pytest.approx(2.0 * expected, rel=0.01)  # 5 000 deviations: ~0.1 %
+    assert h[:, 1] == pytest.approx(expected, rel=0.01)
+    k = math.ceil((len(z) + 1) * 0.95)
+    assert h[0, 1] == pytest.approx(np.sort(np.abs(z))[k - 1], rel=1e-12)
+
+
+def test_the_zero_readings_share_is_the_variance_of_their_mean():
+    """Brute force: G sweeps of m_g zero rows each, readings N(0, 1); the mean over the
+    sweeps of each sweep's zero-row mean has the variance mean_g(1/m_g)/G."""
+    import pandas as pd
+
+    from fsdecouple.axes import DEFAULT
+    from fsdecouple.data.zero import mean_offset_variance
+
+    zeros_per_sweep = {"x": [1, 1, 1, 1, 1, 1], "y": [1, 2, 3, 1], "z": [2, 2]}
+    rows = []
+    for a, axis in enumerate(DEFAULT.labels):
+        for rep, m in enumerate(zeros_per_sweep[axis], start=1):
+            for load in [0.0] * m + [10.0, 20.0]:
+                f = [0.0, 0.0, 0.0]
+                f[a] = load
+                rows.append((rep, axis, *f))
+    points = pd.DataFrame(rows, columns=["repetition", "axis", *DEFAULT.loads])
+    got = mean_offset_variance(points, DEFAULT)
+    rng = np.random.default_rng(7)
+    for b, axis in enumerate(DEFAULT.labels):
+        ms = zeros_per_sweep[axis]
+        draws = np.mean([rng.normal(size=(100_000, m)).mean(axis=1) for m in ms], axis=0)
+        assert got[b] == pytest.approx(draws.var(), rel=0.02)  # 100 000 draws: 0.45 %
+
+
 @pytest.mark.parametrize("field, value, match", [
     ("load_variance", -1.0, "load_variance of y is -1.0"),
     ("load_variance", float("nan"), "load_variance of y is nan"),
