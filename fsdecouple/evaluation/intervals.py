@@ -1,60 +1,57 @@
-"""An interval on every decoupled force: conformal prediction on held-out residuals,
-with a term for the model's error under combined loads.
+"""An interval on every decoupled force: the held-out residuals' own part, measured,
+with the part a sweep shares, modelled (issue 33).
 
 ``fit`` scores the model's method on calibration points it was not fitted on (the
 held-out rounds of the verdict, :mod:`fsdecouple.evaluation.heldout`), each point
-decoupled where the interval is centred (:func:`centre`).  Each residual r = F_hat - F
-on component a becomes a normalised score |r| / sigma_a, and for a coverage P the
-half-width on a log's row is q sigma'_a(row), q the ceil((n + 1) P)-th smallest of the
-n scores: split conformal prediction (Vovk et al., *Algorithmic Learning in a Random
-World*, 2005; normalised scores: Papadopoulos et al., 2008; Lei et al., JASA 2018), the
-rounds' models standing in for the final one as in cross-conformal prediction.
+decoupled where the interval is centred (:func:`centre`).  s_a is the noise of one
+reading in decoupled component a (from the repetitions' scatter).
 
-sigma (a held-out point) and sigma' (a row of a tared log decoupled by the final
-model) differ, and a variance model says by how much.  With s the noise of one
-reading in the decoupled force (from the repetitions' scatter), m zero readings per
-sweep (m = inf with ``zero: fit``), n repetitions (n_t in a round's training set):
+Zero rows (the default for one-way sweeps).  A residual r = F_hat - F is split in two:
 
-* a zero-corrected reading carries its sweep's zero readings too: s^2 (1 + 1/m); a
-  log's row, tared over many rows, s^2;
-* the model's own error at one load (chi and slope estimated from noisy sweeps, a lag
-  eq. (1) cannot represent) adds v s^2 on a held-out point, which loads one component.
-  With zero rows its main part is known: every chi_ab inherits the mean of its n_t
-  sweeps' zero readings (data/zero.py, ``fitted_offsets``), so v = 1 / (m n_t).  With
-  offsets fitted (``zero: fit``, a lag) v is measured: the mean of r^2 / s^2 - (1 + 1/m)
-  over every held-out point and component, less p = (1 + 1/m) / (2 n_t) (the same order
-  as its own scatter: the rounds are three realisations of the model's error), and never
-  below p.  Measured with zero rows too, on simulated sensors it scattered from sensor
-  to sensor (0.17-0.63 at m = 1, n_t = 4) without following the final model's error on
-  the log (correlation -0.37 over 55 sensors): the rounds' few realisations of the zero
-  readings' mean are not the final model's one, and a large one widened every row;
-* a combined load carries every loaded component's share at once (the coupling error
-  model is additive, eq. 1, so are its errors): on a row with loads f_b the model adds
-  v s^2 (n_t / n) sum_b min(1, |f_b| / L_b), L_b the smallest calibrated non-zero
-  |load| of component b; n_t / n, the final model being fitted on all n repetitions.
+* what a sweep shares: its zero reading, and the round's model's inherited zero
+  readings.  Every chi_ab (and omega_b) is fitted to the b sweeps less their zero
+  readings, so the final model inherits their mean error, the same at every load: one
+  realisation per calibration, of known variance c_b s_a^2, c_b = mean_g(1/m_g) / G
+  (:func:`fsdecouple.data.zero.mean_offset_variance`).  The rounds' realisations are
+  not the final model's: held-out, they are set apart, each sweep's mean residual;
+* what each point adds: the residuals less their sweep's mean, over s_a, pooled over
+  the components (:func:`within_sweeps`), the deviations z_i.
 
-So sigma^2 = s^2 (1 + 1/m + v) and sigma'^2 = s^2 + v s^2 (n_t / n) sum_b min(1, |f_b| /
-L_b): the term grows with the loads and the number of components loaded.  Single-axis
-points never show that sum; it is the assumption (errors of the loads add, independent)
-on which the intervals hold under combined loads, and docs/certificate.md gives its
-measured coverage.  The scores of all components are pooled (they are unit-free), so q
-does not hang on one component's few hundred points.  With one repetition s is
-unknown: each component keeps its own raw residuals (sigma = sigma' = 1).  A sweep's
-zero-load points are its own reference (r = 0 by construction) and score nothing.
+On a log's row with loads f_b the shared part is g ~ N(0, rho^2), rho^2 = sum_b c_b
+min(1, |f_b| / L_b) (L_b the smallest calibrated non-zero |load| of b: the first step,
+over which the inherited error ramps in), and the half-width is s_a Q(rho), Q solving
+mean_i P(|z_i + g| <= Q) = P (n + 1) / n (:func:`_convolved`); at rho = 0 the
+split-conformal quantile of |z| (Vovk et al., *Algorithmic Learning in a Random World*,
+2005; Lei et al., JASA 2018).  It grows with the loads and the number of components
+loaded.  The assumption: a row's error is a held-out point's within its sweep plus the
+zero readings' mean error of every loaded component (errors of the loads add, eq. 1);
+docs/certificate.md gives the measured coverage.
+
+Offsets fitted (``zero: fit``, m = inf) or no sweeps to set apart: normalised scores
+|r| / sigma_a, pooled, and a half-width q sigma'_a(row), q the ceil((n + 1) P)-th
+smallest score.  With m zero readings per sweep, n repetitions (n_t in a round):
+sigma^2 = s^2 (1 + 1/m + v) on a held-out point, sigma'^2 = s^2 + v s^2 (n_t / n)
+sum_b min(1, |f_b| / L_b) on a tared row.  v is the model's share at one load: with
+zero rows the zero readings' 1 / (m n_t); with offsets fitted (the log's error is then
+mostly a lag's) measured, the mean of r^2 / s^2 - (1 + 1/m) over the held-out points
+less p = (1 + 1/m) / (2 n_t) (its own scatter is of that order), never below p.
+Measured with zero rows, v scattered 0.17-0.63 over simulated sensors without
+following the final model's error (correlation -0.37 over 55): the reason for the
+split above.  With one repetition s is unknown: each component keeps its own raw
+residuals (sigma = sigma' = 1).  A sweep's zero-load points are its own reference
+(r = 0 by construction) and score nothing.
 
 Under combined loads eq. (11) also errs in second order (each chi is read at an
 output that carries the other components' coupling): the interval is centred on the
 forces refined by ``EXTRA_STEPS`` more fixed-point steps (eqs. 5-6,
 :mod:`fsdecouple.core.decouple`), so it is not symmetric about the row's force, which
-stays eq. (11)'s.  The held-out points are decoupled the same way, so the scores
-measure the centre's error and not eq. (11)'s second-order error, which on a strongly
-coupled sensor (5 % F.S.) is several times the noise even on single-axis points.
+stays eq. (11)'s.  The held-out points are decoupled the same way.
 
-The scores, s, v s^2 n_t / n (``load_variance``) and L_b (``first_step``) live in the
-model file's ``report.certificate["interval"]``; :func:`check_interval_data` checks
-them when they are used.  No conformal library is used: MAPIE and crepes refit an
-estimator per fold through scikit-learn's API, where these residuals come from the
-verdict's own rounds and the method is a sort and an index.
+The scores, s, ``load_variance`` (v s^2 n_t / n), ``first_step`` (L_b), ``deviations``
+and ``zero_variance`` (c_b) live in the model file's ``report.certificate["interval"]``;
+:func:`check_interval_data` checks them when they are used.  No conformal library is
+used: MAPIE and crepes refit an estimator per fold through scikit-learn's API, where
+these residuals come from the verdict's own rounds and the method is a sort and an index.
 """
 
 from __future__ import annotations
@@ -81,7 +78,10 @@ def interval_calibration(true: np.ndarray, predicted: np.ndarray, labels, noise=
     sorted scores or None, "first_step": {axis: L_b [load unit]}, "components": {axis:
     {"sigma": s, "scores": own sorted scores or None, "load_variance": v s^2 n_t / n
     [load unit^2]}}}`` (a component without s: sigma 1, its own raw residuals, no
-    load_variance).
+    load_variance).  ``sweeps``: each point's held-out sweep, and ``zero_variance``: c_b
+    per component (zero rows, :func:`fsdecouple.data.zero.mean_offset_variance`); given
+    both, the result adds ``"deviations"`` (sorted z_i) and ``"zero_variance"``
+    ({axis: c_b}), which :func:`half_widths` then uses.
     """
     n_comp = len(labels)
     noise = np.full(n_comp, np.nan) if noise is None else np.asarray(noise, dtype=float)
