@@ -193,6 +193,16 @@ def check_interval_data(cal: Any, labels) -> None:
         for axis, value in shares.items():
             if axis not in labels or not (number(value) and value >= 0):
                 raise bad(f"zero_variance of {axis}", value)
+    shift = cal.get("zero_shift")
+    if shift is not None:
+        if not isinstance(shift, dict):
+            raise bad("zero_shift", shift)
+        for axis, row in shift.items():
+            if axis not in labels or not (isinstance(row, list) and len(row) == len(labels)
+                                          and all(number(x) for x in row)):
+                raise InputError(f"intervals: the model file's interval data are damaged "
+                                 f"(zero_shift of {axis} is {row!r}, expected {len(labels)} finite "
+                                 "numbers); refit the model", argument="interval")
     steps = cal.get("first_step")
     if steps is not None:
         if not isinstance(steps, dict):
@@ -310,7 +320,9 @@ def centre(model, u: np.ndarray, f: np.ndarray | None = None) -> np.ndarray:
 
     The held-out points are scored here too, so the scores measure the centre's error.
     A row whose refinement does not settle keeps eq. (11)'s force ``f`` (computed
-    from ``u`` if not given).
+    from ``u`` if not given).  A final model fitted on zero rows then takes back the
+    error its chi and omega inherited from them, as the offsets fitted from all points
+    estimate it (``zero_shift``, :func:`shifted`); the held-out rounds' models have none.
     """
     if f is None:
         f = model.decouple(u, rotate=False)
@@ -319,7 +331,28 @@ def centre(model, u: np.ndarray, f: np.ndarray | None = None) -> np.ndarray:
     with np.errstate(all="ignore"):
         refined = model.decouple(np.nan_to_num(u), rotate=False,
                                  refine=model.settings.refine + EXTRA_STEPS)
-    return np.where(np.isfinite(refined), refined, f)
+    mid = np.where(np.isfinite(refined), refined, f)
+    cert = (model.report.certificate if getattr(model, "report", None) is not None else None) or {}
+    cal = cert.get("interval") or {}
+    return shifted(cal, mid, model.layout.labels) if cal.get("zero_shift") else mid
+
+
+def shifted(cal: dict[str, Any], f: np.ndarray, labels) -> np.ndarray:
+    """``f`` less the zero rows' inherited error at ``f``: per loaded component b, each
+    component a != b moves by zero_shift[b][a] min(1, |f_b| / L_b) (chi_ab's share, ramped
+    in over the first step as the chi is), and b by zero_shift[b][b] f_b (omega_b's
+    slope) [load unit]."""
+    out = np.array(f, dtype=float, copy=True)
+    steps = cal.get("first_step") or {}
+    for b, axis in enumerate(labels):
+        row = cal["zero_shift"].get(axis)
+        if row is None or axis not in steps:
+            continue
+        fb = np.nan_to_num(f[:, b])
+        ramp = np.minimum(1.0, np.abs(fb) / steps[axis])
+        for a in range(len(labels)):
+            out[:, a] += row[a] * (fb if a == b else ramp)
+    return out
 
 
 def with_intervals(model, f: np.ndarray, p: float, u: np.ndarray | None = None) -> np.ndarray:
