@@ -327,3 +327,45 @@ def test_compare_and_certificate_json_refuse_an_edited_model_in_one_line(
     e = _edited(sample_model, tmp_path, edit)
     r = invoke([a.format(m=sample_model, e=e) for a in args], 2)
     assert_one_line_error(r, str(e), "refit it")
+
+
+def test_the_zero_rows_shift_is_the_mean_error_of_their_readings():
+    """Sweeps whose outputs are an offset per sweep plus one polynomial of the load
+    (degree <= 5: the fitted offsets' own form), and whose zero rows read e off that
+    offset.  The shift is the mean of (least-squares offset - zero row), re-derived here
+    by its own least squares (the zero row is one of the fitted points, so it pulls the
+    fitted offset by its leverage): about -0.83 mean(e) on this grid (issue 33)."""
+    import pandas as pd
+
+    from fsdecouple.axes import DEFAULT
+    from fsdecouple.data.zero import zero_correct, zero_row_shift
+
+    rng = np.random.default_rng(8)
+    grid = np.arange(-100.0, 100.1, 10.0)
+    rows, errors = [], {}
+    for b, axis in enumerate(DEFAULT.labels):
+        for rep in range(1, 5):
+            offset, e = rng.uniform(-1, 1, 3), rng.normal(scale=0.01, size=3)
+            errors[(axis, rep)] = e
+            for load in grid:
+                f = np.zeros(3)
+                f[b] = load
+                s = load / 100.0
+                u = offset + np.array([0.3, -0.2, 0.1]) * s + 0.05 * s ** 2 - 0.02 * s ** 5
+                if load == 0.0:
+                    u = u + e
+                rows.append((rep, axis, *f, *u))
+    table = pd.DataFrame(rows, columns=["repetition", "axis", *DEFAULT.loads, *DEFAULT.outputs])
+    points, offsets = zero_correct(table, DEFAULT, "rows")
+    shift, ratio = zero_row_shift(points, offsets, DEFAULT)
+    s = np.tile(grid / 100.0, 4)
+    design = np.column_stack([np.repeat(np.eye(4), grid.size, axis=0), *(s ** k for k in range(1, 6))])
+    for b, axis in enumerate(DEFAULT.labels):
+        raw = table.loc[table["axis"] == axis, list(DEFAULT.outputs)].to_numpy()
+        fitted = np.linalg.lstsq(design, raw, rcond=None)[0][:4]
+        zero_rows = raw[np.tile(grid == 0.0, 4)]
+        expected = np.mean(fitted - zero_rows, axis=0)
+        assert shift[b] == pytest.approx(expected, abs=1e-12)
+        e = np.mean([errors[(axis, rep)] for rep in range(1, 5)], axis=0)
+        assert np.sign(shift[b]).tolist() == np.sign(-e).tolist()  # it takes the error back
+        assert ratio[b] == pytest.approx(grid.sum() / (grid @ grid), abs=1e-15)  # 0: symmetric
