@@ -45,10 +45,13 @@ Under combined loads eq. (11) also errs in second order (each chi is read at an
 output that carries the other components' coupling): the interval is centred on the
 forces refined by ``EXTRA_STEPS`` more fixed-point steps (eqs. 5-6,
 :mod:`fsdecouple.core.decouple`), so it is not symmetric about the row's force, which
-stays eq. (11)'s.  The held-out points are decoupled the same way.
+stays eq. (11)'s.  The held-out points are decoupled the same way.  With zero rows the
+final model's centre then takes back the zero readings' mean error as the offsets
+fitted from all points estimate it (``zero_shift``, :func:`shifted`); the estimate is
+not exact, and the intervals keep the whole of c_b.
 
-The scores, s, ``load_variance`` (v s^2 n_t / n), ``first_step`` (L_b), ``deviations``
-and ``zero_variance`` (c_b) live in the model file's ``report.certificate["interval"]``;
+The scores, s, ``load_variance`` (v s^2 n_t / n), ``first_step`` (L_b), ``deviations``,
+``zero_variance`` (c_b) and ``zero_shift`` live in the model file's ``report.certificate["interval"]``;
 :func:`check_interval_data` checks them when they are used.  No conformal library is
 used: MAPIE and crepes refit an estimator per fold through scikit-learn's API, where
 these residuals come from the verdict's own rounds and the method is a sort and an index.
