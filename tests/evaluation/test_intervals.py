@@ -242,14 +242,22 @@ def test_the_zero_readings_share_is_the_variance_of_their_mean():
     ("first_step", {"y": 0.0}, "first_step of y is 0.0"),
     ("first_step", {"q": 1.0}, "first_step of q"),
     ("first_step", [1.0], "first_step is"),
+    ("deviations", [1.0, float("inf")], "deviations are not finite numbers in ascending order"),
+    ("deviations", [2.0, 1.0], "deviations are not finite numbers in ascending order"),
+    ("zero_variance", {"y": -0.1}, "zero_variance of y is -0.1"),
+    ("zero_variance", None, "zero_variance is None"),
+    ("zero_shift", {"y": [0.0, float("nan"), 0.0]}, "zero_shift of y is [0.0, nan, 0.0]"),
+    ("zero_shift", {"y": [0.0]}, "zero_shift of y is [0.0]"),
 ])
 def test_damaged_interval_data_are_refused(model, field, value, match):
     m = _with_scores(model, np.arange(1.0, 20.0))
     cal = m.report.certificate["interval"]
     if field == "load_variance":
         cal["components"]["y"]["load_variance"] = value
+    elif field in ("deviations", "zero_variance"):  # the within-sweep fields go together
+        cal.update({"deviations": [0.5, 1.0], "zero_variance": {"x": 0.1}, field: value})
     else:
-        cal["first_step"] = value
+        cal[field] = value
     with pytest.raises(InputError, match=f"damaged \\({re.escape(match)}"):
         half_widths(m, 0.5)
 
