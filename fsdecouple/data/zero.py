@@ -299,6 +299,53 @@ def fitted_offsets(points: pd.DataFrame, sweep: np.ndarray, keys: list, layout: 
     return out
 
 
+def mean_offset_variance(points: pd.DataFrame, layout: Layout) -> np.ndarray:
+    """Per loaded component b, the variance of the mean of its sweeps' zero readings, in
+    units of one reading's variance: mean_g(1 / m_g) / G over its G sweeps of m_g zero
+    rows each (NaN: a sweep without one).
+
+    With zero rows every chi_ab (and omega_b) is fitted to the b sweeps less their zero
+    readings, so it inherits their mean error, the same at every loaded point
+    (``fitted_offsets``): one realisation per calibration, which no held-out round shows.
+    """
+    labels = points["axis"].to_numpy()
+    out = np.full(layout.n, np.nan)
+    for b, label in enumerate(layout.labels):
+        mine = points[labels == label]
+        _, sweep = np.unique(mine["repetition"].to_numpy(), return_inverse=True)
+        groups = sweep.max(initial=-1) + 1
+        zero = (mine[list(layout.loads)].to_numpy() == 0.0).all(axis=1)
+        n_zero = np.bincount(sweep[zero], minlength=groups)
+        if groups and n_zero.min() > 0:
+            out[b] = float(np.mean(1.0 / n_zero)) / groups
+    return out
+
+
+def zero_row_shift(points: pd.DataFrame, offsets: pd.DataFrame,
+                   layout: Layout) -> tuple[np.ndarray, np.ndarray]:
+    """What the zero rows left in a model, as the offsets fitted from all points see it.
+
+    Returns ``(shift, ratio)``: ``shift[b, a]`` the mean over the b sweeps of
+    (fitted offset - zero rows' offset) of output a [output unit], the error every
+    chi_ab inherits (:func:`fitted_offsets`); ``ratio[b]`` = sum f_b / sum f_b^2 over
+    the b sweeps' points [1/load unit], by which omega_b's slope, a least-squares fit
+    through the origin (eq. 2), takes up shift[b, b].  ``points``: zero-corrected by
+    their zero rows with the raw outputs kept (``ux_raw`` ...); ``offsets``: those rows'.
+    """
+    outputs = list(layout.outputs)
+    table = points.drop(columns=outputs).rename(columns={f"{c}_raw": c for c in outputs})
+    _, fitted = zero_correct(table, layout, "fit")
+    diff = fitted[outputs].to_numpy(dtype=float) - offsets[outputs].to_numpy(dtype=float)
+    axis = offsets["axis"].to_numpy()
+    shift, ratio = np.zeros((layout.n, len(outputs))), np.zeros(layout.n)
+    for b, label in enumerate(layout.labels):
+        if (axis == label).any():
+            shift[b] = diff[axis == label].mean(axis=0)
+        f = points.loc[points["axis"] == label, layout.loads[b]].to_numpy(dtype=float)
+        ratio[b] = f.sum() / (f @ f) if f @ f > 0 else 0.0
+    return shift, ratio
+
+
 def tare_offsets(u: np.ndarray, n: int, source=None) -> np.ndarray:
     """Mean of the first ``n`` voltage rows, the zero of a task log [V]."""
     src = f"{source}: " if source is not None else ""

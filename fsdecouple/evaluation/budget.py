@@ -42,6 +42,7 @@ import numpy as np
 import pandas as pd
 
 from ..data.calibration import CalibrationSet
+from ..data.zero import mean_offset_variance, zero_row_shift
 from .intervals import interval_calibration
 from .iso376 import ComponentSteps, component_steps, resolution
 
@@ -215,10 +216,29 @@ def certificate_data(calib: CalibrationSet, model, points: pd.DataFrame,
     noise, zeros = reading_noise(calib, model.k)
     if settings.zero_method == "fit":  # offsets fitted to whole sweeps, not read at zero rows
         zeros = np.inf
+    sweeps = shares = None
+    if calib.zero == "rows" and np.isfinite(zeros) and {"repetition", "axis"} <= set(points.columns):
+        # each held-out sweep's own share apart, and the zero readings' known share
+        sweeps = points.groupby(["repetition", "axis"], sort=False).ngroup().to_numpy()
+        shares = mean_offset_variance(calib.points, layout)
+    cal = interval_calibration(true, predicted if centred is None else centred, layout.labels,
+                               noise, zeros, len(calib.repetitions), trained, sweeps, shares)
+    if shares is not None and len(layout.outputs) == layout.n:
+        cal["zero_shift"] = zero_shift(calib, model.k)
     return {"reference_uncertainty": settings.lab.reference_uncertainty, "steps": steps,
-            "interval": interval_calibration(true, predicted if centred is None else centred,
-                                             layout.labels, noise, zeros,
-                                             len(calib.repetitions), trained)}
+            "interval": cal}
+
+
+def zero_shift(calib: CalibrationSet, k: np.ndarray) -> dict[str, list[float]]:
+    """Per loaded component b, the force every component a of a row takes from the zero
+    rows' inherited error [load unit]: shift[b, a] / k_a for a != b (chi_ab's), and
+    shift[b, b] ratio_b / k_b per unit of f_b for a = b (omega_b's slope)
+    (:func:`fsdecouple.data.zero.zero_row_shift`)."""
+    shift, ratio = zero_row_shift(calib.points, calib.offsets, calib.layout)
+    k = np.asarray(k, dtype=float)
+    out = shift / k[None, :]
+    out[np.diag_indices_from(out)] = np.diag(shift) * ratio / k
+    return {axis: out[b].tolist() for b, axis in enumerate(calib.layout.labels)}
 
 
 def heldout_predictions(rounds, models: dict, method: str,

@@ -1,58 +1,65 @@
-"""An interval on every decoupled force: conformal prediction on held-out residuals,
-with a term for the model's error under combined loads.
+"""An interval on every decoupled force: the held-out residuals' own part, measured,
+with the part a sweep shares, modelled (issue 33).
 
 ``fit`` scores the model's method on calibration points it was not fitted on (the
 held-out rounds of the verdict, :mod:`fsdecouple.evaluation.heldout`), each point
-decoupled where the interval is centred (:func:`centre`).  Each residual r = F_hat - F
-on component a becomes a normalised score |r| / sigma_a, and for a coverage P the
-half-width on a log's row is q sigma'_a(row), q the ceil((n + 1) P)-th smallest of the
-n scores: split conformal prediction (Vovk et al., *Algorithmic Learning in a Random
-World*, 2005; normalised scores: Papadopoulos et al., 2008; Lei et al., JASA 2018), the
-rounds' models standing in for the final one as in cross-conformal prediction.
+decoupled where the interval is centred (:func:`centre`).  s_a is the noise of one
+reading in decoupled component a (from the repetitions' scatter).
 
-sigma (a held-out point) and sigma' (a row of a tared log decoupled by the final
-model) differ, and a variance model says by how much.  With s the noise of one
-reading in the decoupled force (from the repetitions' scatter), m zero readings per
-sweep (m = inf with ``zero: fit``), n repetitions (n_t in a round's training set):
+Zero rows (the default for one-way sweeps).  A residual r = F_hat - F is split in two:
 
-* a zero-corrected reading carries its sweep's zero readings too: s^2 (1 + 1/m); a
-  log's row, tared over many rows, s^2;
-* the model's own error at one load (chi and slope estimated from noisy sweeps, a lag
-  eq. (1) cannot represent) adds v s^2 on a held-out point, which loads one component.
-  v is measured: the mean of r^2 / s^2 - (1 + 1/m) over every held-out point and
-  component, less p = (1 + 1/m) / (2 n_t) (the same order as its own scatter: the
-  rounds are three realisations of the model's error), and never below p;
-* a combined load carries every loaded component's share at once (the coupling error
-  model is additive, eq. 1, so are its errors): on a row with loads f_b the model adds
-  v s^2 (n_t / n) sum_b min(1, |f_b| / L_b), L_b the smallest calibrated non-zero
-  |load| of component b; n_t / n, the final model being fitted on all n repetitions.
+* what a sweep shares: its zero reading, and the round's model's inherited zero
+  readings.  Every chi_ab (and omega_b) is fitted to the b sweeps less their zero
+  readings, so the final model inherits their mean error, the same at every load: one
+  realisation per calibration, of known variance c_b s_a^2, c_b = mean_g(1/m_g) / G
+  (:func:`fsdecouple.data.zero.mean_offset_variance`).  The rounds' realisations are
+  not the final model's: held-out, they are set apart, each sweep's mean residual;
+* what each point adds: the residuals less their sweep's mean, over s_a, pooled over
+  the components (:func:`within_sweeps`), the deviations z_i.
 
-So sigma^2 = s^2 (1 + 1/m + v) and sigma'^2 = s^2 + v s^2 (n_t / n) sum_b min(1, |f_b| /
-L_b): the term grows with the loads and the number of components loaded.  Single-axis
-points never show that sum; it is the assumption (errors of the loads add, independent)
-on which the intervals hold under combined loads, and docs/certificate.md gives its
-measured coverage.  The scores of all components are pooled (they are unit-free), so q
-does not hang on one component's few hundred points.  With one repetition s is
-unknown: each component keeps its own raw residuals (sigma = sigma' = 1).  A sweep's
-zero-load points are its own reference (r = 0 by construction) and score nothing.
+On a log's row with loads f_b the shared part is g ~ N(0, rho^2), rho^2 = sum_b c_b
+min(1, |f_b| / L_b) (L_b the smallest calibrated non-zero |load| of b: the first step,
+over which the inherited error ramps in), and the half-width is s_a Q(rho), Q solving
+mean_i P(|z_i + g| <= Q) = P (n + 1) / n (:func:`_convolved`); at rho = 0 the
+split-conformal quantile of |z| (Vovk et al., *Algorithmic Learning in a Random World*,
+2005; Lei et al., JASA 2018).  It grows with the loads and the number of components
+loaded.  The assumption: a row's error is a held-out point's within its sweep plus the
+zero readings' mean error of every loaded component (errors of the loads add, eq. 1);
+docs/certificate.md gives the measured coverage.
+
+Offsets fitted (``zero: fit``, m = inf) or no sweeps to set apart: normalised scores
+|r| / sigma_a, pooled, and a half-width q sigma'_a(row), q the ceil((n + 1) P)-th
+smallest score.  With m zero readings per sweep, n repetitions (n_t in a round):
+sigma^2 = s^2 (1 + 1/m + v) on a held-out point, sigma'^2 = s^2 + v s^2 (n_t / n)
+sum_b min(1, |f_b| / L_b) on a tared row.  v is the model's share at one load: with
+zero rows the zero readings' 1 / (m n_t); with offsets fitted (the log's error is then
+mostly a lag's) measured, the mean of r^2 / s^2 - (1 + 1/m) over the held-out points
+less p = (1 + 1/m) / (2 n_t) (its own scatter is of that order), never below p.
+Measured with zero rows, v scattered 0.17-0.63 over simulated sensors without
+following the final model's error (correlation -0.37 over 55): the reason for the
+split above.  With one repetition s is unknown: each component keeps its own raw
+residuals (sigma = sigma' = 1).  A sweep's zero-load points are its own reference
+(r = 0 by construction) and score nothing.
 
 Under combined loads eq. (11) also errs in second order (each chi is read at an
 output that carries the other components' coupling): the interval is centred on the
 forces refined by ``EXTRA_STEPS`` more fixed-point steps (eqs. 5-6,
 :mod:`fsdecouple.core.decouple`), so it is not symmetric about the row's force, which
-stays eq. (11)'s.  The held-out points are decoupled the same way, so the scores
-measure the centre's error and not eq. (11)'s second-order error, which on a strongly
-coupled sensor (5 % F.S.) is several times the noise even on single-axis points.
+stays eq. (11)'s.  The held-out points are decoupled the same way.  With zero rows the
+final model's centre then takes back the zero readings' mean error as the offsets
+fitted from all points estimate it (``zero_shift``, :func:`shifted`); the estimate is
+not exact, and the intervals keep the whole of c_b.
 
-The scores, s, v s^2 n_t / n (``load_variance``) and L_b (``first_step``) live in the
-model file's ``report.certificate["interval"]``; :func:`check_interval_data` checks
-them when they are used.  No conformal library is used: MAPIE and crepes refit an
-estimator per fold through scikit-learn's API, where these residuals come from the
-verdict's own rounds and the method is a sort and an index.
+The scores, s, ``load_variance`` (v s^2 n_t / n), ``first_step`` (L_b), ``deviations``,
+``zero_variance`` (c_b) and ``zero_shift`` live in the model file's ``report.certificate["interval"]``;
+:func:`check_interval_data` checks them when they are used.  No conformal library is
+used: MAPIE and crepes refit an estimator per fold through scikit-learn's API, where
+these residuals come from the verdict's own rounds and the method is a sort and an index.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -65,7 +72,7 @@ EXTRA_STEPS = 3  # refinement steps that estimate eq. (11)'s second-order error
 
 def interval_calibration(true: np.ndarray, predicted: np.ndarray, labels, noise=None,
                          zeros: float = 1.0, repetitions: int = 1,
-                         trained: float = 1.0) -> dict[str, Any]:
+                         trained: float = 1.0, sweeps=None, zero_variance=None) -> dict[str, Any]:
     """The conformal scores of held-out forces (``true``, ``predicted``: shape (n, N)
     [load unit]), and the variance model of a log's row.
 
@@ -74,7 +81,10 @@ def interval_calibration(true: np.ndarray, predicted: np.ndarray, labels, noise=
     sorted scores or None, "first_step": {axis: L_b [load unit]}, "components": {axis:
     {"sigma": s, "scores": own sorted scores or None, "load_variance": v s^2 n_t / n
     [load unit^2]}}}`` (a component without s: sigma 1, its own raw residuals, no
-    load_variance).
+    load_variance).  ``sweeps``: each point's held-out sweep, and ``zero_variance``: c_b
+    per component (zero rows, :func:`fsdecouple.data.zero.mean_offset_variance`); given
+    both, the result adds ``"deviations"`` (sorted z_i) and ``"zero_variance"``
+    ({axis: c_b}), which :func:`half_widths` then uses.
     """
     n_comp = len(labels)
     noise = np.full(n_comp, np.nan) if noise is None else np.asarray(noise, dtype=float)
@@ -83,12 +93,19 @@ def interval_calibration(true: np.ndarray, predicted: np.ndarray, labels, noise=
     known = [a for a in range(n_comp) if np.isfinite(noise[a]) and noise[a] > 0]
     residuals = [np.abs(predicted[:, a] - true[:, a]) for a in range(n_comp)]
     ok = [np.isfinite(predicted[:, a]) & loaded for a in range(n_comp)]
-    v = 0.0
+    v, out = 0.0, {}
     if known:
         excess = float(np.mean(np.concatenate(
             [(residuals[a][ok[a]] / noise[a]) ** 2 for a in known]))) - reading
         p = reading / (2.0 * trained)
-        v = max(p, excess - p)
+        if sweeps is not None and zero_variance is not None:
+            signed = [predicted[:, a] - true[:, a] for a in range(n_comp)]
+            out["deviations"], _ = within_sweeps(signed, ok, noise, known, np.asarray(sweeps))
+            out["zero_variance"] = {axis: float(c) for axis, c in zip(labels, zero_variance, strict=True)
+                                    if np.isfinite(c)}
+        # zero rows: the share is known, 1 / (m n_t); measured from a few rounds it
+        # scattered more than it informed (docs/certificate.md, "The model's share")
+        v = 1.0 / (zeros * trained) if math.isfinite(zeros) else max(p, excess - p)
     pooled, comps = [], {}
     for a, axis in enumerate(labels):
         r = residuals[a][ok[a]]
@@ -105,7 +122,30 @@ def interval_calibration(true: np.ndarray, predicted: np.ndarray, labels, noise=
         if nonzero.size:
             steps[axis] = float(nonzero.min())
     return {"scores": np.sort(np.concatenate(pooled)).tolist() if pooled else None,
-            "first_step": steps, "components": comps}
+            "first_step": steps, "components": comps, **out}
+
+
+def within_sweeps(residuals, ok, noise, known, sweeps: np.ndarray) -> tuple[list[float], float]:
+    """The held-out residuals less their sweep's mean, over s, pooled and sorted; and the
+    sweeps' mean squared mean residual beyond its own noise [s^2].
+
+    A sweep's mean residual is the part a whole sweep shares (its zero reading, the
+    round's model's inherited zero readings: the between-sweep share); what is left
+    is each reading's own error, the model's shape error along the sweep and, on
+    sweeps out and back, a lag's.  Scaled by sqrt(n_g / (n_g - 1)) for the mean's own
+    share of the n_g points of sweep g; sweeps of one loaded point give none.
+    """
+    out, between = [], []
+    for a in known:
+        r, g = residuals[a][ok[a]] / noise[a], sweeps[ok[a]]
+        _, idx, count = np.unique(g, return_inverse=True, return_counts=True)
+        mean = np.bincount(idx, weights=r) / count
+        several = count[idx] > 1
+        w = (r - mean[idx]) * np.sqrt(count[idx] / np.maximum(count[idx] - 1, 1))
+        out.append(w[several])
+        within = np.bincount(idx, weights=w * w) / count  # each sweep's own noise
+        between.append((mean ** 2 - within / count)[count > 1])
+    return np.sort(np.concatenate(out)).tolist(), float(np.mean(np.concatenate(between)))
 
 
 def row_sigma(cal: dict[str, Any], f: np.ndarray, labels) -> np.ndarray:
@@ -113,20 +153,24 @@ def row_sigma(cal: dict[str, Any], f: np.ndarray, labels) -> np.ndarray:
     (shape (n, N)): the reading's noise and, per loaded component b, one share of the
     model's error (models fitted before the share was stored: sigma' alone)."""
     steps = cal.get("first_step") or {}
+    shares = cal.get("zero_variance")
     loads = np.zeros(len(f))
     for b, axis in enumerate(labels):
         if axis in steps:
-            loads += np.minimum(1.0, np.abs(np.nan_to_num(f[:, b])) / steps[axis])
+            ramp = np.minimum(1.0, np.abs(np.nan_to_num(f[:, b])) / steps[axis])
+            loads += ramp if shares is None else shares.get(axis, 0.0) * ramp
     out = np.empty((len(f), len(labels)))
     for a, axis in enumerate(labels):
         c = cal["components"][axis]
-        out[:, a] = np.sqrt(c["sigma"] ** 2 + c.get("load_variance", 0.0) * loads)
+        share = c["sigma"] ** 2 * loads if shares is not None else c.get("load_variance", 0.0) * loads
+        out[:, a] = np.sqrt(c["sigma"] ** 2 + share)
     return out
 
 
 def check_interval_data(cal: Any, labels) -> None:
     """Refuse interval data a fit cannot have written: the fields this module added
-    (``load_variance``, ``first_step``) must be finite, >= 0 and > 0 respectively."""
+    (``load_variance``, ``first_step``, ``zero_variance``) must be finite, >= 0, > 0 and
+    >= 0 respectively, and ``deviations`` finite and sorted."""
     def bad(what: str, value) -> InputError:
         return InputError(f"intervals: the model file's interval data are damaged ({what} is "
                           f"{value!r}, expected a finite number {'>= 0' if 'variance' in what else '> 0'}); "
@@ -139,6 +183,29 @@ def check_interval_data(cal: Any, labels) -> None:
         c = cal["components"][axis]
         if "load_variance" in c and not (number(c["load_variance"]) and c["load_variance"] >= 0):
             raise bad(f"load_variance of {axis}", c["load_variance"])
+    deviations = cal.get("deviations")
+    if deviations is not None:
+        if not (isinstance(deviations, list) and deviations and all(number(x) for x in deviations)
+                and all(x <= y for x, y in zip(deviations[:-1], deviations[1:], strict=True))):
+            raise InputError("intervals: the model file's interval data are damaged (deviations "
+                             "are not finite numbers in ascending order); refit the model",
+                             argument="interval")
+        shares = cal.get("zero_variance")
+        if not isinstance(shares, dict):
+            raise bad("zero_variance", shares)
+        for axis, value in shares.items():
+            if axis not in labels or not (number(value) and value >= 0):
+                raise bad(f"zero_variance of {axis}", value)
+    shift = cal.get("zero_shift")
+    if shift is not None:
+        if not isinstance(shift, dict):
+            raise bad("zero_shift", shift)
+        for axis, row in shift.items():
+            if axis not in labels or not (isinstance(row, list) and len(row) == len(labels)
+                                          and all(number(x) for x in row)):
+                raise InputError(f"intervals: the model file's interval data are damaged "
+                                 f"(zero_shift of {axis} is {row!r}, expected {len(labels)} finite "
+                                 "numbers); refit the model", argument="interval")
     steps = cal.get("first_step")
     if steps is not None:
         if not isinstance(steps, dict):
@@ -189,6 +256,9 @@ def half_widths(model, p: float, f: np.ndarray | None = None) -> np.ndarray:
     check_interval_data(cal, labels)
     at_rows = f is not None
     f = np.asarray(f, dtype=float) if at_rows else np.zeros((1, len(labels)))
+    if cal.get("deviations") is not None:
+        out = _convolved(cal, p, f, labels)
+        return out if at_rows else out[0]
     q = np.empty(len(labels))
     for a, axis in enumerate(labels):
         c = cal["components"][axis]
@@ -197,13 +267,65 @@ def half_widths(model, p: float, f: np.ndarray | None = None) -> np.ndarray:
     return out if at_rows else out[0]
 
 
+GRID = 33  # between-sweep ratios rho at which the half-width is solved, then interpolated
+
+
+def _convolved(cal: dict[str, Any], p: float, f: np.ndarray, labels) -> np.ndarray:
+    """Half-widths, shape (n, N), from the within-sweep deviations z_i and a row's
+    between-sweep share.
+
+    A row's error is s z + g: z drawn from the held-out deviations (each reading's own
+    error and the model's along a sweep), g ~ N(0, rho^2 s^2) the share a sweep of
+    calibration points has in common, here the final model's inherited zero readings
+    (rho^2 = sum_b c_b min(1, |f_b| / L_b), c_b = ``zero_variance``, :func:`row_sigma`).  The
+    half-width h = s Q(rho) solves mean_i P(|z_i + g / s| <= Q) = P (n + 1) / n, the
+    split-conformal correction; at rho = 0 it is the ceil((n + 1) P)-th smallest |z_i|.
+    """
+    z = np.asarray(cal["deviations"], dtype=float)
+    shares = cal.get("zero_variance") or {}
+    top = math.sqrt(sum(shares.get(a, 0.0) for a in labels if a in (cal.get("first_step") or {})))
+    grid, q = _q_grid(z.tobytes(), p, top)
+    sigma = np.array([cal["components"][a]["sigma"] for a in labels])
+    rho = np.sqrt(np.maximum(row_sigma(cal, f, labels) ** 2 / sigma ** 2 - 1.0, 0.0))
+    return sigma * np.interp(rho, grid, q)
+
+
+@functools.lru_cache(maxsize=8)
+def _q_grid(deviations: bytes, p: float, top: float) -> tuple[np.ndarray, np.ndarray]:
+    """Q(rho) on ``GRID`` ratios from 0 to ``top`` (every ramp 1: the largest a row has),
+    the same for every chunk of a log; solved once per model and P."""
+    from scipy.special import ndtr
+
+    z = np.frombuffer(deviations, dtype=float)
+    n = z.size
+    target = p * (n + 1) / n
+    if target >= 1.0:
+        raise InputError(f"coverage {p!r}: {n} held-out deviations calibrate intervals up to "
+                         f"P = {n / (n + 1):.3f}", argument="interval")
+    grid = np.linspace(0.0, top, GRID)
+    q0 = np.sort(np.abs(z))[math.ceil((n + 1) * p) - 1]
+    if not top > 0.0:
+        return grid, np.full(GRID, q0)
+    lo = np.zeros(GRID - 1)
+    hi = np.full(GRID - 1, float(np.abs(z).max()) + 10.0 * top)
+    r = grid[1:, None]
+    for _ in range(50):  # bisection: the coverage rises with the half-width
+        mid = 0.5 * (lo + hi)
+        covered = np.mean(ndtr((mid[:, None] - z) / r) - ndtr((-mid[:, None] - z) / r), axis=1)
+        lo, hi = np.where(covered < target, mid, lo), np.where(covered < target, hi, mid)
+    q = np.concatenate(([q0], hi))
+    return grid, q
+
+
 def centre(model, u: np.ndarray, f: np.ndarray | None = None) -> np.ndarray:
     """Where an interval is centred: eq. (11)'s forces refined by ``EXTRA_STEPS`` more
     fixed-point steps (eqs. 5-6), shape (n, N) [load unit], without rotation.
 
     The held-out points are scored here too, so the scores measure the centre's error.
     A row whose refinement does not settle keeps eq. (11)'s force ``f`` (computed
-    from ``u`` if not given).
+    from ``u`` if not given).  A final model fitted on zero rows then takes back the
+    error its chi and omega inherited from them, as the offsets fitted from all points
+    estimate it (``zero_shift``, :func:`shifted`); the held-out rounds' models have none.
     """
     if f is None:
         f = model.decouple(u, rotate=False)
@@ -212,7 +334,28 @@ def centre(model, u: np.ndarray, f: np.ndarray | None = None) -> np.ndarray:
     with np.errstate(all="ignore"):
         refined = model.decouple(np.nan_to_num(u), rotate=False,
                                  refine=model.settings.refine + EXTRA_STEPS)
-    return np.where(np.isfinite(refined), refined, f)
+    mid = np.where(np.isfinite(refined), refined, f)
+    cert = (model.report.certificate if getattr(model, "report", None) is not None else None) or {}
+    cal = cert.get("interval") or {}
+    return shifted(cal, mid, model.layout.labels) if cal.get("zero_shift") else mid
+
+
+def shifted(cal: dict[str, Any], f: np.ndarray, labels) -> np.ndarray:
+    """``f`` less the zero rows' inherited error at ``f``: per loaded component b, each
+    component a != b moves by zero_shift[b][a] min(1, |f_b| / L_b) (chi_ab's share, ramped
+    in over the first step as the chi is), and b by zero_shift[b][b] f_b (omega_b's
+    slope) [load unit]."""
+    out = np.array(f, dtype=float, copy=True)
+    steps = cal.get("first_step") or {}
+    for b, axis in enumerate(labels):
+        row = cal["zero_shift"].get(axis)
+        if row is None or axis not in steps:
+            continue
+        fb = np.nan_to_num(f[:, b])
+        ramp = np.minimum(1.0, np.abs(fb) / steps[axis])
+        for a in range(len(labels)):
+            out[:, a] += row[a] * (fb if a == b else ramp)
+    return out
 
 
 def with_intervals(model, f: np.ndarray, p: float, u: np.ndarray | None = None) -> np.ndarray:

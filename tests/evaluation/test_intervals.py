@@ -60,26 +60,43 @@ def _held_out(rng, n, s, m, tau, comps=3, step=10.0):
 
 
 def test_the_model_share_is_the_held_out_excess_over_the_reading_noise():
+    """With offsets fitted (zero: fit, m = inf) the model's share is measured."""
     rng = np.random.default_rng(0)
-    s, m, n, nt, tau = 0.1, 1.0, 6, 4.0, 0.08  # tau^2 / s^2 = 0.64
+    s, m, n, nt, tau = 0.1, np.inf, 6, 4.0, 0.08  # tau^2 / s^2 = 0.64
     true, pred = _held_out(rng, 60_000, s, m, tau)
     cal = interval_calibration(true, pred, ("x", "y", "z"), np.full(3, s), zeros=m,
                                repetitions=n, trained=nt)
     # brute force: the excess of the loaded points' mean squared residual over the
-    # reading's variance, less p = (1 + 1/m) / (2 n_t) = 0.25; scaled to n repetitions
+    # reading's variance, less p = 1 / (2 n_t) = 0.125; scaled to n repetitions
     loaded = (true != 0).any(axis=1)
-    excess = np.mean(((pred - true)[loaded] / s) ** 2) - (1 + 1 / m)
+    excess = np.mean(((pred - true)[loaded] / s) ** 2) - 1.0
     assert excess == pytest.approx(0.64, abs=0.03)  # the simulation's own tau^2 / s^2
-    p = (1 + 1 / m) / (2 * nt)
+    p = 1.0 / (2 * nt)
     for c in cal["components"].values():
         assert c["sigma"] == s
         assert c["load_variance"] == pytest.approx((excess - p) * s * s * nt / n, rel=1e-9)
     # zero-load points score nothing; the rest are |r| / (s sqrt(1 + 1/m + v))
     assert len(cal["scores"]) == 3 * loaded.sum()
     v = excess - p
-    expected = np.sort((np.abs(pred - true)[loaded] / (s * math.sqrt(2 + v))).ravel())
+    expected = np.sort((np.abs(pred - true)[loaded] / (s * math.sqrt(1 + v))).ravel())
     assert cal["scores"] == pytest.approx(expected.tolist())
     assert cal["first_step"] == {"x": 10.0, "y": 10.0, "z": 10.0}
+
+
+def test_with_zero_rows_the_model_share_is_the_zero_readings_whatever_the_rounds_show():
+    """Zero rows: each chi inherits the mean of n_t sweeps' zero readings, s^2 / (m n_t);
+    the rounds' excess (here tau^2 / s^2 = 0.64 or none) does not move it (issue 33)."""
+    s, m, n, nt = 0.1, 2.0, 6, 4.0
+    for seed, tau in ((3, 0.08), (4, 0.0)):
+        true, pred = _held_out(np.random.default_rng(seed), 20_000, s, m, tau)
+        cal = interval_calibration(true, pred, ("x", "y", "z"), np.full(3, s), zeros=m,
+                                   repetitions=n, trained=nt)
+        v = 1.0 / (m * nt)  # 0.125
+        for c in cal["components"].values():
+            assert c["load_variance"] == pytest.approx(v * s * s * nt / n, rel=1e-12)
+        loaded = (true != 0).any(axis=1)
+        expected = np.sort((np.abs(pred - true)[loaded] / (s * math.sqrt(1 + 1 / m + v))).ravel())
+        assert cal["scores"] == pytest.approx(expected.tolist())
 
 
 def test_without_excess_the_model_share_keeps_its_floor_and_zero_fit_drops_the_zero_reading():
@@ -114,7 +131,7 @@ def test_intervals_hold_on_combined_loads_whose_errors_add():
     from fsdecouple.evaluation.intervals import _quantile, row_sigma
 
     rng = np.random.default_rng(2)
-    s, m, n, nt, tau, p = 0.1, 1.0, 6, 4.0, 0.12, 0.95
+    s, m, n, nt, tau, p = 0.1, np.inf, 6, 4.0, 0.12, 0.95  # zero: fit: the share measured
     true, pred = _held_out(rng, 20_000, s, m, tau)
     cal = interval_calibration(true, pred, ("x", "y", "z"), np.full(3, s), zeros=m,
                                repetitions=n, trained=nt)
@@ -125,11 +142,98 @@ def test_intervals_hold_on_combined_loads_whose_errors_add():
     err += rng.normal(scale=tau * math.sqrt(nt / n), size=(rows, 3, 3)).sum(axis=2)
     h = _quantile(cal["scores"], p, "x") * row_sigma(cal, f, "xyz")
     covered = (np.abs(err) <= h).mean(axis=0)
-    # v is tau^2 / s^2 = 1.44 less p = 0.25: q = 1.96 sqrt(3.44 / 3.19) = 2.035 and
-    # sigma' = 0.933 of the rows' sigma, so |N(0, 1)| <= 1.90 holds 0.943 of the rows
-    assert covered == pytest.approx(np.full(3, 0.943), abs=0.006)  # 50 000 rows: sd 0.001
+    # v is tau^2 / s^2 = 1.44 less p = 0.125: q = 1.96 sqrt(2.44 / 2.315) = 2.012 and
+    # sigma' = sqrt(1 + 3 v n_t/n) / sqrt(1 + 3 tau^2/s^2 n_t/n) = 0.967 of the rows'
+    # sigma, so |N(0, 1)| <= 1.946 holds 0.948 of the rows
+    v = 1.44 - 1 / (2 * nt)
+    z = 1.96 * math.sqrt(2.44 / (1 + v)) * math.sqrt((1 + 3 * v * nt / n) / (1 + 3 * 1.44 * nt / n))
+    assert covered == pytest.approx(np.full(3, math.erf(z / math.sqrt(2))), abs=0.006)  # sd 0.001
     without = _quantile(cal["scores"], p, "x") * s  # the reading's noise alone
     assert (np.abs(err) <= without).mean() < 0.75
+
+
+def _sweeps(rng, n_sweeps, per, s, shared, comps=3, step=10.0):
+    """Held-out single-axis sweeps of ``per`` loaded points: every point's residual is the
+    reading's noise s plus its sweep's shared error N(0, shared^2) (a round's zero
+    readings), the same on every component of the sweep."""
+    axis = np.repeat(np.arange(n_sweeps) % comps, per)
+    true = np.zeros((n_sweeps * per, comps))
+    true[np.arange(true.shape[0]), axis] = step * np.tile(np.arange(1, per + 1), n_sweeps)
+    err = rng.normal(scale=s, size=true.shape)
+    err += np.repeat(rng.normal(scale=shared, size=(n_sweeps, comps)), per, axis=0)
+    return true, true + err, np.repeat(np.arange(n_sweeps), per)
+
+
+def test_zero_row_intervals_take_the_known_share_not_the_rounds_realisation():
+    """Issue 33: the rounds' sweeps share errors (their zero readings' mean) that are not
+    the final model's.  The final model's share on a row is N(0, rho^2 s^2), rho^2 =
+    sum_b c_b ramp_b with c_b the zero readings' known variance.  Held-out sweeps whose
+    shared error is large (2 s) gave the pooled scores' intervals a coverage near 1; the
+    within-sweep deviations, convolved with the known share, cover P of the rows."""
+    from fsdecouple.evaluation.intervals import half_widths
+
+    rng = np.random.default_rng(5)
+    s, shared, c, p = 0.1, 0.2, 1 / 6, 0.95
+    true, pred, sweeps = _sweeps(rng, 60, 20, s, shared)
+    rows = 40_000
+    f = rng.uniform(20, 100, (rows, 3)) * rng.choice([-1, 1], (rows, 3))  # every ramp 1
+    err = rng.normal(scale=s, size=(rows, 3)) + rng.normal(scale=s * math.sqrt(3 * c), size=(rows, 3))
+    covered = {}
+    for label, extra in (("pooled", {}), ("within", {"sweeps": sweeps, "zero_variance": np.full(3, c)})):
+        cal = interval_calibration(true, pred, ("x", "y", "z"), np.full(3, s), zeros=1.0,
+                                   repetitions=6, trained=4.0, **extra)
+        m = type("M", (), {})()  # half_widths reads the model's report and layout only
+        m.report = type("R", (), {"certificate": {"interval": cal}})()
+        m.layout = type("L", (), {"labels": ("x", "y", "z"), "overdetermined": False})()
+        covered[label] = (np.abs(err) <= half_widths(m, p, f)).mean(axis=0)
+    assert (covered["pooled"] > 0.985).all(), covered  # the rounds' shared errors widened it
+    # the rows' error is N(0, s^2 (1 + 3c)) and so is the convolution: P of them, within
+    # the binomial scatter of 40 000 rows (0.001) and the deviations' (1200 of them)
+    assert covered["within"] == pytest.approx(np.full(3, p), abs=0.012), covered
+
+
+def test_the_convolved_half_width_is_the_gaussian_one_for_gaussian_deviations():
+    """For deviations z ~ N(0, 1) and a share N(0, rho^2) the sum is N(0, 1 + rho^2): the
+    half-width is Phi^-1((1 + P)/2) sqrt(1 + rho^2); at rho = 0 the conformal quantile."""
+    from fsdecouple.evaluation.intervals import _convolved
+
+    z = np.sort(np.random.default_rng(6).normal(size=5_000)).tolist()
+    cal = {"deviations": z, "zero_variance": {"x": 0.5, "y": 0.0},
+           "first_step": {"x": 10.0, "y": 10.0},
+           "components": {"x": {"sigma": 2.0, "scores": None}, "y": {"sigma": 1.0, "scores": None}}}
+    f = np.array([[0.0, 0.0], [5.0, 0.0], [50.0, 0.0], [50.0, 50.0]])  # rho^2 = 0, 0.25, 0.5, 0.5
+    h = _convolved(cal, 0.95, f, ("x", "y"))
+    rho2 = np.array([0.0, 0.25, 0.5, 0.5])
+    expected = 1.959964 * np.sqrt(1 + rho2)
+    assert h[:, 0] == pytest.approx(2.0 * expected, rel=0.01)  # 5 000 deviations: ~0.1 %
+    assert h[:, 1] == pytest.approx(expected, rel=0.01)
+    k = math.ceil((len(z) + 1) * 0.95)
+    assert h[0, 1] == pytest.approx(np.sort(np.abs(z))[k - 1], rel=1e-12)
+
+
+def test_the_zero_readings_share_is_the_variance_of_their_mean():
+    """Brute force: G sweeps of m_g zero rows each, readings N(0, 1); the mean over the
+    sweeps of each sweep's zero-row mean has the variance mean_g(1/m_g)/G."""
+    import pandas as pd
+
+    from fsdecouple.axes import DEFAULT
+    from fsdecouple.data.zero import mean_offset_variance
+
+    zeros_per_sweep = {"x": [1, 1, 1, 1, 1, 1], "y": [1, 2, 3, 1], "z": [2, 2]}
+    rows = []
+    for a, axis in enumerate(DEFAULT.labels):
+        for rep, m in enumerate(zeros_per_sweep[axis], start=1):
+            for load in [0.0] * m + [10.0, 20.0]:
+                f = [0.0, 0.0, 0.0]
+                f[a] = load
+                rows.append((rep, axis, *f))
+    points = pd.DataFrame(rows, columns=["repetition", "axis", *DEFAULT.loads])
+    got = mean_offset_variance(points, DEFAULT)
+    rng = np.random.default_rng(7)
+    for b, axis in enumerate(DEFAULT.labels):
+        ms = zeros_per_sweep[axis]
+        draws = np.mean([rng.normal(size=(100_000, m)).mean(axis=1) for m in ms], axis=0)
+        assert got[b] == pytest.approx(draws.var(), rel=0.02)  # 100 000 draws: 0.45 %
 
 
 @pytest.mark.parametrize("field, value, match", [
@@ -138,14 +242,22 @@ def test_intervals_hold_on_combined_loads_whose_errors_add():
     ("first_step", {"y": 0.0}, "first_step of y is 0.0"),
     ("first_step", {"q": 1.0}, "first_step of q"),
     ("first_step", [1.0], "first_step is"),
+    ("deviations", [1.0, float("inf")], "deviations are not finite numbers in ascending order"),
+    ("deviations", [2.0, 1.0], "deviations are not finite numbers in ascending order"),
+    ("zero_variance", {"y": -0.1}, "zero_variance of y is -0.1"),
+    ("zero_variance", None, "zero_variance is None"),
+    ("zero_shift", {"y": [0.0, float("nan"), 0.0]}, "zero_shift of y is [0.0, nan, 0.0]"),
+    ("zero_shift", {"y": [0.0]}, "zero_shift of y is [0.0]"),
 ])
 def test_damaged_interval_data_are_refused(model, field, value, match):
     m = _with_scores(model, np.arange(1.0, 20.0))
     cal = m.report.certificate["interval"]
     if field == "load_variance":
         cal["components"]["y"]["load_variance"] = value
+    elif field in ("deviations", "zero_variance"):  # the within-sweep fields go together
+        cal.update({"deviations": [0.5, 1.0], "zero_variance": {"x": 0.1}, field: value})
     else:
-        cal["first_step"] = value
+        cal[field] = value
     with pytest.raises(InputError, match=f"damaged \\({re.escape(match)}"):
         half_widths(m, 0.5)
 
@@ -223,3 +335,45 @@ def test_compare_and_certificate_json_refuse_an_edited_model_in_one_line(
     e = _edited(sample_model, tmp_path, edit)
     r = invoke([a.format(m=sample_model, e=e) for a in args], 2)
     assert_one_line_error(r, str(e), "refit it")
+
+
+def test_the_zero_rows_shift_is_the_mean_error_of_their_readings():
+    """Sweeps whose outputs are an offset per sweep plus one polynomial of the load
+    (degree <= 5: the fitted offsets' own form), and whose zero rows read e off that
+    offset.  The shift is the mean of (least-squares offset - zero row), re-derived here
+    by its own least squares (the zero row is one of the fitted points, so it pulls the
+    fitted offset by its leverage): about -0.83 mean(e) on this grid (issue 33)."""
+    import pandas as pd
+
+    from fsdecouple.axes import DEFAULT
+    from fsdecouple.data.zero import zero_correct, zero_row_shift
+
+    rng = np.random.default_rng(8)
+    grid = np.arange(-100.0, 100.1, 10.0)
+    rows, errors = [], {}
+    for b, axis in enumerate(DEFAULT.labels):
+        for rep in range(1, 5):
+            offset, e = rng.uniform(-1, 1, 3), rng.normal(scale=0.01, size=3)
+            errors[(axis, rep)] = e
+            for load in grid:
+                f = np.zeros(3)
+                f[b] = load
+                s = load / 100.0
+                u = offset + np.array([0.3, -0.2, 0.1]) * s + 0.05 * s ** 2 - 0.02 * s ** 5
+                if load == 0.0:
+                    u = u + e
+                rows.append((rep, axis, *f, *u))
+    table = pd.DataFrame(rows, columns=["repetition", "axis", *DEFAULT.loads, *DEFAULT.outputs])
+    points, offsets = zero_correct(table, DEFAULT, "rows")
+    shift, ratio = zero_row_shift(points, offsets, DEFAULT)
+    s = np.tile(grid / 100.0, 4)
+    design = np.column_stack([np.repeat(np.eye(4), grid.size, axis=0), *(s ** k for k in range(1, 6))])
+    for b, axis in enumerate(DEFAULT.labels):
+        raw = table.loc[table["axis"] == axis, list(DEFAULT.outputs)].to_numpy()
+        fitted = np.linalg.lstsq(design, raw, rcond=None)[0][:4]
+        zero_rows = raw[np.tile(grid == 0.0, 4)]
+        expected = np.mean(fitted - zero_rows, axis=0)
+        assert shift[b] == pytest.approx(expected, abs=1e-12)
+        e = np.mean([errors[(axis, rep)] for rep in range(1, 5)], axis=0)
+        assert np.sign(shift[b]).tolist() == np.sign(-e).tolist()  # it takes the error back
+        assert ratio[b] == pytest.approx(grid.sum() / (grid @ grid), abs=1e-15)  # 0: symmetric

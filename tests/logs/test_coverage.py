@@ -9,13 +9,15 @@ rows; a component's coverage is the fraction of rows whose true force lies in
 with the simulator's true coupling functions (the floor).
 
 The limits come from ``benchmarks/interval_coverage.py`` over 58 sensors (docs/
-certificate.md): at P = 0.95 the largest width ratio was 0.71, 75-88 % of the component
-coverages lay in 0.92-0.985 in these three scenarios (79 % on average), the median per
-scenario 0.949-0.966; in memory, on 62 sensors, the median at P = 0.9 was 0.914.  One
-log's coverage scatters from sensor to sensor (the final model's own error is one
-realisation, the same on many rows), so single sensors are not held to the window;
-the fraction in it is, with two binomial standard deviations of margin for 36
-coverages (0.79 - 2 x 0.068 -> 0.65).
+certificate.md): at P = 0.95 the largest width ratio was 0.54, the median coverage per
+scenario 0.949-0.967.  In these twelve sensors (in memory, the same fits) 31 of the 36
+component coverages lay in 0.92-0.985 (0.86), the median at P = 0.9 was 0.912; before
+the within-sweep deviations, the zero readings' share and the centre's zero shift, 28 of
+36 (0.78), four of them above 0.985.  One log's coverage scatters from sensor to sensor
+(the zero readings' mean error the model inherits is one realisation, the same on every
+row), so single sensors are not held to the window; the fraction in it is, above the
+earlier method's 28 of 36 (1.4 binomial standard deviations below the measured 0.86;
+the twelve sensors are fixed, so the figure moves only with the method).
 """
 
 from __future__ import annotations
@@ -71,14 +73,14 @@ def measured(tmp_path_factory):
 def test_every_sensor_keeps_the_width_bound(measured):
     _, width = measured
     for label, w in width.items():
-        assert (w <= 0.9).all(), (label, w)  # largest measured 0.71
+        assert (w <= 0.75).all(), (label, w)  # largest measured 0.54
 
 
 def test_the_coverage_at_095_holds_per_scenario_and_mostly_per_sensor(measured):
     coverage, _ = measured
     everything = np.concatenate([c[0.95].ravel() for c in coverage.values()])
     inside = ((everything >= 0.92) & (everything <= 0.985)).mean()
-    assert inside >= 0.65, everything
+    assert inside > 0.78, everything
     for label, c in coverage.items():
         assert 0.93 <= np.median(c[0.95]) <= 0.985, (label, c[0.95])
 
