@@ -81,7 +81,8 @@ def heldout_verdict(calib: CalibrationSet, settings: Settings, *, protocol: str 
     protocol = choose_protocol(calib, protocol)
     rounds = rounds_for(calib, protocol)
     jobs = [((r.index, m), m, r.train) for r in rounds for m in VERDICT_METHODS]
-    # the rounds' SVRs are solved as the model's are (VERDICT_NOISE_FRACTION, noise.py)
+    # the rounds' SVRs are solved to VERDICT_NOISE_FRACTION of sigma (noise.py: sigma, the
+    # model sigma / 2)
     # each round's SVRs on every core too: the last round to start then does not train
     # alone on one core while the others idle (fit: its SVRs are 90 % of the CPU)
     models, _ = train_all(jobs, settings, workers or 1, None, tables=False,
