@@ -38,8 +38,10 @@ alike:
   - CPU of the three rounds on the sample (fastest of 5): 2.0 s at sigma / 2, 0.87 s at
     sigma, 0.37 s at 2 sigma; the model's own six SVRs 0.93 s.  So ``fit`` with its
     verdict spends 1.1 s less CPU at sigma, two fifths of its SVR time, towards issue
-    30's goal (fit <= 4x the paper's six SVRs; the wall-time ratio was not measurable
-    on the busy machine: benchmarks/run.py row 4f).
+    30's goal (fit <= 4x the paper's six SVRs, benchmarks/run.py row 4f).  Its wall
+    time, runs alternated on a busy machine (medians of 5): 4.9 s at sigma, 6.1 s at
+    sigma / 2, 4.2 s at 2 sigma, the paper's six SVRs 2.1 s; an idle machine's ratio
+    was not measured.
   - the verdict's held-out svr worst gamma: on the sample 0.55 % (2 sigma: 0.60 %)
     against 0.49 %; over 12 simulated sensors (``simulate --seed 0-11``) it moved by
     +0.017 points on average (95 % CI -0.002..+0.037, the sensors' own scatter 0.04),
