@@ -3,6 +3,8 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +36,29 @@ def _command_once(app):
 
 if _build_command is not None:
     typer.testing._get_command = _command_once
+
+
+_interrupted = False
+
+
+def pytest_keyboard_interrupt(excinfo):
+    global _interrupted
+    _interrupted = True
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_unconfigure(config):
+    """After a Ctrl-C, do not wait for threads still inside an in-process command's libsvm
+    (a fit's thread pool): the interpreter joins them at exit, and an SVR of minutes kept
+    pytest alive after its "KeyboardInterrupt" summary.  The CLI's own main exits so too
+    (os._exit once every finally block has run); here pytest has written its report."""
+    busy = [t for t in threading.enumerate()
+            if t is not threading.main_thread() and t.is_alive() and not t.daemon]
+    if _interrupted and busy:
+        with contextlib.suppress(OSError, ValueError):
+            sys.stdout.flush()
+            sys.stderr.flush()
+        os._exit(int(pytest.ExitCode.INTERRUPTED))
 
 
 @pytest.fixture(scope="session")
