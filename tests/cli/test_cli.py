@@ -215,8 +215,9 @@ def test_progress_bars_show_on_a_terminal_and_never_in_ci(tmp_path, sample_model
     cal = SAMPLE / "calibration"
     log = SAMPLE / "task_voltages.csv"
     apply_args = ["apply", sample_model, log, "-o", tmp_path / "f.csv", "--force"]
-    cv_args = ["cv", cal, "-o", tmp_path / "cv.json", "--force"]
-    fit_args = ["fit", cal, "-o", tmp_path / "m.json", "--force"]
+    # one cv round and a fit without its verdict draw the same bars as the whole runs
+    cv_args = ["cv", cal, "--folds", "1,2", "-o", tmp_path / "cv.json", "--force"]
+    fit_args = ["fit", cal, "-o", tmp_path / "m.json", "--force", "--no-verdict"]
     hide_cursor = "\x1b[?25l"  # rich hides the cursor while a live bar is drawn
     for args, label in ((apply_args, "decoupling"), (cv_args, "training"), (fit_args, "fitting")):
         out = _on_a_terminal(args, env)
