@@ -105,6 +105,14 @@ def sim_model_file(sim_fit):
     return sim_fit[0]
 
 
+# Table 2's libsvm stopping tolerance (-e 0.001), written in a config and so obeyed as
+# written: a fit of the sample then takes ~0.4 s of CPU instead of ~1.4 s (the default
+# solves each chi to half the calibration's noise), and a verdict fit ~0.7 s instead of
+# ~3.6 s.  For tests whose point does not depend on the solver's last digits: error
+# paths, names and text, files and outputs.  A config line, so a test shows it.
+FAST_SVR = "svr: {tolerance: 0.001}\n"
+
+
 def eq11_from_file(doc: dict, u: np.ndarray, correction=None, refine=None,
                    raw: bool = False) -> np.ndarray:
     """Forces [load unit] by eq. (11) from a model file's own numbers, sharing no code
