@@ -3,6 +3,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import signal
 import sys
 import threading
 from pathlib import Path
@@ -37,6 +38,11 @@ def _command_once(app):
 if _build_command is not None:
     typer.testing._get_command = _command_once
 
+
+# A shell script's background job (`pytest &`) starts with SIGINT ignored, and Python
+# then installs no KeyboardInterrupt handler: a SIGINT sent to the suite did nothing.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 _interrupted = False
 
