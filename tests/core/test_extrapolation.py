@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
 import pytest
-from conftest import ROOT, SAMPLE, assert_one_line_error, invoke
+from conftest import FAST_SVR, ROOT, SAMPLE, assert_one_line_error, invoke
 
 from fsdecouple import load_calibration, load_config, load_model
 from fsdecouple.core.decouple import PROMISE
@@ -209,9 +209,11 @@ def test_cli_unknown_mode_exit_2_and_nothing_written(tmp_path):
 
 
 def test_cli_fit_records_the_mode(tmp_path):
+    (tmp_path / "fast.yaml").write_text(FAST_SVR)  # the mode is recorded, whatever the solver
     for args, mode in (([], "tangent"), (["--extrapolation", "kernel"], "kernel")):
         out = tmp_path / f"{mode}.json"
-        invoke(["fit", SAMPLE / "calibration", "-o", out, "--no-verdict", *args])
+        invoke(["fit", SAMPLE / "calibration", "-c", tmp_path / "fast.yaml", "-o", out,
+                "--no-verdict", *args])
         assert load_model(out).settings.extrapolation == mode
 
 
