@@ -117,6 +117,7 @@ def sim_model_file(sim_fit):
 # ~3.6 s.  For tests whose point does not depend on the solver's last digits: error
 # paths, names and text, files and outputs.  A config line, so a test shows it.
 FAST_SVR = "svr: {tolerance: 0.001}\n"
+FAST_CONFIG = ROOT / "tests" / "fixtures" / "fast-svr.yaml"  # FAST_SVR alone, for -c
 
 
 def eq11_from_file(doc: dict, u: np.ndarray, correction=None, refine=None,
