@@ -202,7 +202,7 @@ def test_a_candidate_worse_than_table2_on_any_axis_is_never_chosen(monkeypatch):
 def test_fit_tune_round_trips_through_the_model_file(tmp_path):
     out = tmp_path / "m.json"
     r = runner.invoke(app, ["fit", SAMPLE, "-o", str(out), "--tune", "--tune-grid", TINY,
-                            "--json"])
+                            "--json", "--no-verdict"])  # the record is the tune's, verdict or not
     assert r.exit_code == 0, r.output
     printed = json.loads(r.stdout)["tune"]
     model = load_model(out)
@@ -214,14 +214,15 @@ def test_fit_tune_round_trips_through_the_model_file(tmp_path):
     assert model_to_dict(model)["report"]["tune"] == printed
 
 
-@pytest.mark.slow  # fits with the held-out verdict: seconds of CPU; the not-slow run stays under a minute
-def test_untuned_models_have_no_tune_record(tmp_path):
+@pytest.mark.slow  # a fit: about a second of CPU
+def test_untuned_models_have_no_tune_record(tmp_path, sample_model):
     out = tmp_path / "m.json"
-    r = runner.invoke(app, ["fit", SAMPLE, "-o", str(out), "--json"])
+    r = runner.invoke(app, ["fit", SAMPLE, "-o", str(out), "--json", "--no-verdict"])
     assert r.exit_code == 0, r.output
     assert json.loads(r.stdout)["tune"] is None
-    assert "tune" not in json.loads(out.read_text())["report"]  # older files' bytes
-    assert load_model(out).report.tune is None
+    for path in (out, sample_model):  # and the session's fit with its verdict
+        assert "tune" not in json.loads(path.read_text())["report"]  # older files' bytes
+        assert load_model(path).report.tune is None
 
 
 @pytest.mark.parametrize("grid", ["gamma=0", "C=1e9", "epsilon=-1", "gamma=nan", "delta=1",
