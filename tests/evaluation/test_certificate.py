@@ -356,7 +356,11 @@ def test_certificate_on_a_simulated_sensor_matches_the_definitions(certified, ca
 @pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_one_repetition_has_no_b_and_says_why(calib, settings):
     one = calib.subset([1])
-    model = calibrate(one, replace(settings, min_repetitions=1))
+    # one repetition: the verdict holds out each load level in turn (20 s of CPU at the
+    # default tolerance); at Table 2's (as a config writes it) 4x less, and the figures
+    # the certificate leaves out are the point
+    svr = replace(settings.svr, tolerance=1e-3)
+    model = calibrate(one, replace(settings, min_repetitions=1, svr=svr))
     doc = certificate(model, one)
     metrics = {r["metric"] for r in doc["records"]}
     assert "b" not in metrics and "b_prime" not in metrics and "U" in metrics
