@@ -114,9 +114,10 @@ def test_a_stated_solver_tolerance_is_obeyed_in_the_verdict_too(monkeypatch):
     from fsdecouple.config import TABLE2_TOLERANCE
 
     calib = fsdecouple.load_calibration(SAMPLE / "calibration", fsdecouple.load_config())
-    stated, own = _tolerances(monkeypatch, calib, fsdecouple.load_config(tolerance=1e-4))
-    assert stated == [1e-4] * 24 and own == 1e-4
+    # 2e-3: looser than any the built-in rule gives (at most Table 2's), and fast to solve
+    stated, own = _tolerances(monkeypatch, calib, fsdecouple.load_config(tolerance=2e-3))
+    assert stated == [2e-3] * 24 and own == 2e-3
     # by the built-in rule: not the stated value, at most Table 2's, the model's six alike
     rule, own = _tolerances(monkeypatch, calib, fsdecouple.load_config())
-    assert len(rule) == 24 and rule.count(own) >= 6 and 1e-4 not in rule
+    assert len(rule) == 24 and rule.count(own) >= 6 and 2e-3 not in rule
     assert all(0 < t <= TABLE2_TOLERANCE for t in rule)
