@@ -91,6 +91,7 @@ def test_export_says_the_header_has_no_intervals(fitted, tmp_path):
     assert "apply --interval's bounds are not in it" in r.stdout
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_certificate_pdf_has_the_json_figures_on_a4_with_fonts_embedded(fitted, sim_dir, tmp_path):
     from PIL import Image
     from pypdf import PdfReader
@@ -170,6 +171,7 @@ def test_a_copied_repetition_is_refused_naming_the_file(fitted, sim_dir, tmp_pat
     assert_one_line_error(r, "fitted on rep6.csv too")
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_certificate_takes_the_config_fit_was_given_on_sweeps_out_and_back(tmp_path):
     simulate(tmp_path / "s", seed=4, hysteresis=0.001)
     config = tmp_path / "lab.yaml"
@@ -223,6 +225,7 @@ def test_a_creep_column_that_is_not_time_is_one_line(timed, tmp_path, column, ne
     assert not out.exists()
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_certificate_drift_from_compare_json(fitted, sim_dir, tmp_path):
     other = tmp_path / "other"
     simulate(other, seed=12)

@@ -133,6 +133,7 @@ def test_apply_keeps_rows_with_missing_values(tmp_path, sim_model_file):
     assert f["status"].tolist() == ["ok", "missing", "ok"]
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_apply_chunks_give_same_result(tmp_path, model, sim_dir):
     from fsdecouple.logs.apply import apply_file
 

@@ -17,6 +17,7 @@ def gauges_model(tmp_path_factory):
     return d / "m.json", cal, r
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_fit_of_m_gt_n_suggests_no_report_that_would_refuse_it(gauges_model):
     model, _, r = gauges_model
     invoke(["report", model, "-o", model.parent / "r.html"], 2)  # report refuses M > N

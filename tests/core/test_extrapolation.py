@@ -154,6 +154,7 @@ def _kernel_sum_as_before(self, u):
     return self.output_scale * rbf_sum(x, self.support_vectors, self.dual_coef, self.gamma, -self.rho)
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_old_model_file_reads_as_kernel_and_applies_bit_for_bit_as_before(tmp_path, monkeypatch):
     model = load_model(GOLDEN)
     assert "extrapolation" not in json.loads(GOLDEN.read_text())["settings"]

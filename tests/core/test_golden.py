@@ -43,6 +43,7 @@ def test_golden_file_loads_and_decouples_by_its_own_numbers(path):
 
 
 @pytest.mark.parametrize("path", GOLDEN, ids=lambda p: p.name)
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_a_fresh_fit_decouples_like_the_golden_file_within_the_noise(path, fresh):
     """Same data and settings, fitted today on this machine: within REFIT_MAX / REFIT_RMS
     of full scale (conftest.py says why a re-fit is not compared to rounding)."""

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 from conftest import assert_one_line_error, invoke
 
 from fsdecouple.config import load_config
@@ -28,6 +29,7 @@ def rig(tmp_path: Path, line: int, column: str, value: str) -> tuple[Path, Path]
     return edited, tmp_path / "cfg.yaml"
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_a_blank_load_cell_skips_its_line_with_a_warning(tmp_path):
     path, cfg = rig(tmp_path, 61, "Known_Mx", "")
     whole = load_calibration(path.parent / "rig" / "calibration.csv", load_config(cfg))

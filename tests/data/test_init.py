@@ -206,6 +206,7 @@ def test_nice_ceil(value, nice):
 # --- force/torque sensors: components and their prime outputs ----------------------
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_six_axis_sample_gives_its_own_layout_and_fits(tmp_path):
     """The guess for the simulator's file is the simulator's config: same components,
     outputs, full scales and units; and that config fits the sample."""
@@ -327,6 +328,7 @@ def test_init_reads_any_input_once_and_within_the_limits(tmp_path):
     assert pipe == file
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_a_repetition_file_whose_name_is_not_utf8_is_read(tmp_path):
     """A 0xff byte in a repetition's file name was a UnicodeEncodeError inside pyarrow, then
     a refusal; such names are legal (issue 34): read, the byte shown as \\xff."""

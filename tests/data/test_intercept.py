@@ -122,6 +122,7 @@ def test_a_load_that_moves_with_the_offset_is_refused(tmp_path):
         load_calibration(path, load_config(tmp_path / "cfg.yaml"))
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_fit_then_apply_without_a_tare_recovers_the_loads(tmp_path):
     # a linear sensor: the model's decoupled forces of a fresh log, with only the model's
     # fitted offsets as its zero, come back to the noise (0.3 counts of ~300 per F.S.)

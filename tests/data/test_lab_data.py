@@ -176,6 +176,7 @@ def test_redirected_cv_output_keeps_every_column():
         assert method in header
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_fit_prints_the_assumption_checks_the_report_shows(tmp_path):
     """Also seen: the report's WARN (slope yx 0.053) that fit never printed."""
     from fsdecouple.core.modelfile import load_model

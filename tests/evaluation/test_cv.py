@@ -267,6 +267,7 @@ def test_cells_worse_than_initial_are_marked(doc):
 
 
 @pytest.mark.parametrize("repeats", [1, 2])
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_table_4_times_the_training_run_s_own_fits(calib, settings, monkeypatch, repeats):
     """cv fitted round 1's models a second time only to time them (Table 4): now the
     first timing pass is those models' own fit in the training run, so each job is fitted

@@ -92,6 +92,7 @@ def test_grid_candidates_are_solved_to_the_tuned_tolerance(tuned):
         assert chosen.svr.tolerance == TUNE_TOLERANCE
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_the_tuned_tolerance_reaches_the_converged_svr_and_table2s_does_not():
     # Why grid candidates get their own tolerance: libsvm's stopping tolerance is in
     # the target's units (here fractions of F.S.), and Table 2's 1e-3 is larger than
