@@ -24,6 +24,7 @@ def test_fit_of_m_gt_n_suggests_no_report_that_would_refuse_it(gauges_model):
     assert "fsdecouple report" not in r.stdout + r.stderr
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_the_joint_rows_warning_names_its_file_once(gauges_model):
     model, cal, r = gauges_model
     line = next(ln for ln in r.stderr.splitlines() if "several components" in ln)

@@ -209,6 +209,7 @@ def test_cli_unknown_mode_exit_2_and_nothing_written(tmp_path):
     assert not out.exists()
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_cli_fit_records_the_mode(tmp_path):
     (tmp_path / "fast.yaml").write_text(FAST_SVR)  # the mode is recorded, whatever the solver
     for args, mode in (([], "tangent"), (["--extrapolation", "kernel"], "kernel")):

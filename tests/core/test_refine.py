@@ -226,6 +226,7 @@ def test_apply_marks_rows_that_do_not_settle(tmp_path, sample_model):
     assert summary.status_counts["ok"] + summary.status_counts["extrapolated"] == 3000
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_recommended_k_reaches_the_noise_floor_on_a_strongly_coupled_sensor(settings):
     """Fit a simulated sensor with 4x the sample's coupling; the K that fit recommends
     brings the combined-load forces within the simulator's noise (0.5 mV, ~0.04 %

@@ -301,6 +301,7 @@ def test_an_infinite_reading_is_skipped_not_a_traceback(tmp_path):
         assert max(doc["full_scale"].values()) == peak, doc["full_scale"]
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_init_reads_any_input_once_and_within_the_limits(tmp_path):
     """A 200 KB cell or header, /dev/zero, a pipe (`init <(cat f)`, `cat f | init /dev/stdin`):
     one line and exit 2 for the bad ones, the same guess for a pipe as for the file."""

@@ -163,6 +163,7 @@ def test_a_dead_gauge_among_eight_is_named(tmp_path):
     assert not (tmp_path / "m.json").exists()
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_misread_samples_are_rejected_and_counted_per_pose(tmp_path):
     poses = simulate_poses(1, samples=400)
     path = tmp_path / "poses.csv"
@@ -191,6 +192,7 @@ def test_misread_samples_are_rejected_and_counted_per_pose(tmp_path):
                for w in calib.warnings)
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_tare_and_zero_still_replace_the_fitted_offsets(tmp_path):
     offsets = np.random.default_rng(4).uniform(300, 700, 8)
     path = tmp_path / "poses.csv"
@@ -223,6 +225,7 @@ def test_tare_and_zero_still_replace_the_fitted_offsets(tmp_path):
                                np.repeat(at_zero, 4, axis=0), atol=1e-6)
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_the_fitted_zero_round_trips_and_is_checked(tmp_path):
     import json
 
@@ -251,6 +254,7 @@ def test_fit_without_a_config_on_another_rigs_file_points_to_init(tmp_path):
     assert "did you mean" not in r.stderr
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_export_puts_the_fitted_offsets_in_the_header(tmp_path):
     # the header subtracts them itself (tests/export/test_intercept_export.py): no note
     offsets = np.full(8, 512.0)

@@ -52,6 +52,7 @@ def raw_outputs(offsets, rng, rows=400):
     return offsets + GAIN * (f / FS) @ gauge_mix(0, 8).T
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_the_fitted_offsets_matter(intercept):
     # the reference's zero is no rounding: leaving it out moves the forces by far more
     # than any tolerance below (the offsets are ~500 counts, full scale ~300)
@@ -91,6 +92,7 @@ def test_decouple_and_decoupler_subtract_the_fitted_offsets(intercept):
 
 
 @needs_cc
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_float_header_subtracts_the_fitted_offsets(intercept, tmp_path):
     model, doc, offsets = intercept
     run, text = build(model, tmp_path, precision="float")
@@ -104,6 +106,7 @@ def test_float_header_subtracts_the_fitted_offsets(intercept, tmp_path):
 
 
 @needs_cc
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_c_header_subtracts_the_fitted_offsets_until_set_zero(intercept, tmp_path):
     model, doc, offsets = intercept
     run, text = build(model, tmp_path)
