@@ -29,6 +29,7 @@ def pair(calib, settings, sim_model_file):
     return load_model(sim_model_file), calibrate(_scaled(calib, 1.01), settings)
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_en_is_the_difference_of_both_models_on_the_same_outputs_over_both_us(pair):
     a, b = pair
     got, why = en_figures(a, b)

@@ -573,6 +573,7 @@ def test_simulate_six_axis_with_a_gross_error_moves_one_prime_output(tmp_path):
     assert "fx, fy, fz, mx, my, mz" in bad.stderr and not (tmp_path / "bad").exists()
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_validate_shows_mixed_unit_errors_in_full_scale_only(six_model_file, sample_model):
     """Forces and moments have no one unit: the table keeps % F.S. and drops the
     absolute columns a 3-axis model shows in its load unit."""
