@@ -15,6 +15,7 @@ import pandas as pd
 import pytest
 
 from fsdecouple.config import load_config
+from fsdecouple.core.modelfile import load_model
 from fsdecouple.data.calibration import from_table
 from fsdecouple.errors import InputError
 from fsdecouple.evaluation.budget import budget, reading_noise
@@ -323,8 +324,10 @@ def test_reading_noise_recovers_the_simulated_noise(calib, model):
 
 
 @pytest.fixture(scope="module")
-def certified(calib, settings):
-    model = calibrate(calib, settings)
+def certified(calib, sim_model_file):
+    """The session's `fsdecouple fit` of the simulated set (the model fsdecouple.fit makes
+    of it too: tests/evaluation/test_one_fit.py), and its certificate."""
+    model = load_model(sim_model_file)
     return model, certificate(model, calib)
 
 
