@@ -126,6 +126,17 @@ def sim_model_file(sim_fit):
     return sim_fit[0]
 
 
+@pytest.fixture(scope="session")
+def six_model_file(tmp_path_factory):
+    """`fsdecouple fit sample_data/six_axis/calibration -c configs/six-axis.yaml`, with its
+    verdict, once a session (the six-axis CLI tests and the corpus's six-axis cases)."""
+    path = tmp_path_factory.mktemp("six_model") / "model.json"
+    invoke(["fit", SAMPLE / "six_axis" / "calibration", "-c", ROOT / "configs" / "six-axis.yaml",
+            "-o", path])
+    path.chmod(0o444)  # shared: read only
+    return path
+
+
 # Table 2's libsvm stopping tolerance (-e 0.001), written in a config and so obeyed as
 # written: a fit of the sample then takes ~0.4 s of CPU instead of ~1.4 s (the default
 # solves each chi to half the calibration's noise), and a verdict fit ~0.7 s instead of
