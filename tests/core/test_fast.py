@@ -122,6 +122,7 @@ def test_fast_decouple_equals_exact_in_range(model):
     np.testing.assert_array_less(np.abs(fast - exact) * np.abs(model.k), BOUND_V)
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_fast_decouple_does_not_depend_on_blocks_threads_or_compiler(model):
     """numpy and the compiled kernel (numba) run the same operations in the same order."""
     u = in_range_voltages(model, 100_003)

@@ -84,6 +84,7 @@ def test_never_worse_than_table2(tuned):
         [0.25 * record["noise"], record["noise"]])
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_grid_candidates_are_solved_to_the_tuned_tolerance(tuned):
     _, settings, chosen, record = tuned
     cands = record["candidates"]

@@ -58,6 +58,7 @@ def test_the_plan_holds_the_matrix_and_no_chi(linear_model, tmp_path):
     assert "fsd_chi_axes" not in text  # C has no empty arrays
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_float_emulation_is_the_matrix_in_float(linear_model):
     plan = plan_export(linear_model, precision="float")
     rng = np.random.default_rng(3)

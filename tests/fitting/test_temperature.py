@@ -20,6 +20,10 @@ from conftest import invoke
 from fsdecouple.sim.thermal import ThermalSensor, thermal_log
 
 FS = np.array([100.0, 100.0, 150.0])
+# Every test here reads the module's simulated drifting sensor, fitted with its temperature
+# terms and applied to two logs: ~6 s of CPU before the first test, beyond the not-slow
+# run's budget (issue 30: a minute), so the whole file runs in the full suite.
+pytestmark = pytest.mark.slow
 TARE = 200
 
 
