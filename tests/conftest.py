@@ -67,21 +67,6 @@ def pytest_unconfigure(config):
         os._exit(int(pytest.ExitCode.INTERRUPTED))
 
 
-# Slow tests marked here, not in their file, while another branch works on that file
-# (fitting/prior.py's): seconds of CPU each, beyond the not-slow run's budget.
-SLOW_HERE = {
-    "tests/fitting/test_prior.py::test_fit_with_a_prior_says_which_lambda_and_why",
-    "tests/fitting/test_prior.py::test_a_prior_of_another_sensor_is_refused",
-    "tests/fitting/test_prior.py::test_prior_rows_carry_the_old_models_loads_and_one_zero",
-}
-
-
-def pytest_collection_modifyitems(config, items):
-    for item in items:
-        if item.nodeid.split("[")[0] in SLOW_HERE:
-            item.add_marker(pytest.mark.slow)
-
-
 @pytest.fixture(scope="session")
 def settings():
     return load_config()
