@@ -11,18 +11,24 @@ Zero rows (the default for one-way sweeps).  A residual r = F_hat - F is split i
 * what a sweep shares: its zero reading, and the round's model's inherited zero
   readings.  Every chi_ab (and omega_b) is fitted to the b sweeps less their zero
   readings, so the final model inherits their mean error, the same at every load: one
-  realisation per calibration, of known variance c_b s_a^2, c_b = mean_g(1/m_g) / G
+  realisation per calibration, of known variance s_a^2 mean_g(1/m_g) / G
   (:func:`fsdecouple.data.zero.mean_offset_variance`).  The rounds' realisations are
   not the final model's: held-out, they are set apart, each sweep's mean residual;
 * what each point adds: the residuals less their sweep's mean, over s_a, pooled over
   the components (:func:`within_sweeps`), the deviations z_i.
 
-On a log's row with loads f_b the shared part is g ~ N(0, rho^2), rho^2 = sum_b c_b
-min(1, |f_b| / L_b) (L_b the smallest calibrated non-zero |load| of b: the first step,
-over which the inherited error ramps in), and the half-width is s_a Q(rho), Q solving
-mean_i P(|z_i + g| <= Q) = P (n + 1) / n (:func:`_convolved`); at rho = 0 the
-split-conformal quantile of |z| (Vovk et al., *Algorithmic Learning in a Random World*,
-2005; Lei et al., JASA 2018).  It grows with the loads and the number of components
+On a log's row with loads f_b the shared part is a bias b, one value per calibration
+(the same on every row), of variance rho^2 s_a^2, rho^2 = sum_b c_b min(1, |f_b| /
+L_b) (L_b the smallest calibrated non-zero |load| of b: the first step, over which the
+inherited error ramps in). With the centre's shift taken back, c_b is what the shift
+leaves (:func:`fsdecouple.data.zero.shift_variance`), else that whole variance. The
+half-width is s_a Q(rho), Q covering P (n + 1) / n of the deviations z_i shifted by
++-K rho, the bias a sensor exceeds with probability 1 - ``CONFIDENCE``
+(:func:`_convolved`): P per sensor on 90 % of sensors, a tolerance interval (Wald,
+*Ann. Math. Statist.* 1943; Vovk, "Conditional validity of inductive conformal
+predictors", ACML 2012), not P on average over sensors. At rho = 0 it is the split-
+conformal quantile of |z| (Vovk et al., *Algorithmic Learning in a Random World*,
+2005; Lei et al., JASA 2018). It grows with the loads and the number of components
 loaded.  The assumption: a row's error is a held-out point's within its sweep plus the
 zero readings' mean error of every loaded component (errors of the loads add, eq. 1);
 docs/certificate.md gives the measured coverage.
@@ -47,8 +53,8 @@ forces refined by ``EXTRA_STEPS`` more fixed-point steps (eqs. 5-6,
 :mod:`fsdecouple.core.decouple`), so it is not symmetric about the row's force, which
 stays eq. (11)'s.  The held-out points are decoupled the same way.  With zero rows the
 final model's centre then takes back the zero readings' mean error as the offsets
-fitted from all points estimate it (``zero_shift``, :func:`shifted`); the estimate is
-not exact, and the intervals keep the whole of c_b.
+fitted from all points estimate it (``zero_shift``, :func:`shifted`); the estimate's
+own error is the bias the intervals keep (c_b above).
 
 The scores, s, ``load_variance`` (v s^2 n_t / n), ``first_step`` (L_b), ``deviations``,
 ``zero_variance`` (c_b) and ``zero_shift`` live in the model file's ``report.certificate["interval"]``;
