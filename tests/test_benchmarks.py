@@ -22,7 +22,10 @@ CASES = {
     "refine": ["refine.py", "--rows", "20000", "--repeats", "1", "--apply-rows", "20000"],
     # issue 24's strongly coupled sensor with hysteresis, one seed
     "accuracy": ["accuracy.py", "--seeds", "1", "--scenarios", "hysteresis"],
-    "fleet": ["fleet.py", "--quick", "--repeats", "1"],
+    # the script's every path (CSV and Parquet, local and dask, fit-many) on a few small
+    # logs and two sensors: its own --quick sizes took 78 s of CPU
+    "fleet": ["fleet.py", "--quick", "--repeats", "1", "--logs", "4", "--rows", "2000",
+              "--sensors", "2"],
     "c_export": ["c_export.py", "--repeats", "1", "--vectors", "1000"],
     # issue 33's per-sensor coverage of apply --interval, one sensor with a lag
     "interval_coverage": ["interval_coverage.py", "--seeds", "1", "--scenarios", "hysteresis 0.1"],

@@ -195,6 +195,7 @@ def test_the_api_page_examples_run_as_doctests(tmp_path):
     assert (tmp_path / "model.json").is_file() and (tmp_path / "forces.csv").is_file()
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_the_architecture_page_is_generated_and_names_every_module():
     """docs/architecture.md is docs/make_architecture.py's output for the package as it is
     now, and names each module (found here by walking the package, not by the script)."""

@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from conftest import ROOT, SAMPLE
+from conftest import FAST_CONFIG, ROOT, SAMPLE
 
 pytestmark = pytest.mark.slow
 
@@ -59,8 +59,8 @@ def test_commands_write_nothing_into_the_installed_package(installed, tmp_path):
                  env=env, cwd=tmp_path)
     package = site / "fsdecouple"
     assert Path(where.stdout.strip()).parent == package  # the installed copy, not this checkout
-    _run([exe, "fit", SAMPLE / "calibration", "-o", tmp_path / "model.json", "--no-verdict"],
-         env=env, cwd=tmp_path)
+    _run([exe, "fit", SAMPLE / "calibration", "-c", FAST_CONFIG, "-o", tmp_path / "model.json",
+          "--no-verdict"], env=env, cwd=tmp_path)
     log = SAMPLE / "task_voltages.csv"
     assert len(log.read_text().splitlines()) > 33  # apply of a real log, tared
     _run([exe, "apply", tmp_path / "model.json", log, "--tare", "200", "-o", tmp_path / "f.csv"],

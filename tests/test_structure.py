@@ -48,6 +48,7 @@ def _imports(path: Path) -> set[str]:
     return out
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_no_import_cycles():
     modules = {_module_name(p): p for p in PACKAGE.rglob("*.py")}
     graph = {m: {i for i in _imports(p) if i in modules and i != m and i != "fsdecouple"}

@@ -346,6 +346,39 @@ def zero_row_shift(points: pd.DataFrame, offsets: pd.DataFrame,
     return shift, ratio
 
 
+def shift_variance(points: pd.DataFrame, layout: Layout) -> np.ndarray:
+    """Per loaded component b, the variance of what :func:`zero_row_shift` leaves of
+    the zero readings' mean error, in units of one reading's variance.
+
+    The shift is mean_g (c_hat_g - z_g): z_g the zero rows' mean of sweep g, c_hat_g its
+    offset fitted from all points (:func:`fitted_offsets`).  With the sweep's true
+    offset c_g, c_hat_g = c_g + delta_g and z_g = c_g + eps_g, so the shift is
+    mean_g delta_g - mean_g eps_g: the inherited error (- mean_g eps_g) plus the fit's own
+    error, which the centre keeps.  For independent readings of equal variance and a
+    shape the polynomial holds, Var(mean_g delta_g) = a' (X'X)^-1 a, X the design of
+    :func:`fitted_offsets` (one column per sweep, then s^1..s^d) and a = 1/G on the G
+    sweeps' columns (Gauss-Markov).  A component whose offsets are not fitted (too few
+    load levels) keeps its zero rows': nothing is shifted, and all of
+    :func:`mean_offset_variance` is left.  NaN where a sweep has no zero row.
+    """
+    out = mean_offset_variance(points, layout)
+    labels = points["axis"].to_numpy()
+    for b, label in enumerate(layout.labels):
+        mine = points[labels == label]
+        f = mine[layout.loads[b]].to_numpy(dtype=float)
+        degree = min(MAX_DEGREE, np.unique(f).size - 2)
+        peak = np.abs(f).max(initial=0.0)
+        if degree < 1 or not peak > 0 or not np.isfinite(out[b]):
+            continue
+        _, col = np.unique(mine["repetition"].to_numpy(), return_inverse=True)
+        groups = col.max() + 1
+        s = f / peak
+        design = np.column_stack([np.eye(groups)[col], *(s ** p for p in range(1, degree + 1))])
+        a = np.concatenate([np.full(groups, 1.0 / groups), np.zeros(degree)])
+        out[b] = float(a @ np.linalg.lstsq(design.T @ design, a, rcond=None)[0])
+    return out
+
+
 def tare_offsets(u: np.ndarray, n: int, source=None) -> np.ndarray:
     """Mean of the first ``n`` voltage rows, the zero of a task log [V]."""
     src = f"{source}: " if source is not None else ""

@@ -42,7 +42,7 @@ import numpy as np
 import pandas as pd
 
 from ..data.calibration import CalibrationSet
-from ..data.zero import mean_offset_variance, zero_row_shift
+from ..data.zero import mean_offset_variance, shift_variance, zero_row_shift
 from .intervals import interval_calibration
 from .iso376 import ComponentSteps, component_steps, resolution
 
@@ -217,13 +217,17 @@ def certificate_data(calib: CalibrationSet, model, points: pd.DataFrame,
     if settings.zero_method == "fit":  # offsets fitted to whole sweeps, not read at zero rows
         zeros = np.inf
     sweeps = shares = None
+    # the centre takes the zero rows' shift back (intervals.centre: eq. (11)'s refined forces)
+    shifts = len(layout.outputs) == layout.n and getattr(model, "method", None) == "svr"
     if calib.zero == "rows" and np.isfinite(zeros) and {"repetition", "axis"} <= set(points.columns):
         # each held-out sweep's own share apart, and the zero readings' known share
         sweeps = points.groupby(["repetition", "axis"], sort=False).ngroup().to_numpy()
-        shares = mean_offset_variance(calib.points, layout)
+        # the zero readings' mean error the model inherits: what the centre's shift
+        # leaves of it where the shift is taken back, else all of it
+        shares = (shift_variance if shifts else mean_offset_variance)(calib.points, layout)
     cal = interval_calibration(true, predicted if centred is None else centred, layout.labels,
                                noise, zeros, len(calib.repetitions), trained, sweeps, shares)
-    if shares is not None and len(layout.outputs) == layout.n:
+    if shares is not None and shifts:
         cal["zero_shift"] = zero_shift(calib, model.k)
     return {"reference_uncertainty": settings.lab.reference_uncertainty, "steps": steps,
             "interval": cal}

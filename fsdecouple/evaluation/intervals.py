@@ -11,18 +11,24 @@ Zero rows (the default for one-way sweeps).  A residual r = F_hat - F is split i
 * what a sweep shares: its zero reading, and the round's model's inherited zero
   readings.  Every chi_ab (and omega_b) is fitted to the b sweeps less their zero
   readings, so the final model inherits their mean error, the same at every load: one
-  realisation per calibration, of known variance c_b s_a^2, c_b = mean_g(1/m_g) / G
+  realisation per calibration, of known variance s_a^2 mean_g(1/m_g) / G
   (:func:`fsdecouple.data.zero.mean_offset_variance`).  The rounds' realisations are
   not the final model's: held-out, they are set apart, each sweep's mean residual;
 * what each point adds: the residuals less their sweep's mean, over s_a, pooled over
   the components (:func:`within_sweeps`), the deviations z_i.
 
-On a log's row with loads f_b the shared part is g ~ N(0, rho^2), rho^2 = sum_b c_b
-min(1, |f_b| / L_b) (L_b the smallest calibrated non-zero |load| of b: the first step,
-over which the inherited error ramps in), and the half-width is s_a Q(rho), Q solving
-mean_i P(|z_i + g| <= Q) = P (n + 1) / n (:func:`_convolved`); at rho = 0 the
-split-conformal quantile of |z| (Vovk et al., *Algorithmic Learning in a Random World*,
-2005; Lei et al., JASA 2018).  It grows with the loads and the number of components
+On a log's row with loads f_b the shared part is a bias b, one value per calibration
+(the same on every row), of variance rho^2 s_a^2, rho^2 = sum_b c_b min(1, |f_b| /
+L_b) (L_b the smallest calibrated non-zero |load| of b: the first step, over which the
+inherited error ramps in). With the centre's shift taken back, c_b is what the shift
+leaves (:func:`fsdecouple.data.zero.shift_variance`), else that whole variance. The
+half-width is s_a Q(rho), Q covering P (n + 1) / n of the deviations z_i shifted by
++-K rho, the bias a sensor exceeds with probability 1 - ``CONFIDENCE``
+(:func:`_convolved`): P per sensor on 90 % of sensors, a tolerance interval (Wald,
+*Ann. Math. Statist.* 1943; Vovk, "Conditional validity of inductive conformal
+predictors", ACML 2012), not P on average over sensors. At rho = 0 it is the split-
+conformal quantile of |z| (Vovk et al., *Algorithmic Learning in a Random World*,
+2005; Lei et al., JASA 2018). It grows with the loads and the number of components
 loaded.  The assumption: a row's error is a held-out point's within its sweep plus the
 zero readings' mean error of every loaded component (errors of the loads add, eq. 1);
 docs/certificate.md gives the measured coverage.
@@ -47,8 +53,8 @@ forces refined by ``EXTRA_STEPS`` more fixed-point steps (eqs. 5-6,
 :mod:`fsdecouple.core.decouple`), so it is not symmetric about the row's force, which
 stays eq. (11)'s.  The held-out points are decoupled the same way.  With zero rows the
 final model's centre then takes back the zero readings' mean error as the offsets
-fitted from all points estimate it (``zero_shift``, :func:`shifted`); the estimate is
-not exact, and the intervals keep the whole of c_b.
+fitted from all points estimate it (``zero_shift``, :func:`shifted`); the estimate's
+own error is the bias the intervals keep (c_b above).
 
 The scores, s, ``load_variance`` (v s^2 n_t / n), ``first_step`` (L_b), ``deviations``,
 ``zero_variance`` (c_b) and ``zero_shift`` live in the model file's ``report.certificate["interval"]``;
@@ -268,18 +274,24 @@ def half_widths(model, p: float, f: np.ndarray | None = None) -> np.ndarray:
 
 
 GRID = 33  # between-sweep ratios rho at which the half-width is solved, then interpolated
+CONFIDENCE = 0.9  # of a sensor: its shared error lies within K rho (the interval's width)
+K = 1.6448536269514722  # two-sided normal quantile of CONFIDENCE: Phi(K) = (1 + 0.9) / 2
 
 
 def _convolved(cal: dict[str, Any], p: float, f: np.ndarray, labels) -> np.ndarray:
     """Half-widths, shape (n, N), from the within-sweep deviations z_i and a row's
     between-sweep share.
 
-    A row's error is s z + g: z drawn from the held-out deviations (each reading's own
-    error and the model's along a sweep), g ~ N(0, rho^2 s^2) the share a sweep of
-    calibration points has in common, here the final model's inherited zero readings
-    (rho^2 = sum_b c_b min(1, |f_b| / L_b), c_b = ``zero_variance``, :func:`row_sigma`).  The
-    half-width h = s Q(rho) solves mean_i P(|z_i + g / s| <= Q) = P (n + 1) / n, the
-    split-conformal correction; at rho = 0 it is the ceil((n + 1) P)-th smallest |z_i|.
+    A row's error is s z + b: z drawn from the held-out deviations (each reading's own
+    error and the model's along a sweep), b the share a sweep of calibration points has
+    in common, here what the final model's inherited zero readings leave once the
+    centre takes back their estimate: one value per calibration, the same on every row
+    of a log, of variance rho^2 s^2 (rho^2 = sum_b c_b min(1, |f_b| / L_b), c_b =
+    ``zero_variance``, :func:`row_sigma`).  Per sensor, not on average over sensors: the
+    half-width h = s Q(rho) covers P (n + 1) / n of the deviations shifted by b = +-K rho,
+    a bias a sensor exceeds with probability 1 - ``CONFIDENCE`` (a tolerance interval of
+    content P and confidence 0.9 in b); at rho = 0 it is the ceil((n + 1) P)-th smallest
+    |z_i|, the split-conformal quantile.
     """
     z = np.asarray(cal["deviations"], dtype=float)
     shares = cal.get("zero_variance") or {}
@@ -293,9 +305,12 @@ def _convolved(cal: dict[str, Any], p: float, f: np.ndarray, labels) -> np.ndarr
 @functools.lru_cache(maxsize=8)
 def _q_grid(deviations: bytes, p: float, top: float) -> tuple[np.ndarray, np.ndarray]:
     """Q(rho) on ``GRID`` ratios from 0 to ``top`` (every ramp 1: the largest a row has),
-    the same for every chunk of a log; solved once per model and P."""
-    from scipy.special import ndtr
+    the same for every chunk of a log; solved once per model and P.
 
+    At bias b = K rho the share of the deviations covered, (#{|z_i + b| <= Q} +
+    #{|z_i - b| <= Q}) / 2n, reaches the target at the ceil(2 n target)-th smallest of
+    the 2n values |z_i +- b| (b's sign is unknown: both count alike).
+    """
     z = np.frombuffer(deviations, dtype=float)
     n = z.size
     target = p * (n + 1) / n
@@ -303,17 +318,10 @@ def _q_grid(deviations: bytes, p: float, top: float) -> tuple[np.ndarray, np.nda
         raise InputError(f"coverage {p!r}: {n} held-out deviations calibrate intervals up to "
                          f"P = {n / (n + 1):.3f}", argument="interval")
     grid = np.linspace(0.0, top, GRID)
-    q0 = np.sort(np.abs(z))[math.ceil((n + 1) * p) - 1]
-    if not top > 0.0:
-        return grid, np.full(GRID, q0)
-    lo = np.zeros(GRID - 1)
-    hi = np.full(GRID - 1, float(np.abs(z).max()) + 10.0 * top)
-    r = grid[1:, None]
-    for _ in range(50):  # bisection: the coverage rises with the half-width
-        mid = 0.5 * (lo + hi)
-        covered = np.mean(ndtr((mid[:, None] - z) / r) - ndtr((-mid[:, None] - z) / r), axis=1)
-        lo, hi = np.where(covered < target, mid, lo), np.where(covered < target, hi, mid)
-    q = np.concatenate(([q0], hi))
+    b = K * grid[:, None]
+    both = np.sort(np.concatenate([np.abs(z + b), np.abs(z - b)], axis=1), axis=1)
+    q = both[:, math.ceil(2 * n * target) - 1]
+    q[0] = np.sort(np.abs(z))[math.ceil((n + 1) * p) - 1]  # b = 0: the conformal quantile
     return grid, q
 
 

@@ -11,7 +11,7 @@ import shutil
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import assert_one_line_error, invoke
+from conftest import FAST_SVR, assert_one_line_error, invoke
 
 from fsdecouple import decouple_frame, load_model
 from fsdecouple.reporting.certificate_html import fmt
@@ -91,6 +91,7 @@ def test_export_says_the_header_has_no_intervals(fitted, tmp_path):
     assert "apply --interval's bounds are not in it" in r.stdout
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_certificate_pdf_has_the_json_figures_on_a4_with_fonts_embedded(fitted, sim_dir, tmp_path):
     from PIL import Image
     from pypdf import PdfReader
@@ -170,10 +171,11 @@ def test_a_copied_repetition_is_refused_naming_the_file(fitted, sim_dir, tmp_pat
     assert_one_line_error(r, "fitted on rep6.csv too")
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_certificate_takes_the_config_fit_was_given_on_sweeps_out_and_back(tmp_path):
     simulate(tmp_path / "s", seed=4, hysteresis=0.001)
     config = tmp_path / "lab.yaml"
-    config.write_text("serial: SN-7\nreference_uncertainty: 0.01\n")  # no zero key
+    config.write_text("serial: SN-7\nreference_uncertainty: 0.01\n" + FAST_SVR)  # no zero key
     model = tmp_path / "m.json"
     r = invoke(["fit", tmp_path / "s" / "calibration", "-c", config, "-o", model])
     assert "zero: fit" in r.stdout + r.stderr  # fit chose zero: fit itself
@@ -204,7 +206,7 @@ def timed(sim_dir, tmp_path_factory):
             t.loc[7, "t2"] = 1.0
         t.to_csv(calib / f.name, index=False)
     model = d / "m.json"
-    invoke(["fit", calib, "-o", model])
+    invoke(["fit", calib, "-o", model, "--no-verdict"])
     return model, calib
 
 
@@ -223,11 +225,13 @@ def test_a_creep_column_that_is_not_time_is_one_line(timed, tmp_path, column, ne
     assert not out.exists()
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_certificate_drift_from_compare_json(fitted, sim_dir, tmp_path):
     other = tmp_path / "other"
     simulate(other, seed=12)
     m2 = tmp_path / "m2.json"
-    invoke(["fit", other / "calibration", "-o", m2])
+    (tmp_path / "fast.yaml").write_text(FAST_SVR)
+    invoke(["fit", other / "calibration", "-c", tmp_path / "fast.yaml", "-o", m2])
     cmp = tmp_path / "cmp.json"
     from fsdecouple.fleet.drift import compare  # what compare --json prints; it exits 1 on E_n > 1
 

@@ -56,6 +56,7 @@ def test_ingest_summary_and_tidy_output(tmp_path):
     assert np.abs(zero.groupby(["repetition", "axis"])[["ux", "uy", "uz"]].mean()).max().max() < 1e-12
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_single_csv_with_repetition_column_gives_same_model(tmp_path, sim_dir, sim_model_file):
     frames = []
     for rep in range(1, 7):
@@ -70,6 +71,7 @@ def test_single_csv_with_repetition_column_gives_same_model(tmp_path, sim_dir, s
     assert da["chi"] == db["chi"] and da["omega"] == db["omega"]
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_axis_column_is_optional(tmp_path, sim_dir, sim_model_file):
     """Without `axis`, sweeps are inferred from consecutive rows: same model."""
     d = tmp_path / "noaxis"
@@ -98,6 +100,7 @@ def test_show_and_flags_override(tmp_path):
     assert "chi_zy" in invoke(["show", m]).stdout
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_rotation_from_config(tmp_path, sample_model):
     cfg = tmp_path / "rot.yaml"
     cfg.write_text("rotation: [[0, -1, 0], [1, 0, 0], [0, 0, 1]]\n")
@@ -133,6 +136,7 @@ def test_apply_keeps_rows_with_missing_values(tmp_path, sim_model_file):
     assert f["status"].tolist() == ["ok", "missing", "ok"]
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_apply_chunks_give_same_result(tmp_path, model, sim_dir):
     from fsdecouple.logs.apply import apply_file
 
@@ -142,6 +146,7 @@ def test_apply_chunks_give_same_result(tmp_path, model, sim_dir):
     assert a.read_bytes() == b.read_bytes()
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_python_module_entry_point():
     import subprocess
     import sys
@@ -150,6 +155,7 @@ def test_python_module_entry_point():
     assert r.returncode == 0 and "apply" in r.stdout
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_apply_counts_rows_outside_calibrated_range(tmp_path, model):
     from fsdecouple.logs.apply import apply_file
 
@@ -215,8 +221,9 @@ def test_progress_bars_show_on_a_terminal_and_never_in_ci(tmp_path, sample_model
     cal = SAMPLE / "calibration"
     log = SAMPLE / "task_voltages.csv"
     apply_args = ["apply", sample_model, log, "-o", tmp_path / "f.csv", "--force"]
-    cv_args = ["cv", cal, "-o", tmp_path / "cv.json", "--force"]
-    fit_args = ["fit", cal, "-o", tmp_path / "m.json", "--force"]
+    # one cv round and a fit without its verdict draw the same bars as the whole runs
+    cv_args = ["cv", cal, "--folds", "1,2", "-o", tmp_path / "cv.json", "--force"]
+    fit_args = ["fit", cal, "-o", tmp_path / "m.json", "--force", "--no-verdict"]
     hide_cursor = "\x1b[?25l"  # rich hides the cursor while a live bar is drawn
     for args, label in ((apply_args, "decoupling"), (cv_args, "training"), (fit_args, "fitting")):
         out = _on_a_terminal(args, env)

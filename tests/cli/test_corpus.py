@@ -55,16 +55,6 @@ def good_model(sample_model):
 
 
 SIX_CONFIG = ROOT / "configs" / "six-axis.yaml"
-_six_models: dict = {}
-
-
-def six_model(tmp_path_factory) -> str:
-    """A six-axis model, fitted once, for the cases that use it."""
-    if not _six_models:
-        path = tmp_path_factory.mktemp("six") / "model.json"
-        invoke(["fit", SAMPLE / "six_axis" / "calibration", "-c", SIX_CONFIG, "-o", path])
-        _six_models["path"] = str(path)
-    return _six_models["path"]
 
 
 def _overlay(src: Path, case: Path, sub: str, spec: dict, dest: Path) -> str:
@@ -78,7 +68,7 @@ def _overlay(src: Path, case: Path, sub: str, spec: dict, dest: Path) -> str:
 
 
 def prepare(name: str, tmp_path: Path, good_model: Path,
-            tmp_path_factory=None) -> tuple[dict, list[str]]:
+            request=None) -> tuple[dict, list[str]]:
     spec = yaml.safe_load((BAD / name / "case.yaml").read_text(encoding="utf-8"))
     case = tmp_path / name
     shutil.copytree(BAD / name, case)
@@ -89,7 +79,7 @@ def prepare(name: str, tmp_path: Path, good_model: Path,
         values["six"] = _overlay(SAMPLE / "six_axis" / "calibration", case, "six", spec,
                                  tmp_path / "six")
     if any("{six_model}" in a for a in spec["command"]):
-        values["six_model"] = six_model(tmp_path_factory)
+        values["six_model"] = str(request.getfixturevalue("six_model_file"))  # conftest's, once
     if any("{cal}" in a for a in spec["command"]):
         cal = tmp_path / "cal"
         shutil.copytree(SAMPLE / "calibration", cal)
@@ -114,8 +104,8 @@ def test_corpus_is_large_enough():
 
 @pytest.mark.parametrize("name", [pytest.param(c, marks=pytest.mark.slow) if c in SLOW_CASES else c
                                   for c in CASES])
-def test_bad_input(name, tmp_path, good_model, tmp_path_factory):
-    spec, args = prepare(name, tmp_path, good_model, tmp_path_factory)
+def test_bad_input(name, tmp_path, good_model, request):
+    spec, args = prepare(name, tmp_path, good_model, request)
     out_dir = tmp_path / "out"
     out_dir.mkdir()
     out = out_dir / "result.out"

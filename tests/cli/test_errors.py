@@ -6,7 +6,7 @@ import json
 import shutil
 
 import pytest
-from conftest import ROOT, SAMPLE, invoke
+from conftest import FAST_CONFIG, ROOT, SAMPLE, invoke
 
 CAL = SAMPLE / "calibration"
 
@@ -65,7 +65,7 @@ def test_nan_inf_empty(cal, tmp_path, value):
 def test_a_blank_load_cell_is_skipped_or_refused_with_strict(cal, tmp_path):
     # issue 32: a load not typed in skips its row with a warning; --strict refuses it
     edit(cal / "rep1.csv", 5, "fx", "")
-    r = invoke(["fit", cal, "-o", tmp_path / "m.json", "--no-verdict"])
+    r = invoke(["fit", cal, "-c", FAST_CONFIG, "-o", tmp_path / "m.json", "--no-verdict"])
     assert "rep1.csv, line 5: an applied load is blank" in r.stderr
     fails(["fit", cal, "--strict"], tmp_path, "rep1.csv", "row 5", "column 'fx'", "--strict")
 
@@ -77,7 +77,8 @@ def test_a_row_contradicting_its_own_axis_label_is_refused_and_excludable(cal, t
     edit(cal / "rep4.csv", 3, "fy", "10.000")
     fails(["fit", cal, "--no-verdict"], tmp_path, "rep4.csv, row 3", "'x' sweep",
           "fx = -90", "fy = 10", "--exclude rep4.csv:3")
-    r = invoke(["fit", cal, "-o", tmp_path / "m.json", "--no-verdict", "--exclude", "rep4.csv:3"])
+    r = invoke(["fit", cal, "-c", FAST_CONFIG, "-o", tmp_path / "m.json", "--no-verdict",
+                "--exclude", "rep4.csv:3"])
     assert "several components" not in r.stderr
 
 
@@ -88,7 +89,7 @@ def test_row_loading_two_axes_is_fitted_jointly_and_named(cal, tmp_path):
     for p in cal.glob("rep*.csv"):  # the same set without its axis column
         p.write_text("\n".join(ln.split(",", 1)[1] for ln in p.read_text().splitlines()) + "\n")
     edit(cal / "rep4.csv", 3, "fy", "10.000")
-    r = invoke(["fit", cal, "-o", tmp_path / "m.json", "--no-verdict"])
+    r = invoke(["fit", cal, "-c", FAST_CONFIG, "-o", tmp_path / "m.json", "--no-verdict"])
     assert "1 row loads several components (" in r.stderr
     assert "rep4.csv, row 3): fitted jointly" in r.stderr
 
@@ -189,7 +190,7 @@ def test_a_file_name_that_is_not_utf8_is_read_and_shown_with_its_byte(cal, tmp_p
     latin = os.path.join(os.fsencode(cal), b"rep3\xff.csv")
     os.rename(os.path.join(os.fsencode(cal), b"rep3.csv"), latin)
     out = tmp_path / "m.json"
-    invoke(["fit", cal, "-o", out, "--no-verdict"])
+    invoke(["fit", cal, "-c", FAST_CONFIG, "-o", out, "--no-verdict"])
     files = [f["path"] for f in json.loads(out.read_text())["provenance"]["files"]]
     assert files[2].endswith("rep3\\xff.csv") and len(files) == 6, files
     with open(latin, "rb") as fh:

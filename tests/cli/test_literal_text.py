@@ -11,7 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from conftest import SAMPLE, invoke
+from conftest import FAST_SVR, SAMPLE, invoke
 
 RENAME = {"ux": "ux[/]", "uy": "uy[bold]", "uz": "uz:thumbs_up:",
           "fx": "fx[/]", "fy": "fy[bold]", "fz": "fz[red]"}
@@ -38,7 +38,7 @@ def tricky(tmp_path_factory) -> dict[str, Path]:
     log.write_text(_renamed((SAMPLE / "task_voltages.csv").read_text()) + "\n")  # + a blank row
     cfg = root / "cfg.yaml"
     cols = ", ".join(f'{k}: "{v}"' for k, v in RENAME.items())
-    cfg.write_text(f'sensor: "{SENSOR}"\ncolumns: {{{cols}}}\n')
+    cfg.write_text(f'sensor: "{SENSOR}"\ncolumns: {{{cols}}}\n' + FAST_SVR)
     model = base / "]m[bold].json"
     fit = invoke(["fit", "-c", cfg, cal, "-o", model])
     return {"root": root, "cal": cal, "log": log, "cfg": cfg, "model": model, "fit": fit}
@@ -91,7 +91,7 @@ def test_control_characters_are_shown_escaped_never_sent_raw(tmp_path, sample_mo
     """A clear-screen in a sensor name or a directory name reaches the terminal escaped
     (``\\x1b[2J``), in titles, tables and summary lines alike."""
     cfg = tmp_path / "cfg.yaml"
-    cfg.write_text('sensor: "rig\\e[2J\\e[31m"\n')
+    cfg.write_text('sensor: "rig\\e[2J\\e[31m"\n' + FAST_SVR)
     model = tmp_path / "m.json"
     fit = invoke(["fit", SAMPLE / "calibration", "-c", cfg, "-o", model, "--no-verdict"])
     shown = invoke(["show", model])
@@ -99,7 +99,7 @@ def test_control_characters_are_shown_escaped_never_sent_raw(tmp_path, sample_mo
     (sensors / f"s{ESC}1").mkdir(parents=True)
     for f in (SAMPLE / "calibration").iterdir():
         (sensors / f"s{ESC}1" / f.name).write_bytes(f.read_bytes())
-    (sensors / f"s{ESC}1" / "sensor.yaml").write_text("sensor: one\n")
+    (sensors / f"s{ESC}1" / "sensor.yaml").write_text("sensor: one\n" + FAST_SVR)
     many = invoke(["fit-many", sensors, "-o", tmp_path / "models", "--workers", 1])
     for r in (fit, shown, many):
         out = r.stdout + r.stderr
@@ -160,7 +160,7 @@ def test_a_table_holding_a_newline_or_an_escape_stays_aligned(capsys):
 def test_a_newline_in_an_output_or_sensor_name_never_splits_a_line(tmp_path):
     out = tmp_path / "a\nb.json"
     cfg = tmp_path / "cfg.yaml"
-    cfg.write_text('sensor: "left\\narm\\e[2J"\n')
+    cfg.write_text('sensor: "left\\narm\\e[2J"\n' + FAST_SVR)
     r = invoke(["fit", SAMPLE / "calibration", "-c", cfg, "-o", out, "--no-verdict"])
     lines = r.stdout.splitlines()
     assert "model written to " + str(tmp_path / "a\\nb.json") + " (decouples by svr)" in lines

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from conftest import SAMPLE, assert_one_line_error, invoke
+from conftest import FAST_CONFIG, SAMPLE, assert_one_line_error, invoke
 
 
 @pytest.fixture(scope="module")
@@ -17,12 +17,14 @@ def gauges_model(tmp_path_factory):
     return d / "m.json", cal, r
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_fit_of_m_gt_n_suggests_no_report_that_would_refuse_it(gauges_model):
     model, _, r = gauges_model
     invoke(["report", model, "-o", model.parent / "r.html"], 2)  # report refuses M > N
     assert "fsdecouple report" not in r.stdout + r.stderr
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_the_joint_rows_warning_names_its_file_once(gauges_model):
     model, cal, r = gauges_model
     line = next(ln for ln in r.stderr.splitlines() if "several components" in ln)
@@ -55,13 +57,16 @@ def test_certificate_titles_keep_iso_376_together(sample_model):
     assert "ISO\u00a0376" in r.stdout and "ISO\n" not in r.stdout
 
 
+@pytest.mark.slow  # a levels cv: every method trained once per load level
 def test_the_levels_report_speaks_of_load_levels(sample_model, tmp_path):
     from fsdecouple.core.modelfile import load_model
     from fsdecouple.evaluation.cv_results import load_cv_results
     from fsdecouple.reporting.report import build_report
 
     cv = tmp_path / "cv.json"
-    invoke(["cv", SAMPLE / "calibration", "--protocol", "levels", "-o", cv])
+    # Table 2's tolerance (FAST_CONFIG): the report's words are the point, and a levels
+    # cv trains every method once per load level (36 s of CPU at the default, 7 s so)
+    invoke(["cv", SAMPLE / "calibration", "--protocol", "levels", "-c", FAST_CONFIG, "-o", cv])
     html = build_report(load_model(sample_model), load_cv_results(cv)).html
     assert "same held-out load level" in html and "same held-out repetition" not in html
 

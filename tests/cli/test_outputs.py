@@ -81,6 +81,7 @@ def test_report_and_pngs_together(tmp_path, model):
     assert (tmp_path / "r.html").is_file() and len(list((tmp_path / "figs").glob("*.png"))) >= 2
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_read_only_directory_at_mkstemp(tmp_path, monkeypatch):
     """EROFS when the temporary file is created: one line, nothing written."""
     def erofs(*a, **k):

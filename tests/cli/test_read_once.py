@@ -44,6 +44,7 @@ def test_a_fifo_without_writer_is_refused_not_waited_on(tmp_path, sample_model, 
     assert not out.exists() and list(tmp_path.iterdir()) == [fifo]
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_a_fifo_with_a_writer_is_read_whole(tmp_path, sample_model, short_wait):
     fifo = tmp_path / "pipe.csv"
     os.mkfifo(fifo)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import shutil
 
+import pytest
 from conftest import SAMPLE, assert_one_line_error, invoke
 
 ROTATION = "rotation: [[0, -1, 0], [1, 0, 0], [0, 0, 1]]\n"
@@ -45,6 +46,7 @@ def _certificate(model, calib, tmp_path, text, code=0):
     return r, out
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_certificate_refuses_a_rotation_warns_of_svr_and_reads_its_lab_keys(
         sim_model_file, sim_dir, tmp_path):
     calib = sim_dir / "calibration"

@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
 import pytest
-from conftest import ROOT, SAMPLE, assert_one_line_error, invoke
+from conftest import FAST_SVR, ROOT, SAMPLE, assert_one_line_error, invoke
 
 from fsdecouple import load_calibration, load_config, load_model
 from fsdecouple.core.decouple import PROMISE
@@ -154,6 +154,7 @@ def _kernel_sum_as_before(self, u):
     return self.output_scale * rbf_sum(x, self.support_vectors, self.dual_coef, self.gamma, -self.rho)
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_old_model_file_reads_as_kernel_and_applies_bit_for_bit_as_before(tmp_path, monkeypatch):
     model = load_model(GOLDEN)
     assert "extrapolation" not in json.loads(GOLDEN.read_text())["settings"]
@@ -208,10 +209,13 @@ def test_cli_unknown_mode_exit_2_and_nothing_written(tmp_path):
     assert not out.exists()
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_cli_fit_records_the_mode(tmp_path):
+    (tmp_path / "fast.yaml").write_text(FAST_SVR)  # the mode is recorded, whatever the solver
     for args, mode in (([], "tangent"), (["--extrapolation", "kernel"], "kernel")):
         out = tmp_path / f"{mode}.json"
-        invoke(["fit", SAMPLE / "calibration", "-o", out, "--no-verdict", *args])
+        invoke(["fit", SAMPLE / "calibration", "-c", tmp_path / "fast.yaml", "-o", out,
+                "--no-verdict", *args])
         assert load_model(out).settings.extrapolation == mode
 
 

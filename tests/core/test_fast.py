@@ -54,6 +54,7 @@ def test_every_chi_has_a_verified_surrogate(model):
 
 
 @pytest.mark.parametrize("train", [[3, 4, 5, 6], [1, 2, 5, 6], [1, 2, 3, 4]])
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_every_cv_round_of_the_sample_data_gets_a_usable_surrogate(train, settings):
     """Round 1 once measured a NaN error (a check point whose table index rounded up
     to the end of the table), refined to 131072 intervals for 10 s and fell back to
@@ -75,6 +76,7 @@ def test_surrogate_covers_exactly_where_its_index_is_inside(model):
     np.testing.assert_array_equal(np.isnan(s(x)), ~s.covers(x))
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_surrogate_equals_kernel_sum_on_dense_points(model):
     for name, c in model.chi.items():
         s = c.surrogate
@@ -113,12 +115,14 @@ def test_the_gate_leaves_room_for_errors_between_check_points(model):
         assert err <= MAX_SURROGATE_ERROR and err <= 2 * max(s.max_error, 1e-11), name
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_fast_decouple_equals_exact_in_range(model):
     u = in_range_voltages(model, 300_000)
     fast, exact = model.decouple(u), model.decouple(u, exact=True)
     np.testing.assert_array_less(np.abs(fast - exact) * np.abs(model.k), BOUND_V)
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_fast_decouple_does_not_depend_on_blocks_threads_or_compiler(model):
     """numpy and the compiled kernel (numba) run the same operations in the same order."""
     u = in_range_voltages(model, 100_003)
@@ -352,6 +356,7 @@ def test_a_control_loop_loads_numpy_only(model, tmp_path, load):
     assert out.stdout.strip() == "[]"
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_fit_warns_when_a_surrogate_misses_its_bound(calib, settings, monkeypatch):
     import importlib
 
@@ -431,6 +436,7 @@ def test_the_kernel_caches_in_the_user_cache_directory_never_in_the_package(tmp_
         importlib.reload(kernel)
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_apply_loads_no_pandas_and_writes_pandas_own_metadata(model, tmp_path):
     """pyarrow imports pandas (0.8 s) for pa.array, pa.scalar and to_numpy; apply avoids all
     three (logs/arrow.py) and writes the Parquet output's pandas metadata itself: byte for

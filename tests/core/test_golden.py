@@ -36,6 +36,7 @@ def _task_outputs():
 
 
 @pytest.mark.parametrize("path", GOLDEN, ids=lambda p: p.name)
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_golden_file_loads_and_decouples_by_its_own_numbers(path):
     """The stored model, not a re-fit: the same on every machine to rounding (conftest.py)."""
     assert json.loads(path.read_text())["format_version"] <= FORMAT_VERSION
@@ -43,6 +44,7 @@ def test_golden_file_loads_and_decouples_by_its_own_numbers(path):
 
 
 @pytest.mark.parametrize("path", GOLDEN, ids=lambda p: p.name)
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_a_fresh_fit_decouples_like_the_golden_file_within_the_noise(path, fresh):
     """Same data and settings, fitted today on this machine: within REFIT_MAX / REFIT_RMS
     of full scale (conftest.py says why a re-fit is not compared to rounding)."""
@@ -78,6 +80,7 @@ def _beyond(model, u):
 
 
 @pytest.mark.parametrize("refine", [None, 2])
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_every_evaluator_of_a_fitted_model_is_eq11_of_its_file(sample_model, refine):
     """Tangent extrapolation (the default of new fits) beyond the range, refinement, NaN."""
     model = load_model(sample_model)
@@ -86,6 +89,7 @@ def test_every_evaluator_of_a_fitted_model_is_eq11_of_its_file(sample_model, ref
                                         header=refine is None)
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_every_evaluator_of_a_joint_fit_with_own_load_chi_is_eq11_of_its_file(rig_model, tmp_path):
     path = tmp_path / "rig.json"
     save_model(rig_model, path)

@@ -15,6 +15,7 @@ from fsdecouple.fitting.linear import fit_omega
 from fsdecouple.fitting.svr import predict, train
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_numpy_chi_equals_libsvm_prediction(calib, model, settings):
     """The saved chi, evaluated by numpy, is libsvm's own prediction to 1e-9 V."""
     for name in CHI_NAMES:
@@ -88,6 +89,7 @@ def test_task_forces_close_to_truth(model, sim_dir):
     assert err.max() < 0.3 * initial.max()
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_fit_is_deterministic_and_thread_independent(calib, settings, model):
     sequential = fit(calib, settings, workers=1)
     a, b = model_to_dict(sequential), model_to_dict(model)
@@ -120,6 +122,7 @@ def test_model_file_newer_version_refused(model):
         model_from_dict(doc)
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_full_scale_scaling_handles_millivolts(sim_dir, settings):
     """Voltages in mV: scaling 'full_scale' gives the same forces as volts would."""
     from dataclasses import replace

@@ -26,6 +26,7 @@ def correction(model) -> InputCorrection:
     return InputCorrection(span * np.array([0.03, -0.02, 0.025]), np.array([1.02, 0.97, 1.03]))
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_an_input_correction_is_applied_by_every_form(sample_model):
     model = load_model(sample_model)
     doc = json.loads(sample_model.read_text())
@@ -104,6 +105,7 @@ def by_hand(doc, u, t, t0, b, g, zero=None):
     return eq11_from_file(doc, c)
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_the_temperature_step_is_applied_by_every_form(sample_model):
     """model.decouple (tables, compiled, small calls, exact), decoupler() and the float
     emulation all apply the plan's temperature step, with and without a zero."""

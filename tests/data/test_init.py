@@ -206,6 +206,7 @@ def test_nice_ceil(value, nice):
 # --- force/torque sensors: components and their prime outputs ----------------------
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_six_axis_sample_gives_its_own_layout_and_fits(tmp_path):
     """The guess for the simulator's file is the simulator's config: same components,
     outputs, full scales and units; and that config fits the sample."""
@@ -300,6 +301,7 @@ def test_an_infinite_reading_is_skipped_not_a_traceback(tmp_path):
         assert max(doc["full_scale"].values()) == peak, doc["full_scale"]
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_init_reads_any_input_once_and_within_the_limits(tmp_path):
     """A 200 KB cell or header, /dev/zero, a pipe (`init <(cat f)`, `cat f | init /dev/stdin`):
     one line and exit 2 for the bad ones, the same guess for a pipe as for the file."""
@@ -327,6 +329,7 @@ def test_init_reads_any_input_once_and_within_the_limits(tmp_path):
     assert pipe == file
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_a_repetition_file_whose_name_is_not_utf8_is_read(tmp_path):
     """A 0xff byte in a repetition's file name was a UnicodeEncodeError inside pyarrow, then
     a refusal; such names are legal (issue 34): read, the byte shown as \\xff."""

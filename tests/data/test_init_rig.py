@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import json
 
+import pytest
 from conftest import invoke
 
 from fsdecouple.sim.rig import write_rig
@@ -14,6 +15,7 @@ HEADER = ["Time (s)", "Fx [N]", "Fy [N]", "Fz [N]", "Mx [Nm]", "My [Nm]", "Mz [N
           "applied_fx", "Fy_ref", "known_Fz [N]", "Known_Mx", "My_true", "REF_Mz"]
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_init_maps_applied_loads_and_readings_whatever_their_spelling(tmp_path):
     path = write_rig(tmp_path, seed=2)[0]
     with path.open(newline="") as fh:

@@ -75,6 +75,7 @@ def rig(tmp_path, readings, applied, rows=None):
 
 
 @pytest.mark.parametrize("headed", [False, True])
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_readings_named_like_the_components_are_in_load_units(tmp_path, headed):
     """Readings of 200 (N) were guessed 'mV' from their magnitude."""
     u = (" [N]", " [N·m]") if headed else ("", "")

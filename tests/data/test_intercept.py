@@ -122,6 +122,7 @@ def test_a_load_that_moves_with_the_offset_is_refused(tmp_path):
         load_calibration(path, load_config(tmp_path / "cfg.yaml"))
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_fit_then_apply_without_a_tare_recovers_the_loads(tmp_path):
     # a linear sensor: the model's decoupled forces of a fresh log, with only the model's
     # fitted offsets as its zero, come back to the noise (0.3 counts of ~300 per F.S.)
@@ -162,6 +163,7 @@ def test_a_dead_gauge_among_eight_is_named(tmp_path):
     assert not (tmp_path / "m.json").exists()
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_misread_samples_are_rejected_and_counted_per_pose(tmp_path):
     poses = simulate_poses(1, samples=400)
     path = tmp_path / "poses.csv"
@@ -200,6 +202,7 @@ def test_misread_samples_are_rejected_and_counted_per_pose(tmp_path):
                for w in calib.warnings)
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_tare_and_zero_still_replace_the_fitted_offsets(tmp_path):
     offsets = np.random.default_rng(4).uniform(300, 700, 8)
     path = tmp_path / "poses.csv"
@@ -232,6 +235,7 @@ def test_tare_and_zero_still_replace_the_fitted_offsets(tmp_path):
                                np.repeat(at_zero, 4, axis=0), atol=1e-6)
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_the_fitted_zero_round_trips_and_is_checked(tmp_path):
     import json
 
@@ -260,6 +264,7 @@ def test_fit_without_a_config_on_another_rigs_file_points_to_init(tmp_path):
     assert "did you mean" not in r.stderr
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_export_puts_the_fitted_offsets_in_the_header(tmp_path):
     # the header subtracts them itself (tests/export/test_intercept_export.py): no note
     offsets = np.full(8, 512.0)

@@ -95,6 +95,7 @@ def test_verdict_recomputes_the_matrix_figure_independently(lab):
     assert v["heldout"]["linear"]["worst_gamma"] == pytest.approx(worst, rel=1e-12)
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_fit_warns_when_the_matrix_generalizes_better_and_auto_takes_it(tmp_path, lab):
     """Finding 5: on a sensor with linear coupling the matrix is right; fit says so."""
     calib, settings = lab
@@ -176,6 +177,7 @@ def test_redirected_cv_output_keeps_every_column():
         assert method in header
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_fit_prints_the_assumption_checks_the_report_shows(tmp_path):
     """Also seen: the report's WARN (slope yx 0.053) that fit never printed."""
     from fsdecouple.core.modelfile import load_model

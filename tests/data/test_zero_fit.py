@@ -95,6 +95,7 @@ def test_offsets_table_records_the_whole_offset_removed():
             np.testing.assert_allclose(p.loc[s, f"{c}_raw"] - sweep[c], p.loc[s, c], atol=1e-15)
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_zero_fit_is_recorded_and_rows_keeps_old_bytes(tmp_path, sample_model):
     assert settings_from_dict({"zero": "fit"}).zero == "fit"
     assert "zero" not in Settings().to_dict()

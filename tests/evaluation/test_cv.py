@@ -9,7 +9,7 @@ import re
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import ROOT, SAMPLE, invoke
+from conftest import FAST_CONFIG, FAST_SVR, ROOT, SAMPLE, invoke
 
 from fsdecouple.axes import VOLTAGE_COLUMNS
 from fsdecouple.core.metrics import interference_error
@@ -194,13 +194,14 @@ def test_cv_json_has_the_documented_keys(doc):
 @pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_cv_command_json_output_and_gate(tmp_path):
     out = tmp_path / "cv.json"
-    r = invoke(["cv", SAMPLE / "calibration", "--json", "-o", out, "--max-gamma", "0.5"])
+    r = invoke(["cv", SAMPLE / "calibration", "-c", FAST_CONFIG, "--json", "-o", out,
+                "--max-gamma", "0.5"])
     doc = json.loads(r.stdout)  # stdout is the document and nothing else
     assert doc == json.loads(out.read_text())
     assert doc["format"] == "fsdecouple.cv" and doc["gate"]["passed"] is True
     r = invoke(["cv", SAMPLE / "calibration", "-o", out], code=2)
     assert "already exists" in r.stderr
-    r = invoke(["cv", SAMPLE / "calibration", "--max-gamma", "1e-6"], code=1)
+    r = invoke(["cv", SAMPLE / "calibration", "-c", FAST_CONFIG, "--max-gamma", "1e-6"], code=1)
     assert "Interference error" in r.stdout and "FAILED" in r.stdout
 
 
@@ -227,7 +228,7 @@ def test_fewer_than_three_repetitions_hold_out_load_levels(tmp_path):
     for rep in (1, 2):
         (d / f"rep{rep}.csv").write_bytes((SAMPLE / "calibration" / f"rep{rep}.csv").read_bytes())
     cfg = tmp_path / "two.yaml"
-    cfg.write_text("min_repetitions: 2\n")
+    cfg.write_text("min_repetitions: 2\n" + FAST_SVR)  # the rounds' layout is the point
     r = invoke(["cv", d, "-c", cfg, "--protocol", "repetitions"], code=2)
     assert "needs at least 3" in r.stderr and "--protocol levels" in r.stderr
     r = invoke(["cv", d, "-c", cfg, "--folds", "1,2"], code=2)  # folds are repetitions
@@ -266,6 +267,7 @@ def test_cells_worse_than_initial_are_marked(doc):
 
 
 @pytest.mark.parametrize("repeats", [1, 2])
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_table_4_times_the_training_run_s_own_fits(calib, settings, monkeypatch, repeats):
     """cv fitted round 1's models a second time only to time them (Table 4): now the
     first timing pass is those models' own fit in the training run, so each job is fitted

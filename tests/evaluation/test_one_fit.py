@@ -27,6 +27,7 @@ def _model_keys(path) -> dict:
     return {k: v for k, v in doc.items() if k not in STAMPS}
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_the_api_fit_writes_the_command_s_model_file(sample_model, tmp_path, monkeypatch):
     """``fsdecouple.fit(fsdecouple.load_calibration(path, fsdecouple.load_config()))``,
     called exactly as the docs show it, saved by ``save_model``: the same file as
@@ -46,6 +47,7 @@ def test_the_api_fit_writes_the_command_s_model_file(sample_model, tmp_path, mon
     assert api["matrix"] is not None and report["outliers"] == []
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_apply_interval_takes_the_model_the_api_saved(tmp_path):
     """``apply --interval`` on a model fitted and saved through the API: bounds on every
     row (it was refused as "fitted by an older fsdecouple, or with --no-verdict")."""
@@ -60,6 +62,7 @@ def test_apply_interval_takes_the_model_the_api_saved(tmp_path):
         assert np.isfinite(lo).all() and (lo < hi).all(), name
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_no_verdict_and_method_are_keywords():
     """``verdict=False`` is ``--no-verdict`` (no verdict, no interval data) and ``method``
     is ``--method``: a linear model decouples by the least-squares matrix it keeps."""
@@ -107,6 +110,7 @@ def _tolerances(monkeypatch, calib, settings) -> tuple[list[float], float]:
     return seen, model.settings.svr.tolerance
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_a_stated_solver_tolerance_is_obeyed_in_the_verdict_too(monkeypatch):
     """Issue 34: a tolerance the user writes is obeyed exactly: with ``tolerance`` stated,
     all 24 SVRs (6 of the model, 18 of three rounds) use it; by the built-in rule
@@ -114,9 +118,10 @@ def test_a_stated_solver_tolerance_is_obeyed_in_the_verdict_too(monkeypatch):
     from fsdecouple.config import TABLE2_TOLERANCE
 
     calib = fsdecouple.load_calibration(SAMPLE / "calibration", fsdecouple.load_config())
-    stated, own = _tolerances(monkeypatch, calib, fsdecouple.load_config(tolerance=1e-4))
-    assert stated == [1e-4] * 24 and own == 1e-4
+    # 2e-3: looser than any the built-in rule gives (at most Table 2's), and fast to solve
+    stated, own = _tolerances(monkeypatch, calib, fsdecouple.load_config(tolerance=2e-3))
+    assert stated == [2e-3] * 24 and own == 2e-3
     # by the built-in rule: not the stated value, at most Table 2's, the model's six alike
     rule, own = _tolerances(monkeypatch, calib, fsdecouple.load_config())
-    assert len(rule) == 24 and rule.count(own) >= 6 and 1e-4 not in rule
+    assert len(rule) == 24 and rule.count(own) >= 6 and 2e-3 not in rule
     assert all(0 < t <= TABLE2_TOLERANCE for t in rule)

@@ -8,6 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import FAST_CONFIG
 from typer.testing import CliRunner
 
 from fsdecouple import load_config
@@ -64,6 +65,7 @@ def test_table2_is_candidate_zero_and_its_figure_is_rederived(tuned):
     assert t2["figure"] == pytest.approx(max(np.sqrt(sq / n) / settings.full_scale), rel=1e-9)
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_never_worse_than_table2(tuned):
     _, _, chosen, record = tuned
     cands = record["candidates"]
@@ -82,6 +84,7 @@ def test_never_worse_than_table2(tuned):
         [0.25 * record["noise"], record["noise"]])
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_grid_candidates_are_solved_to_the_tuned_tolerance(tuned):
     _, settings, chosen, record = tuned
     cands = record["candidates"]
@@ -92,6 +95,7 @@ def test_grid_candidates_are_solved_to_the_tuned_tolerance(tuned):
         assert chosen.svr.tolerance == TUNE_TOLERANCE
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_the_tuned_tolerance_reaches_the_converged_svr_and_table2s_does_not():
     # Why grid candidates get their own tolerance: libsvm's stopping tolerance is in
     # the target's units (here fractions of F.S.), and Table 2's 1e-3 is larger than
@@ -202,7 +206,7 @@ def test_a_candidate_worse_than_table2_on_any_axis_is_never_chosen(monkeypatch):
 def test_fit_tune_round_trips_through_the_model_file(tmp_path):
     out = tmp_path / "m.json"
     r = runner.invoke(app, ["fit", SAMPLE, "-o", str(out), "--tune", "--tune-grid", TINY,
-                            "--json"])
+                            "--json", "--no-verdict"])  # the record is the tune's, verdict or not
     assert r.exit_code == 0, r.output
     printed = json.loads(r.stdout)["tune"]
     model = load_model(out)
@@ -214,14 +218,15 @@ def test_fit_tune_round_trips_through_the_model_file(tmp_path):
     assert model_to_dict(model)["report"]["tune"] == printed
 
 
-@pytest.mark.slow  # fits with the held-out verdict: seconds of CPU; the not-slow run stays under a minute
-def test_untuned_models_have_no_tune_record(tmp_path):
+@pytest.mark.slow  # a fit: about a second of CPU
+def test_untuned_models_have_no_tune_record(tmp_path, sample_model):
     out = tmp_path / "m.json"
-    r = runner.invoke(app, ["fit", SAMPLE, "-o", str(out), "--json"])
+    r = runner.invoke(app, ["fit", SAMPLE, "-o", str(out), "--json", "--no-verdict"])
     assert r.exit_code == 0, r.output
     assert json.loads(r.stdout)["tune"] is None
-    assert "tune" not in json.loads(out.read_text())["report"]  # older files' bytes
-    assert load_model(out).report.tune is None
+    for path in (out, sample_model):  # and the session's fit with its verdict
+        assert "tune" not in json.loads(path.read_text())["report"]  # older files' bytes
+        assert load_model(path).report.tune is None
 
 
 @pytest.mark.parametrize("grid", ["gamma=0", "C=1e9", "epsilon=-1", "gamma=nan", "delta=1",
@@ -327,7 +332,8 @@ def test_sample_like_coupling_tuned_and_refined_is_near_the_floor(tmp_path):
 @pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_cv_tune_records_the_choice_and_cross_validates_with_it(tmp_path):
     out = tmp_path / "cv.json"
-    r = runner.invoke(app, ["cv", SAMPLE, "--tune", "--tune-grid", TINY, "-o", str(out)])
+    r = runner.invoke(app, ["cv", SAMPLE, "--tune", "--tune-grid", TINY, "-c", str(FAST_CONFIG),
+                            "-o", str(out)])  # Table 2's tolerance: the record is the point
     assert r.exit_code == 0, r.output
     doc = json.loads(out.read_text())
     pick = doc["tune"]["candidates"][doc["tune"]["chosen"]]

@@ -81,6 +81,7 @@ def test_import_export_round_trip(name, tmp_path):
 
 @pytest.mark.parametrize("frame", [None, Frame(((0.0, -1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
                                                (0.1, 0.0, 0.25))])
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_fitted_linear_model_reads_back_in_atidaq(six_linear, frame, tmp_path):
     """A fitted linear six-axis model -> .cal -> ATIDAQ's forces = the model's, 1e-6 F.S."""
     model = six_linear if frame is None else replace(

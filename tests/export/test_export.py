@@ -67,15 +67,16 @@ int main(int argc, char **argv)
 
 
 @pytest.fixture(scope="module")
-def sample_model():
-    """The model of the committed sample data (fitted once; it has surrogate tables)."""
-    return fit(SAMPLE / "calibration")
+def sample_model(sample_model):
+    """The model of the committed sample data (it has surrogate tables): the session's
+    `fsdecouple fit` of it (conftest's sample_model), loaded."""
+    return load_model(sample_model)
 
 
 @pytest.fixture(scope="module")
 def kernel_model():
     """The sample data fitted with extrapolation: kernel (the kernel sum beyond the range)."""
-    return fit(SAMPLE / "calibration", load_config(extrapolation="kernel"))
+    return fit(SAMPLE / "calibration", load_config(extrapolation="kernel"), verdict=False)
 
 
 @pytest.fixture(scope="module")
@@ -89,7 +90,7 @@ def rotated_model(tmp_path_factory):
     cfg.write_text("rotation:\n" + "".join(f"  - [{', '.join(map(repr, row))}]\n" for row in r.tolist()))
     settings = load_config(cfg)
     assert settings.rotation is not None
-    return fit(SAMPLE / "calibration", settings)
+    return fit(SAMPLE / "calibration", settings, verdict=False)  # the header needs no verdict
 
 
 class _Settings:
@@ -606,7 +607,7 @@ def gauge_model(tmp_path_factory):
     path = write_rig(out, seed=2, gauges=8)[0]
     init_config(path, out / "cfg.yaml")
     settings = load_config(out / "cfg.yaml")
-    return fit(load_calibration(path, settings), settings)
+    return fit(load_calibration(path, settings), settings, verdict=False)
 
 
 @needs_cc

@@ -42,6 +42,7 @@ def linear_model():
     return model
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_the_plan_holds_the_matrix_and_no_chi(linear_model, tmp_path):
     plan = plan_export(linear_model)
     assert plan.method == "linear" and plan.chis == [] and plan.refine == 0
@@ -57,6 +58,7 @@ def test_the_plan_holds_the_matrix_and_no_chi(linear_model, tmp_path):
     assert "fsd_chi_axes" not in text  # C has no empty arrays
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_float_emulation_is_the_matrix_in_float(linear_model):
     plan = plan_export(linear_model, precision="float")
     rng = np.random.default_rng(3)
@@ -91,6 +93,7 @@ def test_linear_header_matches_model_and_apply(linear_model, precision, tmp_path
     assert (status & OUTSIDE_TABLE == 0).all() and (status & SATURATED == 0).all()
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_cli_exports_a_linear_model(tmp_path):
     model = tmp_path / "model.json"
     invoke(["fit", SAMPLE / "calibration", "--method", "linear", "--no-verdict", "-o", model])

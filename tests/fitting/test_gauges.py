@@ -53,6 +53,7 @@ def test_init_keeps_every_gauge_and_the_config_names_them(tmp_path):
     assert "8 output channels for 6 components (M > N)" in (tmp_path / "cfg.yaml").read_text()
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_decoupling_is_the_least_squares_solution_of_the_forward_models(tmp_path):
     """Re-derived from the per-output forward models u_j = K_j f + sum_b chi_jb(v_b): the
     model's forces minimise |u - K f - chi(P u)| (np.linalg.lstsq), to rounding; and each
@@ -115,6 +116,7 @@ def test_fit_apply_validate_and_export_through_the_cli_and_the_rest_refuse_in_on
         "calibration.csv", "cfg.yaml", "d.h", "forces.csv", "log.csv", "m.json"]
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_the_model_file_keeps_the_projection_and_refuses_a_wrong_one(tmp_path):
     """Also: the table path (own-load chi included) within its promise of the exact path,
     for one vector too, and refinement in v = P u."""

@@ -76,6 +76,7 @@ def test_prior_rows_carry_the_old_models_loads(old):
     assert np.abs(delta).max() < 1.0  # counts, of readings ~500
 
 
+@pytest.mark.slow  # a whole prior fit: its lambda grid over held-out folds
 def test_fit_with_a_prior_says_what_it_chose_and_writes_it(old):
     tmp, model, settings = old
     new = tmp / "new.csv"
@@ -124,6 +125,7 @@ def test_a_prior_with_tuning_is_refused_not_ignored(old):
     assert not (tmp / "t.json").exists()
 
 
+@pytest.mark.slow  # a whole prior fit: its lambda grid over held-out folds
 def test_a_config_method_a_prior_cannot_obey_is_named_not_dropped(old):
     """init writes method: auto for poses; with a prior the choice is the prior's, and the
     fit says the config's method was not used (an unused key is warned about)."""
@@ -177,6 +179,7 @@ def test_with_ten_poses_the_prior_beats_a_fresh_fit_and_the_old_model(kind, tmp_
         assert ratio.mean() + 2 * ratio.std(ddof=1) < 0, (kind, other, e)
 
 
+@pytest.mark.slow  # a whole prior fit: its lambda grid over held-out folds
 def test_one_output_per_component_leans_on_prior_rows(tmp_path):
     # no matrix P to correct (a six-output rig): lambda copies of the new rows with the old
     # model's loads, lambda and a fresh fit scored held out on the same folds
@@ -192,6 +195,7 @@ def test_one_output_per_component_leans_on_prior_rows(tmp_path):
     assert choice.copies == (0 if choice.best == FRESH else 2)
 
 
+@pytest.mark.slow  # a whole prior fit: its lambda grid over held-out folds
 def test_a_model_of_another_sensor_loses_to_a_fresh_fit(old, tmp_path):
     # sensor 1's model as the prior of sensor 0 (same layout, other gauges and chi): no
     # correction of its matrix makes its chi sensor 0's, and held-out error must see it

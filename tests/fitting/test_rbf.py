@@ -44,6 +44,7 @@ def test_mimo_interpolates_well_separated_points():
     assert np.abs(m.decouple(u) - f).max() < 1e-8 * 100.0
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_mimo_on_calibration_data_fits_training_points_and_is_deterministic(calib, settings):
     a = fit_mimo(calib.voltages, calib.forces)
     b = fit_mimo(calib.voltages, calib.forces)

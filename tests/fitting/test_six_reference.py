@@ -77,6 +77,7 @@ def test_zero_rows_decouples_as_the_straightforward_reference(case):
     assert diff.max() < 1e-8, diff.max(axis=0)
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_default_is_no_worse_than_the_reference_on_combined_loads(case, default_model):
     """Every component, and the worst one: a broken zero: fit (or any default that
     drifts from the paper's chi) shows here; measured 1.45-1.92x the floor against the

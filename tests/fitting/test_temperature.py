@@ -20,6 +20,10 @@ from conftest import invoke
 from fsdecouple.sim.thermal import ThermalSensor, thermal_log
 
 FS = np.array([100.0, 100.0, 150.0])
+# Every test here reads the module's simulated drifting sensor, fitted with its temperature
+# terms and applied to two logs: ~6 s of CPU before the first test, beyond the not-slow
+# run's budget (issue 30: a minute), so the whole file runs in the full suite.
+pytestmark = pytest.mark.slow
 TARE = 200
 
 
@@ -40,6 +44,7 @@ def drifting(tmp_path_factory):
     return d
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_drifting_log_within_the_floor(drifting):
     sensor = ThermalSensor(seed=3)
     log, twin, f, t = thermal_log(sensor, seed=3)
@@ -142,6 +147,7 @@ def test_temperature_column_holding_text(drifting, tmp_path):
     assert not (tmp_path / "m.json").exists()
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_a_narrow_span_fits_no_terms(drifting, tmp_path):
     """Temperatures within 5 K: no terms (the model file has none), and fit says why."""
     cal = tmp_path / "cal"
@@ -173,6 +179,7 @@ def test_init_recognises_a_temperature_column(tmp_path, header, unit):
     assert doc["columns"]["temperature"] == header and doc["units"]["temperature"] == unit
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_report_certificate_and_compare_show_the_terms(drifting, tmp_path):
     invoke(["report", drifting / "model.json", "-o", tmp_path / "r.html"])
     html = (tmp_path / "r.html").read_text(encoding="utf-8")
@@ -216,6 +223,7 @@ def test_simulate_temperature_refuses_what_it_cannot_honour(tmp_path, extra):
     assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "s").exists()
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_offsets_jumping_between_sweeps_keep_each_sweeps_zero(drifting, tmp_path):
     """Sweeps whose zero jumps by 0.02 V (40x the noise) at random: the fit no longer zeroes
     by its common z (offset_t0 None), and b's uncertainty grows to cover the jumps."""
@@ -238,6 +246,7 @@ def test_offsets_jumping_between_sweeps_keep_each_sweeps_zero(drifting, tmp_path
     assert (jumpy.terms.b_sigma > 3 * steady.terms.b_sigma).all()
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_a_column_named_temperature_needs_no_mapping(drifting, tmp_path):
     """As fx is read from a column named fx: fit and apply without a config read the column
     named 'temperature' (degC), and give the forces the config gives."""
@@ -268,6 +277,7 @@ def _soak(truth: dict, n: int = 300, seed: int = 0) -> pd.DataFrame:
                          "temperature": t + rng.normal(0.0, 0.02, n)})
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_a_soak_file_pins_the_offset_drift(drifting, tmp_path):
     """A file of zero-load rows over 10-40 degC beside the repetitions: accepted with a note,
     not a repetition, and b_i's uncertainty shrinks while b_i stays by the truth."""

@@ -29,6 +29,7 @@ def pair(calib, settings, sim_model_file):
     return load_model(sim_model_file), calibrate(_scaled(calib, 1.01), settings)
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_en_is_the_difference_of_both_models_on_the_same_outputs_over_both_us(pair):
     a, b = pair
     got, why = en_figures(a, b)
@@ -47,6 +48,7 @@ def test_en_is_the_difference_of_both_models_on_the_same_outputs_over_both_us(pa
         assert got["en"][axis] == pytest.approx(worst, rel=1e-9)
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_outputs_one_percent_larger_give_en_above_one_on_every_component(pair):
     a, b = pair
     got, _ = en_figures(a, b)
@@ -56,6 +58,7 @@ def test_outputs_one_percent_larger_give_en_above_one_on_every_component(pair):
     assert all(v == 0.0 for v in same["en"].values())
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_compare_gates_on_en_and_an_old_model_falls_back_with_a_note(pair, tmp_path):
     a, b = pair
     pa, pb = tmp_path / "a.json", tmp_path / "b.json"

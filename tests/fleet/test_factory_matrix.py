@@ -69,6 +69,7 @@ def test_validate_scores_the_factory_matrix_on_the_users_set(lab, tmp_path):
         assert got == pytest.approx(err.max(), abs=1e-5), axis
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_compare_factory_against_recalibration(lab, tmp_path):
     d, factory, w_true, fs = lab
     invoke(["fit", d / "set", "-c", d / "sensor.yaml", "-o", tmp_path / "recal.json",

@@ -139,6 +139,7 @@ def test_unknown_unit_exits_2_and_writes_nothing(sample_model_file, tmp_path):
         apply_file(load_model(sample_model_file), LOG, out, unit="n")
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_zero_line_shows_the_output_unit(tmp_path):
     cal = tmp_path / "calibration"
     cal.mkdir()
@@ -179,6 +180,7 @@ def test_bad_limits_exit_2_in_apply(sample_model_file, tmp_path):
     assert not (tmp_path / "f.csv").exists()
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_limits_round_trip_through_the_model_file(tmp_path):
     assert "limits" not in Settings().to_dict()  # files without limits keep their bytes
     cfg = tmp_path / "cfg.yaml"

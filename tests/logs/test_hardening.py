@@ -117,6 +117,7 @@ def european(src, dst):
     ))
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_european_csv_through_the_config(tmp_path, sample_model_file):
     """sep ';' and decimal ',' (plus CRLF) give the same model and forces as the comma files."""
     cal = tmp_path / "cal"
@@ -141,6 +142,7 @@ def test_european_csv_through_the_config(tmp_path, sample_model_file):
 
 
 @pytest.mark.parametrize("variant", ["bom", "crlf", "bom+crlf"])
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_bom_and_windows_line_endings_read_correctly(tmp_path, variant, sample_model_file):
     cal = tmp_path / "cal"
     cal.mkdir()

@@ -19,6 +19,7 @@ from fsdecouple.sim.poses import ORIENTATIONS, POSITIONS, PoseSet, pose_lines, s
 N_POSES = len(POSITIONS) * ORIENTATIONS
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_a_directory_of_pose_files_is_one_set(tmp_path):
     files = write_poses(tmp_path / "poses", seed=3, samples=50)
     assert len(files) == N_POSES
@@ -41,6 +42,7 @@ def test_a_directory_of_pose_files_is_one_set(tmp_path):
     assert any("60 pose files, one calibration set" in w for w in by_dir.warnings)
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_a_pose_file_in_another_layout_is_refused(tmp_path):
     write_poses(tmp_path / "poses", seed=0, samples=5)
     odd = tmp_path / "poses" / "pose07.csv"
@@ -58,6 +60,7 @@ def test_a_pose_file_in_another_layout_is_refused(tmp_path):
     assert not (tmp_path / "m.json").exists() and not (tmp_path / "new.yaml").exists()
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_a_pose_file_whose_loads_change_is_refused(tmp_path):
     write_poses(tmp_path / "poses", seed=0, samples=5)
     bad = tmp_path / "poses" / "pose09.csv"

@@ -198,12 +198,7 @@ def test_decoupler_takes_six_outputs(six_model):
     np.testing.assert_allclose(got, six_model.decouple(u), rtol=0, atol=1e-12)
 
 
-@pytest.fixture(scope="module")
-def six_model_file(tmp_path_factory):
-    """`fsdecouple fit` of the six-axis sample, run once for the CLI tests below."""
-    model = tmp_path_factory.mktemp("six") / "m.json"
-    invoke(["fit", SIX / "calibration", "-c", CONFIG, "-o", model])
-    return model
+# six_model_file: conftest's, the session's `fsdecouple fit` of the six-axis sample
 
 
 @pytest.mark.slow  # a six-axis fit with its verdict: seconds of CPU; the not-slow run stays under a minute
@@ -573,6 +568,7 @@ def test_simulate_six_axis_with_a_gross_error_moves_one_prime_output(tmp_path):
     assert "fx, fy, fz, mx, my, mz" in bad.stderr and not (tmp_path / "bad").exists()
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_validate_shows_mixed_unit_errors_in_full_scale_only(six_model_file, sample_model):
     """Forces and moments have no one unit: the table keeps % F.S. and drops the
     absolute columns a 3-axis model shows in its load unit."""
