@@ -92,6 +92,28 @@ class _Group(TyperGroup):
         except _Interrupted:
             raise KeyboardInterrupt from None
 
+    def parse_args(self, ctx, args):
+        """Refuse a number typed with digits of another script (``--tare \u0663``) before any
+        option reads it: int() and float() read '\u0663' (Arabic-Indic three) as 3."""
+        for token in args:
+            bad = _other_digit(token) if _NUMBER_LIKE.fullmatch(token) else None
+            if bad is not None:
+                raise typer.BadParameter(_other_digit_message(token, bad))
+        return super().parse_args(ctx, args)
+
+
+# a token that can only be a number (or numbers: --zero 1,2,3, --folds 1,2;3,4)
+_NUMBER_LIKE = re.compile(r"[\d.,;:eE+\-]+")
+
+
+def _other_digit(text: str) -> str | None:
+    """The first digit of ``text`` that is not ASCII 0-9, if any."""
+    return next((c for c in text if c.isdigit() and not c.isascii()), None)
+
+
+def _other_digit_message(text: str, bad: str) -> str:
+    return f"{text!r}: {bad!r} (U+{ord(bad):04X}) is not an ASCII digit 0-9"
+
 
 app = typer.Typer(
     cls=_Group,
@@ -318,13 +340,13 @@ def _given(*paths):
 def ascii_digits(ctx: typer.Context, param: typer.CallbackParam, value):
     """An option holding numbers as text (``--folds``, ``--zero``, ``FILE:ROW``): its digits
     are ASCII.  Python's int() and float() read '٣' (Arabic-Indic three) as 3, so a digit
-    the user may not have meant to type was obeyed; option types refuse it already."""
+    the user may not have meant to type was obeyed; a token that is only a number is
+    refused before parsing (``_Group.parse_args``)."""
     for text in value if isinstance(value, list | tuple) else [value]:
         number = text.rsplit(":", 1)[-1] if param.name == "exclude" and text else text
-        bad = next((c for c in number or "" if c.isdigit() and not c.isascii()), None)
+        bad = _other_digit(number or "")
         if bad is not None:
-            raise typer.BadParameter(f"{text!r}: {bad!r} (U+{ord(bad):04X}) is not an ASCII digit "
-                                     "0-9")
+            raise typer.BadParameter(_other_digit_message(text, bad))
     return value
 
 
