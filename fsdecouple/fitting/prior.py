@@ -135,15 +135,19 @@ def _decoder(old, exact: bool = False):
     return g
 
 
+def _central(g, x: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """dg/dx at each row of ``x`` (n, K), (n, N, K), by central differences of ``steps`` (K,)."""
+    cols = []
+    for b, h in enumerate(steps):
+        step = np.zeros(len(steps))
+        step[b] = h
+        cols.append((g(x + step) - g(x - step)) / (2 * h))
+    return np.stack(cols, axis=-1)
+
+
 def _jacobian(g, v: np.ndarray, fs: np.ndarray) -> np.ndarray:
     """d(f / fs) / d(v / fs) of eq. (11) at each row, (n, N, N), by central differences."""
-    n, big_n = v.shape
-    jac = np.empty((n, big_n, big_n))
-    for b in range(big_n):
-        step = np.zeros(big_n)
-        step[b] = 1e-4 * fs[b]
-        jac[:, :, b] = (g(v + step) - g(v - step)) / (2 * step[b]) * fs[b] / fs[None, :]
-    return jac
+    return _central(g, v, 1e-4 * fs) * fs[None, None, :] / fs[None, :, None]
 
 
 def fit_correction(u: np.ndarray, f: np.ndarray, g, p: np.ndarray, fs: np.ndarray,
@@ -381,11 +385,8 @@ def zero_shift(old, u: np.ndarray, f: np.ndarray) -> np.ndarray:
     """
     m = u.shape[1]
     step = np.maximum(np.abs(u).max(axis=0), 1e-12) * 1e-4
-    mean = u.mean(axis=0, keepdims=True)
-    jac = np.column_stack([
-        (old.decouple(mean + step[j] * np.eye(m)[j], rotate=False, exact=True)
-         - old.decouple(mean - step[j] * np.eye(m)[j], rotate=False, exact=True))[0] / (2 * step[j])
-        for j in range(m)])  # (N, M)
+    jac = _central(lambda x: old.decouple(x, rotate=False, exact=True),
+                   u.mean(axis=0, keepdims=True), step)[0]  # (N, M)
     r = (old.decouple(u, rotate=False, exact=True) - f).mean(axis=0)
     delta, *_ = np.linalg.lstsq(jac, r, rcond=None)
     return delta if np.isfinite(delta).all() else np.zeros(m)
