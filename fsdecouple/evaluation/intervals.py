@@ -67,6 +67,7 @@ from __future__ import annotations
 
 import functools
 import math
+from statistics import NormalDist
 from typing import Any
 
 import numpy as np
@@ -275,7 +276,7 @@ def half_widths(model, p: float, f: np.ndarray | None = None) -> np.ndarray:
 
 GRID = 33  # between-sweep ratios rho at which the half-width is solved, then interpolated
 CONFIDENCE = 0.9  # of a sensor: its shared error lies within K rho (the interval's width)
-K = 1.6448536269514722  # two-sided normal quantile of CONFIDENCE: Phi(K) = (1 + 0.9) / 2
+K = NormalDist().inv_cdf((1.0 + CONFIDENCE) / 2.0)  # two-sided normal quantile of CONFIDENCE
 
 
 def _convolved(cal: dict[str, Any], p: float, f: np.ndarray, labels) -> np.ndarray:
