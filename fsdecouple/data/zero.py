@@ -286,17 +286,26 @@ def fitted_offsets(points: pd.DataFrame, sweep: np.ndarray, keys: list, layout: 
     for b, label in enumerate(layout.labels):
         idx = np.flatnonzero(labels == label)
         f = points[layout.loads[b]].to_numpy(dtype=float)[idx]
-        degree = min(MAX_DEGREE, np.unique(f).size - 2)
-        peak = np.abs(f).max(initial=0.0)
-        if degree < 1 or not peak > 0:
-            continue
         groups = np.flatnonzero(axis_of_key == label)  # this component's sweeps
-        col = np.searchsorted(groups, sweep[idx])
-        s = f / peak
-        design = np.column_stack([np.eye(groups.size)[col], *(s ** p for p in range(1, degree + 1))])
+        design = offset_design(f, np.searchsorted(groups, sweep[idx]), groups.size)
+        if design is None:
+            continue
         coef, *_ = np.linalg.lstsq(design, u[idx], rcond=None)
         out[groups] = coef[:groups.size]
     return out
+
+
+def offset_design(f: np.ndarray, col: np.ndarray, groups: int) -> np.ndarray | None:
+    """The design of :func:`fitted_offsets` for one component's points of loads ``f``:
+    one column per sweep (``col`` each point's, of ``groups``), then s^1..s^d, s = f over
+    the largest |f|, d up to MAX_DEGREE and two below the number of load levels; None
+    where the offsets cannot be fitted (too few levels, no load)."""
+    degree = min(MAX_DEGREE, np.unique(f).size - 2)
+    peak = np.abs(f).max(initial=0.0)
+    if degree < 1 or not peak > 0:
+        return None
+    s = f / peak
+    return np.column_stack([np.eye(groups)[col], *(s ** p for p in range(1, degree + 1))])
 
 
 def mean_offset_variance(points: pd.DataFrame, layout: Layout) -> np.ndarray:
@@ -365,16 +374,14 @@ def shift_variance(points: pd.DataFrame, layout: Layout) -> np.ndarray:
     labels = points["axis"].to_numpy()
     for b, label in enumerate(layout.labels):
         mine = points[labels == label]
-        f = mine[layout.loads[b]].to_numpy(dtype=float)
-        degree = min(MAX_DEGREE, np.unique(f).size - 2)
-        peak = np.abs(f).max(initial=0.0)
-        if degree < 1 or not peak > 0 or not np.isfinite(out[b]):
+        if not np.isfinite(out[b]):
             continue
         _, col = np.unique(mine["repetition"].to_numpy(), return_inverse=True)
         groups = col.max() + 1
-        s = f / peak
-        design = np.column_stack([np.eye(groups)[col], *(s ** p for p in range(1, degree + 1))])
-        a = np.concatenate([np.full(groups, 1.0 / groups), np.zeros(degree)])
+        design = offset_design(mine[layout.loads[b]].to_numpy(dtype=float), col, groups)
+        if design is None:
+            continue
+        a = np.concatenate([np.full(groups, 1.0 / groups), np.zeros(design.shape[1] - groups)])
         out[b] = float(a @ np.linalg.lstsq(design.T @ design, a, rcond=None)[0])
     return out
 
