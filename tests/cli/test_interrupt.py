@@ -115,6 +115,20 @@ def _wait_for_training(proc, marks, processes=1, timeout=120):
         time.sleep(0.02)
 
 
+def _signal_while_training(proc, marks, sig, timeout, processes=1):
+    """Once ``processes`` are training (and 0.2 s inside libsvm), send ``sig``; return
+    (stdout, stderr, seconds from the signal to the exit)."""
+    _wait_for_training(proc, marks, processes)
+    time.sleep(0.2)
+    proc.send_signal(sig)
+    sent = time.monotonic()
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    finally:
+        proc.kill()
+    return out, err, time.monotonic() - sent
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("workers", ["1", "2"])
 @pytest.mark.parametrize("sig, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
@@ -130,15 +144,9 @@ def test_a_signal_during_libsvm_training_stops_the_command(tmp_path, sig, code, 
                              "-c", str(slow), "--workers", workers, "-o", str(out)],
                             env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, preexec_fn=_default_sigint)
-    _wait_for_training(proc, marks)  # on the main thread (1) or a pool's (2)
-    time.sleep(0.2)  # inside libsvm: C = 1e6 takes seconds per SVR
-    proc.send_signal(sig)
-    sent = time.monotonic()
-    try:
-        _, err = proc.communicate(timeout=30)
-    finally:
-        proc.kill()
-    assert proc.returncode == code and time.monotonic() - sent < 5, err.decode()[-2000:]
+    # on the main thread (1) or a pool's (2), inside libsvm: C = 1e6 takes seconds per SVR
+    _, err, took = _signal_while_training(proc, marks, sig, 30)
+    assert proc.returncode == code and took < 5, err.decode()[-2000:]
     assert b"Exception ignored" not in err and b"Traceback" not in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["slow.yaml"]
 
@@ -160,15 +168,9 @@ def test_sigterm_stops_fit_many_and_its_worker_processes(tmp_path):
     proc = subprocess.Popen([sys.executable, "-m", "fsdecouple", "fit-many", str(sensors), "-o",
                              str(models), "--workers", "2"],
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    _wait_for_training(proc, marks, processes=2)  # both workers are training
-    time.sleep(0.2)
-    proc.send_signal(signal.SIGTERM)
-    sent = time.monotonic()
-    try:
-        _, err = proc.communicate(timeout=30)
-    finally:
-        proc.kill()
-    assert proc.returncode == 143 and time.monotonic() - sent < 10, err.decode()[-2000:]
+    # both workers are training
+    _, err, took = _signal_while_training(proc, marks, signal.SIGTERM, 30, processes=2)
+    assert proc.returncode == 143 and took < 10, err.decode()[-2000:]
     alive = subprocess.run(["pgrep", "-f", str(sensors)], capture_output=True, text=True).stdout
     assert alive == "", alive
     assert not models.exists()  # the directory it made is not left behind, empty
@@ -211,16 +213,10 @@ def test_ctrl_c_stops_pytest_while_a_command_runs_in_process(tmp_path):
                              "-p", "conftest", str(tmp_path / "test_fits.py")],
                             cwd=tmp_path, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, preexec_fn=_default_sigint)
-    _wait_for_training(proc, marks)  # inside the first fit command
-    time.sleep(0.2)
-    proc.send_signal(signal.SIGINT)
-    sent = time.monotonic()
-    try:
-        out, _ = proc.communicate(timeout=15)
-    finally:
-        proc.kill()
+    # inside the first fit command
+    out, _, took = _signal_while_training(proc, marks, signal.SIGINT, 15)
     out = out.decode()
-    assert time.monotonic() - sent < 15
+    assert took < 15
     assert proc.returncode == 2, out[-3000:]  # pytest's ExitCode.INTERRUPTED
     assert "KeyboardInterrupt" in out and mark.read_text() == "0", out[-3000:]
     assert "failed" not in out and "passed" not in out, out[-3000:]
