@@ -302,6 +302,9 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
                                "value": _decouple_seconds(models[(1, m)], vectors, repeats)})
 
     warnings = list(calib.warnings)
+    if settings.method is not None:  # the config's method: key is fit's choice, not cv's
+        warnings.append(f"config method: {settings.method} not used: cv scores every method "
+                        "side by side (fit obeys it)")
     for r in trains:
         warnings += [f"round {r}: {w}" for w in models[(r, "svr")].warnings
                      if w not in calib.warnings]

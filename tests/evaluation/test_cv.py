@@ -290,3 +290,15 @@ def test_table_4_times_the_training_run_s_own_fits(calib, settings, monkeypatch,
     times = {r["method"]: r["value"] for r in doc["timing"]["records"]
              if r["metric"] == "establish_seconds"}
     assert set(times) == set(METHODS) and all(t > 0 for t in times.values())
+
+
+@pytest.mark.slow  # a whole cv run
+def test_a_config_method_is_named_as_not_used_by_cv(tmp_path):
+    """method: is fit's choice; cv scores every method, and says the key was not used
+    instead of dropping it in silence."""
+    cfg = tmp_path / "m.yaml"
+    cfg.write_text("svr: {tolerance: 0.001}\nmethod: linear\n")
+    r = invoke(["cv", SAMPLE / "calibration", "-c", cfg, "-o", tmp_path / "cv.json", "--json"])
+    doc = json.loads((tmp_path / "cv.json").read_text())
+    assert any("config method: linear not used" in w for w in doc["warnings"]), doc["warnings"]
+    assert "config method: linear not used" in r.stdout + r.stderr
