@@ -32,6 +32,7 @@ from ..errors import InputError, where
 from ..fitting import svr as _svr
 from ..fitting.baselines import METHODS, establish, train_all
 from ..fitting.linear import fit_omega
+from ..fitting.noise import VERDICT_NOISE_FRACTION
 from ..fitting.rbf import B_FACTOR, MSE_GOAL, OUTPUT_LAYER, SPREAD, basic_solution
 from ..fitting.threads import single_threaded_libraries
 from .checks import assumption_checks
@@ -266,7 +267,11 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
     if workers <= 1:
         warm.join()
     alone: dict = {}  # each job's time to fit alone (train_all)
-    all_models, wall = train_all(jobs + gross_jobs, settings, workers, progress, seconds=alone)
+    # the rounds' SVRs are solved as the held-out verdict's (the same protocol): to
+    # VERDICT_NOISE_FRACTION of sigma, the model to sigma / 2 (fitting/noise.py); a
+    # tolerance the user states is obeyed in both
+    all_models, wall = train_all(jobs + gross_jobs, settings, workers, progress, seconds=alone,
+                                 noise_fraction=VERDICT_NOISE_FRACTION)
     warm.join()
     models = {k: v for k, v in all_models.items() if k[0] != "gross"}
 
@@ -287,7 +292,7 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
     for _ in range(repeats - 1):
         for _key, method, train in jobs[:len(METHODS)]:  # round 1, one job per method
             t0 = time.perf_counter()
-            establish(method, train, settings, workers=1)
+            establish(method, train, settings, workers=1, noise_fraction=VERDICT_NOISE_FRACTION)
             establish_times[method].append(time.perf_counter() - t0)
     # the whole training run done sequentially, estimated from the sample
     count = {m: sum(1 for _, jm, _ in jobs + gross_jobs if jm == m) for m in METHODS}
