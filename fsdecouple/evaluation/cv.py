@@ -11,6 +11,7 @@ with one calibration point moved (Section 4.4, Table 5), and timed (Table 4).
 from __future__ import annotations
 
 import os
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -180,11 +181,26 @@ def run_cv(
         (:mod:`fsdecouple.evaluation.tune`, over ``tune_grid``), and cross-validate with them;
         the record goes to ``doc["tune"]``.
     """
+    _scipy_before_the_limit()
     with single_threaded_libraries():
         return _run_cv(calib, settings, folds=folds, task=task, task_tare=task_tare,
                        gross_error=gross_error, max_gamma=max_gamma, workers=workers,
                        repeats=repeats, progress=progress, protocol=protocol, tune=tune,
                        tune_grid=tune_grid)
+
+
+def _scipy_before_the_limit() -> None:
+    """Load scipy before cv limits BLAS to one thread, unless its OpenBLAS starts at one.
+
+    scipy ships an OpenBLAS of its own, loaded with the RBF baselines' ``scipy.linalg``.
+    Loaded inside the limit while the SVRs train, it kept its threads (threadpoolctl's
+    setting does not take then): they cost CPU, and the networks' last digits then
+    depended on whether an earlier run had loaded it.  The CLI starts every OpenBLAS at
+    one thread (``OPENBLAS_NUM_THREADS``, fsdecouple/cli/__init__.py), so there scipy
+    keeps loading beside the SVRs; elsewhere it loads here first (0.4 s, once).
+    """
+    if "scipy.linalg" not in sys.modules and os.environ.get("OPENBLAS_NUM_THREADS") != "1":
+        import scipy.linalg  # noqa: F401
 
 
 def _refuse_beyond(values: np.ndarray, scale: float, path, columns) -> None:
