@@ -388,7 +388,7 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
                 else ()
             status = pc.take(STATUS_NAMES, numbers(code))
             if tare is None and zero is None and len(block):
-                medians.append(block_median(block.u * scale))
+                medians.append(block_median(block.u, scale))
             return len(block), counts, first, block.done, block.total, \
                 sink.encode(block, f, empty, (status,))
 
