@@ -63,7 +63,7 @@ alike:
   then scores what the verdict scores (the sample's svr worst gamma 0.55 % in both,
   per axis equal, tested; at sigma / 2 cv read 0.49 %; its combined-load errors moved
   by 0.02 points either way).  Measured on 2026-11-27 on a busy 2-core machine
-  (medians of alternated runs): the cv command's CPU 3.0 s against 3.8 s, its three
+  (medians of 6 alternated runs): the cv command's CPU 3.7 s against 5.7 s, its three
   rounds' SVRs 1.1 s of thread CPU against 2.0-2.6 s; benchmarks/run.py rows 4b and 4g.
 * a sensor with ``components:`` in volts is solved to Table 2's tolerance: its 30
   chi over hundreds of points take 3-10x longer to solve to 1e-4 F.S., past

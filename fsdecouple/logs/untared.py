@@ -19,7 +19,7 @@ import numpy as np
 MEDIAN_ROWS = 1 << 14
 
 
-def block_median(u: np.ndarray, scale=1.0) -> np.ndarray:
+def block_median(u: np.ndarray, scale: np.ndarray | float = 1.0) -> np.ndarray:
     """The median of each output over a block's rows ``u * scale`` (NaN for an all-empty
     column), over at most MEDIAN_ROWS evenly spaced rows.
 
