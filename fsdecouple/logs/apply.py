@@ -261,6 +261,18 @@ class RowRules:
         return cls(*model.extrapolation_limits().T, *limit_bounds(settings or model.settings, model))
 
 
+def _any_column(a: np.ndarray, test: Callable[[np.ndarray, int], np.ndarray]) -> np.ndarray:
+    """Rows (n,) of ``a`` (n, m) where ``test(column, k)`` holds for any column k.
+
+    The same as ``test`` on the whole array and ``.any(axis=1)``, column by column:
+    numpy reduces a few columns a row some 10x slower than it ORs whole columns.
+    """
+    hit = np.zeros(len(a), dtype=bool)
+    for k in range(a.shape[1]):
+        hit |= test(a[:, k], k)
+    return hit
+
+
 def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarray,
                   rules: RowRules, *, truncated: bool = False, compiled: bool | None = None):
     """Eq. (11) and a status per row: ``(forces, status code, no-forces mask)``.
@@ -272,7 +284,7 @@ def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarra
     """
     u = model.zero_corrected(raw, offsets)  # the plan's temperature step, if any
     code = np.zeros(len(u), dtype=np.int8)  # index into STATUSES
-    empty = np.isnan(u).any(axis=1)
+    empty = _any_column(u, lambda c, k: np.isnan(c))
     code[empty] = MISSING_
     if truncated:
         # a writer that crashed mid-line: the fields may look complete but the last
@@ -287,14 +299,14 @@ def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarra
         empty |= unsettled
         # not finite, or beyond FORCE_LIMIT x full scale: physically meaningless
         bound = FORCE_LIMIT * float(np.max(np.abs(model.settings.full_scale)))
-        huge = ~(np.abs(f) <= bound).all(axis=1) & ~empty
+        huge = _any_column(f, lambda c, k: ~(np.abs(c) <= bound)) & ~empty
         code[huge] = NOT_FINITE_
         empty |= huge
         x = u if model.projection is None else model.project(u)  # M > N: the limits are v's
-        outside = ((x < rules.lo) | (x > rules.hi)).any(axis=1) & ~empty
+        outside = _any_column(x, lambda c, k: (c < rules.lo[k]) | (c > rules.hi[k])) & ~empty
         outside |= beyond_temperatures(model, raw) & ~empty
         # the limits are the ADC's or amplifier's, so they bound the raw values
-        saturated = ((raw <= rules.sat_lo) | (raw >= rules.sat_hi)).any(axis=1) & ~empty
+        saturated = _any_column(raw, lambda c, k: (c <= rules.sat_lo[k]) | (c >= rules.sat_hi[k])) & ~empty
     code[outside] = EXTRAPOLATED_
     code[saturated] = SATURATED_
     return f, code, empty
@@ -376,7 +388,7 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
                 else ()
             status = pc.take(STATUS_NAMES, numbers(code))
             if tare is None and zero is None and len(block):
-                medians.append(block_median(block.u * scale))
+                medians.append(block_median(block.u, scale))
             return len(block), counts, first, block.done, block.total, \
                 sink.encode(block, f, empty, (status,))
 

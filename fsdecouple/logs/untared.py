@@ -15,12 +15,22 @@ import warnings
 
 import numpy as np
 
+# rows a block's median is taken over: a longer block's evenly spaced rows
+MEDIAN_ROWS = 1 << 14
 
-def block_median(u: np.ndarray) -> np.ndarray:
-    """The median of each output over a block's rows (NaN for an all-empty column)."""
+
+def block_median(u: np.ndarray, scale: np.ndarray | float = 1.0) -> np.ndarray:
+    """The median of each output over a block's rows ``u * scale`` (NaN for an all-empty
+    column), over at most MEDIAN_ROWS evenly spaced rows.
+
+    The warning looks for an offset of about the calibrated span, which 16,384 rows
+    place to a small fraction of the outputs' spread; every row of apply's 131,072-row
+    blocks cost 0.4 s of CPU on a 10 M-row log (a tenth of apply's).
+    """
+    step = -(-len(u) // MEDIAN_ROWS)  # ceil: 1 for a short block, which is taken whole
     with np.errstate(invalid="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # an all-empty column
-        return np.nanmedian(u, axis=0)
+        return np.nanmedian(u[::max(step, 1)] * scale, axis=0)
 
 
 def untared(summary, medians: list[np.ndarray], rules) -> tuple[str, float, float, float] | None:

@@ -50,3 +50,21 @@ def test_a_tared_log_or_a_log_in_range_gets_no_hint(loadcell_model, tmp_path):
     _unloaded_log(log)
     r = invoke(["apply", loadcell_model, log, "-o", tmp_path / "f.csv", "--tare", "10"])
     assert "constant offset" not in r.stderr and "extrapolated" not in r.stderr, r.stderr
+
+
+def test_a_long_block_s_median_is_taken_over_a_sample_that_places_it():
+    """block_median samples MEDIAN_ROWS rows of a long block: the median it gives lies
+    within a small fraction of the outputs' spread of the whole block's; a short block
+    is taken whole (exactly np.median)."""
+    from fsdecouple.logs.untared import MEDIAN_ROWS, block_median
+
+    rng = np.random.default_rng(3)
+    # a drifting, noisy raw level (counts) about an offset of 750,000 on one output
+    n = 131_072
+    u = np.column_stack([750_000 + np.linspace(-5_000, 5_000, n) + rng.normal(0, 2_000, n),
+                         rng.normal(0, 1, n), rng.standard_cauchy(n)])
+    got, whole = block_median(u, 2.0), np.median(u * 2.0, axis=0)
+    spread = np.subtract(*np.percentile(u * 2.0, [75, 25], axis=0))
+    assert np.all(np.abs(got - whole) <= 0.02 * spread), (got, whole, spread)
+    short = u[:MEDIAN_ROWS]
+    np.testing.assert_array_equal(block_median(short), np.median(short, axis=0))
