@@ -20,8 +20,12 @@ pytestmark = pytest.mark.slow
 CASES = {
     # the apply row's log is 10 M rows unless told (issue 24's goal): small here
     "refine": ["refine.py", "--rows", "20000", "--repeats", "1", "--apply-rows", "20000"],
-    # issue 24's strongly coupled sensor with hysteresis, one seed
-    "accuracy": ["accuracy.py", "--seeds", "1", "--scenarios", "hysteresis"],
+    # issue 24's strongly coupled sensor with hysteresis, one seed; one method of each
+    # kind (fitted with changed settings, tuned, the matrix), tuned on one candidate:
+    # every method and tune's default grid took 64 s of CPU
+    "accuracy": ["accuracy.py", "--seeds", "1", "--scenarios", "hysteresis", "--methods",
+                 "zero: fit + refine K = 3", "tune + refine K = 3", "linear matrix",
+                 "--tune-grid", "gamma=2;C=1;epsilon=0.5"],
     # the script's every path (CSV and Parquet, local and dask, fit-many) on a few small
     # logs and two sensors: its own --quick sizes took 78 s of CPU
     "fleet": ["fleet.py", "--quick", "--repeats", "1", "--logs", "4", "--rows", "2000",
