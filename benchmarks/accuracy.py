@@ -5,8 +5,8 @@
     python benchmarks/accuracy.py --seeds 2 --scenarios 5%
     python benchmarks/accuracy.py --seeds 1 --methods "tune" "linear matrix" --tune-grid "gamma=2;C=1"
 
-Each scenario simulates sensors with :mod:`fsdecouple.sim.simulate` (six repetitions on
-the paper's grid) and a combined-load log of 3000 rows (tared by its first 200
+Each scenario simulates sensors with :mod:`fsdecouple.sim.simulate` (six repetitions
+on the paper's grid, or ``--repetitions``) and a combined-load log of 3000 rows (tared by its first 200
 unloaded rows, as ``apply --tare 200`` does).  The **floor** is the error left when
 the simulator's true coupling functions are known and eq. (1) is solved exactly
 for the forces: noise and the tare's own noise only.  Each method's figure is its
@@ -146,9 +146,13 @@ def rms(f: np.ndarray, truth: np.ndarray) -> np.ndarray:
     return np.sqrt(np.nanmean((f - truth) ** 2, axis=0))
 
 
-def run(scenarios, seeds: int, methods=METHODS, progress=print) -> dict[str, dict[str, float]]:
-    """scenario label -> method -> mean over seeds of the worst axis's RMS / floor RMS."""
+def run(scenarios, seeds: int, methods=METHODS, progress=print,
+        repetitions: int = 6) -> dict[str, dict[str, float]]:
+    """scenario label -> method -> mean over seeds of the worst axis's RMS / floor RMS;
+    each sensor calibrated with ``repetitions`` repetitions (the paper's six)."""
     settings = load_config()
+    # fewer than the config's least number of repetitions, as asked: the least follows
+    settings = replace(settings, min_repetitions=min(settings.min_repetitions, repetitions))
     out = {}
     for sc in scenarios:
         ratios: dict[str, list[float]] = {m: [] for m in methods}
@@ -156,7 +160,7 @@ def run(scenarios, seeds: int, methods=METHODS, progress=print) -> dict[str, dic
             base = SimulatedSensor()
             base = replace(base, noise=base.noise * sc.noise, hysteresis=sc.hysteresis)
             sensor = base if sc.coupling is None else with_coupling(base, sc.coupling)
-            table = simulate_calibration(sensor, seed=seed)
+            table = simulate_calibration(sensor, repetitions, seed=seed)
             # the log without the lag: eq. (1) cannot represent it, so in the log it would be
             # most of the floor and every method ~1x; this way the row measures what the lag
             # and the out-and-back sweeps do to the fit (docs/design/tuning.md)
@@ -248,6 +252,9 @@ if __name__ == "__main__":
     ap.add_argument("--six", action="store_true", help="the six-axis sensors instead")
     ap.add_argument("--methods", nargs="+", metavar="NAME",
                     help="only these methods (their names as in the table); default: all")
+    ap.add_argument("--repetitions", type=int,
+                    help="repetitions of each simulated calibration (default 6, the paper's; "
+                         "the config's min_repetitions follows; not with --six)")
     ap.add_argument("--tune-grid", help="the tuned methods' grid, as fit --tune-grid takes it, "
                     "e.g. 'gamma=2;C=1'; default: tune's")
     args = ap.parse_args()
@@ -255,6 +262,8 @@ if __name__ == "__main__":
         grid = parse_grid(args.tune_grid) if args.tune_grid else None
     except FsdecoupleError as err:
         ap.error(f"--tune-grid: {err}")
+    if args.six and args.repetitions is not None:
+        ap.error("--repetitions: not with --six (its calibrations are the six-axis simulator's)")
     registry = (six_methods if args.six else methods)(grid)
     unknown = [m for m in args.methods or [] if m not in registry]
     if unknown:
@@ -272,7 +281,7 @@ if __name__ == "__main__":
     chosen = SCENARIOS if not args.scenarios else [
         s for s in SCENARIOS if any(s.label.startswith(p) for p in args.scenarios.split(","))]
     t0 = time.perf_counter()
-    res = run(chosen, args.seeds, registry)
+    res = run(chosen, args.seeds, registry, repetitions=args.repetitions or 6)
     print(f"({time.perf_counter() - t0:.0f} s)")
     if args.docs:
         write_block("accuracy", markdown(res, args.seeds))
