@@ -34,8 +34,10 @@ CASES = {
     "fleet": ["fleet.py", "--quick", "--repeats", "1", "--logs", "2", "--rows", "1000",
               "--sensors", "1"],
     "c_export": ["c_export.py", "--repeats", "1", "--vectors", "1000"],
-    # issue 33's per-sensor coverage of apply --interval, one sensor with a lag
-    "interval_coverage": ["interval_coverage.py", "--seeds", "1", "--scenarios", "hysteresis 0.1"],
+    # issue 33's per-sensor coverage of apply --interval, one sensor with a lag, calibrated
+    # with three repetitions
+    "interval_coverage": ["interval_coverage.py", "--seeds", "1", "--scenarios", "hysteresis 0.1",
+                          "--repetitions", "3"],
     # issue 32's eight-gauge check through the CLI, one simulated set of few samples a pose,
     # the commands in the script's process (a Python start each was half of its 16 s), the
     # folds' fits without the verdict (the figure is not the point here)
