@@ -3,9 +3,10 @@
     python benchmarks/accuracy.py              # every scenario, five seeds each
     python benchmarks/accuracy.py --docs       # the same, written into docs/benchmarks.md's table
     python benchmarks/accuracy.py --seeds 2 --scenarios 5%
+    python benchmarks/accuracy.py --seeds 1 --methods "tune" "linear matrix" --tune-grid "gamma=2;C=1"
 
-Each scenario simulates sensors with :mod:`fsdecouple.sim.simulate` (six repetitions on
-the paper's grid) and a combined-load log of 3000 rows (tared by its first 200
+Each scenario simulates sensors with :mod:`fsdecouple.sim.simulate` (six repetitions
+on the paper's grid, or ``--repetitions``) and a combined-load log of 3000 rows (tared by its first 200
 unloaded rows, as ``apply --tare 200`` does).  The **floor** is the error left when
 the simulator's true coupling functions are known and eq. (1) is solved exactly
 for the forces: noise and the tare's own noise only.  Each method's figure is its
@@ -15,7 +16,7 @@ and back with that lag (``simulate --hysteresis``); its log is the sensor's with
 the lag, so the floor stays the noise's.
 
 Methods and scenarios are registries: add a row with one entry in ``SCENARIOS``,
-a method with one function in ``METHODS``.
+a method with one function in ``methods()`` (``six_methods()``).
 """
 
 from __future__ import annotations
@@ -30,7 +31,8 @@ import numpy as np
 
 from fsdecouple import load_config
 from fsdecouple.data.calibration import from_table
-from fsdecouple.evaluation.tune import tune_settings
+from fsdecouple.errors import FsdecoupleError
+from fsdecouple.evaluation.tune import Grid, parse_grid, tune_settings
 from fsdecouple.fitting.fit import fit
 from fsdecouple.fitting.linear import fit_calibration_matrix
 from fsdecouple.sim.simulate import SimulatedSensor, simulate_calibration, simulate_task, with_coupling
@@ -70,11 +72,13 @@ def _fitted(**changes) -> Callable:
     return method
 
 
-def _tuned(**changes) -> Callable:
+def _tuned(grid: Grid | None = None, **changes) -> Callable:
+    """A method: tune on ``grid`` (None: tune's default grid), then fit, with these settings
+    changed."""
     def method(table, settings):
         settings = replace(settings, **changes)
         calib = from_table(table, settings)
-        tuned, _ = tune_settings(calib, settings, workers=1)
+        tuned, _ = tune_settings(calib, settings, grid=grid, workers=1)
         return fit(calib, tuned, workers=1)
     return method
 
@@ -92,19 +96,24 @@ def _linear(table, settings):
     return fit_calibration_matrix(calib.voltages, calib.forces)
 
 
-# name -> (raw calibration table, settings) -> object with decouple(u, rotate=False)
-METHODS: dict[str, Callable] = {
-    "paper default (Table 2, K = 0)": _fitted(),
-    # chi beyond its calibrated range as the kernel sum (decaying to -rho), as fits
-    # were before tangent extrapolation became the default
-    "paper default, extrapolation: kernel": _fitted(extrapolation="kernel"),
-    f"refine K = {REFINE}": _fitted(refine=REFINE),
-    "tune": _tuned(),
-    f"tune + refine K = {REFINE}": _tuned(refine=REFINE),
-    "zero: fit": _fitted(zero="fit"),
-    f"zero: fit + refine K = {REFINE}": _fitted(zero="fit", refine=REFINE),
-    "linear matrix": _linear,
-}
+def methods(grid: Grid | None = None) -> dict[str, Callable]:
+    """name -> (raw calibration table, settings) -> object with decouple(u, rotate=False);
+    the tuned ones tune on ``grid`` (``--tune-grid``; None: tune's default grid)."""
+    return {
+        "paper default (Table 2, K = 0)": _fitted(),
+        # chi beyond its calibrated range as the kernel sum (decaying to -rho), as fits
+        # were before tangent extrapolation became the default
+        "paper default, extrapolation: kernel": _fitted(extrapolation="kernel"),
+        f"refine K = {REFINE}": _fitted(refine=REFINE),
+        "tune": _tuned(grid),
+        f"tune + refine K = {REFINE}": _tuned(grid, refine=REFINE),
+        "zero: fit": _fitted(zero="fit"),
+        f"zero: fit + refine K = {REFINE}": _fitted(zero="fit", refine=REFINE),
+        "linear matrix": _linear,
+    }
+
+
+METHODS = methods()
 
 
 def task(sensor: SimulatedSensor, seed: int, reach: float) -> tuple[np.ndarray, np.ndarray]:
@@ -137,9 +146,13 @@ def rms(f: np.ndarray, truth: np.ndarray) -> np.ndarray:
     return np.sqrt(np.nanmean((f - truth) ** 2, axis=0))
 
 
-def run(scenarios, seeds: int, methods=METHODS, progress=print) -> dict[str, dict[str, float]]:
-    """scenario label -> method -> mean over seeds of the worst axis's RMS / floor RMS."""
+def run(scenarios, seeds: int, methods=METHODS, progress=print,
+        repetitions: int = 6) -> dict[str, dict[str, float]]:
+    """scenario label -> method -> mean over seeds of the worst axis's RMS / floor RMS;
+    each sensor calibrated with ``repetitions`` repetitions (the paper's six)."""
     settings = load_config()
+    # fewer than the config's least number of repetitions, as asked: the least follows
+    settings = replace(settings, min_repetitions=min(settings.min_repetitions, repetitions))
     out = {}
     for sc in scenarios:
         ratios: dict[str, list[float]] = {m: [] for m in methods}
@@ -147,7 +160,7 @@ def run(scenarios, seeds: int, methods=METHODS, progress=print) -> dict[str, dic
             base = SimulatedSensor()
             base = replace(base, noise=base.noise * sc.noise, hysteresis=sc.hysteresis)
             sensor = base if sc.coupling is None else with_coupling(base, sc.coupling)
-            table = simulate_calibration(sensor, seed=seed)
+            table = simulate_calibration(sensor, repetitions, seed=seed)
             # the log without the lag: eq. (1) cannot represent it, so in the log it would be
             # most of the floor and every method ~1x; this way the row measures what the lag
             # and the out-and-back sweeps do to the fit (docs/design/tuning.md)
@@ -163,19 +176,23 @@ def run(scenarios, seeds: int, methods=METHODS, progress=print) -> dict[str, dic
     return out
 
 
-# Six axes (simulate --components 6): the config's defaults are zero: fit, K = 0
-SIX_METHODS: dict[str, Callable] = {
-    "default (zero: fit, K = 0)": _fitted(),
-    "zero: rows": _fitted(zero="rows"),
-    f"refine K = {REFINE}": _fitted(refine=REFINE),
-    f"zero: rows + refine K = {REFINE}": _fitted(zero="rows", refine=REFINE),
-    f"tune + refine K = {REFINE}": _tuned(refine=REFINE),
-    # outputs in any unit but V get scaling: full_scale, solved to half the noise there
-    # (noise.py); and volts solved to about the noise (5e-4 V) instead of Table 2's 1e-3
-    "scaling: full_scale": _fitted(scaling="full_scale"),
-    "libsvm tolerance 5e-4": _svr(tolerance=5e-4),
-    "linear matrix": _linear,
-}
+def six_methods(grid: Grid | None = None) -> dict[str, Callable]:
+    """Six axes (simulate --components 6): the config's defaults are zero: fit, K = 0."""
+    return {
+        "default (zero: fit, K = 0)": _fitted(),
+        "zero: rows": _fitted(zero="rows"),
+        f"refine K = {REFINE}": _fitted(refine=REFINE),
+        f"zero: rows + refine K = {REFINE}": _fitted(zero="rows", refine=REFINE),
+        f"tune + refine K = {REFINE}": _tuned(grid, refine=REFINE),
+        # outputs in any unit but V get scaling: full_scale, solved to half the noise there
+        # (noise.py); and volts solved to about the noise (5e-4 V) instead of Table 2's 1e-3
+        "scaling: full_scale": _fitted(scaling="full_scale"),
+        "libsvm tolerance 5e-4": _svr(tolerance=5e-4),
+        "linear matrix": _linear,
+    }
+
+
+SIX_METHODS = six_methods()
 
 
 def run_six(seeds: int, methods=SIX_METHODS, progress=print) -> dict[str, dict[str, float]]:
@@ -233,10 +250,30 @@ if __name__ == "__main__":
                     help="write the markdown table into docs/benchmarks.md")
     ap.add_argument("--scenarios", help="comma-separated labels (prefixes) to run")
     ap.add_argument("--six", action="store_true", help="the six-axis sensors instead")
+    ap.add_argument("--methods", nargs="+", metavar="NAME",
+                    help="only these methods (their names as in the table); default: all")
+    ap.add_argument("--repetitions", type=int,
+                    help="repetitions of each simulated calibration (default 6, the paper's; "
+                         "the config's min_repetitions follows; not with --six)")
+    ap.add_argument("--tune-grid", help="the tuned methods' grid, as fit --tune-grid takes it, "
+                    "e.g. 'gamma=2;C=1'; default: tune's")
     args = ap.parse_args()
+    try:
+        grid = parse_grid(args.tune_grid) if args.tune_grid else None
+    except FsdecoupleError as err:
+        ap.error(f"--tune-grid: {err}")
+    if args.six and args.repetitions is not None:
+        ap.error("--repetitions: not with --six (its calibrations are the six-axis simulator's)")
+    registry = (six_methods if args.six else methods)(grid)
+    unknown = [m for m in args.methods or [] if m not in registry]
+    if unknown:
+        ap.error(f"--methods: {', '.join(map(repr, unknown))}: expected among "
+                 f"{', '.join(map(repr, registry))}")
+    if args.methods:
+        registry = {m: registry[m] for m in args.methods}
     if args.six:
         t0 = time.perf_counter()
-        res = run_six(args.seeds)
+        res = run_six(args.seeds, registry)
         print(f"({time.perf_counter() - t0:.0f} s)")
         if args.docs:
             write_block("accuracy-six", markdown(res, args.seeds, six=True))
@@ -244,7 +281,7 @@ if __name__ == "__main__":
     chosen = SCENARIOS if not args.scenarios else [
         s for s in SCENARIOS if any(s.label.startswith(p) for p in args.scenarios.split(","))]
     t0 = time.perf_counter()
-    res = run(chosen, args.seeds)
+    res = run(chosen, args.seeds, registry, repetitions=args.repetitions or 6)
     print(f"({time.perf_counter() - t0:.0f} s)")
     if args.docs:
         write_block("accuracy", markdown(res, args.seeds))

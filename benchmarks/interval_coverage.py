@@ -68,11 +68,16 @@ def sensor_of(sc: Scenario) -> SimulatedSensor:
     return sensor if sc.hysteresis is None else replace(sensor, hysteresis=sc.hysteresis)
 
 
-def one_sensor(sc: Scenario, seed: int, p: float, work: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(coverage, width ratio), each shape (3,), of one simulated sensor's task log."""
+def one_sensor(sc: Scenario, seed: int, p: float, work: Path,
+               repetitions: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(coverage, width ratio), each shape (3,), of one simulated sensor's task log;
+    ``repetitions``: its calibration's (None: simulate's six)."""
     out = work / f"s{seed}"
-    simulate(out, seed=seed, coupling=sc.coupling, hysteresis=sc.hysteresis, force=True)
+    simulate(out, seed=seed, coupling=sc.coupling, hysteresis=sc.hysteresis, force=True,
+             repetitions=repetitions)
     settings = load_config()
+    if repetitions is not None:  # fewer than the config's least, as asked: the least follows
+        settings = replace(settings, min_repetitions=min(settings.min_repetitions, repetitions))
     model = fit(load_calibration(out / "calibration", settings), settings, workers=1)
     frame = pd.read_csv(out / "task_voltages.csv")
     got = decouple_frame(model, frame, tare=TARE_ROWS, interval=p)
@@ -86,7 +91,8 @@ def one_sensor(sc: Scenario, seed: int, p: float, work: Path) -> tuple[np.ndarra
     return coverage, (hi - lo).mean(axis=0) / (WIDTH_BOUND * floor_rms)
 
 
-def run(scenarios, p: float, seeds: int | None, progress=print) -> dict[str, dict]:
+def run(scenarios, p: float, seeds: int | None, progress=print,
+        repetitions: int | None = None) -> dict[str, dict]:
     """Per scenario: every sensor's coverage and width ratio, shape (sensors, 3)."""
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
@@ -94,7 +100,7 @@ def run(scenarios, p: float, seeds: int | None, progress=print) -> dict[str, dic
             chosen = sc.seeds if seeds is None else sc.seeds[:seeds]
             cov, wid = [], []
             for seed in chosen:
-                c, w = one_sensor(sc, seed, p, Path(tmp))
+                c, w = one_sensor(sc, seed, p, Path(tmp), repetitions)
                 cov.append(c)
                 wid.append(w)
             out[sc.label] = {"coverage": np.array(cov), "width": np.array(wid)}
@@ -119,13 +125,16 @@ def main() -> int:
     ap.add_argument("--seeds", type=int, default=None, help="sensors per scenario (default: its own)")
     ap.add_argument("--scenarios", default=None, help="run the scenarios whose label contains this")
     ap.add_argument("--p", type=float, default=0.95, help="coverage asked (default 0.95)")
+    ap.add_argument("--repetitions", type=int, default=None,
+                    help="repetitions of each calibration (default: simulate's six; the "
+                         "config's min_repetitions follows)")
     args = ap.parse_args()
     chosen = [s for s in SCENARIOS if args.scenarios is None or args.scenarios in s.label]
     if not chosen:
         print(f"no scenario matches {args.scenarios!r}", file=sys.stderr)
         return 2
     started = time.perf_counter()
-    results = run(chosen, args.p, args.seeds)
+    results = run(chosen, args.p, args.seeds, repetitions=args.repetitions)
     cov = np.concatenate([r["coverage"] for r in results.values()])
     wid = np.concatenate([r["width"] for r in results.values()])
     print(line("all", {"coverage": cov, "width": wid}, args.p))

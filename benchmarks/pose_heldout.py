@@ -26,22 +26,16 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-CLI = [sys.executable, "-m", "fsdecouple"]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from rig_heldout import run, run_here  # noqa: E402  (a process per command, or this one)
+
 FOLDS = 5
-
-
-def run(*args: str) -> str:
-    done = subprocess.run([*CLI, *args], capture_output=True, text=True)
-    if done.returncode != 0:
-        raise SystemExit(f"fsdecouple {' '.join(args)}: exit {done.returncode}\n{done.stderr}")
-    return done.stdout
 
 
 def joined(source: Path, work: Path) -> Path:
@@ -57,9 +51,11 @@ def joined(source: Path, work: Path) -> Path:
     return out
 
 
-def heldout(path: Path, work: Path) -> tuple[np.ndarray, np.ndarray, str]:
+def heldout(path: Path, work: Path, run=run, verdict: bool = True) -> tuple[np.ndarray, np.ndarray, str]:
     """Per component the RMS error [fraction of the largest load] of the model and of the
-    matrix over the 5 pose folds, and the methods the folds' models decouple by."""
+    matrix over the 5 pose folds, and the methods the folds' models decouple by; each
+    command run by ``run`` (a process each, or :func:`rig_heldout.run_here`), each fold's
+    fit with ``--no-verdict`` unless ``verdict``."""
     cfg = work / "cfg.yaml"
     guess = json.loads(run("init", str(path), "-o", str(cfg), "--force", "--json"))
     text = path.read_text().splitlines()
@@ -81,7 +77,8 @@ def heldout(path: Path, work: Path) -> tuple[np.ndarray, np.ndarray, str]:
         test = np.arange(n) % FOLDS == k
         for name, keep in (("train.csv", ~test[pose]), ("test.csv", test[pose])):
             (work / name).write_text("\n".join([header, *np.asarray(body)[keep]]) + "\n")
-        run("fit", str(work / "train.csv"), "-c", str(cfg), "-o", str(work / "m.json"), "--force")
+        run("fit", str(work / "train.csv"), "-c", str(cfg), "-o", str(work / "m.json"), "--force",
+            *([] if verdict else ["--no-verdict"]))
         methods.append(json.loads((work / "m.json").read_text()).get("method", "svr"))
         run("apply", str(work / "m.json"), str(work / "test.csv"), "-o", str(work / "out.csv"),
             "--force")
@@ -110,6 +107,12 @@ def main() -> int:
                     help="simulate --rig poses seeds, without a source")
     ap.add_argument("--samples", type=int, default=200, help="samples per simulated pose")
     ap.add_argument("--limit", type=float, default=1.10)
+    ap.add_argument("--in-process", action="store_true",
+                    help="run the commands in this process (the same CLI, without starting "
+                         "Python for each)")
+    ap.add_argument("--no-verdict", dest="verdict", action="store_false",
+                    help="fit --no-verdict in each fold: the model alone (the config's method "
+                         "auto, which needs the verdict, then fits svr)")
     args = ap.parse_args()
     worst = 0.0
     cases = [(str(args.source), args.source)] if args.source else \
@@ -124,7 +127,7 @@ def main() -> int:
 
                 write_poses(work / "sim", seed=case, samples=args.samples)
                 path = joined(work / "sim", work)
-            m, c, methods = heldout(path, work)
+            m, c, methods = heldout(path, work, run_here if args.in_process else run, args.verdict)
         ratio = m.max() / c.max()
         worst = max(worst, ratio)
         print(f"{label}: worst component's held-out RMS error, model {100 * m.max():.1f} % "

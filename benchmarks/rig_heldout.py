@@ -18,12 +18,15 @@ nonlinear a file is.  ``--rig quadratic`` is the stand-in for that file.
     python benchmarks/rig_heldout.py --seeds 0 1 2
     python benchmarks/rig_heldout.py --rig quadratic --seeds 0 1 2 --limit 0.85
     python benchmarks/rig_heldout.py --gauges 8 --seeds 0 1 2    # M > N: eight gauges
+    python benchmarks/rig_heldout.py --seeds 0 --method svr --no-verdict   # the model alone
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
+import io
 import json
 import subprocess
 import sys
@@ -42,17 +45,32 @@ def run(*args: str) -> str:
     return done.stdout
 
 
+def run_here(*args: str) -> str:
+    """:func:`run` without a process per command: the same CLI (its parsing, checks and
+    rendering) called in this process, its output captured (``--in-process``)."""
+    from fsdecouple.cli import app
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = app(args=list(args), prog_name="fsdecouple", standalone_mode=False)
+    if code:
+        raise SystemExit(f"fsdecouple {' '.join(args)}: exit {code}\n{err.getvalue()}")
+    return out.getvalue()
+
+
 def read(path: Path) -> tuple[list[str], list[list[str]]]:
     with open(path, newline="") as fh:
         rows = list(csv.reader(fh))
     return rows[0], [r for r in rows[1:] if any(c.strip() for c in r)]
 
 
-def heldout(path: Path, work: Path) -> dict:
-    """Both methods' per-component RMS errors [fraction of F.S.] over the level folds."""
+def heldout(path: Path, work: Path, method: str = "auto", verdict: bool = True,
+            run=run) -> dict:
+    """Both methods' per-component RMS errors [fraction of F.S.] over the level folds;
+    each fold fitted by ``fit --method method`` (``--no-verdict`` unless ``verdict``), each
+    command run by ``run`` (a process each, or :func:`run_here`)."""
     cfg = work / "cfg.yaml"
-    run("init", str(path), "-o", str(cfg), "--force")
-    guess = json.loads(run("init", str(path), "-o", str(work / "again.yaml"), "--force", "--json"))
+    guess = json.loads(run("init", str(path), "-o", str(cfg), "--force", "--json"))
     header, rows = read(path)
     comps = guess["components"]
     load_cols = [header.index(guess["columns"][c]) for c in comps]
@@ -77,7 +95,7 @@ def heldout(path: Path, work: Path) -> dict:
     def squares(v):
         return np.column_stack([v, (v / span) ** 2])
 
-    chosen = []  # what fit --method auto kept in each fold: svr (the model) or linear
+    chosen = []  # what fit kept in each fold (auto: svr, the model, or linear)
     err = {"model": [], "matrix": [], "squares": []}
     for lv in range(1, level.max() + 1):
         held = level == lv
@@ -87,7 +105,8 @@ def heldout(path: Path, work: Path) -> dict:
             w.writerow(header)
             w.writerows(r for r, h in zip(rows, held, strict=True) if not h)
         model = work / f"model{lv}.json"
-        run("fit", str(train), "-c", str(cfg), "-o", str(model), "--method", "auto", "--force")
+        run("fit", str(train), "-c", str(cfg), "-o", str(model), "--method", method, "--force",
+            *([] if verdict else ["--no-verdict"]))
         chosen.append(json.loads(model.read_text())["method"])
         log = work / f"log{lv}.csv"
         with open(log, "w", newline="") as fh:
@@ -120,7 +139,18 @@ def main(argv=None) -> None:
     ap.add_argument("--rig", default="lever-arm", help="simulate --rig: lever-arm or quadratic")
     ap.add_argument("--gauges", type=int, default=6, help="simulate --gauges: 8 for M > N")
     ap.add_argument("--limit", type=float, help="exit 1 when any file's ratio is above this")
+    ap.add_argument("--method", default="auto", choices=["auto", "svr", "linear"],
+                    help="fit --method in each fold (default auto, as issue 22's check)")
+    ap.add_argument("--no-verdict", dest="verdict", action="store_false",
+                    help="fit --no-verdict in each fold (not with auto, which needs it): the "
+                         "model alone, at about half the cost")
+    ap.add_argument("--in-process", action="store_true",
+                    help="run the commands in this process (the same CLI, without starting "
+                         "Python for each)")
     args = ap.parse_args(argv)
+    cli = run_here if args.in_process else run
+    if args.method == "auto" and not args.verdict:
+        ap.error("--no-verdict: --method auto chooses by the held-out verdict; give --method svr")
     ratios = []
     with tempfile.TemporaryDirectory() as tmp:
         for seed in ([None] if args.file else args.seeds):
@@ -128,14 +158,14 @@ def main(argv=None) -> None:
             work.mkdir()
             path = args.file
             if path is None:
-                run("simulate", str(work), "--rig", args.rig, "--seed", str(seed),
+                cli("simulate", str(work), "--rig", args.rig, "--seed", str(seed),
                     "--gauges", str(args.gauges))
                 path = work / "calibration.csv"
-            r = heldout(path, work)
+            r = heldout(path, work, args.method, args.verdict, cli)
             ratios.append(r["ratio"])
             print(f"seed {seed}: worst RMS model {100 * max(r['model']):.3f} % F.S., matrix "
                   f"{100 * max(r['matrix']):.3f} % F.S., ratio {r['ratio']:.3f} (squared-terms "
-                  f"least squares {r['squares_ratio']:.3f}); auto kept "
+                  f"least squares {r['squares_ratio']:.3f}); --method {args.method} kept "
                   f"{r['chosen'].count('svr')}/{len(r['chosen'])} folds' model")
     print(f"ratio over {len(ratios)} files: mean {np.mean(ratios):.3f}, max {np.max(ratios):.3f}")
     if args.limit is not None and max(ratios) > args.limit:

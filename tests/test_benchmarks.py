@@ -18,19 +18,31 @@ from conftest import ROOT
 pytestmark = pytest.mark.slow
 
 CASES = {
-    # the apply row's log is 10 M rows unless told (issue 24's goal): small here
-    "refine": ["refine.py", "--rows", "20000", "--repeats", "1", "--apply-rows", "20000"],
-    # issue 24's strongly coupled sensor with hysteresis, one seed
-    "accuracy": ["accuracy.py", "--seeds", "1", "--scenarios", "hysteresis"],
-    # the script's every path (CSV and Parquet, local and dask, fit-many) on a few small
-    # logs and two sensors: its own --quick sizes took 78 s of CPU
-    "fleet": ["fleet.py", "--quick", "--repeats", "1", "--logs", "4", "--rows", "2000",
-              "--sensors", "2"],
+    # the apply row's log is 10 M rows unless told (issue 24's goal): small here, and each
+    # apply run once (three times each: six Python starts, most of the smoke's CPU)
+    "refine": ["refine.py", "--rows", "20000", "--repeats", "1", "--apply-rows", "20000",
+               "--apply-repeats", "1"],
+    # issue 24's strongly coupled sensor with hysteresis, one seed of three repetitions;
+    # one method of each kind (fitted with changed settings, tuned, the matrix), tuned on
+    # one candidate: every method and tune's default grid took 64 s of CPU
+    "accuracy": ["accuracy.py", "--seeds", "1", "--scenarios", "hysteresis", "--repetitions",
+                 "3", "--methods", "zero: fit + refine K = 3", "tune + refine K = 3",
+                 "linear matrix", "--tune-grid", "gamma=2;C=1;epsilon=0.5"],
+    # the script's every path (CSV and Parquet, local and dask, fit-many) on two small
+    # logs and one sensor (fit-many's process pool all the same): its own --quick sizes
+    # took 78 s of CPU, four logs and two sensors 17 s
+    "fleet": ["fleet.py", "--quick", "--repeats", "1", "--logs", "2", "--rows", "1000",
+              "--sensors", "1"],
     "c_export": ["c_export.py", "--repeats", "1", "--vectors", "1000"],
-    # issue 33's per-sensor coverage of apply --interval, one sensor with a lag
-    "interval_coverage": ["interval_coverage.py", "--seeds", "1", "--scenarios", "hysteresis 0.1"],
-    # issue 32's eight-gauge check through the CLI, one simulated set of few samples a pose
-    "pose_heldout": ["pose_heldout.py", "--seeds", "0", "--samples", "30"],
+    # issue 33's per-sensor coverage of apply --interval, one sensor with a lag, calibrated
+    # with three repetitions
+    "interval_coverage": ["interval_coverage.py", "--seeds", "1", "--scenarios", "hysteresis 0.1",
+                          "--repetitions", "3"],
+    # issue 32's eight-gauge check through the CLI, one simulated set of few samples a pose,
+    # the commands in the script's process (a Python start each was half of its 16 s), the
+    # folds' fits without the verdict (the figure is not the point here)
+    "pose_heldout": ["pose_heldout.py", "--seeds", "0", "--samples", "5", "--in-process",
+                     "--no-verdict"],
 }
 
 
@@ -49,12 +61,19 @@ def test_benchmark_script_runs_on_the_current_code(name, tmp_path):
 
 
 def test_the_rig_model_beats_the_matrix_on_held_out_levels_through_the_cli(tmp_path):
-    """Issue 22's check on a simulated lever-arm rig: init, then fit --method auto and apply
-    per held-out level, all through the CLI.  In process, seeds 0-4 gave 0.45-0.55 x the
-    matrix (tests/fitting/test_joint.py); 0.8 allows that scatter, and a model that fell
-    back to the matrix (about 1.0) fails."""
+    """Issue 22's protocol on a simulated lever-arm rig through the CLI: init, then fit and
+    apply per held-out level (the file's own Fx .. Mz outputs as the log's columns).  The
+    figure is the model's own, fitted with --method svr --no-verdict, as the 0.8 limit's
+    scatter was measured: in process, seeds 0-4 gave 0.45-0.55 x the matrix
+    (tests/fitting/test_joint.py), through this script 0.25-0.39 (seed 0: 0.37, as with
+    --method auto, which kept the model in 9 of 9 folds); a model no better than the
+    matrix (about 1.0) fails.
+    That --method auto keeps the model in every fold is test_joint.py's
+    test_auto_beats_the_matrix_on_the_quadratic_stand_in_by_the_issues_margin; its verdict
+    per fold doubled the fits here.  The commands run in the script's process (the same
+    CLI, parsing to rendering): a Python start per command was half the rest."""
     r = subprocess.run([sys.executable, ROOT / "benchmarks" / "rig_heldout.py", "--seeds", "0",
-                        "--limit", "0.8"], cwd=tmp_path, capture_output=True, text=True,
-                       timeout=3600)
+                        "--limit", "0.8", "--method", "svr", "--no-verdict", "--in-process"],
+                       cwd=tmp_path, capture_output=True, text=True, timeout=3600)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-3000:]
     assert "ratio" in r.stdout

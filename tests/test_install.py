@@ -44,8 +44,11 @@ def installed(tmp_path_factory):
     site = _site_packages(venv)
     here = [p for p in sys.path if p.endswith("site-packages")]
     (site / "zz_outer.pth").write_text("\n".join(here) + "\n")  # after the venv's own
+    # without PYTHONPATH: with this checkout on it (as the suite is run from a worktree),
+    # pip took the source tree's egg-info for an installed fsdecouple and installed nothing
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     _run([sys.executable, "-m", "pip", "--python", venv / "bin" / "python", "install", "-q",
-          "--no-deps", "--no-index", wheel])
+          "--no-deps", "--no-index", wheel], env=env)
     return venv, site
 
 
