@@ -199,8 +199,10 @@ def test_every_candidate_better_inside_is_not_given_up_for_the_edge(monkeypatch)
 @pytest.mark.slow  # a tuning grid of fits: seconds of CPU; the not-slow run stays under a minute
 def test_a_candidate_worse_than_table2_on_any_axis_is_never_chosen(monkeypatch):
     # a grid of one bad candidate (far too narrow a kernel): Table 2 stays.  C = 10: the
-    # held-out figure is 3.9x Table 2's (C = 1000: 106x, and 6x the libsvm time)
-    settings = load_config()
+    # held-out figure is 3.9x Table 2's (C = 1000: 106x, and 6x the libsvm time).  Table 2
+    # at its own tolerance (1e-3, as a config writes it): the candidate's loss is far
+    # beyond the difference that makes to Table 2's figure
+    settings = load_config(tolerance=1e-3)
     calib = load_calibration(SAMPLE, settings)
     chosen, record = tune_settings(calib, settings, grid=Grid(gamma=(5000.0,), C=(10.0,),
                                                               epsilon=(0.5,)), workers=2)
