@@ -120,14 +120,24 @@ def test_cv_on_a_pose_set_holds_out_poses_in_five_folds(tmp_path):
     path = tmp_path / "six.csv"
     path.write_text("\n".join(pose_lines(poses)) + "\n")
     init_config(path, tmp_path / "cfg.yaml")
-    r = invoke(["cv", path, "-c", tmp_path / "cfg.yaml", "--json"])
-    doc = json.loads(r.stdout)
+    # Table 2's solver tolerance (conftest.FAST_SVR) beside init's gamma: the rounds are
+    # the point, not the solver's last digits
+    cfg = tmp_path / "cfg.yaml"
+    text = cfg.read_text()
+    assert "\nsvr: {gamma: " in text
+    cfg.write_text(text.replace("\nsvr: {gamma: ", "\nsvr: {tolerance: 0.001, gamma: "))
+    # one run: the text on stdout, the document (what --json prints) in the file
+    r = invoke(["cv", path, "-c", tmp_path / "cfg.yaml", "-o", tmp_path / "cv.json"])
+    assert "protocol: poses (round k of 5 holds out every fifth pose" in r.stdout
+
+    def strict(token):
+        raise AssertionError(f"not strict JSON: {token}")
+
+    doc = json.loads((tmp_path / "cv.json").read_text(), parse_constant=strict)
     assert doc["protocol"] == "poses" and doc["folds"] == [[1], [2], [3], [4], [5]]
     n = len(poses.loads)
     scored = {(rec["round"], rec["axis"]) for rec in doc["records"] if rec["method"] == "linear"}
     assert {rnd for rnd, _ in scored} == {1, 2, 3, 4, 5} and n == 60
-    r = invoke(["cv", path, "-c", tmp_path / "cfg.yaml"])
-    assert "protocol: poses (round k of 5 holds out every fifth pose" in r.stdout
 
 
 def test_inits_output_peak_is_no_misread(tmp_path):

@@ -28,6 +28,14 @@ def doc(sim_dir, calib, settings):
     )
 
 
+def _table2_tolerance(settings):
+    """``settings`` with Table 2's libsvm tolerance (FAST_SVR's), for checks of what is
+    fitted and how, not of the solver's last digits."""
+    from dataclasses import replace
+
+    return replace(settings, svr=replace(settings.svr, tolerance=1e-3))
+
+
 def test_gamma_by_hand():
     forces = np.array([[100.0, 1.0, -2.0], [50.0, -3.0, 0.5], [0.0, 0.0, 0.0]])
     # loaded along x: (max|fy| + max|fz|) / F_FS = (3 + 2) / 100
@@ -284,7 +292,8 @@ def test_table_4_times_the_training_run_s_own_fits(calib, settings, monkeypatch,
 
     monkeypatch.setattr(baselines, "establish", counting)
     monkeypatch.setattr(cv_module, "establish", counting)
-    doc = run_cv(calib, settings, repeats=repeats, workers=2)
+    # Table 2's tolerance: what is counted is the fits, not their last digits
+    doc = run_cv(calib, _table2_tolerance(settings), repeats=repeats, workers=2)
     rounds = len(doc["train"])
     assert sorted(fitted) == sorted(list(METHODS) * (rounds + repeats - 1))
     times = {r["method"]: r["value"] for r in doc["timing"]["records"]

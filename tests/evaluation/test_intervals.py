@@ -418,7 +418,7 @@ def test_what_the_shift_leaves_has_the_variance_of_the_fitted_offsets_mean():
     zero = load == 0.0
     rng = np.random.default_rng(9)
     left = []
-    for _ in range(400):
+    for _ in range(200):
         offset = rng.uniform(-1, 1, (reps, 3, 3))[rep - 1, comp]
         noise = rng.normal(size=(len(load), 3))
         table = pd.DataFrame({"repetition": rep, "axis": axis, **dict(zip(DEFAULT.loads, f.T, strict=True)),
@@ -432,7 +432,9 @@ def test_what_the_shift_leaves_has_the_variance_of_the_fitted_offsets_mean():
     points, _ = zero_correct(table, DEFAULT, "rows")
     got = shift_variance(points, DEFAULT)
     for b in range(3):
-        draws = left[:, b, :].ravel()  # 1 200 draws: the variance's standard error 4 %
+        # 600 draws: the variance's standard error sqrt(2 / 600) = 5.8 %, so 0.2 is 3.4 of
+        # them (seeds 1-3 and 9 gave ratios 0.93-1.09; 1 200 draws, 4 %, cost twice the CPU)
+        draws = left[:, b, :].ravel()
         assert got[b] == pytest.approx(np.mean(draws ** 2), rel=0.2)
     assert got[1] == pytest.approx(mean_offset_variance(points, DEFAULT)[1], rel=1e-12)
     assert got[0] < 0.25 * got[2]  # the one-sided grid extrapolates to its zero row

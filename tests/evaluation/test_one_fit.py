@@ -27,17 +27,40 @@ def _model_keys(path) -> dict:
     return {k: v for k, v in doc.items() if k not in STAMPS}
 
 
-@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
-def test_the_api_fit_writes_the_command_s_model_file(sample_model, tmp_path, monkeypatch):
+@pytest.fixture(scope="module")
+def api_fit(tmp_path_factory):
     """``fsdecouple.fit(fsdecouple.load_calibration(path, fsdecouple.load_config()))``,
-    called exactly as the docs show it, saved by ``save_model``: the same file as
+    called exactly as the docs show it and saved by ``save_model``, once for the module:
+    (the file, libsvm's stopping tolerance of every SVR the fit trained, in the order
+    they started, and the model's own).  A spy on ``fit_svr`` records the tolerances and
+    passes every call through."""
+    import threading
+
+    from fsdecouple.fitting import svr
+
+    path = tmp_path_factory.mktemp("api") / "api.json"
+    seen, lock, train = [], threading.Lock(), svr.fit_svr
+
+    def spy(x, y, params):
+        with lock:
+            seen.append(params.tolerance)
+        return train(x, y, params)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.chdir(SAMPLE.parent)  # the path as the README's command names it (provenance)
+        mp.setattr(svr, "fit_svr", spy)
+        model = fsdecouple.fit(fsdecouple.load_calibration("sample_data/calibration",
+                                                           fsdecouple.load_config()))
+    fsdecouple.save_model(model, path)
+    return path, seen, model.settings.svr.tolerance
+
+
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
+def test_the_api_fit_writes_the_command_s_model_file(sample_model, api_fit):
+    """The API's fit (``api_fit``), saved by ``save_model``: the same file as
     ``fsdecouple fit path`` apart from the creation time and digest, key by key (the
     verdict, the outliers, the matrix, the method and the interval data included)."""
-    monkeypatch.chdir(SAMPLE.parent)  # the path as the README's command names it (provenance)
-    model = fsdecouple.fit(fsdecouple.load_calibration("sample_data/calibration",
-                                                       fsdecouple.load_config()))
-    fsdecouple.save_model(model, tmp_path / "api.json")
-    api, cli = _model_keys(tmp_path / "api.json"), _model_keys(sample_model)
+    api, cli = _model_keys(api_fit[0]), _model_keys(sample_model)
     assert sorted(api) == sorted(cli)
     for key in cli:
         assert api[key] == cli[key], key
@@ -48,13 +71,11 @@ def test_the_api_fit_writes_the_command_s_model_file(sample_model, tmp_path, mon
 
 
 @pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
-def test_apply_interval_takes_the_model_the_api_saved(tmp_path):
+def test_apply_interval_takes_the_model_the_api_saved(api_fit, tmp_path):
     """``apply --interval`` on a model fitted and saved through the API: bounds on every
     row (it was refused as "fitted by an older fsdecouple, or with --no-verdict")."""
-    calib = fsdecouple.load_calibration(SAMPLE / "calibration", fsdecouple.load_config())
-    fsdecouple.save_model(fsdecouple.fit(calib), tmp_path / "api.json")
     out = tmp_path / "forces.csv"
-    invoke(["apply", tmp_path / "api.json", SAMPLE / "task_voltages.csv", "-o", out,
+    invoke(["apply", api_fit[0], SAMPLE / "task_voltages.csv", "-o", out,
             "--tare", 200, "--interval", 0.9])
     forces = pd.read_csv(out)
     for name in ("fx", "fy", "fz"):  # finite bounds of positive width on every row
@@ -66,11 +87,13 @@ def test_apply_interval_takes_the_model_the_api_saved(tmp_path):
 def test_no_verdict_and_method_are_keywords():
     """``verdict=False`` is ``--no-verdict`` (no verdict, no interval data) and ``method``
     is ``--method``: a linear model decouples by the least-squares matrix it keeps."""
-    calib = fsdecouple.load_calibration(SAMPLE / "calibration", fsdecouple.load_config())
-    bare = fsdecouple.fit(calib, verdict=False)
+    # Table 2's tolerance: the keywords are the point, not the solver's last digits
+    settings = fsdecouple.load_config(tolerance=1e-3)
+    calib = fsdecouple.load_calibration(SAMPLE / "calibration", settings)
+    bare = fsdecouple.fit(calib, settings, verdict=False)
     assert bare.report.verdict is None and not bare.report.certificate
     assert bare.matrix is not None
-    linear = fsdecouple.fit(calib, method="linear", verdict=False)
+    linear = fsdecouple.fit(calib, settings, method="linear", verdict=False)
     u = calib.voltages[:5]
     assert linear.method == "linear"
     np.testing.assert_allclose(linear.decouple(u, rotate=False), u @ linear.matrix.T, rtol=1e-12)
@@ -111,10 +134,11 @@ def _tolerances(monkeypatch, calib, settings) -> tuple[list[float], float]:
 
 
 @pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
-def test_a_stated_solver_tolerance_is_obeyed_in_the_verdict_too(monkeypatch):
+def test_a_stated_solver_tolerance_is_obeyed_in_the_verdict_too(monkeypatch, api_fit):
     """Issue 34: a tolerance the user writes is obeyed exactly: with ``tolerance`` stated,
     all 24 SVRs (6 of the model, 18 of three rounds) use it; by the built-in rule
-    (fitting/noise.py) each fit takes its own, from its set's noise."""
+    (fitting/noise.py) each fit takes its own, from its set's noise (the module's API fit
+    with the built-in config, ``api_fit``)."""
     from fsdecouple.config import TABLE2_TOLERANCE
 
     calib = fsdecouple.load_calibration(SAMPLE / "calibration", fsdecouple.load_config())
@@ -122,6 +146,6 @@ def test_a_stated_solver_tolerance_is_obeyed_in_the_verdict_too(monkeypatch):
     stated, own = _tolerances(monkeypatch, calib, fsdecouple.load_config(tolerance=2e-3))
     assert stated == [2e-3] * 24 and own == 2e-3
     # by the built-in rule: not the stated value, at most Table 2's, the model's six alike
-    rule, own = _tolerances(monkeypatch, calib, fsdecouple.load_config())
+    _, rule, own = api_fit
     assert len(rule) == 24 and rule.count(own) >= 6 and 2e-3 not in rule
     assert all(0 < t <= TABLE2_TOLERANCE for t in rule)

@@ -32,9 +32,11 @@ from fsdecouple.sim.simulate import SimulatedSensor, with_coupling
 
 runner = CliRunner()
 SAMPLE = "sample_data/calibration"
-SMALL = "gamma=1,8;C=1,10;epsilon=0.25,1"
+# the module's grid: C x epsilon at the narrow gamma = 8 (the calibrated-range check's
+# candidate is one of them); a second gamma only added fits (the product is C x epsilon's)
+SMALL = "gamma=8;C=1,10;epsilon=0.25,1"
 # two candidates besides Table 2: enough for the CLI's record and round trip (the grid
-# itself is checked on SMALL through the `tuned` fixture), a third of SMALL's fits
+# itself is checked on SMALL through the `tuned` fixture), half of SMALL's fits
 TINY = "gamma=1,8;C=10;epsilon=0.25"
 
 
@@ -52,7 +54,7 @@ def test_table2_is_candidate_zero_and_its_figure_is_rederived(tuned):
     t2 = record["candidates"][0]
     assert t2["table2"] and (t2["gamma"], t2["C"], t2["epsilon"]) == (0.5, 1000.0, 1e-4)
     assert t2["scaling"] == settings.scaling
-    assert len(record["candidates"]) == 1 + 2 * 2 * 2
+    assert len(record["candidates"]) == 1 + 1 * 2 * 2
     # the held-out RMS of Table 2, computed here from the rounds and plain fits
     sq, n = np.zeros(3), 0
     for rnd in rounds_for(calib, "repetitions"):
@@ -134,21 +136,25 @@ def test_edge_round_holds_out_each_sweeps_loads_beyond_its_others():
         assert not rnd.train.sweep(axis)["f" + axis].isin(loads).any()
 
 
-@pytest.mark.slow  # two tunes of ~0.6 s
-def test_the_calibrated_range_decides_and_the_edge_only_with_kernel_extrapolation():
+@pytest.mark.slow  # a tune of one candidate, and the module's grid (SMALL holds it)
+def test_the_calibrated_range_decides_and_the_edge_only_with_kernel_extrapolation(tuned):
     # gamma = 8 per F.S.^2: better than Table 2 on the held-out points inside the
     # loads (figure), worse extrapolating one load step (edge): its kernel is narrow.
     # With tangent extrapolation (the default) beyond the range is the tangent's, and
-    # the candidate is chosen; with the kernel sum beyond the range it is not (issue 24)
-    settings = load_config()
+    # the candidate is chosen; with the kernel sum beyond the range it is not (issue 24).
+    # The tangent side is read from the module's tune of SMALL (the same candidate, on
+    # the same rounds: its figure, edge and clearly_better do not depend on the others)
+    calib, settings, chosen, record = tuned
     assert settings.extrapolation == "tangent"
-    calib = load_calibration(SAMPLE, settings)
-    grid = Grid(gamma=(8.0,), C=(10.0,), epsilon=(0.25,))
-    chosen, record = tune_settings(calib, settings, grid=grid, workers=2)
-    t2, narrow = record["candidates"]
+    t2 = record["candidates"][0]
+    narrow, = (c for c in record["candidates"]
+               if (c["gamma"], c["C"]) == (8.0, 10.0)
+               and c["epsilon"] == pytest.approx(0.25 * record["noise"]))
     assert narrow["figure"] < t2["figure"] and narrow["edge"] > t2["edge"]
-    assert narrow["clearly_better"] and record["chosen"] == 1
-    assert record["beyond_range"] == "extrapolation" and chosen.svr.gamma == 8.0
+    assert narrow["clearly_better"] and record["chosen"] != 0
+    pick = record["candidates"][record["chosen"]]
+    assert record["beyond_range"] == "extrapolation" and chosen.svr.gamma == pick["gamma"]
+    grid = Grid(gamma=(8.0,), C=(10.0,), epsilon=(0.25,))
     kernel = replace(settings, extrapolation="kernel")
     chosen, record = tune_settings(calib, kernel, grid=grid, workers=2)
     t2, narrow = record["candidates"]
@@ -193,8 +199,10 @@ def test_every_candidate_better_inside_is_not_given_up_for_the_edge(monkeypatch)
 @pytest.mark.slow  # a tuning grid of fits: seconds of CPU; the not-slow run stays under a minute
 def test_a_candidate_worse_than_table2_on_any_axis_is_never_chosen(monkeypatch):
     # a grid of one bad candidate (far too narrow a kernel): Table 2 stays.  C = 10: the
-    # held-out figure is 3.9x Table 2's (C = 1000: 106x, and 6x the libsvm time)
-    settings = load_config()
+    # held-out figure is 3.9x Table 2's (C = 1000: 106x, and 6x the libsvm time).  Table 2
+    # at its own tolerance (1e-3, as a config writes it): the candidate's loss is far
+    # beyond the difference that makes to Table 2's figure
+    settings = load_config(tolerance=1e-3)
     calib = load_calibration(SAMPLE, settings)
     chosen, record = tune_settings(calib, settings, grid=Grid(gamma=(5000.0,), C=(10.0,),
                                                               epsilon=(0.5,)), workers=2)
@@ -205,8 +213,9 @@ def test_a_candidate_worse_than_table2_on_any_axis_is_never_chosen(monkeypatch):
 @pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
 def test_fit_tune_round_trips_through_the_model_file(tmp_path):
     out = tmp_path / "m.json"
+    # the record is the tune's, verdict or not; Table 2's tolerance: the record is the point
     r = runner.invoke(app, ["fit", SAMPLE, "-o", str(out), "--tune", "--tune-grid", TINY,
-                            "--json", "--no-verdict"])  # the record is the tune's, verdict or not
+                            "-c", str(FAST_CONFIG), "--json", "--no-verdict"])
     assert r.exit_code == 0, r.output
     printed = json.loads(r.stdout)["tune"]
     model = load_model(out)
@@ -221,7 +230,8 @@ def test_fit_tune_round_trips_through_the_model_file(tmp_path):
 @pytest.mark.slow  # a fit: about a second of CPU
 def test_untuned_models_have_no_tune_record(tmp_path, sample_model):
     out = tmp_path / "m.json"
-    r = runner.invoke(app, ["fit", SAMPLE, "-o", str(out), "--json", "--no-verdict"])
+    r = runner.invoke(app, ["fit", SAMPLE, "-o", str(out), "-c", str(FAST_CONFIG), "--json",
+                            "--no-verdict"])  # Table 2's tolerance: the record is the point
     assert r.exit_code == 0, r.output
     assert json.loads(r.stdout)["tune"] is None
     for path in (out, sample_model):  # and the session's fit with its verdict
@@ -292,8 +302,9 @@ def _ratio_to_floor(tmp_path, coupling, fit_args):
         sim += ["--coupling", str(coupling)]
         sensor = with_coupling(sensor, coupling)
     assert runner.invoke(app, sim).exit_code == 0
+    # --no-verdict: the verdict only reports (method svr decouples as fitted either way)
     r = runner.invoke(app, ["fit", str(tmp_path / "d" / "calibration"), "-o",
-                            str(tmp_path / "m.json"), *fit_args])
+                            str(tmp_path / "m.json"), "--no-verdict", *fit_args])
     assert r.exit_code == 0, r.output
     r = runner.invoke(app, ["apply", str(tmp_path / "m.json"), str(tmp_path / "d" / "task_voltages.csv"),
                             "-o", str(tmp_path / "f.csv"), "--tare", "200"])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import functools
 import re
 from pathlib import Path
 
@@ -98,12 +99,17 @@ def _edit(path: Path, out: Path, change) -> Path:
     pytest.param("quadratic", "known_Fz", (23, 24), marks=pytest.mark.slow),
     pytest.param("quadratic", "known_Fy", (17, 18), marks=pytest.mark.slow),  # issue 32's
 ])
-def test_two_swapped_loads_are_flagged_by_their_editor_lines(tmp_path, kind, column, lines):
+def test_two_swapped_loads_are_flagged_by_their_editor_lines(tmp_path, kind, column, lines,
+                                                            monkeypatch):
     """Two neighbouring levels typed into each other's rows: fit names exactly those two
     editor lines (header = line 1), also where the quadratic stand-in bends most (its
     last two Fx levels, lines 10-11) and on a lever-arm moment sweep."""
-    path, settings, whole = rig(tmp_path, kind=kind)
+    import fsdecouple.fitting.fit as fitting
     from fsdecouple.evaluation.calibrate import fit as calibrate
+
+    # the outliers are the point, never decoupling by the models: no fast-path tables
+    monkeypatch.setattr(fitting, "fit", functools.partial(fitting.fit, tables=False))
+    path, settings, whole = rig(tmp_path, kind=kind)
 
     if kind == "quadratic":  # its readings bend by up to 3 % F.S.: nothing flagged on the clean file
         assert calibrate(whole, settings, verdict=False).report.outliers == []
@@ -173,15 +179,20 @@ def test_rig_rows_get_an_own_load_chi_per_component_and_single_axis_sweeps_none(
 
 @pytest.mark.slow  # about 12 s: a fit with its held-out verdict per fold
 @pytest.mark.parametrize("seed", [0])  # one seed: the scatter over 20 is in docs/rigs.md
-def test_auto_beats_the_matrix_on_the_quadratic_stand_in_by_the_issues_margin(tmp_path, seed):
+def test_auto_beats_the_matrix_on_the_quadratic_stand_in_by_the_issues_margin(tmp_path, seed,
+                                                                             monkeypatch):
     """Issue 22's check on the stand-in for the public rig file (simulate --rig quadratic):
     each load level of every sweep held out in turn, fit --method auto (calibrate) on the
     rest, decoupled held-out rows against the applied loads; the worst component's RMS
     must be at most 0.85 x the least-squares matrix's under the same folds.  Over seeds
     0-19 the model alone (heldout_rms) was 0.53-0.72 x the matrix (docs/rigs.md); auto
     must keep it in every fold, as its verdict now scores every component's error."""
+    import fsdecouple.fitting.fit as fitting
     from fsdecouple.evaluation.calibrate import fit as calibrate
 
+    # each fold's model without the fast path's tables: decoupled on the exact path, which
+    # the tables stand in for to 1e-9 F.S.; model, verdict and method are calibrate's
+    monkeypatch.setattr(fitting, "fit", functools.partial(fitting.fit, tables=False))
     _, settings, calib = rig(tmp_path, seed, kind="quadratic")
     k, _ = level_index(calib)
     fs = np.asarray(settings.full_scale)
@@ -193,7 +204,7 @@ def test_auto_beats_the_matrix_on_the_quadratic_stand_in_by_the_issues_margin(tm
         assert model.method == "svr" and model.report.verdict["figure"] == "worst_rms"
         u, f = calib.voltages[held], calib.forces[held]
         ct, *_ = np.linalg.lstsq(train.voltages, train.forces, rcond=None)
-        err["auto"].append((model.decouple(u, rotate=False) - f) / fs)
+        err["auto"].append((model.decouple(u, rotate=False, exact=True) - f) / fs)
         err["matrix"].append((u @ ct - f) / fs)
     rms = {m: np.sqrt((np.concatenate(e) ** 2).mean(axis=0)).max() for m, e in err.items()}
     assert rms["auto"] <= 0.85 * rms["matrix"]
@@ -216,7 +227,9 @@ def test_a_blank_load_and_a_slip_in_one_rig_file(tmp_path, kind):
         rows[60][rows[0].index("Known_Mx")] = ""
 
     bad = _edit(path, tmp_path / "rig.csv", edit)
-    r = invoke(["fit", bad, "-c", tmp_path / "cfg.yaml", "-o", tmp_path / "m.json"])
+    # --no-verdict: the blank load is read and the slips flagged by fit itself, not its verdict
+    r = invoke(["fit", bad, "-c", tmp_path / "cfg.yaml", "-o", tmp_path / "m.json",
+                "--no-verdict"])
     assert "rig.csv, line 61: an applied load is blank" in r.stderr
     flagged = [int(m) for m in re.findall(r"row (\d+): possible gross error", r.stderr)]
     assert {17, 18} <= set(flagged) and len(flagged) <= 4, flagged

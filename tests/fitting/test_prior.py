@@ -3,6 +3,8 @@ matrix and zero ridge-corrected, or a fresh fit, whichever held-out error prefer
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 from conftest import assert_one_line_error, invoke
@@ -76,15 +78,24 @@ def test_prior_rows_carry_the_old_models_loads(old):
     assert np.abs(delta).max() < 1.0  # counts, of readings ~500
 
 
-@pytest.mark.slow  # a whole prior fit: its lambda grid over held-out folds
-def test_fit_with_a_prior_says_what_it_chose_and_writes_it(old):
-    tmp, model, settings = old
+@pytest.fixture(scope="module")
+def prior_fit(old):
+    """``fit NEW --prior OLD.json`` through the CLI, once: 12 poses of the drifted sensor,
+    the old model's config (``method: auto``, as init writes it for poses)."""
+    tmp, _, _ = old
     new = tmp / "new.csv"
     drifted = simulate_poses(0, 30, drift=0.01, noise_seed=1)
     few = PoseSet(drifted.loads[::5], drifted.samples[::5], drifted.truth[::5], drifted.railing)
     new.write_text("\n".join(pose_lines(few)) + "\n")
     r = invoke(["fit", new, "-c", tmp / "cfg.yaml", "-o", tmp / "new.json",
                 "--prior", tmp / "old.json", "--no-verdict"])
+    return new, r
+
+
+@pytest.mark.slow  # a whole prior fit: its lambda grid over held-out folds
+def test_fit_with_a_prior_says_what_it_chose_and_writes_it(old, prior_fit):
+    tmp, model, settings = old
+    new, r = prior_fit
     assert "prior model" in r.stderr and "chosen by held-out worst component's RMS error" in r.stderr
     calib = load_calibration(new, settings)
     choice = choose_prior(calib, settings, model, "old.json")
@@ -125,26 +136,38 @@ def test_a_prior_with_tuning_is_refused_not_ignored(old):
     assert not (tmp / "t.json").exists()
 
 
-@pytest.mark.slow  # a whole prior fit: its lambda grid over held-out folds
-def test_a_config_method_a_prior_cannot_obey_is_named_not_dropped(old):
+@pytest.mark.slow  # reads the module's prior fit
+def test_a_config_method_a_prior_cannot_obey_is_named_not_dropped(old, prior_fit):
     """init writes method: auto for poses; with a prior the choice is the prior's, and the
-    fit says the config's method was not used (an unused key is warned about)."""
+    fit says the config's method was not used (an unused key is warned about).  The
+    module's prior fit (``prior_fit``) ran with that config."""
     tmp, _, _ = old
-    cfg = tmp / "cfg.yaml"
-    assert "method: auto" in cfg.read_text()
-    r = invoke(["fit", tmp / "poses.csv", "-c", cfg, "-o", tmp / "a.json",
-                "--prior", tmp / "old.json", "--no-verdict"])
-    assert "config method: auto not used" in r.output
+    assert "method: auto" in (tmp / "cfg.yaml").read_text()
+    assert "config method: auto not used" in prior_fit[1].output
 
 
-def _errors(seed: int, kind: str, tmp) -> tuple[float, float, float]:
+@pytest.fixture(scope="module")
+def old_models(tmp_path_factory):
+    """Per seed, the old sensor's config and model (fitted once, for both kinds of drift)."""
+    made = {}
+
+    def of(seed: int):
+        if seed not in made:
+            tmp = tmp_path_factory.mktemp(f"old{seed}")
+            (tmp / "old.csv").write_text("\n".join(pose_lines(simulate_poses(seed, 60))) + "\n")
+            init_config(tmp / "old.csv", tmp / "cfg.yaml")
+            settings = load_config(tmp / "cfg.yaml")
+            made[seed] = settings, fit(load_calibration(tmp / "old.csv", settings), settings,
+                                       verdict=False)
+        return made[seed]
+
+    return of
+
+
+def _errors(seed: int, kind: str, tmp, old_models) -> tuple[float, float, float]:
     """benchmarks/prior.py's protocol, smaller: (old, fresh, prior) worst component's RMS
     error [F.S.] on all 60 poses of the drifted sensor, from 10 new poses."""
-    old_set = simulate_poses(seed, 60)
-    (tmp / "old.csv").write_text("\n".join(pose_lines(old_set)) + "\n")
-    init_config(tmp / "old.csv", tmp / "cfg.yaml", force=True)
-    settings = load_config(tmp / "cfg.yaml")
-    model = fit(load_calibration(tmp / "old.csv", settings), settings, verdict=False)
+    settings, model = old_models(seed)
     moved = {"drift": 0.03} if kind == "gain" else {"coupling": 0.03}
     new = simulate_poses(seed, 60, noise_seed=1, **moved)
     top = 1023.0
@@ -160,7 +183,11 @@ def _errors(seed: int, kind: str, tmp) -> tuple[float, float, float]:
         f = m.decouple(new.truth - m.zero, rotate=False, exact=True)
         return float((np.sqrt(((f - truth) ** 2).mean(axis=0)) / fs).max())
 
-    fresh = fit(calib, settings, verdict=False)  # what fit without --prior writes
+    import fsdecouple.fitting.fit as fitting
+
+    with pytest.MonkeyPatch.context() as mp:  # scored on the exact path: no fast-path tables
+        mp.setattr(fitting, "fit", functools.partial(fitting.fit, tables=False))
+        fresh = fit(calib, settings, verdict=False)  # what fit without --prior writes
     prior = fit_with_prior(calib, settings, model, "old.json",
                            lambda c: fit(c, settings, verdict=False))
     return worst(model), worst(fresh), worst(prior)
@@ -168,11 +195,11 @@ def _errors(seed: int, kind: str, tmp) -> tuple[float, float, float]:
 
 @pytest.mark.slow  # 5 seeds x 2 drifts, each an old fit, a fresh fit and the prior's choice
 @pytest.mark.parametrize("kind", ["gain", "coupling"])
-def test_with_ten_poses_the_prior_beats_a_fresh_fit_and_the_old_model(kind, tmp_path):
+def test_with_ten_poses_the_prior_beats_a_fresh_fit_and_the_old_model(kind, tmp_path, old_models):
     # the issue's requirement, on the simulator's gain-and-offset drift and on a change of
     # coupling the correction has no parameter for by name; the win must hold by two
     # standard deviations of the seeds' scatter of log(ratio), not on average only
-    e = np.array([_errors(seed, kind, tmp_path) for seed in range(5)])
+    e = np.array([_errors(seed, kind, tmp_path, old_models) for seed in range(5)])
     for other in (0, 1):  # old, fresh
         ratio = np.log(e[:, 2] / e[:, other])
         assert (ratio < 0).all(), (kind, other, e)

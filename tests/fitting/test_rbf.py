@@ -9,6 +9,16 @@ from fsdecouple.axes import CHI_NAMES
 from fsdecouple.fitting.fit import chi_training_data
 from fsdecouple.fitting.linear import fit_calibration_matrix
 from fsdecouple.fitting.rbf import B_FACTOR, MSE_GOAL, basic_solution, fit_mimo, fit_rbf, fit_siso
+from fsdecouple.fitting.threads import single_threaded_libraries
+
+
+@pytest.fixture(autouse=True)
+def _one_blas_thread():
+    """The networks trained here as cv trains them (baselines.train_all): BLAS at one
+    thread.  Bare, OpenBLAS's spinning threads made these tests 6-12x the CPU in the full
+    suite (4.8 s and 3.0 s against 0.4 s and 0.7 s alone)."""
+    with single_threaded_libraries():
+        yield
 
 
 def test_b_is_newrbs_0_8326_per_spread():

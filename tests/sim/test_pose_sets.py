@@ -4,6 +4,7 @@ offset held out by pose; bad pose directories get one line and exit 2."""
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -77,6 +78,16 @@ def test_a_pose_file_whose_loads_change_is_refused(tmp_path):
     assert_one_line_error(r, "pose09.csv, row 4", "loads change", "one static pose")
 
 
+@pytest.fixture
+def exact_fits(monkeypatch):
+    """``fit``'s models without the fast path's tables (about half a fold's CPU on eight
+    gauges): held_out_ratio decouples on the exact path, which the tables stand in for to
+    1e-9 F.S.; the model, its verdict and method are what ``fit`` writes."""
+    import fsdecouple.fitting.fit as fitting
+
+    monkeypatch.setattr(fitting, "fit", functools.partial(fitting.fit, tables=False))
+
+
 def held_out_ratio(tmp_path: Path, seed: int, samples: int = 100, folds: int = 5,
                    repeatability: float = 0.0, order=None) -> float:
     """Worst component's held-out RMS error [F.S.] of init -> fit on the joined pose file
@@ -113,7 +124,7 @@ def held_out_ratio(tmp_path: Path, seed: int, samples: int = 100, folds: int = 5
 
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 6])
-def test_init_then_fit_beats_a_matrix_with_offset_held_out_by_pose(tmp_path, seed):
+def test_init_then_fit_beats_a_matrix_with_offset_held_out_by_pose(tmp_path, seed, exact_fits):
     # issue 32's hidden check: <= 1.10 x.  Over seeds 0-9 the ratio was 0.16-0.91 (seed 6
     # the highest, its worst component mz near the matrix's); Table 2's kernel gave up to 1.17
     assert held_out_ratio(tmp_path, seed) <= 1.10
@@ -121,7 +132,8 @@ def test_init_then_fit_beats_a_matrix_with_offset_held_out_by_pose(tmp_path, see
 
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1])
-def test_poses_that_do_not_repeat_decouple_by_whichever_held_out_better(tmp_path, seed):
+def test_poses_that_do_not_repeat_decouple_by_whichever_held_out_better(tmp_path, seed,
+                                                                        exact_fits):
     # the public eight-gauge set's poses sit ~10 % of a span off any smooth model while
     # their samples scatter by under a count (repeatability, sim/poses.py); its svr model
     # held out at 1.17 x the matrix.  Simulated so (0.15 x SPAN), the model fit wrote
