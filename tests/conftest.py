@@ -1,8 +1,14 @@
 from __future__ import annotations
 
+import os
+
+# the environment `fsdecouple` gives itself (fsdecouple/cli/__init__.py), set before numpy
+# loads: the tests run the commands in this process, and OpenBLAS threads spinning beside
+# the fits cost CPU on a loaded machine
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import contextlib
 import json
-import os
 import signal
 import sys
 import threading
