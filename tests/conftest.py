@@ -382,3 +382,19 @@ def assert_one_line_error(r, *needles) -> str:
     for n in needles:
         assert n in msg, (n, msg)
     return msg
+
+
+@pytest.fixture
+def unrendered(monkeypatch):
+    """Reports and certificates without rasterising their figures (~1-2 s of CPU each,
+    matplotlib's layout and PNG): each figure is still built, plotted and embedded,
+    as these bytes.  For tests whose point is the HTML's tables and text; the figures'
+    pixels are the tests' of the full report (tests/reporting/test_report.py)."""
+    from fsdecouple.reporting import certificate_html, certificate_pdf, report
+
+    def to_png(fig, dpi=110):
+        return b"\x89PNG not rendered"
+
+    for module in (report, certificate_html, certificate_pdf):
+        monkeypatch.setattr(module, "to_png", to_png)
+    return to_png

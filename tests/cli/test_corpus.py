@@ -12,16 +12,20 @@ it applies, ``row N`` and ``column 'x'``).  Placeholders in the command:
 ``{log}``    sample_data/task_voltages.csv;
 ``{six}``    a copy of sample_data/six_axis/calibration with the case's ``six/`` files
              laid over it (and ``remove`` deleted), read with ``{six_config}``,
-             configs/six-axis.yaml; ``{six_model}`` a good model fitted on it.
+             configs/six-axis.yaml; ``{six_model}`` a good model fitted on it;
+``{fast_config}`` tests/fixtures/fast-svr.yaml (Table 2's libsvm tolerance), for cases
+             whose fit only leads up to the error.
 
 Commands that write (``output``, default true) get ``-o OUT`` appended.  The
 contract checked: exit 2, exactly one line on stderr starting ``error:``, no
 traceback, and OUT neither created nor, when it existed and ``--force`` was
-given, changed; no temporary file left.  A case with ``main: true`` is a usage error
-(an option's value refused by its parser): it runs as ``python -m fsdecouple`` in a
-subprocess, through the CLI's main, which makes it one line.  A case with ``exit: 0`` is accepted
-input that must warn (``warn`` substrings); for ``apply`` it may give the number
-of output ``rows`` and the ``last_status``.  Add a case by adding a directory.
+given, changed; no temporary file left.  ``report`` cases build their figures but do not
+rasterise them (conftest's ``unrendered``): the error paths are the point.  A case with
+``main: true`` is a usage error (an option's value refused by its parser): it runs as
+``python -m fsdecouple`` in a subprocess, through the CLI's main, which makes it one line.
+A case with ``exit: 0`` is accepted input that must warn (``warn`` substrings); for
+``apply`` it may give the number of output ``rows`` and the ``last_status``.  Add a case by
+adding a directory.
 """
 
 from __future__ import annotations
@@ -32,7 +36,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 import yaml
-from conftest import ROOT, SAMPLE, invoke
+from conftest import FAST_CONFIG, ROOT, SAMPLE, invoke
 
 BAD = Path(__file__).parents[1] / "fixtures" / "bad"
 CASES = sorted(p.name for p in BAD.iterdir() if (p / "case.yaml").is_file())
@@ -74,7 +78,7 @@ def prepare(name: str, tmp_path: Path, good_model: Path,
     shutil.copytree(BAD / name, case)
     (case / "case.yaml").unlink()
     values = {"case": str(case), "model": str(good_model), "log": str(SAMPLE / "task_voltages.csv"),
-              "six_config": str(SIX_CONFIG)}
+              "six_config": str(SIX_CONFIG), "fast_config": str(FAST_CONFIG)}
     if any("{six}" in a for a in spec["command"]):
         values["six"] = _overlay(SAMPLE / "six_axis" / "calibration", case, "six", spec,
                                  tmp_path / "six")
@@ -106,6 +110,8 @@ def test_corpus_is_large_enough():
                                   for c in CASES])
 def test_bad_input(name, tmp_path, good_model, request):
     spec, args = prepare(name, tmp_path, good_model, request)
+    if args[0] == "report":
+        request.getfixturevalue("unrendered")
     out_dir = tmp_path / "out"
     out_dir.mkdir()
     out = out_dir / "result.out"

@@ -67,13 +67,13 @@ def test_apply_prints_names_and_warnings_literally(tricky):
 
 
 @pytest.mark.slow  # runs cv and renders a report
-def test_validate_cv_and_report_print_names_literally(tricky):
+def test_validate_cv_and_report_print_names_literally(tricky, unrendered):
     _literal(invoke(["validate", tricky["model"], tricky["cal"], "-c", tricky["cfg"]]),
              tricky["cal"], tricky["model"])
     cv = tricky["cal"].parent / "]cv[bold].json"
     _literal(invoke(["cv", "-c", tricky["cfg"], tricky["cal"], "-o", cv]), cv, tricky["cal"])
     html = tricky["cal"].parent / "]r[bold].html"
-    _literal(invoke(["report", tricky["model"], "--cv", cv, "-o", html]), html)
+    _literal(invoke(["report", tricky["model"], "--cv", cv, "-o", html]), html)  # figures not rasterised
 
 
 def test_errors_quote_names_literally(tricky):

@@ -369,7 +369,8 @@ def test_fit_warns_when_a_surrogate_misses_its_bound(calib, settings, monkeypatc
                 for c, s in zip(chis, real(chis, lo, hi, *tolerance), strict=True)]
 
     monkeypatch.setattr(model_module, "build_pair", poor)
-    m = fit(calib, settings)
+    # Table 2's libsvm tolerance: the warning is the point, not the solver's digits
+    m = fit(calib, replace(settings, svr=replace(settings.svr, tolerance=1e-3)))
     assert any("chi_zx" in w and "exact kernel sum" in w for w in m.warnings)
     assert m.fast_decoupler() is None
 

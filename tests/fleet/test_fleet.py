@@ -22,9 +22,9 @@ pytestmark = pytest.mark.slow  # fits several sensors in worker processes
 THREE_REPS = "min_repetitions: 3\n"
 
 
-def _fit(calib_dir, config, out):
+def _fit(calib_dir, config, out, verdict=True):
     settings = load_config(config)
-    model = calibrate(load_calibration(calib_dir, settings), settings)
+    model = calibrate(load_calibration(calib_dir, settings), settings, verdict=verdict)
     save_model(model, out)
     return out
 
@@ -32,10 +32,13 @@ def _fit(calib_dir, config, out):
 @pytest.fixture(scope="module")
 def drift_models(tmp_path_factory):
     """Two calibrations of the sample sensor (repetitions 1-3 and 4-6), and two
-    simulated calibrations of one sensor whose gain rose by 1 % in between."""
+    simulated calibrations of one sensor whose gain rose by 1 % in between, all at
+    Table 2's libsvm tolerance (FAST_SVR, a third of the CPU of the default's): over
+    10 seed pairs at that tolerance the 1 % gain change gave slope changes of
+    0.90-1.04 %, forces 0.95-1.23 %, chi at most 0.17 %; the no-drift bound below."""
     tmp = tmp_path_factory.mktemp("drift")
     config = tmp / "three.yaml"
-    config.write_text(THREE_REPS)
+    config.write_text(THREE_REPS + FAST_SVR)
     for name, reps in (("first", (1, 2, 3)), ("second", (4, 5, 6))):
         (tmp / name).mkdir()
         for r in reps:
@@ -55,10 +58,13 @@ def drift_models(tmp_path_factory):
 # Two calibrations of one sensor differ by their noise only: 0.5 mV per channel
 # (simulate.SimulatedSensor.noise), 0.04 % of x's full-scale output of 1.33 V.  An
 # SVR with C = 1000 and epsilon = 0.1 mV follows that noise, so two fits' chi differ
-# by a few noise sigmas (0.06-0.11 % measured), and a force by up to two chi
-# differences plus the slope's (0.14-0.22 % measured, at the corners of the grid).
-# 0.3 % bounds that with a margin, and is far below a 1 % gain change.
-NOISE_DRIFT_PCT = 0.3
+# by a few noise sigmas, and a force by up to two chi differences plus the slope's
+# (at the corners of the grid).  The largest figure of compare over 10 simulated
+# pairs of calibrations (3 repetitions each, seeds 100-119) at Table 2's tolerance:
+# 0.16-0.29 % (at the default, noise-derived one: 0.17-0.26 %); the sample's
+# repetitions 1-3 against 4-6: 0.22 %.  0.4 % bounds that with a margin (1.37x the
+# largest), and is far below a 1 % gain change (forces 0.95 % and more, above).
+NOISE_DRIFT_PCT = 0.4
 
 
 def test_two_calibrations_of_one_sensor_show_no_drift(drift_models):
@@ -258,12 +264,12 @@ def test_fit_many_cli_gates_and_errors(fleet, tmp_path):
     assert doc["format"] == "fsdecouple.fleet" and doc["failed"] == ["broken"]
     assert [s["sensor"] for s in doc["sensors"]] == ["alpha", "beta", "broken", "gamma"]
     assert "error: broken:" in r.stderr and "no sensor.yaml" in r.stderr
-    (fleet / "good").mkdir(exist_ok=True)
+    # the gates on the sensor with the worst held-out gamma (a fleet of one: a third of
+    # the fits of the whole fleet's, four times over)
+    worst, name = max((s["worst_gamma"], s["sensor"]) for s in doc["sensors"] if s["error"] is None)
     good = fleet / "good"
-    for name in ("alpha", "gamma"):
-        if not (good / name).exists():
-            shutil.copytree(fleet / "sensors" / name, good / name)
-    worst = max(s["worst_gamma"] for s in doc["sensors"] if s["error"] is None)
+    if not (good / name).exists():
+        shutil.copytree(fleet / "sensors" / name, good / name)
     invoke(["fit-many", good, "-o", tmp_path / "ok", "--max-gamma", worst * 1.01])
     r = invoke(["fit-many", good, "-o", tmp_path / "strict", "--max-gamma", worst * 0.99], 1)
     assert "gate failed" in r.stderr and "exceeds --max-gamma" in r.stderr
@@ -275,9 +281,8 @@ def test_fit_many_cli_gates_and_errors(fleet, tmp_path):
 
 def test_fit_many_baseline_reports_drift(fleet, drift_models, tmp_path):
     good = tmp_path / "sensors"
-    for name in ("alpha", "gamma"):
+    for name in ("alpha", "gamma"):  # their configs are their baselines' (THREE_REPS + FAST_SVR)
         shutil.copytree(fleet / "sensors" / name, good / name)
-        (good / name / "sensor.yaml").write_text(THREE_REPS)  # the baselines' own config
     base = tmp_path / "base"
     base.mkdir()
     shutil.copy(drift_models["first"], base / "alpha.json")  # the same sensor, fitted on reps 1-3
@@ -286,7 +291,8 @@ def test_fit_many_baseline_reports_drift(fleet, drift_models, tmp_path):
                 "--json"], 1)
     doc = json.loads(r.stdout)
     alpha, gamma = doc["sensors"]
-    # alpha: the same data as its baseline, and the fit is deterministic: no drift at all
+    # alpha: the same data and config as its baseline, and the fit is deterministic (in a
+    # worker process or not): no drift at all
     assert largest(alpha["drift"]) == 0.0 and alpha["gate"] == []
     assert gamma["drift"]["components"]["x"]["slope_change_pct"] == pytest.approx(1.0, abs=0.15)
     assert doc["gate_failed"] == ["gamma"] and "drift exceeds --max-drift" in r.stderr
@@ -318,7 +324,7 @@ def test_ranges_that_meet_only_at_zero_are_not_compared(tmp_path):
     """One calibration in tension, one in compression (x and y), sharing the single
     point 0: compare reported a drift of 0.01-0.08 % with no warning."""
     config = tmp_path / "three.yaml"
-    config.write_text(THREE_REPS)
+    config.write_text(THREE_REPS + FAST_SVR)  # an error path: the solver's digits are not the point
     for name, keep in (("pull", lambda v: v >= 0), ("push", lambda v: v <= 0)):
         (tmp_path / name).mkdir()
         for r in (1, 2, 3):
@@ -326,7 +332,7 @@ def test_ranges_that_meet_only_at_zero_are_not_compared(tmp_path):
             rows = [line for line in lines[1:]
                     if line.split(",")[0] == "z" or keep(float(line.split(",")[1 + "xyz".index(line[0])]))]
             (tmp_path / name / f"rep{r}.csv").write_text("\n".join([lines[0], *rows]) + "\n")
-        _fit(tmp_path / name, config, tmp_path / f"{name}.json")
+        _fit(tmp_path / name, config, tmp_path / f"{name}.json", verdict=False)
     r = invoke(["compare", tmp_path / "pull.json", tmp_path / "push.json"], 2)
     assert "share less than 10 %" in r.stderr and len(r.stderr.strip().splitlines()) == 1
     with pytest.raises(InputError, match="share less than"):

@@ -303,7 +303,7 @@ def test_png_files_are_sized_and_not_blank(full_report):
         assert_figure_ok(img)
 
 
-def test_worse_cells_are_highlighted(tmp_path, sample_model, cv_json):
+def test_worse_cells_are_highlighted(unrendered, tmp_path, sample_model, cv_json):
     doc = json.loads(cv_json.read_text())
     for r in doc["records"]:
         if (r["round"], r["test_set"], r["method"], r["axis"]) == (1, 1, "svr", "y"):
@@ -325,7 +325,7 @@ def test_worse_cells_are_highlighted(tmp_path, sample_model, cv_json):
     assert body_rows(tables["table-gamma-svr"])[0][3] == ("td", "▲ 50.00 %", "worse")
 
 
-def test_report_from_the_model_alone(tmp_path, sample_model):
+def test_report_from_the_model_alone(unrendered, tmp_path, sample_model):
     html = tmp_path / "r.html"
     invoke(["report", sample_model, "-o", html, "--png", tmp_path / "png"])
     text = html.read_text(encoding="utf-8")
@@ -336,7 +336,7 @@ def test_report_from_the_model_alone(tmp_path, sample_model):
                                                                    "figure7_chi.png"]
 
 
-def test_report_with_calib_only_has_in_sample_residuals(tmp_path, sample_model):
+def test_report_with_calib_only_has_in_sample_residuals(unrendered, tmp_path, sample_model):
     html = tmp_path / "r.html"
     invoke(["report", sample_model, "--calib", SAMPLE / "calibration", "-o", html])
     tree = parse(html.read_text(encoding="utf-8"))
@@ -344,7 +344,7 @@ def test_report_with_calib_only_has_in_sample_residuals(tmp_path, sample_model):
     assert "in-sample" in html.read_text(encoding="utf-8")
 
 
-def test_report_refuses_to_overwrite_without_force(tmp_path, sample_model):
+def test_report_refuses_to_overwrite_without_force(unrendered, tmp_path, sample_model):
     html = tmp_path / "r.html"
     html.write_text("keep")
     r = invoke(["report", sample_model, "-o", html], code=2)
@@ -380,7 +380,7 @@ def test_readme_ends_its_main_command_with_a_report_and_shows_a_figure():
     assert_figure_ok(imread(SAMPLE.parent / "docs" / "figure7.png"))
 
 
-def test_report_copes_with_a_minimal_cv_and_absent_methods(tmp_path, sample_model, cv_json):
+def test_report_copes_with_a_minimal_cv_and_absent_methods(unrendered, tmp_path, sample_model, cv_json):
     doc = json.loads(cv_json.read_text())
     for c in doc["curves"]["chi"].values():
         del c["rbf-siso"]
@@ -401,7 +401,7 @@ def test_report_copes_with_a_minimal_cv_and_absent_methods(tmp_path, sample_mode
     assert "No gross-error run" in text and "No combined-load validation" in text
 
 
-def test_held_out_labels_name_the_repetition(tmp_path, sample_model, cv_json):
+def test_held_out_labels_name_the_repetition(unrendered, tmp_path, sample_model, cv_json):
     """test_set is the held-out repetition's number: round 2 holds out reps 3 and 4."""
     doc = json.loads(cv_json.read_text())
     assert doc["folds"][1] == [3, 4]
@@ -443,7 +443,7 @@ def _report_text(html_text: str) -> str:
 
 
 @pytest.mark.slow  # two reports with their figures
-def test_the_report_speaks_the_datas_own_units(tmp_path):
+def test_the_report_speaks_the_datas_own_units(unrendered, tmp_path):
     """A gf / count load cell's report said k [V/N], input range [V], [mV] and [N] and
     printed 1/k as 0.0012; a six-axis one shows N, N·m and V (mV for small figures) only."""
     import re

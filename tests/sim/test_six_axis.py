@@ -407,12 +407,20 @@ def test_gamma_with_forces_and_moments_is_dimensionless():
 
 # --- cv and validate -----------------------------------------------------------------
 
-@pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
-def test_cv_runs_every_baseline_on_six_axes(six_settings):
+@pytest.fixture(scope="module")
+def six_cv(six_calib, six_settings):
+    """`fsdecouple cv` of the six-axis sample with its task log, as plain JSON data (the
+    cv.json document), once for the module."""
     from fsdecouple.evaluation.cv import run_cv
 
-    doc = run_cv(SIX / "calibration", six_settings, workers=2,
-                 task=(SIX / "task_voltages.csv", SIX / "task_forces.csv"), task_tare=TARE_ROWS)
+    return json.loads(json.dumps(run_cv(six_calib, six_settings, workers=2,
+                                        task=(SIX / "task_voltages.csv", SIX / "task_forces.csv"),
+                                        task_tare=TARE_ROWS)))
+
+
+@pytest.mark.slow  # over ~0.8 s: the not-slow run stays under a minute
+def test_cv_runs_every_baseline_on_six_axes(six_cv):
+    doc = six_cv
     gammas = [r for r in doc["records"] if r["metric"] == "gamma"]
     assert {r["axis"] for r in gammas} == set(COMPONENTS)
     assert {r["method"] for r in gammas} == {"initial", "linear", "rbf-mimo", "rbf-siso", "svr"}
@@ -451,20 +459,20 @@ def test_validate_accepts_combined_loads(six_model, six_settings, tmp_path):
 
 
 @pytest.mark.slow
-def test_report_has_a_panel_per_component_and_every_chi(six_model, six_calib, tmp_path):
-    from fsdecouple.evaluation.cv import run_cv
+def test_report_has_a_panel_per_component_and_every_chi(unrendered, six_model, six_calib, six_cv):
+    """The report's figures are built but not rasterised (~9 s of CPU for N = 6); the
+    30-panel chi grid, the largest, is rasterised below."""
+    from fsdecouple.reporting.plots import to_png
     from fsdecouple.reporting.report import build_report
 
-    cv = json.loads(json.dumps(run_cv(six_calib, six_model.settings, workers=1,
-                                      task=(SIX / "task_voltages.csv", SIX / "task_forces.csv"),
-                                      task_tare=TARE_ROWS)))
-    report = build_report(six_model, cv, six_calib)
+    report = build_report(six_model, six_cv, six_calib)
     html = report.html
     assert set(report.figures) == {"figure6_omega", "figure7_chi", "residuals"}
     for text in ("χfx:fy", "χmz:my", "γmz", ">mz<", "u6"):
         assert text in html, text
     fig = chi_figure_axes(six_model)
     assert len([ax for ax in fig.axes if ax.get_visible()]) == 30
+    assert to_png(fig).startswith(b"\x89PNG\r\n\x1a\n")
 
 
 def chi_figure_axes(model):
