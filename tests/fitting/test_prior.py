@@ -87,18 +87,28 @@ def prior_fit(old):
     drifted = simulate_poses(0, 30, drift=0.01, noise_seed=1)
     few = PoseSet(drifted.loads[::5], drifted.samples[::5], drifted.truth[::5], drifted.railing)
     new.write_text("\n".join(pose_lines(few)) + "\n")
-    r = invoke(["fit", new, "-c", tmp / "cfg.yaml", "-o", tmp / "new.json",
-                "--prior", tmp / "old.json", "--no-verdict"])
-    return new, r
+    import fsdecouple.fitting.prior as prior
+
+    chosen, choose = [], prior.choose_prior
+
+    def spy(*args, **kwargs):  # the choice the command made, kept for the checks below
+        chosen.append(choose(*args, **kwargs))
+        return chosen[-1]
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(prior, "choose_prior", spy)
+        r = invoke(["fit", new, "-c", tmp / "cfg.yaml", "-o", tmp / "new.json",
+                    "--prior", tmp / "old.json", "--no-verdict"])
+    assert len(chosen) == 1
+    return new, r, chosen[0]
 
 
 @pytest.mark.slow  # a whole prior fit: its lambda grid over held-out folds
 def test_fit_with_a_prior_says_what_it_chose_and_writes_it(old, prior_fit):
     tmp, model, settings = old
-    new, r = prior_fit
+    new, r, choice = prior_fit  # the command's own choice (choose_prior, spied on)
     assert "prior model" in r.stderr and "chosen by held-out worst component's RMS error" in r.stderr
     calib = load_calibration(new, settings)
-    choice = choose_prior(calib, settings, model, "old.json")
     assert choice.scores[choice.best] == min(choice.scores.values()) and FRESH in choice.scores
     assert choice.best.replace(" ", "") in r.stderr.replace(" ", "").replace("\n", "")
     # the file decodes the new set's raw outputs as the model of that choice does
