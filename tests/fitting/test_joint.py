@@ -193,6 +193,10 @@ def test_auto_beats_the_matrix_on_the_quadratic_stand_in_by_the_issues_margin(tm
     # each fold's model without the fast path's tables: decoupled on the exact path, which
     # the tables stand in for to 1e-9 F.S.; model, verdict and method are calibrate's
     monkeypatch.setattr(fitting, "fit", functools.partial(fitting.fit, tables=False))
+    # nor each fold's certificate data (budget.py, ~2 s of the test's CPU): read by nothing here
+    import fsdecouple.evaluation.budget as budget
+
+    monkeypatch.setattr(budget, "certificate_data", lambda *args, **kwargs: None)
     _, settings, calib = rig(tmp_path, seed, kind="quadratic")
     k, _ = level_index(calib)
     fs = np.asarray(settings.full_scale)
