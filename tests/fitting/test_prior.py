@@ -203,16 +203,27 @@ def _errors(seed: int, kind: str, tmp, old_models) -> tuple[float, float, float]
     return worst(model), worst(fresh), worst(prior)
 
 
-@pytest.mark.slow  # 5 seeds x 2 drifts, each an old fit, a fresh fit and the prior's choice
+SEED_RATIO = 0.7  # the most a seed's prior error may be of the old's or the fresh fit's
+
+
+@pytest.mark.slow  # 3 seeds x 2 drifts, each an old fit, a fresh fit and the prior's choice
 @pytest.mark.parametrize("kind", ["gain", "coupling"])
 def test_with_ten_poses_the_prior_beats_a_fresh_fit_and_the_old_model(kind, tmp_path, old_models):
-    # the issue's requirement, on the simulator's gain-and-offset drift and on a change of
-    # coupling the correction has no parameter for by name; the win must hold by two
-    # standard deviations of the seeds' scatter of log(ratio), not on average only
-    e = np.array([_errors(seed, kind, tmp_path, old_models) for seed in range(5)])
+    """The issue's requirement, on the simulator's gain-and-offset drift and on a change of
+    coupling the correction has no parameter for by name; the win must hold by two
+    standard deviations of the seeds' scatter of log(ratio), not on average only.
+
+    Over seeds 0-13 (this protocol), log(prior / other) per seed: gain vs old mean -2.40,
+    sd 0.67; gain vs fresh -1.72, 0.42; coupling vs old -1.57, 0.40; coupling vs fresh
+    -1.40, 0.50; the largest of all 56 -0.72 (ratio 0.49).  Every comparison's mean + 2 sd
+    is below log(0.7) = -0.36 (-0.40 at worst), so each seed is held to SEED_RATIO = 0.7,
+    the population's two-sd win, besides the seeds' own mean + 2 sd below 0 (seeds 0-2:
+    -0.37 at worst; seeds 0-4 gave -0.44, at 5/3 of the CPU).
+    """
+    e = np.array([_errors(seed, kind, tmp_path, old_models) for seed in range(3)])
     for other in (0, 1):  # old, fresh
         ratio = np.log(e[:, 2] / e[:, other])
-        assert (ratio < 0).all(), (kind, other, e)
+        assert (ratio < np.log(SEED_RATIO)).all(), (kind, other, e)
         assert ratio.mean() + 2 * ratio.std(ddof=1) < 0, (kind, other, e)
 
 
