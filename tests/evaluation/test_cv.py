@@ -139,11 +139,13 @@ def test_parallel_training_equals_sequential(doc, calib, settings):
 
 @pytest.mark.slow  # every cv model twice: seconds of CPU; the not-slow run stays under a minute
 def test_parallel_models_decouple_bit_for_bit_like_sequential_ones(calib, settings):
-    """Every method trained on threads gives the same forces, to the last bit, as alone."""
+    """Every method trained on threads gives the same forces, to the last bit, as alone
+    (at Table 2's tolerance: the threads are the point, not the solver's last digits)."""
     from fsdecouple.fitting.baselines import train_all
 
     jobs = [((r, m), m, calib.subset(train)) for r, train in enumerate([[1, 2, 3, 4], [3, 4, 5, 6]])
             for m in METHODS]
+    settings = _table2_tolerance(settings)
     parallel, _ = train_all(jobs, settings, 2, None)
     sequential, _ = train_all(jobs, settings, 1, None)
     u = calib.voltages
