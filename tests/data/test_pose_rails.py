@@ -98,7 +98,10 @@ def test_init_writes_method_auto_for_poses_and_fit_obeys_it(tmp_path):
     assert settings.method == "auto"
     # the config's method is what fit decouples by; --method overrides it
     cfg = Path(tmp_path / "lin.yaml")
-    cfg.write_text(text.replace("method: auto", "method: linear"))
+    # at Table 2's solver tolerance (conftest.FAST_SVR): which method is the point
+    assert "\nsvr: {gamma: " in text
+    cfg.write_text(text.replace("method: auto", "method: linear")
+                   .replace("\nsvr: {gamma: ", "\nsvr: {tolerance: 0.001, gamma: "))
     invoke(["fit", path, "-c", cfg, "-o", tmp_path / "m.json", "--no-verdict"])
     from fsdecouple.core.modelfile import load_model
     assert load_model(tmp_path / "m.json").method == "linear"
