@@ -123,15 +123,17 @@ def held_out_ratio(tmp_path: Path, seed: int, samples: int = 100, folds: int = 5
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", [0, 6])
+@pytest.mark.parametrize("seed", [6])
 def test_init_then_fit_beats_a_matrix_with_offset_held_out_by_pose(tmp_path, seed, exact_fits):
     # issue 32's hidden check: <= 1.10 x.  Over seeds 0-9 the ratio was 0.16-0.91 (seed 6
-    # the highest, its worst component mz near the matrix's); Table 2's kernel gave up to 1.17
+    # the highest, its worst component mz near the matrix's); Table 2's kernel gave up to 1.17.
+    # Checked on seed 6 alone, the one nearest the limit (0.81 now; seed 0, also checked
+    # before, 0.42): the same claim at its hardest, at half the CPU
     assert held_out_ratio(tmp_path, seed) <= 1.10
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("seed", [5])
 def test_poses_that_do_not_repeat_decouple_by_whichever_held_out_better(tmp_path, seed,
                                                                         exact_fits):
     # the public eight-gauge set's poses sit ~10 % of a span off any smooth model while
@@ -139,6 +141,8 @@ def test_poses_that_do_not_repeat_decouple_by_whichever_held_out_better(tmp_path
     # held out at 1.17 x the matrix.  Simulated so (0.15 x SPAN), the model fit wrote
     # before (svr, poses near a rail left out) held out at 1.12 and 1.14 x (seeds 0, 1;
     # 0.98-1.14 over seeds 0-5); with method: auto and the verdict holding out poses,
-    # 0.96-1.03 (seeds 0-5).  Folds in file order, every fifth pose, as the check's.
+    # 0.96-1.03 (seeds 0-5: 1.016, 0.961, 0.972, 1.022, 1.001, 1.034).  Checked on seed 5
+    # alone, the highest (seeds 0 and 1 before, at twice the CPU).  Folds in file order,
+    # every fifth pose, as the check's.
     n = len(POSITIONS) * ORIENTATIONS
     assert held_out_ratio(tmp_path, seed, 200, repeatability=0.15, order=np.arange(n)) <= 1.10
