@@ -211,7 +211,9 @@ def test_cv_command_json_output_and_gate(tmp_path):
     assert doc["format"] == "fsdecouple.cv" and doc["gate"]["passed"] is True
     r = invoke(["cv", SAMPLE / "calibration", "-o", out], code=2)
     assert "already exists" in r.stderr
-    r = invoke(["cv", SAMPLE / "calibration", "-c", FAST_CONFIG, "--max-gamma", "1e-6"], code=1)
+    # the failing gate on one round (--folds 1,2): any round's gamma is above 1e-6
+    r = invoke(["cv", SAMPLE / "calibration", "-c", FAST_CONFIG, "--max-gamma", "1e-6",
+                "--folds", "1,2"], code=1)
     assert "Interference error" in r.stdout and "FAILED" in r.stdout
 
 
@@ -309,8 +311,11 @@ def test_a_config_method_is_named_as_not_used_by_cv(tmp_path):
     instead of dropping it in silence."""
     cfg = tmp_path / "m.yaml"
     cfg.write_text("svr: {tolerance: 0.001}\nmethod: linear\n")
-    r = invoke(["cv", SAMPLE / "calibration", "-c", cfg, "-o", tmp_path / "cv.json", "--json"])
+    # one round (--folds 1,2): the warning is the document's, whatever the rounds
+    r = invoke(["cv", SAMPLE / "calibration", "-c", cfg, "-o", tmp_path / "cv.json", "--json",
+                "--folds", "1,2"])
     doc = json.loads((tmp_path / "cv.json").read_text())
+    assert doc["folds"] == [[1, 2]]
     assert any("config method: linear not used" in w for w in doc["warnings"]), doc["warnings"]
     assert "config method: linear not used" in r.stdout + r.stderr
 
