@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
-from fsdecouple import load_calibration, load_config
+from fsdecouple import load_calibration, load_config, load_model
 from fsdecouple.config import TABLE2_TOLERANCE
 from fsdecouple.data.calibration import from_table
 from fsdecouple.fitting.fit import fit
@@ -120,7 +120,7 @@ def test_full_scale_scaling_keeps_six_axis_defaults_near_the_floor(case):
 
 @pytest.mark.slow  # six-axis fits: seconds of CPU; the not-slow run stays under a minute
 def test_six_axis_volts_keep_the_configured_tolerance_and_three_axes_solve_to_the_noise(
-        default_model):
+        default_model, sample_model):
     """Six-axis fits in volts keep Table 2's tolerance (fit's 10 s budget); three axes are
     solved to half the noise sigma, at least SOLVE_FRACTION, of the full-scale output in
     any unit (noise.py): a one-repetition load cell in counts (sigma unknown) records
@@ -133,7 +133,7 @@ def test_six_axis_volts_keep_the_configured_tolerance_and_three_axes_solve_to_th
     assert model.settings.svr.tolerance == pytest.approx(SOLVE_FRACTION, rel=1e-12)
     paper = load_config()
     calib = load_calibration(ROOT / "sample_data" / "calibration", paper)
-    model = fit(calib, paper, workers=2, tables=False)
+    model = load_model(sample_model)  # the suite's `fit sample_data/calibration`, no config
     u_fs = np.abs(model.k) * np.asarray(paper.full_scale)
     sigma = noise(calib, paper)
     assert 2e-4 < sigma < 1e-3  # the sample's 0.5 mV on 1-2 V full-scale outputs
