@@ -32,10 +32,13 @@ GOLDEN = ROOT / "tests" / "fixtures" / "golden" / "model-v2.json"
 
 
 @pytest.fixture(scope="module")
-def tangent():
-    settings = load_config()
-    assert settings.extrapolation == "tangent"  # the default of new fits
-    return fit(load_calibration(SAMPLE / "calibration", settings), settings)
+def tangent(sample_model):
+    """The suite's ``fit sample_data/calibration`` (no config: the default settings), read
+    from its file: the same chi as an in-process fit of the sample, without fitting again."""
+    assert load_config().extrapolation == "tangent"  # the default of new fits
+    model = load_model(sample_model)
+    assert model.settings.extrapolation == "tangent"
+    return model
 
 
 @pytest.fixture(scope="module")
