@@ -188,7 +188,8 @@ def test_init_recognises_a_temperature_column(tmp_path, header, unit):
 
 
 @pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
-def test_report_certificate_and_compare_show_the_terms(drifting, tmp_path):
+def test_report_certificate_and_compare_show_the_terms(drifting, tmp_path, unrendered):
+    # the report's figures built, not rasterised (conftest's unrendered): its text is the point
     invoke(["report", drifting / "model.json", "-o", tmp_path / "r.html"])
     html = (tmp_path / "r.html").read_text(encoding="utf-8")
     assert 'id="temperature"' in html and "ppm/K" in html
