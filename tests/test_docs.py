@@ -174,10 +174,11 @@ def test_the_readme_fit_block_is_the_shared_sample_fit(sample_fit):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("group", sorted({e.group for e in examples.EXAMPLES}))
-def test_every_example_block_is_a_fresh_run(group, sample_fit, sample_cv, tmp_path):
+def test_every_example_block_is_a_fresh_run(group, sample_fit, sample_cv, tmp_path, unrendered):
     """Each group's commands run again (in-process), in order, in a scratch directory; the
     sample's fit and cv are the suite's shared runs of the same commands (their files
-    copied in, their output reused)."""
+    copied in, their output reused).  The report's figures are built but not rasterised
+    (``unrendered``): its block shows the line the command prints, which counts them."""
     from conftest import SAMPLE_CV
 
     done = {}
@@ -207,10 +208,12 @@ def _doctests(page):
 
 
 @pytest.mark.slow
-def test_the_api_page_examples_run_as_doctests(tmp_path):
+def test_the_api_page_examples_run_as_doctests(tmp_path, unrendered):
     """docs/api.md's examples, run from a directory that looks like the repository's root
     (its sample data and configs) as the page says; every '>>>' line runs and every shown
-    result must match (one raised NameError when they were not run)."""
+    result must match (one raised NameError when they were not run).  The report's
+    figures are built and plotted but not rasterised (``unrendered``: ~3 s of CPU; the
+    page shows the HTML's start, and the pixels are tests/reporting/test_report.py's)."""
     import doctest
 
     test, blocks = _doctests(ROOT / "docs" / "api.md")
