@@ -42,7 +42,13 @@ TINY = "gamma=1,8;C=10;epsilon=0.25"
 
 @pytest.fixture(scope="module")
 def tuned():
-    settings = load_config()
+    # Table 2 at its own libsvm tolerance (1e-3, as a config writes it): its figure is
+    # re-derived here with the same settings, and the narrow candidate beats it inside
+    # and loses at the edge either way (measured: figure 7.3e-4 against 9.0e-4 F.S., 7.8e-4
+    # at the noise rule; edge 1.38e-3 against 1.10e-3, 1.22e-3).  Its fits at the noise
+    # rule cost 3x: 7.7 s of CPU instead of 2.5 s for the tune and the re-derivation.
+    # The noise rule's record (tolerance None) is test_every_candidate_better_inside's.
+    settings = load_config(tolerance=1e-3)
     calib = load_calibration(SAMPLE, settings)
     chosen, record = tune_settings(calib, settings, grid=parse_grid(SMALL), workers=2)
     return calib, settings, chosen, record
@@ -90,8 +96,8 @@ def test_never_worse_than_table2(tuned):
 def test_grid_candidates_are_solved_to_the_tuned_tolerance(tuned):
     _, settings, chosen, record = tuned
     cands = record["candidates"]
-    # as configured: none written, so fit's noise rule (None), never a figure it does not use
-    assert cands[0]["tolerance"] is settings.svr.tolerance is None
+    # as configured (here Table 2's 1e-3), not the grid's
+    assert cands[0]["tolerance"] == settings.svr.tolerance == 1e-3
     assert all(c["tolerance"] == TUNE_TOLERANCE for c in cands[1:])
     if record["chosen"]:
         assert chosen.svr.tolerance == TUNE_TOLERANCE
@@ -189,6 +195,10 @@ def test_every_candidate_better_inside_is_not_given_up_for_the_edge(monkeypatch)
     _scripted(monkeypatch, inside, edge)
     _, record = tune_settings(calib, settings, grid=grid, workers=1)
     assert record["chosen"] == 2  # the lowest figure, though the worst at the edge
+    # Table 2 as configured: none written, so fit's noise rule (None), never a figure it
+    # does not use; the grid's candidates at TUNE_TOLERANCE
+    assert record["candidates"][0]["tolerance"] is settings.svr.tolerance is None
+    assert all(c["tolerance"] == TUNE_TOLERANCE for c in record["candidates"][1:])
     assert [c["edge"] for c in record["candidates"]] == pytest.approx([1e-3, 3 ** 0.5 * 1e-3,
                                                                        2e-3])
     _, record = tune_settings(calib, replace(settings, extrapolation="kernel"), grid=grid,
