@@ -27,6 +27,7 @@ from fsdecouple.evaluation.tune import (
     tune_settings,
 )
 from fsdecouple.fitting.fit import chi_training_data, fit
+from fsdecouple.fitting.linear import fit_omega
 from fsdecouple.fitting.svr import predict, train
 from fsdecouple.sim.simulate import SimulatedSensor, with_coupling
 
@@ -111,7 +112,9 @@ def test_the_tuned_tolerance_reaches_the_converged_svr_and_table2s_does_not():
     # reference is the same problem solved to 1e-9.
     settings = load_config()
     calib = load_calibration(SAMPLE, settings)
-    u_fs = np.abs(fit(calib, settings, workers=1, tables=False).k) * np.asarray(settings.full_scale)
+    # the SVRs' full-scale units: |k| F_FS, k the slopes of eq. (2) (the fit's own k,
+    # without the 1 s of its six SVRs)
+    u_fs = np.abs(fit_omega(calib.points, calib.layout).k) * np.asarray(settings.full_scale)
     x, y = chi_training_data(calib, "yx")
     x, y = x / u_fs[0], y / u_fs[1]
     grid = np.linspace(x.min(), x.max(), 101)
