@@ -172,12 +172,37 @@ def test_the_readme_fit_block_is_the_shared_sample_fit(sample_fit):
     assert "verdict: " in fresh and "second-order coupling error" in fresh
 
 
+SIX_FIT = "fsdecouple fit six/calibration -c six/sensor.yaml -o model.json"
+
+
+def _six_fit_is_the_shared_one(six_model_file, tmp_path, done):
+    """The six-axis group's fit is the suite's shared six-axis fit (``six_model_file``):
+    ``simulate six --components 6`` (run here) writes the committed sample's data and
+    configs/six-axis.yaml but for the sensor's name (asserted here, as
+    tests/sim/test_six_axis.py does), and the block shows nothing of the fit's output."""
+    simulate, = (c for c in done if c.startswith("fsdecouple simulate six"))
+    example, = (e for e in examples.EXAMPLES if SIX_FIT in e.commands)
+    assert example.show[example.commands.index(SIX_FIT)] is examples.nothing
+    assert simulate in example.commands
+    six, sample = tmp_path / "six", ROOT / "sample_data" / "six_axis"
+    for path in (sample / "calibration").iterdir():
+        assert (six / "calibration" / path.name).read_bytes() == path.read_bytes(), path.name
+    assert len(list((six / "calibration").iterdir())) == len(list((sample / "calibration").iterdir()))
+    assert (six / "sensor.yaml").read_text().replace("sim-6axis-seed0", "sim-6axis") \
+        == (ROOT / "configs" / "six-axis.yaml").read_text()
+    shutil.copyfile(six_model_file, tmp_path / "model.json")
+    done[SIX_FIT] = examples.Result(0, "", "")  # not shown (asserted above)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("group", sorted({e.group for e in examples.EXAMPLES}))
-def test_every_example_block_is_a_fresh_run(group, sample_fit, sample_cv, tmp_path):
+def test_every_example_block_is_a_fresh_run(group, sample_fit, sample_cv, tmp_path, unrendered,
+                                            request):
     """Each group's commands run again (in-process), in order, in a scratch directory; the
     sample's fit and cv are the suite's shared runs of the same commands (their files
-    copied in, their output reused)."""
+    copied in, their output reused), and the six-axis fit the suite's of the same data
+    (_six_fit_is_the_shared_one).  The report's figures are built but not rasterised
+    (``unrendered``): its block shows the line the command prints, which counts them."""
     from conftest import SAMPLE_CV
 
     done = {}
@@ -191,6 +216,11 @@ def test_every_example_block_is_a_fresh_run(group, sample_fit, sample_cv, tmp_pa
     for name in ("sample_data", "configs"):
         (tmp_path / name).symlink_to(ROOT / name, target_is_directory=True)
     with working_directory(tmp_path):
+        if group == "six":
+            simulate = next(c for e in examples.EXAMPLES if e.group == "six" for c in e.commands
+                            if c.startswith("fsdecouple simulate six"))
+            done[simulate] = examples.run_command(simulate, _in_process)
+            _six_fit_is_the_shared_one(request.getfixturevalue("six_model_file"), tmp_path, done)
         for example in (e for e in examples.EXAMPLES if e.group == group):
             fresh = examples.masked(examples.run(example, _in_process, done), example.volatile)
             want = examples.masked(examples.block(example), example.volatile)
@@ -207,10 +237,12 @@ def _doctests(page):
 
 
 @pytest.mark.slow
-def test_the_api_page_examples_run_as_doctests(tmp_path):
+def test_the_api_page_examples_run_as_doctests(tmp_path, unrendered):
     """docs/api.md's examples, run from a directory that looks like the repository's root
     (its sample data and configs) as the page says; every '>>>' line runs and every shown
-    result must match (one raised NameError when they were not run)."""
+    result must match (one raised NameError when they were not run).  The report's
+    figures are built and plotted but not rasterised (``unrendered``: ~3 s of CPU; the
+    page shows the HTML's start, and the pixels are tests/reporting/test_report.py's)."""
     import doctest
 
     test, blocks = _doctests(ROOT / "docs" / "api.md")

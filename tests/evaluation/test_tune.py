@@ -27,6 +27,7 @@ from fsdecouple.evaluation.tune import (
     tune_settings,
 )
 from fsdecouple.fitting.fit import chi_training_data, fit
+from fsdecouple.fitting.linear import fit_omega
 from fsdecouple.fitting.svr import predict, train
 from fsdecouple.sim.simulate import SimulatedSensor, with_coupling
 
@@ -36,13 +37,22 @@ SAMPLE = "sample_data/calibration"
 # candidate is one of them); a second gamma only added fits (the product is C x epsilon's)
 SMALL = "gamma=8;C=1,10;epsilon=0.25,1"
 # two candidates besides Table 2: enough for the CLI's record and round trip (the grid
-# itself is checked on SMALL through the `tuned` fixture), half of SMALL's fits
-TINY = "gamma=1,8;C=10;epsilon=0.25"
+# itself is checked on SMALL through the `tuned` fixture).  Wide kernels at C = 1 solve
+# fast (0.9 s of CPU for the tune, 1.6 s with gamma 1 and 8 at C = 10), and with Table
+# 2's tolerance (FAST_CONFIG) both are clearly better on the sample, the second chosen
+# (figures 7.8e-4 and 7.5e-4 F.S. against 9.0e-4): the round trips carry a grid pick
+TINY = "gamma=2,4;C=1;epsilon=1"
 
 
 @pytest.fixture(scope="module")
 def tuned():
-    settings = load_config()
+    # Table 2 at its own libsvm tolerance (1e-3, as a config writes it): its figure is
+    # re-derived here with the same settings, and the narrow candidate beats it inside
+    # and loses at the edge either way (measured: figure 7.3e-4 against 9.0e-4 F.S., 7.8e-4
+    # at the noise rule; edge 1.38e-3 against 1.10e-3, 1.22e-3).  Its fits at the noise
+    # rule cost 3x: 7.7 s of CPU instead of 2.5 s for the tune and the re-derivation.
+    # The noise rule's record (tolerance None) is test_every_candidate_better_inside's.
+    settings = load_config(tolerance=1e-3)
     calib = load_calibration(SAMPLE, settings)
     chosen, record = tune_settings(calib, settings, grid=parse_grid(SMALL), workers=2)
     return calib, settings, chosen, record
@@ -90,8 +100,8 @@ def test_never_worse_than_table2(tuned):
 def test_grid_candidates_are_solved_to_the_tuned_tolerance(tuned):
     _, settings, chosen, record = tuned
     cands = record["candidates"]
-    # as configured: none written, so fit's noise rule (None), never a figure it does not use
-    assert cands[0]["tolerance"] is settings.svr.tolerance is None
+    # as configured (here Table 2's 1e-3), not the grid's
+    assert cands[0]["tolerance"] == settings.svr.tolerance == 1e-3
     assert all(c["tolerance"] == TUNE_TOLERANCE for c in cands[1:])
     if record["chosen"]:
         assert chosen.svr.tolerance == TUNE_TOLERANCE
@@ -105,7 +115,9 @@ def test_the_tuned_tolerance_reaches_the_converged_svr_and_table2s_does_not():
     # reference is the same problem solved to 1e-9.
     settings = load_config()
     calib = load_calibration(SAMPLE, settings)
-    u_fs = np.abs(fit(calib, settings, workers=1, tables=False).k) * np.asarray(settings.full_scale)
+    # the SVRs' full-scale units: |k| F_FS, k the slopes of eq. (2) (the fit's own k,
+    # without the 1 s of its six SVRs)
+    u_fs = np.abs(fit_omega(calib.points, calib.layout).k) * np.asarray(settings.full_scale)
     x, y = chi_training_data(calib, "yx")
     x, y = x / u_fs[0], y / u_fs[1]
     grid = np.linspace(x.min(), x.max(), 101)
@@ -189,6 +201,10 @@ def test_every_candidate_better_inside_is_not_given_up_for_the_edge(monkeypatch)
     _scripted(monkeypatch, inside, edge)
     _, record = tune_settings(calib, settings, grid=grid, workers=1)
     assert record["chosen"] == 2  # the lowest figure, though the worst at the edge
+    # Table 2 as configured: none written, so fit's noise rule (None), never a figure it
+    # does not use; the grid's candidates at TUNE_TOLERANCE
+    assert record["candidates"][0]["tolerance"] is settings.svr.tolerance is None
+    assert all(c["tolerance"] == TUNE_TOLERANCE for c in record["candidates"][1:])
     assert [c["edge"] for c in record["candidates"]] == pytest.approx([1e-3, 3 ** 0.5 * 1e-3,
                                                                        2e-3])
     _, record = tune_settings(calib, replace(settings, extrapolation="kernel"), grid=grid,
@@ -218,6 +234,7 @@ def test_fit_tune_round_trips_through_the_model_file(tmp_path):
                             "-c", str(FAST_CONFIG), "--json", "--no-verdict"])
     assert r.exit_code == 0, r.output
     printed = json.loads(r.stdout)["tune"]
+    assert printed["chosen"] != 0  # a grid candidate, not Table 2's settings
     model = load_model(out)
     assert model.report.tune == printed
     pick = printed["candidates"][printed["chosen"]]
@@ -296,6 +313,9 @@ def floor_forces(sensor: SimulatedSensor, u: np.ndarray) -> np.ndarray:
 def _ratio_to_floor(tmp_path, coupling, fit_args):
     from fsdecouple.sim.simulate import SimulatedSensor
 
+    if "--tune-grid" in fit_args:  # a part of the default grid
+        g, default = parse_grid(fit_args[fit_args.index("--tune-grid") + 1]), Grid()
+        assert all(set(getattr(g, k)) <= set(getattr(default, k)) for k in ("gamma", "C", "epsilon"))
     sim = ["simulate", str(tmp_path / "d"), "--seed", "7"]
     sensor = SimulatedSensor()
     if coupling is not None:
@@ -324,11 +344,23 @@ def _ratio_to_floor(tmp_path, coupling, fit_args):
 # 1.5 held on seed 7 but not on 3 of the 24 seeds at either coupling.  Limits: the
 # max x 1.25, rounded.
 FIVE_PERCENT_LIMIT, SAMPLE_LIKE_LIMIT = 2.4, 2.75
+# The tests tune on part of the default grid that holds the candidate the default grid
+# (24 candidates) chooses on seed 7, measured with --tune alone: gamma 4, C 1, epsilon
+# 0.25 sigma at coupling 0.05 (figure 6.26e-4 F.S.), gamma 2, C 10, epsilon 0.25 sigma
+# at 0.0175 (6.05e-4), each the lowest figure of those clearly better than Table 2.
+# Each candidate is judged against Table 2 alone and the lowest figure of those clearly
+# better is chosen, so these grids choose the same settings and the ratios are the
+# default grid's to the last digit (measured: 1.246, 1.081, 1.376 and 1.271, 1.068,
+# 1.315): the limits above hold for them as derived.  Beside the winner, gamma 2, C 1,
+# epsilon 0.25 sigma: clearly better but a higher figure at 0.05 (6.44e-4), not clearly
+# better at 0.0175.  A tune of 3 candidates instead of 25: ~3.3 s of CPU a test, not ~13 s.
+FIVE_PERCENT_GRID = "gamma=2,4;C=1;epsilon=0.25"
+SAMPLE_LIKE_GRID = "gamma=2;C=1,10;epsilon=0.25"
 
 
 @pytest.mark.slow
 def test_five_percent_coupling_tuned_and_refined_is_near_the_floor(tmp_path):
-    ratio = _ratio_to_floor(tmp_path, 0.05, ["--tune", "--refine", "3"])
+    ratio = _ratio_to_floor(tmp_path, 0.05, ["--tune", "--tune-grid", FIVE_PERCENT_GRID, "--refine", "3"])
     assert (ratio <= FIVE_PERCENT_LIMIT).all(), ratio
 
 
@@ -336,7 +368,8 @@ def test_five_percent_coupling_tuned_and_refined_is_near_the_floor(tmp_path):
 def test_sample_like_coupling_tuned_and_refined_is_near_the_floor(tmp_path):
     """At the sample's coupling the defaults (K = 0, Table 2) reach 1.2-1.8x the floor per
     axis on simulate's log (docs/benchmarks.md, the accuracy table); tune + refine close most of it."""
-    ratio = _ratio_to_floor(tmp_path, 0.0175, ["--tune", "--refine", "3"])
+    ratio = _ratio_to_floor(tmp_path, 0.0175, ["--tune", "--tune-grid", SAMPLE_LIKE_GRID,
+                                                  "--refine", "3"])
     assert (ratio <= SAMPLE_LIKE_LIMIT).all(), ratio  # seed 7: 1.32x; see the scatter above
 
 
@@ -347,6 +380,7 @@ def test_cv_tune_records_the_choice_and_cross_validates_with_it(tmp_path):
                             "-o", str(out)])  # Table 2's tolerance: the record is the point
     assert r.exit_code == 0, r.output
     doc = json.loads(out.read_text())
+    assert doc["tune"]["chosen"] != 0  # a grid candidate, not Table 2's settings
     pick = doc["tune"]["candidates"][doc["tune"]["chosen"]]
     assert (doc["settings"]["svr"]["gamma"], doc["settings"]["scaling"]) == (
         pick["gamma"], pick["scaling"])
