@@ -270,7 +270,9 @@ def test_progress_bars_show_on_a_terminal_and_never_in_ci(tmp_path, sample_model
 
 @pytest.mark.slow  # over ~0.6 s: the not-slow run stays under a minute
 def test_usage_errors_are_one_line_and_exit_2(sample_model):
-    """A missing argument, a bad option value or an unknown command: bad input like any other."""
+    """A missing argument, a bad option value or an unknown command: bad input like any
+    other, through the CLI's main (what `python -m fsdecouple` runs)."""
+    import re
     import subprocess
     import sys
 
@@ -281,14 +283,29 @@ def test_usage_errors_are_one_line_and_exit_2(sample_model):
         "Did you mean 'apply'?": ["aply"],
         "No such option: --bogus": ["cv", SAMPLE / "calibration", "--bogus"],
     }
-    # the processes run side by side: each is mostly an interpreter starting up
-    procs = {expected: subprocess.Popen([sys.executable, "-m", "fsdecouple", *map(str, args)],
-                                        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-             for expected, args in cases.items()}
-    for expected, p in procs.items():
-        stdout, stderr = p.communicate()
+    # one process runs the CLI's main once per case (each start-up costs ~1 s of CPU);
+    # each case's output on each stream follows a line of its own
+    runner = ("import json, sys\n"
+              "from fsdecouple.cli import main\n"
+              "for i, args in enumerate(json.loads(sys.argv[1])):\n"
+              "    print(f'@@ case {i} @@', flush=True)\n"
+              "    print(f'@@ case {i} @@', file=sys.stderr, flush=True)\n"
+              "    sys.argv = ['fsdecouple', *args]\n"
+              "    try:\n"
+              "        main()\n"
+              "    except SystemExit as stop:\n"
+              "        print(f'@@ exit {stop.code} @@', file=sys.stderr, flush=True)\n")
+    p = subprocess.run([sys.executable, "-c", runner,
+                        json.dumps([list(map(str, args)) for args in cases.values()])],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    outs = re.split(r"@@ case \d+ @@\n", p.stdout)[1:]
+    errs = re.split(r"@@ case \d+ @@\n", p.stderr)[1:]
+    assert len(outs) == len(errs) == len(cases), (p.stdout, p.stderr)
+    for expected, stdout, stderr in zip(cases, outs, errs, strict=True):
+        stderr, code = stderr.removesuffix("\n").rsplit("\n", 1)
         lines = stderr.splitlines()
-        assert p.returncode == 2 and len(lines) == 1, stderr
+        assert code == "@@ exit 2 @@" and len(lines) == 1, stderr
         assert lines[0].startswith("error: ") and expected in lines[0] and "--help" in lines[0]
         assert "Traceback" not in stderr and stdout == ""
 
