@@ -109,10 +109,15 @@ class _Settings:
         return self._extra[name] if name in self._extra else getattr(self._base, name)
 
 
-def build(model, tmp_path, *, opt="-O2", name="decoupler.h", **kw):
-    """Export ``model``, compile it into the harness; return (run, header text)."""
+def build(model, tmp_path, *, opt="-O2", name="decoupler.h", exported=None, **kw):
+    """Export ``model`` (or take ``exported``, (header text, export result), of it),
+    compile it into the harness; return (run, header text)."""
     header = tmp_path / name
-    result = export_header(model, header, force=True, **kw)
+    if exported is None:
+        result = export_header(model, header, force=True, **kw)
+    else:
+        header.write_text(exported[0])
+        result = exported[1]
     p = kw.get("prefix", "fsd_")
     real = "float" if result.precision == "float" else "double"
     fn = f"{p}decouple_f" if real == "float" else f"{p}decouple"
@@ -238,16 +243,12 @@ def test_double_header_matches_model_and_apply(which, opt, request, tmp_path, re
 
 @needs_cc
 @pytest.mark.parametrize("which", ["sample", "rotated"])
-def test_float_header_within_its_bound(which, request, tmp_path, monkeypatch):
-    import fsdecouple.export.header as header
-
+def test_float_header_within_its_bound(which, request, tmp_path):
     model = request.getfixturevalue(f"{which}_model")
-    plans = []  # the plan export_header writes (planning it again costs its float bound: ~1 s)
-    real_plan_export = header.plan_export
-    monkeypatch.setattr(header, "plan_export",
-                        lambda *a, **k: plans.append(real_plan_export(*a, **k)) or plans[-1])
-    run, text = build(model, tmp_path, precision="float")
-    assert len(plans) == 1 and plans[0].precision == "float"
+    exported = request.getfixturevalue("sample_float_header") if which == "sample" else \
+        _float_export(model, tmp_path / "export")
+    run, text = build(model, tmp_path, exported=exported[:2])
+    plan = exported[2]
     bound = float(re.search(r"#define FSD_FLOAT_MAX_ERROR (\S+)", text).group(1))
     assert 0 < bound < 1e-5  # float: ~1e-7 of full scale from rounding u / k alone
     rng = np.random.default_rng(2)
@@ -258,7 +259,7 @@ def test_float_header_within_its_bound(which, request, tmp_path, monkeypatch):
     err = np.abs(f_c - model.decouple(u)) / np.asarray(model.settings.full_scale)
     assert err.max() <= bound
     # the emulation the bound comes from is the C: equal but for a rare last-bit difference
-    emu = emulate_float(plans[0], u32).astype(float)
+    emu = emulate_float(plan, u32).astype(float)
     assert np.mean(emu == f_c) > 0.99 and np.max(np.abs(emu - f_c) / np.abs(f_c).clip(1)) < 1e-6
     # statuses on the whole vector set, float inputs: the float thresholds are exact
     w = vectors(model, rng, 20_000)
@@ -268,14 +269,30 @@ def test_float_header_within_its_bound(which, request, tmp_path, monkeypatch):
     assert (as_apply(status, w.astype(float), 3) == apply_statuses(model, w.astype(float), tmp_path)).all()
 
 
+def _float_export(model, directory):
+    """``model``'s float header: (its text, the export's result, the plan it was written
+    from, recorded as export_header made it: planning it again would compute its float
+    bound again, ~0.6 s of CPU)."""
+    import fsdecouple.export.header as header_module
+
+    directory.mkdir(exist_ok=True)
+    header = directory / "f.h"
+    plans = []
+    real_plan_export = header_module.plan_export
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(header_module, "plan_export",
+                   lambda *a, **k: plans.append(real_plan_export(*a, **k)) or plans[-1])
+        result = export_header(model, header, precision="float")
+    assert len(plans) == 1 and plans[0].precision == "float" == result.precision
+    return header.read_text(), result, plans[0]
+
+
 @pytest.fixture(scope="module")
 def sample_float_header(sample_model, tmp_path_factory):
     """The sample model's float header, exported once for the tests that compile it as it
-    is or damaged (each export computes its float bound: ~1 s of CPU): (its text, the
-    export's result)."""
-    header = tmp_path_factory.mktemp("float") / "f.h"
-    result = export_header(sample_model, header, precision="float")
-    return header.read_text(), result
+    is or damaged (each export computes its float bound: ~0.6 s of CPU): (its text, the
+    export's result, its plan)."""
+    return _float_export(sample_model, tmp_path_factory.mktemp("float"))
 
 
 @needs_cc
@@ -283,7 +300,7 @@ def test_float_bound_holds_with_fused_multiply_add(sample_model, sample_float_he
     """The 2x safety factor of FSD_FLOAT_MAX_ERROR covers a compiler contracting the
     Horner steps into FMAs (the emulation rounds each product separately)."""
     header = tmp_path / "f.h"
-    text, result = sample_float_header
+    text, result, _ = sample_float_header
     header.write_text(text)
     src = tmp_path / "fma.c"
     src.write_text(HARNESS.format(P="FSD_", p="fsd_", header="f.h", real="float", fn="fsd_decouple_f"))
