@@ -191,15 +191,38 @@ def test_outputs_get_the_usual_file_mode(tmp_path):
     assert out.stat().st_mode & 0o777 == 0o644
 
 
-def _on_a_terminal(args, env):
-    """Run ``python -m fsdecouple ARGS`` with a pseudo-terminal as stdout and stderr."""
+# The commands of one _on_a_terminal call, run one after the other by the CLI's app in
+# one process (what `python -m fsdecouple` runs, less main()'s signal handling), each
+# output headed by a line of its own
+_TERMINAL_RUNNER = """
+import json, sys
+from fsdecouple.cli.app import app
+for i, args in enumerate(json.loads(sys.argv[1])):
+    print(f"@@ command {i} @@", flush=True)
+    try:
+        code = app(args, prog_name="fsdecouple", standalone_mode=False)
+    except SystemExit as stop:
+        code = stop.code
+    sys.stdout.flush()
+    sys.stderr.flush()
+    print(f"@@ exit {code or 0} @@", flush=True)
+"""
+
+
+def _on_a_terminal(commands, env) -> list[str]:
+    """Run ``commands`` (lists of CLI arguments) in one Python process with a
+    pseudo-terminal as stdout and stderr; each one's output.  One interpreter for all:
+    each start-up costs ~1 s of CPU, and the terminal, not the process, is the point."""
+    import json
     import os
     import pty
+    import re
     import subprocess
     import sys
 
     master, slave = pty.openpty()
-    proc = subprocess.Popen([sys.executable, "-m", "fsdecouple", *map(str, args)],
+    proc = subprocess.Popen([sys.executable, "-c", _TERMINAL_RUNNER,
+                             json.dumps([list(map(str, args)) for args in commands])],
                             stdin=slave, stdout=slave, stderr=slave, env=env)
     os.close(slave)
     chunks = []
@@ -212,11 +235,16 @@ def _on_a_terminal(args, env):
             break
         chunks.append(data)
     os.close(master)
-    assert proc.wait(timeout=60) == 0, b"".join(chunks).decode(errors="replace")
-    return b"".join(chunks).decode(errors="replace")
+    text = b"".join(chunks).decode(errors="replace")
+    assert proc.wait(timeout=120) == 0, text
+    parts = re.split(r"@@ command \d+ @@\r?\n", text)[1:]
+    assert len(parts) == len(commands), text
+    for part in parts:
+        assert re.search(r"@@ exit 0 @@\r?\n$", part), part
+    return parts
 
 
-@pytest.mark.slow  # runs the CLI under a pseudo-terminal, several times
+@pytest.mark.slow  # runs the CLI under a pseudo-terminal
 def test_progress_bars_show_on_a_terminal_and_never_in_ci(tmp_path, sample_model):
     import os
 
@@ -230,18 +258,21 @@ def test_progress_bars_show_on_a_terminal_and_never_in_ci(tmp_path, sample_model
     cv_args = ["cv", cal, "--folds", "1,2", "-c", FAST_CONFIG, "-o", tmp_path / "cv.json", "--force"]
     fit_args = ["fit", cal, "-c", FAST_CONFIG, "-o", tmp_path / "m.json", "--force", "--no-verdict"]
     hide_cursor = "\x1b[?25l"  # rich hides the cursor while a live bar is drawn
-    for args, label in ((apply_args, "decoupling"), (cv_args, "training"), (fit_args, "fitting")):
-        out = _on_a_terminal(args, env)
+    outs = _on_a_terminal([apply_args, cv_args, fit_args], env)
+    for out, label in zip(outs, ("decoupling", "training", "fitting"), strict=True):
         assert hide_cursor in out and label in out, out
         assert "[progress" not in out and "tuning" not in out, out  # styles, not markup text
     env["CI"] = "true"
-    assert "decoupling" not in (out := _on_a_terminal(apply_args, env)) and hide_cursor not in out
-    assert hide_cursor not in _on_a_terminal(cv_args, env)
+    out, cv_out = _on_a_terminal([apply_args, cv_args], env)
+    assert "decoupling" not in out and hide_cursor not in out
+    assert hide_cursor not in cv_out
 
 
 @pytest.mark.slow  # over ~0.6 s: the not-slow run stays under a minute
 def test_usage_errors_are_one_line_and_exit_2(sample_model):
-    """A missing argument, a bad option value or an unknown command: bad input like any other."""
+    """A missing argument, a bad option value or an unknown command: bad input like any
+    other, through the CLI's main (what `python -m fsdecouple` runs)."""
+    import re
     import subprocess
     import sys
 
@@ -252,14 +283,29 @@ def test_usage_errors_are_one_line_and_exit_2(sample_model):
         "Did you mean 'apply'?": ["aply"],
         "No such option: --bogus": ["cv", SAMPLE / "calibration", "--bogus"],
     }
-    # the processes run side by side: each is mostly an interpreter starting up
-    procs = {expected: subprocess.Popen([sys.executable, "-m", "fsdecouple", *map(str, args)],
-                                        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-             for expected, args in cases.items()}
-    for expected, p in procs.items():
-        stdout, stderr = p.communicate()
+    # one process runs the CLI's main once per case (each start-up costs ~1 s of CPU);
+    # each case's output on each stream follows a line of its own
+    runner = ("import json, sys\n"
+              "from fsdecouple.cli import main\n"
+              "for i, args in enumerate(json.loads(sys.argv[1])):\n"
+              "    print(f'@@ case {i} @@', flush=True)\n"
+              "    print(f'@@ case {i} @@', file=sys.stderr, flush=True)\n"
+              "    sys.argv = ['fsdecouple', *args]\n"
+              "    try:\n"
+              "        main()\n"
+              "    except SystemExit as stop:\n"
+              "        print(f'@@ exit {stop.code} @@', file=sys.stderr, flush=True)\n")
+    p = subprocess.run([sys.executable, "-c", runner,
+                        json.dumps([list(map(str, args)) for args in cases.values()])],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    outs = re.split(r"@@ case \d+ @@\n", p.stdout)[1:]
+    errs = re.split(r"@@ case \d+ @@\n", p.stderr)[1:]
+    assert len(outs) == len(errs) == len(cases), (p.stdout, p.stderr)
+    for expected, stdout, stderr in zip(cases, outs, errs, strict=True):
+        stderr, code = stderr.removesuffix("\n").rsplit("\n", 1)
         lines = stderr.splitlines()
-        assert p.returncode == 2 and len(lines) == 1, stderr
+        assert code == "@@ exit 2 @@" and len(lines) == 1, stderr
         assert lines[0].startswith("error: ") and expected in lines[0] and "--help" in lines[0]
         assert "Traceback" not in stderr and stdout == ""
 

@@ -96,10 +96,9 @@ def check_outputs(out_dir: Path, code: int, expected: list[str]) -> None:
 
 
 @pytest.fixture(scope="module")
-def model_file(tmp_path_factory):
-    path = tmp_path_factory.mktemp("fuzz") / "model.json"
-    assert run(["fit", SAMPLE / "calibration", "-o", path, "--no-verdict"])[0] == 0
-    return path
+def model_file(sample_model):
+    """The sample's model: conftest's, fitted once a session (apply only reads it)."""
+    return sample_model
 
 
 def data_lines(data: bytes) -> int:

@@ -257,7 +257,21 @@ def test_fit_many_fits_each_sensor_as_fit_does(fleet, tmp_path):
     assert alpha.k["x"] == pytest.approx(1 / 75.065, rel=1e-3)  # the sample sensor's slope
 
 
-def test_fit_many_cli_gates_and_errors(fleet, tmp_path):
+@pytest.fixture
+def in_threads(monkeypatch):
+    """fit-many's sensors fitted on threads of this process (``executor="thread"``), not
+    in worker processes: for the CLI tests whose point is the summary, the gates, the
+    errors and the baselines.  That a worker process fits as `fit` does is
+    test_fit_many_fits_each_sensor_as_fit_does's point, and keeps its processes; each
+    process started costs ~1 s of CPU to import the package again."""
+    import functools
+
+    import fsdecouple.fleet.sensors as sensors
+
+    monkeypatch.setattr(sensors, "fit_many", functools.partial(sensors.fit_many, executor="thread"))
+
+
+def test_fit_many_cli_gates_and_errors(fleet, tmp_path, in_threads):
     out = tmp_path / "models"
     r = invoke(["fit-many", fleet / "sensors", "-o", out, "--json", "--workers", 2], 2)
     doc = json.loads(r.stdout)
@@ -279,7 +293,7 @@ def test_fit_many_cli_gates_and_errors(fleet, tmp_path):
     invoke(["fit-many", good, "-o", tmp_path / "ok", "--force"])
 
 
-def test_fit_many_baseline_reports_drift(fleet, drift_models, tmp_path):
+def test_fit_many_baseline_reports_drift(fleet, drift_models, tmp_path, in_threads):
     good = tmp_path / "sensors"
     for name in ("alpha", "gamma"):  # their configs are their baselines' (THREE_REPS + FAST_SVR)
         shutil.copytree(fleet / "sensors" / name, good / name)
@@ -291,8 +305,8 @@ def test_fit_many_baseline_reports_drift(fleet, drift_models, tmp_path):
                 "--json"], 1)
     doc = json.loads(r.stdout)
     alpha, gamma = doc["sensors"]
-    # alpha: the same data and config as its baseline, and the fit is deterministic (in a
-    # worker process or not): no drift at all
+    # alpha: the same data and config as its baseline, and the fit is deterministic (on a
+    # thread of fit-many's or not): no drift at all
     assert largest(alpha["drift"]) == 0.0 and alpha["gate"] == []
     assert gamma["drift"]["components"]["x"]["slope_change_pct"] == pytest.approx(1.0, abs=0.15)
     assert doc["gate_failed"] == ["gamma"] and "drift exceeds --max-drift" in r.stderr

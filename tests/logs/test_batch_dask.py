@@ -190,12 +190,14 @@ def _wait_for(check, timeout=60.0):
     raise AssertionError("timed out")
 
 
-def test_a_worker_killed_on_every_try_fails_the_log_alone(sample_model, tmp_path):
+def test_a_worker_killed_on_every_try_fails_the_log_alone(sample_model, tmp_path, cluster,
+                                                         monkeypatch):
     """With no retry allowed (allowed-failures 0), the one death of the worker decoupling a
     log is its last: the log is reported failed in one line, its partial output is gone,
-    and the other log of the run is written."""
-    import dask
-
+    and the other log of the run is written.  (On the module's cluster, its scheduler
+    allowing no failure for this test: it reads ``allowed_failures`` at each worker's
+    death, as a cluster started under ``distributed.scheduler.allowed-failures: 0`` does;
+    a cluster of its own cost two more worker processes, ~2.5 s of CPU.)"""
     from fsdecouple.logs.many import apply_many
 
     rows = (SAMPLE / "task_voltages.csv").read_bytes().splitlines(keepends=True)
@@ -207,10 +209,8 @@ def test_a_worker_killed_on_every_try_fails_the_log_alone(sample_model, tmp_path
     (logs / "good.csv").write_bytes(b"".join(rows[:1001]))
     out = tmp_path / "out"
     result = {}
-    with dask.config.set({"distributed.scheduler.allowed-failures": 0}), \
-            distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                     dashboard_address=":0", silence_logs=50) as cluster, \
-            distributed.Client(cluster, set_as_default=False) as client:
+    monkeypatch.setattr(cluster.scheduler, "allowed_failures", 0)
+    with distributed.Client(cluster, set_as_default=False) as client:
         run = threading.Thread(target=lambda: result.update(r=apply_many(
             sample_model, [fifo, logs / "good.csv"], out, engine="dask",
             scheduler=cluster.scheduler_address)))
@@ -230,6 +230,7 @@ def test_a_worker_killed_on_every_try_fails_the_log_alone(sample_model, tmp_path
             with contextlib.suppress(BrokenPipeError):
                 fh.close()
         assert not run.is_alive()
+        client.wait_for_workers(2, timeout=60)  # the nanny's new worker, for the tests after
     doc = result["r"].to_dict()
     assert doc["failed"] == [str(fifo)]
     error = next(f["error"] for f in doc["files"] if f["input"] == str(fifo))
