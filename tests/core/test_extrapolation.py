@@ -65,7 +65,7 @@ def scaled():
     return fit(load_calibration(SAMPLE / "calibration", settings), settings)
 
 
-@pytest.mark.parametrize("which", ["tangent", "scaled"])
+@pytest.mark.parametrize("which", ["tangent", pytest.param("scaled", marks=pytest.mark.slow)])
 def test_tangent_is_continuous_in_value_and_slope_at_the_range_edges(which, request):
     model = request.getfixturevalue(which)
     h = 1e-4  # as test_checks: roundoff ~1e-16 sum|c| / h against truncation h^2 chi''' / 3

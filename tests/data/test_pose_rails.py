@@ -8,6 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 from conftest import assert_one_line_error, invoke
 
 from fsdecouple.config import load_config
@@ -58,6 +59,7 @@ def test_a_pinned_channel_leaves_its_poses_out_and_a_near_one_that_follows_is_ke
     assert not (tmp_path / "m.json").exists()
 
 
+@pytest.mark.slow  # a whole fit or cv: over half a second of CPU
 def test_the_verdict_of_a_pose_set_holds_out_poses_in_five_folds(tmp_path):
     # the levels protocol took sweeps from file order and failed on a training fold of a
     # pose set ("the mz sweep of repetition 1 has 1 loaded point"); poses hold out by pose
@@ -87,6 +89,7 @@ def test_the_verdict_of_a_pose_set_holds_out_poses_in_five_folds(tmp_path):
     assert '"protocol": "poses"' in r.stdout
 
 
+@pytest.mark.slow  # a whole fit or cv: over half a second of CPU
 def test_init_writes_method_auto_for_poses_and_fit_obeys_it(tmp_path):
     poses = simulate_poses(0, 20)
     path = tmp_path / "poses.csv"
@@ -113,6 +116,7 @@ def test_init_writes_method_auto_for_poses_and_fit_obeys_it(tmp_path):
     assert_one_line_error(r, "method", "best")
 
 
+@pytest.mark.slow  # a whole fit or cv: over half a second of CPU
 def test_cv_on_a_pose_set_holds_out_poses_in_five_folds(tmp_path):
     # before: "the mx sweep of repetition 1 has 1 loaded point; holding out load levels
     # needs at least 2" (a pose set has no sweeps); now every fifth pose per round, and the

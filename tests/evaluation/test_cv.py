@@ -336,6 +336,7 @@ def _agree(cv_doc, verdict) -> None:
         assert got[axis] == pytest.approx(want[axis], rel=1e-6, abs=1e-12), axis
 
 
+@pytest.mark.slow  # a whole fit or cv: over half a second of CPU
 def test_cv_scores_the_svr_as_the_held_out_verdict_does(doc, calib, settings):
     """cv's rounds are the verdict's protocol, solved alike (fitting/noise.py): the verdict
     (fit's own held-out rounds, another code path) gives cv's svr gamma per axis."""
