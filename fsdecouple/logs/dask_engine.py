@@ -43,7 +43,7 @@ from .apply import (
 )
 from .frame import frame_forces, frame_outputs
 from .jobs import ApplySpec, Job, apply_job, dataset_zero
-from .sinks import force_arrays, pandas_metadata
+from .sinks import force_arrays, pandas_metadata, parquet_options
 
 CONNECT_TIMEOUT = 5.0  # seconds to reach a --scheduler before giving up
 # Dask's nannies start workers with MALLOC_TRIM_THRESHOLD_=65536, so that freed memory
@@ -173,13 +173,10 @@ def _dataset_graph(spec: ApplySpec, job: Job, target):
     factor = load_factor(model.settings.load_unit, unit)
     out = frame.map_partitions(decouple_partition, spec, zero, factor, meta=meta)
     names = [p.name for p in job.parts]
-    # as apply's ParquetSink: dictionary-encoding measured doubles, which seldom repeat,
-    # is wasted work
-    keep = [c for c, t in meta.dtypes.items() if not pd.api.types.is_float_dtype(t)]
     metadata = {FORCE_UNIT_KEY: unit, OUTPUT_UNIT_KEY: model.settings.output_unit}
     # each part written here, not by to_parquet, whose pandas metadata says
     # double[pyarrow] (and may not be replaced): the local engine's schema, metadata too
-    write = out.map_partitions(write_part, str(target), names, metadata, keep,
+    write = out.map_partitions(write_part, str(target), names, metadata,
                                meta=pd.DataFrame({"rows": pd.Series([], dtype="int64")}),
                                align_dataframes=False)
     # the statuses are counted from the parts written (_count_written): a second
@@ -191,8 +188,7 @@ def _dataset_graph(spec: ApplySpec, job: Job, target):
     return write.optimize(fuse=True)
 
 
-def write_part(df, target: str, names: list[str], metadata: dict[str, str], keep: list[str],
-               partition_info=None):
+def write_part(df, target: str, names: list[str], metadata: dict[str, str], partition_info=None):
     """Write one decoupled partition as ``target/<its input part's name>``, as apply's
     ParquetSink writes a log: the same types, units and pandas metadata."""
     import pandas as pd
@@ -203,7 +199,7 @@ def write_part(df, target: str, names: list[str], metadata: dict[str, str], keep
     table = table.replace_schema_metadata({**metadata, b"pandas": pandas_metadata(table.schema)})
     os.makedirs(target, exist_ok=True)
     pq.write_table(table, os.path.join(target, names[partition_info["number"]]),
-                   use_dictionary=keep)
+                   **parquet_options(table.schema))  # encoded as ParquetSink encodes
     return pd.DataFrame({"rows": [len(df)]})
 
 

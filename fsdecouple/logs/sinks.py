@@ -151,9 +151,17 @@ def _plain_pandas_metadata(schema: pa.Schema) -> bytes | None:
                        "pandas_version": version}).encode()
 
 
-def parquet_compression(schema: pa.Schema) -> dict[str, str]:
-    """Per column: no compression for floating-point columns, pyarrow's default for the rest."""
-    return {f.name: "none" if pa.types.is_floating(f.type) else "snappy" for f in schema}
+def parquet_options(schema: pa.Schema) -> dict:
+    """The writer's encoding options for a decoupled log, shared by apply and the Dask engine.
+
+    Measured doubles seldom repeat and do not compress: dictionary-encoding or
+    Snappy-compressing them is wasted work (Snappy saved < 0.1 % on them), so float
+    columns are written plain; the rest keep pyarrow's defaults (dictionary, Snappy).
+    Every column is named: pyarrow leaves a column missing from the dict uncompressed.
+    """
+    return {"use_dictionary": [f.name for f in schema if not pa.types.is_floating(f.type)],
+            "compression": {f.name: "none" if pa.types.is_floating(f.type) else "snappy"
+                            for f in schema}}
 
 
 class ParquetSink:
@@ -180,13 +188,9 @@ class ParquetSink:
 
     def write(self, table: pa.Table) -> None:
         if self.writer is None:
-            # measured doubles seldom repeat and do not compress: dictionary-encoding
-            # or Snappy-compressing them is wasted work (Snappy saves < 0.1 % on them)
-            keep = [f.name for f in table.schema if not pa.types.is_floating(f.type)]
             schema = table.schema.with_metadata({**(table.schema.metadata or {}), **self.metadata,
                                                  b"pandas": pandas_metadata(table.schema)})
-            self.writer = pq.ParquetWriter(self.fh, schema, use_dictionary=keep,
-                                           compression=parquet_compression(table.schema))
+            self.writer = pq.ParquetWriter(self.fh, schema, **parquet_options(table.schema))
         self.writer.write_table(table)
 
     def close(self) -> None:

@@ -277,6 +277,14 @@ def test_a_hive_partitioned_dataset_reads_back_whole_from_both_engines(sample_mo
         out = tmp_path / engine
         for part in out.rglob("*.parquet"):
             assert "robot" not in pq.read_schema(part).names, part
+            # each column encoded as apply's ParquetSink encodes it (sinks.parquet_options):
+            # floats plain and uncompressed, the status dictionary-encoded with Snappy
+            group = pq.ParquetFile(part).metadata.row_group(0)
+            stored = {group.column(i).path_in_schema: group.column(i) for i in range(group.num_columns)}
+            for name in ("ux", "fx"):
+                assert stored[name].compression == "UNCOMPRESSED", (engine, name)
+                assert not {"PLAIN_DICTIONARY", "RLE_DICTIONARY"} & set(stored[name].encodings)
+            assert stored["status"].compression == "SNAPPY", engine
         with warnings.catch_warnings():  # dask's own reset_index(inplace=True), pandas >= 3.1
             warnings.filterwarnings("ignore", message="The inplace keyword")
             by_dask = dd.read_parquet(out).compute()
