@@ -262,6 +262,8 @@ if __name__ == "__main__":
         grid = parse_grid(args.tune_grid) if args.tune_grid else None
     except FsdecoupleError as err:
         ap.error(f"--tune-grid: {err}")
+    if args.repetitions is not None and args.repetitions < 1:
+        ap.error(f"--repetitions {args.repetitions}: expected at least 1")
     if args.six and args.repetitions is not None:
         ap.error("--repetitions: not with --six (its calibrations are the six-axis simulator's)")
     registry = (six_methods if args.six else methods)(grid)
@@ -281,7 +283,7 @@ if __name__ == "__main__":
     chosen = SCENARIOS if not args.scenarios else [
         s for s in SCENARIOS if any(s.label.startswith(p) for p in args.scenarios.split(","))]
     t0 = time.perf_counter()
-    res = run(chosen, args.seeds, registry, repetitions=args.repetitions or 6)
+    res = run(chosen, args.seeds, registry, repetitions=6 if args.repetitions is None else args.repetitions)
     print(f"({time.perf_counter() - t0:.0f} s)")
     if args.docs:
         write_block("accuracy", markdown(res, args.seeds))

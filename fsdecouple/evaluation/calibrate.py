@@ -100,8 +100,8 @@ def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
     from ..fitting.temperature import compensate
     from ..fitting.threads import single_threaded_libraries
 
-    calib, _ = compensate(calib, settings)  # outputs at T0 for every figure below (issue 31)
-    with single_threaded_libraries():
+    with single_threaded_libraries():  # the terms' least squares too (threads.py)
+        calib, _ = compensate(calib, settings)  # outputs at T0 for every figure below (issue 31)
         model = _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress)
     if note:
         model.report.warnings.append(note)

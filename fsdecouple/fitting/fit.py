@@ -103,9 +103,9 @@ def fit(
     settings = settings or Settings()
     if not isinstance(calib, CalibrationSet):
         calib = load_calibration(calib, settings)
-    # a temperature column spanning >= 5 K: the outputs at T0, and the terms (issue 31)
-    calib, drift = compensate(calib, settings)
-    with single_threaded_libraries():
+    with single_threaded_libraries():  # the terms' least squares too (threads.py)
+        # a temperature column spanning >= 5 K: the outputs at T0, and the terms (issue 31)
+        calib, drift = compensate(calib, settings)
         model = _establish(calib, settings, workers, fit_svr, tables, noise_fraction)
     if drift is not None:
         model.temperature = drift.terms

@@ -217,15 +217,6 @@ def compensate(calib: CalibrationSet, settings) -> tuple[CalibrationSet, Tempera
     ``temperature_fit`` set) is returned as it is."""
     if not has_temperature(calib) or getattr(calib, "temperature_fit", None) is not None:
         return calib, getattr(calib, "temperature_fit", None)
-    from .threads import single_threaded_libraries
-
-    # the terms' and the held-out figure's least squares are heavy calls (threads.py):
-    # a multi-threaded BLAS spinning beside them made them 8-20x slower on 2 loaded cores
-    with single_threaded_libraries():
-        return _compensate(calib, settings)
-
-
-def _compensate(calib: CalibrationSet, settings) -> tuple[CalibrationSet, TemperatureFit | None]:
     found = fit_terms(calib, settings)
     if found is None:
         t = calib.points["temperature"].to_numpy(dtype=float)
