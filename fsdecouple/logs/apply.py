@@ -256,19 +256,27 @@ class RowRules:
     sat_lo: np.ndarray  # limits: raw outputs (after scale:, before the zero)
     sat_hi: np.ndarray
 
+    @property
+    def limited(self) -> list[int]:
+        """The raw columns with a saturation limit (``limits:``); the rest are +-inf."""
+        return [k for k in range(len(self.sat_lo))
+                if np.isfinite(self.sat_lo[k]) or np.isfinite(self.sat_hi[k])]
+
     @classmethod
     def for_model(cls, model: CouplingErrorModel, settings: Settings | None = None) -> RowRules:
         return cls(*model.extrapolation_limits().T, *limit_bounds(settings or model.settings, model))
 
 
-def _any_column(a: np.ndarray, test: Callable[[np.ndarray, int], np.ndarray]) -> np.ndarray:
-    """Rows (n,) of ``a`` (n, m) where ``test(column, k)`` holds for any column k.
+def _any_column(a: np.ndarray, test: Callable[[np.ndarray, int], np.ndarray],
+                columns=None) -> np.ndarray:
+    """Rows (n,) of ``a`` (n, m) where ``test(column, k)`` holds for any column k
+    (of ``columns``, default all).
 
     The same as ``test`` on the whole array and ``.any(axis=1)``, column by column:
     numpy reduces a few columns a row some 10x slower than it ORs whole columns.
     """
     hit = np.zeros(len(a), dtype=bool)
-    for k in range(a.shape[1]):
+    for k in range(a.shape[1]) if columns is None else columns:
         hit |= test(a[:, k], k)
     return hit
 
@@ -305,8 +313,11 @@ def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarra
         x = u if model.projection is None else model.project(u)  # M > N: the limits are v's
         outside = _any_column(x, lambda c, k: (c < rules.lo[k]) | (c > rules.hi[k])) & ~empty
         outside |= beyond_temperatures(model, raw) & ~empty
-        # the limits are the ADC's or amplifier's, so they bound the raw values
-        saturated = _any_column(raw, lambda c, k: (c <= rules.sat_lo[k]) | (c >= rules.sat_hi[k])) & ~empty
+        # the limits are the ADC's or amplifier's, so they bound the raw values; a column
+        # without limits (+-inf, the default) is not scanned: only an infinite raw value
+        # could meet them, and its row has no forces (empty) already
+        saturated = _any_column(raw, lambda c, k: (c <= rules.sat_lo[k]) | (c >= rules.sat_hi[k]),
+                                rules.limited) & ~empty
     code[outside] = EXTRAPOLATED_
     code[saturated] = SATURATED_
     return f, code, empty

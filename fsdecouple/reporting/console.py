@@ -193,8 +193,10 @@ def apply_warnings(summary) -> list[str]:
     if getattr(summary, "untared", None):
         out, median, lo, hi = summary.untared
         unit = summary.output_unit
+        # "typically": the median of each block's median, over a sample of a long block's
+        # rows (untared.py), not the exact median of every row
         w.append(f"most rows ({summary.out_of_range_rows} of {summary.rows}) lie outside the "
-                 f"calibrated range by about a constant offset ({out}: median {median:.6g} "
+                 f"calibrated range by about a constant offset ({out}: typically {median:.6g} "
                  f"{unit}, calibrated {lo:.6g} to {hi:.6g} {unit}): the log looks unzeroed; "
                  "give --tare N (its first N rows unloaded) or --zero")
     if summary.status_counts.get("not_converged"):

@@ -235,6 +235,17 @@ def test_saturated_rows_in_csv_and_parquet(sample_model_file, tmp_path):
                                    atol=1e-10 * 100)
 
 
+def test_only_the_limited_output_saturates(sample_model_file, tmp_path):
+    """Limits on uy alone: uy at -1 saturates its row; ux at and beyond 1 does not (its
+    column has no limits, so apply does not scan it: RowRules.limited)."""
+    log, cfg, out = tmp_path / "log.csv", tmp_path / "cfg.yaml", tmp_path / "f.csv"
+    log.write_text(SAT_LOG)
+    cfg.write_text("limits: {uy: [-1, 1]}\n")
+    invoke(["apply", sample_model_file, log, "-o", out, "-c", cfg])
+    status = pd.read_csv(out, dtype={"status": str}, keep_default_na=False)["status"].tolist()
+    assert status[3] == "saturated" and "saturated" not in status[:3] + status[6:], status
+
+
 def test_limits_compare_the_raw_values_before_the_zero(sample_model_file, tmp_path):
     """--zero shifts u after the limits are checked: raw 1.0 saturates, raw 0.95 does not."""
     log = tmp_path / "log.csv"

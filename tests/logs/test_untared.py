@@ -39,9 +39,9 @@ def test_an_untared_count_log_gets_the_tare_hint(loadcell_model, tmp_path):
     hint = [ln for ln in r.stderr.splitlines() if "constant offset" in ln]
     assert len(hint) == 1 and "--tare N" in hint[0] and "--zero" in hint[0], r.stderr
     assert "most rows (50 of 50)" in hint[0]
-    # the median it quotes is the log's own raw level of the channel it names
+    # the typical value it quotes is the log's own raw level of the channel it names
     name = hint[0].split("constant offset (")[1].split(":")[0]
-    median = float(hint[0].split("median ")[1].split()[0])
+    median = float(hint[0].split("typically ")[1].split()[0])
     assert median == pytest.approx(raw[["ux", "uy", "uz"].index(name)], abs=60)
 
 
