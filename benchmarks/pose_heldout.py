@@ -51,7 +51,7 @@ def joined(source: Path, work: Path) -> Path:
     return out
 
 
-def heldout(path: Path, work: Path, run=run, verdict: bool = True) -> tuple[np.ndarray, np.ndarray, str]:
+def heldout(path: Path, work: Path, verdict: bool = True, run=run) -> tuple[np.ndarray, np.ndarray, str]:
     """Per component the RMS error [fraction of the largest load] of the model and of the
     matrix over the 5 pose folds, and the methods the folds' models decouple by; each
     command run by ``run`` (a process each, or :func:`rig_heldout.run_here`), each fold's
@@ -127,7 +127,8 @@ def main() -> int:
 
                 write_poses(work / "sim", seed=case, samples=args.samples)
                 path = joined(work / "sim", work)
-            m, c, methods = heldout(path, work, run_here if args.in_process else run, args.verdict)
+            m, c, methods = heldout(path, work, verdict=args.verdict,
+                                    run=run_here if args.in_process else run)
         ratio = m.max() / c.max()
         worst = max(worst, ratio)
         print(f"{label}: worst component's held-out RMS error, model {100 * m.max():.1f} % "

@@ -161,7 +161,7 @@ def main(argv=None) -> None:
                 cli("simulate", str(work), "--rig", args.rig, "--seed", str(seed),
                     "--gauges", str(args.gauges))
                 path = work / "calibration.csv"
-            r = heldout(path, work, args.method, args.verdict, cli)
+            r = heldout(path, work, args.method, verdict=args.verdict, run=cli)
             ratios.append(r["ratio"])
             print(f"seed {seed}: worst RMS model {100 * max(r['model']):.3f} % F.S., matrix "
                   f"{100 * max(r['matrix']):.3f} % F.S., ratio {r['ratio']:.3f} (squared-terms "
