@@ -1,7 +1,8 @@
 """Threads: fsdecouple parallelises over whole jobs, and keeps BLAS and OpenMP to one thread.
 
 Every matrix here is small (hundreds of rows) and fsdecouple runs whole jobs (the
-SVRs of a fit, the models of cv, the blocks of a log) on its own threads.
+SVRs of a fit, the models of cv, the blocks of a log) on its own threads; several
+fits can share one pool's threads task by task (:func:`tasks_on`, cv's rounds).
 OpenBLAS's and OpenMP's worker threads would only compete with those threads for
 the cores, and their spin-waiting made cv up to 10x slower on a loaded 2-core
 machine; a multi-threaded BLAS also changes the last digits of a least-squares
