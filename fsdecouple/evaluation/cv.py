@@ -358,8 +358,9 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
             "records": timing_records,
             "repeats": repeats,
             "establish": "each method fitted alone on round 1's training set, once per repeat "
-                         "(the first: that model's fit in the training run, its thread's CPU "
-                         "time when parallel; then sequentially); median over repeats",
+                         "(the first: that model's fit in the training run, when parallel the "
+                         "CPU time of its thread and of its tasks' pool threads; then "
+                         "sequentially); median over repeats",
             "decouple": f"{len(vectors)} single-vector calls on round 1's model; median over "
                         "repeats of the mean time per call",
             "parallel": {"workers": workers, "wall_seconds": wall, "sequential_seconds": sequential,

@@ -83,10 +83,10 @@ def heldout_verdict(calib: CalibrationSet, settings: Settings, *, protocol: str 
     jobs = [((r.index, m), m, r.train) for r in rounds for m in VERDICT_METHODS]
     # the rounds' SVRs are solved to VERDICT_NOISE_FRACTION of sigma (noise.py: sigma, the
     # model sigma / 2)
-    # each round's SVRs on every core too: the last round to start then does not train
-    # alone on one core while the others idle (fit: its SVRs are 90 % of the CPU)
+    # the rounds' SVRs are tasks on one pool (train_all): the last round to start then
+    # does not train alone on one core while the others idle (fit: its SVRs are 90 % of the CPU)
     models, _ = train_all(jobs, settings, workers or 1, None, tables=False,
-                          noise_fraction=VERDICT_NOISE_FRACTION, svr_workers=workers or 1)
+                          noise_fraction=VERDICT_NOISE_FRACTION)
     records = gamma_records(rounds, models, settings)
     heldout = {}
     for m in VERDICT_METHODS:

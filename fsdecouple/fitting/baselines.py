@@ -22,7 +22,7 @@ from ..core.decouple import initial_forces
 from ..data.calibration import CalibrationSet
 from .fit import chi_training_data, fit
 from .linear import CalibrationMatrix, fit_calibration_matrix, fit_omega
-from .threads import single_threaded_libraries, thread_pool
+from .threads import single_threaded_libraries, tasks_on, thread_pool
 
 METHODS = ("initial", "linear", "rbf-mimo", "rbf-siso", "svr")
 
@@ -74,27 +74,28 @@ def establish(method: str, train: CalibrationSet, settings: Settings, *, workers
 
 
 def train_all(jobs, settings, workers, progress, *, tables: bool = True,
-              noise_fraction: float | None = None, seconds: dict | None = None,
-              svr_workers: int = 1) -> tuple[dict, float]:
-    """Fit every (key, method, train) job on a thread pool; (models, wall seconds).
+              noise_fraction: float | None = None, seconds: dict | None = None
+              ) -> tuple[dict, float]:
+    """Fit every (key, method, train) job on ``workers`` threads; (models, wall seconds).
 
     libsvm and LAPACK release the GIL, so threads train in parallel; each model
-    depends only on its own job, so the results equal sequential training.
+    depends only on its own job, so the results equal sequential training.  In
+    parallel, each svr job's N(N - 1) SVRs and its tables are tasks on one pool of
+    ``workers`` threads that every svr job shares (:func:`~.threads.tasks_on`): three
+    svr jobs on two threads keep both busy to the end, where one job per thread left
+    one idle for the last job's whole fit.  Each job runs on a thread of its own that
+    mostly waits for its tasks; the short baselines share one more.
     ``seconds``, if given, gets each key's time to fit alone: its wall time when
-    sequential, else the CPU time of its pool thread (each job runs on one thread,
-    with BLAS and OpenMP at one thread, so that is its time alone on an idle core).
-    ``svr_workers``: threads of each svr job's own N(N - 1) SVRs (the verdict's: its last
-    round then trains on every core, not on one); 1 where ``seconds`` is timed.
+    sequential, else the CPU time of its own thread plus that of its tasks, whichever
+    pool thread ran them (BLAS and OpenMP at one thread: its time alone on an idle core).
     """
-    if svr_workers > 1 and seconds is not None:
-        raise ValueError("svr_workers > 1: a job's pool-thread time is not its time alone")
     with single_threaded_libraries():
         return _train_all(jobs, settings, workers, progress, tables, noise_fraction,
-                          {} if seconds is None else seconds, svr_workers)
+                          {} if seconds is None else seconds)
 
 
 def _train_all(jobs, settings, workers, progress, tables, noise_fraction,
-               seconds, svr_workers=1) -> tuple[dict, float]:
+               seconds) -> tuple[dict, float]:
     models = {}
     t0 = time.perf_counter()
     if workers <= 1:
@@ -105,24 +106,23 @@ def _train_all(jobs, settings, workers, progress, tables, noise_fraction,
             seconds[key] = time.perf_counter() - start
             if progress:
                 progress(i, len(jobs))
-    else:
-        def timed(key, method, train):
+        return models, time.perf_counter() - t0
+
+    def timed(key, method, train):
+        with tasks_on(pool) as tasks:
             start = time.thread_time()
-            model = establish(method, train, settings, tables=tables,
-                              workers=svr_workers if method == "svr" else 1,
+            model = establish(method, train, settings, workers=workers, tables=tables,
                               noise_fraction=noise_fraction)
-            seconds[key] = time.thread_time() - start
-            return model
+            seconds[key] = time.thread_time() - start + tasks.cpu
+        return model
 
-        # the SVR jobs are the long ones: start them first
-        order = sorted(jobs, key=lambda j: j[1] != "svr")
-        with thread_pool(workers) as pool:
-            # one thread per model (unless svr_workers): a fit's own pool on top only
-            # oversubscribes while every job runs, but spreads the last ones over the cores
-            futures = {pool.submit(timed, key, m, tr): key for key, m, tr in order}
-            for i, fut in enumerate(as_completed(futures), start=1):
-                models[futures[fut]] = fut.result()
-                if progress:
-                    progress(i, len(jobs))
+    # the svr jobs first, each on a thread of its own; the rest one after another
+    order = sorted(jobs, key=lambda j: j[1] != "svr")
+    svr_jobs = sum(1 for _, method, _ in jobs if method == "svr")
+    with thread_pool(workers) as pool, thread_pool(svr_jobs + 1) as job_threads:
+        futures = {job_threads.submit(timed, key, m, tr): key for key, m, tr in order}
+        for i, fut in enumerate(as_completed(futures), start=1):
+            models[futures[fut]] = fut.result()
+            if progress:
+                progress(i, len(jobs))
     return models, time.perf_counter() - t0
-

@@ -11,12 +11,10 @@ import os
 import subprocess
 import sys
 
-import numpy as np
 import pytest
 from conftest import ROOT
 
 from fsdecouple.config import SVRSettings
-from fsdecouple.fitting.baselines import train_all
 
 
 def test_svr_trains_without_scipy_or_numba_loaded():
@@ -50,10 +48,3 @@ def test_svr_trains_without_scipy_or_numba_loaded():
                                     text=True, check=True).stdout)
     assert got["coef"] == ref["coef"] and got["sv"] == ref["sv"] and got["rho"] == ref["rho"]
 
-
-def test_train_all_refuses_inner_threads_when_timing():
-    """A job's pool-thread CPU time is its time alone only if it trains on that thread."""
-    with pytest.raises(ValueError, match="svr_workers"):
-        train_all([], None, 2, None, seconds={}, svr_workers=2)
-    assert train_all([], None, 2, None, svr_workers=2)[0] == {}
-    assert np.isfinite(train_all([], None, 1, None)[1])
