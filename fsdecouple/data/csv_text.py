@@ -268,8 +268,14 @@ def to_numbers(
         if decimal != ".":
             text = text.str.replace(decimal, ".", regex=False)
         cells = values.array
-    # an object array and a Series of text parse alike (to_numeric reads either as objects)
-    nums = np.asarray(pd.to_numeric(text, errors="coerce"), dtype=float)
+    if isinstance(text, np.ndarray):
+        # each distinct cell parsed once (a pose log's loads are one cell a thousand times):
+        # to_numeric's value of a cell depends on the kinds of cells beside it (all whole
+        # numbers or not), which the distinct cells share with the column
+        codes, distinct = pd.factorize(text)
+        nums = np.asarray(pd.to_numeric(distinct, errors="coerce"), dtype=float)[codes]
+    else:
+        nums = np.asarray(pd.to_numeric(text, errors="coerce"), dtype=float)
     bad = ~np.isfinite(nums)
     if allow_missing and bad.any():
         words = text if isinstance(text, pd.Series) else pd.Series(text, dtype=str)

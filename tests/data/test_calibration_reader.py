@@ -17,7 +17,7 @@ from conftest import ROOT, SAMPLE
 
 from fsdecouple.config import Settings, load_config
 from fsdecouple.data.calibration_csv import read_calibration_table
-from fsdecouple.data.csv_text import _split_plain, read_cells, read_csv_text
+from fsdecouple.data.csv_text import _split_plain, read_cells, read_csv_text, to_numbers
 
 SETS = [
     (SAMPLE / "calibration", None),
@@ -144,3 +144,21 @@ def test_the_cells_are_strings_in_an_object_array():
     cells, _ = read_cells(b"a,b\n1,2\n", Settings(), Path("x.csv"), 2)
     assert cells.dtype == object and cells.shape == (1, 2)
     assert np.array_equal(cells, np.array([["1", "2"]], dtype=object))
+
+
+def test_numbers_are_pandas_to_numeric_of_the_whole_column():
+    """to_numbers parses each distinct cell once and gives it back to every row holding it:
+    bit for bit pandas' reading of the whole column (which reads a column of whole numbers
+    as integers, then converts), on columns mixing kinds, repeats and digits past a
+    double's."""
+    rng = random.Random(1)
+    kinds = ["0", "522", "-1", "+7", "007", "1.5", "-0.0", "1e5", ".5", "3.336568",
+             "9007199254740993", "18446744073709551617", "-9223372036854775809",
+             "123456789012345678901234567890", "0.1234567890123456789",
+             "1.00000000000000011102230246251565"]
+    for _ in range(300):
+        pool = rng.sample(kinds, rng.randrange(1, 5))
+        cells = np.array([rng.choice(pool) for _ in range(rng.randrange(1, 40))], dtype=object)
+        got = to_numbers(cells, Path("x.csv"), "ux", 2, stripped=True)
+        want = pd.to_numeric(pd.Series(cells, dtype="str")).to_numpy(dtype=float)
+        assert np.array_equal(got.view(np.uint64), want.view(np.uint64)), cells.tolist()
