@@ -232,10 +232,11 @@ def read_calibration_table(path: str | Path, settings: Settings,
         text = np.frompyfunc(str.strip, 1, 1)(raw) if spaced else raw
         empty = text == ""
         blank = empty.all(axis=1)
-        for r in rows[blank]:
-            skipped.append(f"{f}, row {r}: skipped, no value in any mapped column (a blank row, "
-                           "or a side table running past the data)")
-        raw, text, empty, rows = raw[~blank], text[~blank], empty[~blank], rows[~blank]
+        if blank.any():
+            for r in rows[blank]:
+                skipped.append(f"{f}, row {r}: skipped, no value in any mapped column (a blank "
+                               "row, or a side table running past the data)")
+            raw, text, empty, rows = raw[~blank], text[~blank], empty[~blank], rows[~blank]
         # a row whose applied loads are all blank (a load not yet typed in): skipped with
         # a warning naming its lines, or refused in strict mode
         loads = [cols[c] for c in layout.loads]

@@ -201,15 +201,15 @@ def _split_plain(data: bytes, sep: str, width: int) -> tuple[np.ndarray, bool] |
                 rows[i] = next(csv.reader([line], delimiter=sep, skipinitialspace=True))
             elif " " in line:  # skipinitialspace: spaces (only) after a separator are skipped
                 rows[i] = [c.lstrip(" ") for c in rows[i]]
-    for row in rows:
-        if len(row) != width:
-            if len(row) > width:  # pandas refuses it, in its own words
-                return None
+    lengths = set(map(len, rows))
+    if lengths - {width}:
+        if max(lengths) > width:  # pandas refuses it, in its own words
+            return None
+        for row in rows:
             row += [""] * (width - len(row))
-    cells = np.empty((len(rows), width), dtype=object)
-    if rows:
-        cells[:] = rows
-    return cells, _spaced(text)
+    cells = np.fromiter(itertools.chain.from_iterable(rows), dtype=object,
+                        count=len(rows) * width)
+    return cells.reshape(len(rows), width), _spaced(text)
 
 
 def _spaced(text: str) -> bool:
