@@ -13,7 +13,7 @@ from ..axes import DEFAULT, Layout
 from ..config import Settings
 from ..errors import InputError
 from .calibration_csv import read_calibration_table
-from .zero import assign_sweeps, has_zero_row, intercept_offsets, out_and_back, zero_correct
+from .zero import assign_sweeps, has_zero_row, intercept_offsets, out_and_back, stack, zero_correct
 
 
 @dataclass(frozen=True)
@@ -97,7 +97,12 @@ class CalibrationSet:
 
     def sweep(self, axis: str) -> pd.DataFrame:
         """All points whose loaded axis is ``axis``, in file order."""
-        return self.points[self.points["axis"] == axis]
+        return self.points[self.points["axis"].to_numpy() == axis]
+
+    def sweep_columns(self, axis: str, columns) -> list[np.ndarray]:
+        """Columns of :meth:`sweep` as arrays, without building its frame (fit, cv)."""
+        mine = self.points["axis"].to_numpy() == axis
+        return [self.points[c].to_numpy()[mine] for c in columns]
 
     @property
     def forces(self) -> np.ndarray:
@@ -109,9 +114,8 @@ class CalibrationSet:
 
     def load_grid(self, axis: str) -> dict[int, np.ndarray]:
         """Sorted distinct loads [N] of each repetition's ``axis`` sweep."""
-        s = self.sweep(axis)
-        reps = s["repetition"].to_numpy()
-        loads = s[self.layout.loads[self.layout.index(axis)]].to_numpy()
+        reps, loads = self.sweep_columns(axis, ["repetition",
+                                                self.layout.loads[self.layout.index(axis)]])
         if not reps.size:
             return {}
         # one sort for all repetitions: a groupby loop costs a pandas frame per repetition
@@ -143,7 +147,7 @@ def split_soak(table: pd.DataFrame, layout: Layout):
 
     if "file" not in table.columns:  # a table built in code: no files to set apart
         return table, None, []
-    zero = (table[list(layout.loads)].to_numpy() == 0.0).all(axis=1)
+    zero = (stack(table, layout.loads) == 0.0).all(axis=1)
     files = table["file"].to_numpy()
     soaks = [f for f in pd.unique(files) if zero[files == f].all()]
     if not soaks or len(soaks) == len(pd.unique(files)):  # nothing loaded at all: zero.py says so
@@ -180,8 +184,9 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
     # no unloaded row (poses of a known mass): each output's offset is fitted (zero.py)
     intercept = settings.zero == "intercept" or (settings.zero is None
                                                  and not has_zero_row(table, layout))
-    several = not combined and ((table[list(layout.loads)].to_numpy() != 0.0).sum(axis=1) > 1).any()
-    reps = sorted(table["repetition"].unique())
+    several = not combined and ((stack(table, layout.loads) != 0.0).sum(axis=1) > 1).any()
+    rep_of, axis_of = table["repetition"].to_numpy(), table["axis"].to_numpy()
+    reps = np.unique(rep_of)
     if len(reps) < settings.min_repetitions:
         raise InputError(
             f"{_source(files)}: {len(reps)} "
@@ -191,14 +196,14 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
                "repetition" if len(files) == 1 and len(reps) == 1 else "")
         )
     # one grouping, not a scan of the table per repetition (quadratic in thousands)
-    pairs = table[["repetition", "axis"]].drop_duplicates()
-    n_axes = pairs.groupby("repetition", sort=True).size()
+    have: dict = {}
+    for rep, axis in zip(rep_of.tolist(), axis_of.tolist(), strict=True):
+        have.setdefault(rep, set()).add(axis)
     # rows loading several components are fitted jointly: no sweep need isolate a component
-    for rep in n_axes.index[n_axes.to_numpy() < layout.n][:0 if several else 1]:
-        have = set(pairs.loc[pairs["repetition"] == rep, "axis"])
-        missing = [a for a in layout.labels if a not in have]
+    for rep in [r for r in sorted(have) if len(have[r]) < layout.n][:0 if several else 1]:
+        missing = [a for a in layout.labels if a not in have[rep]]
         if missing:
-            first = table.loc[table["repetition"] == rep].iloc[0]
+            first = table.iloc[int(np.argmax(rep_of == rep))]
             every = "all three axes" if layout.is_default else f"all {layout.n} components"
             raise InputError(
                 f"{first['file']}: repetition {rep} has no {' or '.join(missing)} sweep; "
@@ -276,9 +281,9 @@ def dead_channels(table: pd.DataFrame, layout: Layout, source: str) -> None:
     A constant channel carries no load: the forward model and every chi divide by its
     span, and the overflow that follows would blame an innocent cell of another channel.
     """
-    u = table[list(layout.outputs)].to_numpy(dtype=float)
-    if len(u) < 2 or not layout.overdetermined:  # one output per component: fit names it
+    if len(table) < 2 or not layout.overdetermined:  # one output per component: fit names it
         return
+    u = stack(table, layout.outputs).astype(float, copy=False)
     flat = np.flatnonzero(np.ptp(u, axis=0) == 0.0)
     if flat.size:
         names = ", ".join(f"'{layout.outputs[j]}'" for j in flat)
@@ -326,6 +331,8 @@ def _exclude(table: pd.DataFrame, specs, unread=()) -> tuple[pd.DataFrame, list[
     ``unread``: (file, line) already dropped while reading (a pose's samples, a line that
     could not be parsed): excluded, and not looked for among the points.
     """
+    if not specs:  # nothing to drop: the table as read
+        return table, []
     drop = np.zeros(len(table), dtype=bool)
     dropped = []
     files = table["file"].to_numpy()

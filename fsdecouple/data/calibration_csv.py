@@ -22,6 +22,7 @@ from ..temperature_units import unit as temperature_unit
 from .csv_text import (
     HEADER_ROW,
     first_difference,
+    read_cells,
     read_csv_text,
     read_header,
     require_columns,
@@ -70,7 +71,9 @@ LABEL_TEXT = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?", re.ASCII)  # a
 
 
 def _repetition_labels(cells, path: Path, column: str, rows, decimal: str) -> np.ndarray:
-    """Repetition numbers as exact integers, or name the first cell that is not one."""
+    """Repetition numbers as exact integers, or name the first cell that is not one.
+
+    ``cells``: an object array of the column's cells (``str``)."""
     text = np.asarray([str(c).strip().replace(decimal, ".") for c in cells], dtype=object)
     uniq, inverse = np.unique(text, return_inverse=True)  # a few labels, many rows
     values, bad = np.zeros(len(uniq), dtype=np.int64), np.zeros(len(uniq), dtype=bool)
@@ -91,10 +94,23 @@ def _repetition_labels(cells, path: Path, column: str, rows, decimal: str) -> np
         i = int(np.argmax(bad[inverse]))
         big = _too_big(text[i])
         raise InputError(
-            f"{where(path, int(rows[i]), column)}: {excerpt(str(cells.iloc[i]).strip())!r} is "
+            f"{where(path, int(rows[i]), column)}: {excerpt(str(cells[i]).strip())!r} is "
             f"not a repetition number (1, 2, ...{', at most 2**53' if big else ''})"
         )
     return values[inverse]
+
+
+def _axis_labels(cells: np.ndarray, labels: dict[str, str]) -> np.ndarray:
+    """The sweep label of each stripped ``axis`` cell (``labels``: lower-cased cell to label),
+    None where it names none; each distinct cell looked up once."""
+    import pandas as pd
+
+    uniq, inverse = np.unique(cells, return_inverse=True)
+    if all(u.isascii() for u in uniq):
+        lower = [u.lower() for u in uniq]
+    else:  # pandas' str.lower, as the table's reader always had: İ is i there, not Python's i̇
+        lower = pd.Series(uniq, dtype="str").str.lower().tolist()
+    return np.array([labels.get(u) for u in lower], dtype=object)[inverse.ravel()]
 
 
 def _too_big(text: str) -> bool:
@@ -192,14 +208,12 @@ def read_calibration_table(path: str | Path, settings: Settings,
                        if cols[c] in header and (c != "repetition" or numbered)})
         require_columns(header, mapped, f)
         # Columns the config does not map are ignored: they may have no name, a
-        # duplicated one, or hold a side table.  Positional names keep pandas from
-        # renaming any of them (every field is still read, so a row with more
-        # fields than the header is still refused).
-        raw = read_csv_text(io.BytesIO(data), settings, path=f, header=0,
-                            names=[str(i) for i in range(len(header))])
-        raw = raw[[str(header.index(n)) for n in mapped]]
-        raw.columns = list(mapped)
-        if raw.empty:
+        # duplicated one, or hold a side table.  Every field is still read, so a row
+        # with more fields than the header is still refused.
+        cells, spaced = read_cells(data, settings, f, len(header))
+        raw = cells[:, [header.index(n) for n in mapped]]  # the mapped columns, in order
+        at = {n: j for j, n in enumerate(mapped)}
+        if not len(raw):
             raise InputError(f"{f}: header only, no data rows")
         rows = np.arange(len(raw)) + HEADER_ROW + 1
         mine = {line for name, line in exclude if _names_file(name, f)}
@@ -209,20 +223,25 @@ def read_calibration_table(path: str | Path, settings: Settings,
             if timestamp_column(header) is not None:
                 # a pose log: a line of a pose names the pose (one calibration point), so
                 # the run of consecutive lines with its load cells goes with it
-                key = raw[[cols[c] for c in layout.loads]].agg("\x1f".join, axis=1).to_numpy()
+                load_cells = raw[:, [at[cols[c]] for c in layout.loads]]
+                key = np.array(["\x1f".join(r) for r in load_cells.tolist()], dtype=object)
                 run = np.cumsum(np.r_[True, key[1:] != key[:-1]])
                 gone = np.isin(run, run[gone])
             raw, rows = raw[~gone], rows[~gone]
-        used = list(mapped)
-        blank = np.logical_and.reduce([raw[c].str.strip().eq("").to_numpy() for c in used])
-        for r in rows[blank]:
-            skipped.append(f"{f}, row {r}: skipped, no value in any mapped column (a blank row, "
-                           "or a side table running past the data)")
-        raw, rows = raw[~blank], rows[~blank]
+        # one strip of every mapped cell: the blank checks and the numbers read it
+        text = np.frompyfunc(str.strip, 1, 1)(raw) if spaced else raw
+        empty = text == ""
+        blank = empty.all(axis=1)
+        if blank.any():
+            for r in rows[blank]:
+                skipped.append(f"{f}, row {r}: skipped, no value in any mapped column (a blank "
+                               "row, or a side table running past the data)")
+            raw, text, empty, rows = raw[~blank], text[~blank], empty[~blank], rows[~blank]
         # a row whose applied loads are all blank (a load not yet typed in): skipped with
         # a warning naming its lines, or refused in strict mode
         loads = [cols[c] for c in layout.loads]
-        noload = np.logical_and.reduce([raw[c].str.strip().eq("").to_numpy() for c in loads])
+        blanks = empty[:, [at[c] for c in loads]]
+        noload = blanks.all(axis=1)
         if noload.any():
             lines = ("lines " if noload.sum() > 1 else "line ") + ", ".join(map(str, rows[noload]))
             if strict:
@@ -231,10 +250,9 @@ def read_calibration_table(path: str | Path, settings: Settings,
                                  argument="strict")
             warnings.append(f"{f}, {lines}: applied loads blank; rows skipped "
                             "(strict mode refuses them)")
-            raw, rows = raw[~noload], rows[~noload]
+            raw, text, blanks, rows = raw[~noload], text[~noload], blanks[~noload], rows[~noload]
         # some applied loads blank (a cell not typed in): the row cannot be placed, skipped
         # with a warning naming its lines, or refused in strict mode
-        blanks = np.column_stack([raw[c].str.strip().eq("").to_numpy() for c in loads])
         partial = blanks.any(axis=1)
         if partial.any():
             lines = ("lines " if partial.sum() > 1 else "line ") + ", ".join(map(str, rows[partial]))
@@ -244,46 +262,48 @@ def read_calibration_table(path: str | Path, settings: Settings,
                 raise InputError(f"{where(f, int(rows[i]), col)}: an applied load is blank "
                                  f"({lines}); strict mode refuses rows without every load",
                                  argument="strict")
-            cells = "; ".join(
+            shown = "; ".join(
                 f"line {r}: {', '.join(repr(c) for c, b in zip(loads, bl, strict=True) if b)}"
                 for r, bl in zip(rows[partial][:5], blanks[partial][:5], strict=True))
-            warnings.append(f"{f}, {lines}: an applied load is blank ({cells}"
+            warnings.append(f"{f}, {lines}: an applied load is blank ({shown}"
                             f"{'; ...' if partial.sum() > 5 else ''}); rows skipped "
                             "(strict mode refuses them)")
-            raw, rows = raw[~partial], rows[~partial]
-        if raw.empty:
+            raw, text, rows = raw[~partial], text[~partial], rows[~partial]
+        if not len(raw):
             raise InputError(f"{f}: header only, no data rows")
-        out = pd.DataFrame({"file": name, "row": rows})
+        # the file's columns, as the table's: built into one DataFrame after the last file
+        out = {"file": np.full(len(rows), name, dtype=object), "row": rows}
         if numbered:
-            out["repetition"] = _repetition_labels(raw[cols["repetition"]], f,
+            out["repetition"] = _repetition_labels(text[:, at[cols["repetition"]]], f,
                                                    cols["repetition"], rows, settings.decimal)
-        else:
-            out["repetition"] = rep_index  # a directory's file order, or the one CSV
+        else:  # a directory's file order, or the one CSV
+            out["repetition"] = np.full(len(rows), rep_index, dtype=np.int64)
         if cols["axis"] in header:
             # a label (x; fx for a named component) or the component's load column name
-            labels = layout.label_map()
-            axis = raw[cols["axis"]].str.strip().str.lower().map(labels)
-            bad = axis.isna()
+            j = at[cols["axis"]]
+            axis = _axis_labels(text[:, j], layout.label_map())
+            bad = np.array([a is None for a in axis], dtype=bool)
             if bad.any():
-                i = int(np.argmax(bad.to_numpy()))
+                i = int(np.argmax(bad))
                 names = list(layout.labels)
                 raise InputError(
                     f"{where(f, int(rows[i]), cols['axis'])}: "
-                    f"{excerpt(repr(raw[cols['axis']].iloc[i]))}, expected "
+                    f"{excerpt(repr(raw[i, j]))}, expected "
                     f"{', '.join(names[:-1])} or {names[-1]}"
                 )
-            out["axis"] = axis.to_numpy(dtype=object)
+            out["axis"] = axis
         else:
-            out["axis"] = ""
+            out["axis"] = np.full(len(rows), "", dtype=object)
         for canonical, name in numeric.items():
-            values = to_numbers(raw[name], f, name, rows, settings.decimal)
+            values = to_numbers(text[:, at[name]], f, name, rows, settings.decimal, stripped=True)
             # check each cell before scaling so the message quotes the file's value
             out[canonical] = values * settings.scale[canonical]
         if settings.output_unit == "count":  # the converter's range, from the samples (rails.py)
-            counts.append(out[list(layout.outputs)].to_numpy())
+            counts.append(np.column_stack([out[c] for c in layout.outputs]))
         if t_name is not None:  # in degC, as a fitted model's temperature terms are
-            out["temperature"] = to_celsius(to_numbers(raw[t_name], f, t_name, rows, settings.decimal),
-                                            temperature_unit(settings))
+            out["temperature"] = to_celsius(
+                to_numbers(text[:, at[t_name]], f, t_name, rows, settings.decimal, stripped=True),
+                temperature_unit(settings))
         if timestamp_column(header) is not None:  # a pose log: samples averaged per load
             keys = [*layout.loads, "repetition", "axis"]
             out, ss, dof, runs, inverse = average_poses(out, keys, list(layout.outputs))
@@ -292,35 +312,45 @@ def read_calibration_table(path: str | Path, settings: Settings,
                 pose_inv, pose_n = pose_inv + inverse, pose_n + len(runs)
             poses.append((f, header, runs, out))
         frames.append(out)
-    if len(poses) == len(files) > 1 and len(poses[0][3]) == 1:
+    if len(poses) == len(files) > 1 and len(poses[0][3]["row"]) == 1:
         # a directory of pose files: one static pose per file, all one calibration set
         _one_pose_each(poses)
         for frame in frames:
-            frame["repetition"] = 1
+            frame["repetition"] = np.ones(len(frame["row"]), dtype=np.int64)
         runs = [(f"{Path(f).name}, lines {r[0]}-{r[1]}", *r[2:]) for f, _, rs, _ in poses for r in rs]
         warnings.append(pose_note(Path(path), [(a, "", *rest) for a, *rest in runs],
                                   sum(r[1] for r in runs), files=len(poses)))
     else:
         warnings += [pose_note(f, runs, sum(r[2] for r in runs)) for f, _, runs, _ in poses if runs]
-    table = pd.concat(frames, ignore_index=True)
+    columns = ["repetition", "axis", "file", "row", *layout.loads, *layout.outputs]
+    if any("temperature" in frame for frame in frames):
+        columns.append("temperature")
+        for frame in frames:  # not in every file: refused below, once the set is read
+            frame.setdefault("temperature", np.full(len(frame["row"]), np.nan))
+    table = {c: np.concatenate([frame[c] for frame in frames]) for c in columns}
     bits = adc_bits(np.concatenate(counts)) if counts else None
-    known = ranges(settings, layout.outputs, table[list(layout.outputs)].to_numpy(), bits)
-    posed = table["file"].isin([str(f) for f, *_ in poses]).to_numpy()
+    u = np.column_stack([table[c] for c in layout.outputs])
+    known = ranges(settings, layout.outputs, u, bits)
+    pose_files = {str(f) for f, *_ in poses}
+    posed = np.concatenate([np.full(len(frame["row"]), frame["file"][0] in pose_files)
+                            for frame in frames])
+    keep = np.ones(len(table["row"]), dtype=bool)
     if known and posed.any():  # a channel at a rail on a pose (rails.py)
-        keep = np.ones(len(table), dtype=bool)
-        keep[posed], notes = at_rail(table[posed], layout.outputs, known, strict, layout.loads)
+        keep[posed], notes = at_rail(pd.DataFrame({c: v[posed] for c, v in table.items()}),
+                                     layout.outputs, known, strict, layout.loads)
         warnings.extend(notes)
-        table = table[keep].reset_index(drop=True)
-    if "temperature" in table.columns and table["temperature"].isna().any():  # not in every file
-        f = table.loc[table["temperature"].isna(), "file"].iloc[0]
+    if "temperature" in table and np.isnan(table["temperature"][keep]).any():
+        f = table["file"][keep][np.isnan(table["temperature"][keep])][0]
         raise InputError(f"{where(f, HEADER_ROW)}: no column 'temperature', which the set's "
                          "other files have; every repetition needs its temperature")
     # training order is file order: repetition, then row (stable)
-    table = table.sort_values(["repetition"], kind="stable").reset_index(drop=True)
-    table = table[["repetition", "axis", "file", "row", *layout.loads, *layout.outputs,
-                   *(["temperature"] if "temperature" in table.columns else [])]]
+    order = np.flatnonzero(keep)
+    order = order[np.argsort(table["repetition"][order], kind="stable")]
+    frame = pd.DataFrame(table)  # one frame, its string columns typed as pandas reads text
+    if len(order) < len(keep) or (order[1:] < order[:-1]).any():
+        frame = frame.iloc[order].reset_index(drop=True)
     noise = np.sqrt(pose_ss / pose_dof * pose_inv / pose_n) if pose_dof else None
-    return CalibrationTable(table, skipped, tuple(digests), hidden, tuple(warnings), noise,
+    return CalibrationTable(frame, skipped, tuple(digests), hidden, tuple(warnings), noise,
                             tuple(excluded))
 
 
@@ -346,10 +376,10 @@ def _one_pose_each(poses) -> None:
             j, found, want = first_difference(header, header0)
             raise InputError(f"{where(f, HEADER_ROW)}: column {j + 1} is {found}, {first.name} has "
                              f"{want} there; the files of a pose directory share one layout")
-        if len(out) > 1:
-            line = int(out["row"].iat[1])
+        if len(out["row"]) > 1:
+            line = int(out["row"][1])
             raise InputError(f"{where(f, line)}: the applied loads change here (from line "
-                             f"{int(out['row'].iat[0])}'s); a pose file holds one static pose "
+                             f"{int(out['row'][0])}'s); a pose file holds one static pose "
                              "(split it into one file per pose)")
 
 

@@ -134,6 +134,91 @@ def read_csv_text(source, settings: Settings, *, path: Path | None = None, **kw)
     return df
 
 
+# A line that pandas' C tokenizer reads as plainly as a split on the separator would:
+# every field unquoted (no quote character) or wholly quoted, a quote opening it after any
+# spaces and closing it right before the separator or the line's end.  Mid-field quotes,
+# text after a closing quote and values running over lines are left to pandas.
+_PLAIN_LINE = {}
+
+
+def _plain_line(sep: str) -> re.Pattern:
+    if sep not in _PLAIN_LINE:
+        s = re.escape(sep)
+        field = f'(?: *"(?:[^"]|"")*"|[^"{s}]*)'
+        _PLAIN_LINE[sep] = re.compile(f"{field}(?:{s}{field})*")
+    return _PLAIN_LINE[sep]
+
+
+def read_cells(data: bytes, settings: Settings, path: Path, width: int) -> tuple[np.ndarray, bool]:
+    """The data rows of a whole CSV's bytes as cells: ``(cells, spaced)``.
+
+    ``cells``, an object array of shape (rows, ``width``) of ``str``, holds exactly what
+    :func:`read_csv_text` (``header=0``, one positional name per header field) reads: a
+    blank line is a row of empty cells, a short row is padded with empty cells, spaces
+    after a separator are skipped, and every refusal is the same.  Plain files (UTF-8,
+    ``\n`` or ``\r\n`` line ends, quotes only around whole fields, no row wider than the
+    header) are split here, at a fraction of pandas' cost (a calibration set is read by
+    every fit, cv and test); anything else is read by pandas itself.  ``spaced``: whether
+    a cell may begin or end with white space (False: ``str.strip`` would change none).
+    """
+    cells = _split_plain(data, settings.sep, width)
+    if cells is not None:
+        return cells
+    raw = read_csv_text(io.BytesIO(data), settings, path=path, header=0,
+                        names=[str(i) for i in range(width)])
+    return raw.to_numpy(dtype=object).reshape(len(raw), width), True
+
+
+def _split_plain(data: bytes, sep: str, width: int) -> tuple[np.ndarray, bool] | None:
+    """:func:`read_cells` of a plain file, or None to leave the file to pandas."""
+    if len(sep) != 1 or sep in ' "\r\n':
+        return None
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return None
+    if "\r" in text:
+        text = text.replace("\r\n", "\n")
+        if "\r" in text:  # a line ending in \r alone (old Mac) or a \r inside a value
+            return None
+    if text.startswith("\ufeff"):  # a second byte-order mark, which pandas skips too
+        return None
+    lines = text.split("\n")
+    if lines[-1] == "":
+        lines.pop()  # the last line's end
+    if not lines:
+        return None
+    header, lines = lines[0], lines[1:]
+    if '"' in header or len(header.split(sep)) != width:
+        return None
+    rows = [line.split(sep) for line in lines]
+    if '"' in text or " " in text:
+        plain = _plain_line(sep)
+        for i, line in enumerate(lines):
+            if '"' in line:
+                if not plain.fullmatch(line):
+                    return None
+                rows[i] = next(csv.reader([line], delimiter=sep, skipinitialspace=True))
+            elif " " in line:  # skipinitialspace: spaces (only) after a separator are skipped
+                rows[i] = [c.lstrip(" ") for c in rows[i]]
+    lengths = set(map(len, rows))
+    if lengths - {width}:
+        if max(lengths) > width:  # pandas refuses it, in its own words
+            return None
+        for row in rows:
+            row += [""] * (width - len(row))
+    cells = np.fromiter(itertools.chain.from_iterable(rows), dtype=object,
+                        count=len(rows) * width)
+    return cells.reshape(len(rows), width), _spaced(text)
+
+
+def _spaced(text: str) -> bool:
+    """Whether ``text`` holds white space but for line ends (a cell could need stripping)."""
+    if text.isascii():
+        return any(c in text for c in " \t\x0b\x0c\x1c\x1d\x1e\x1f")
+    return any(c.isspace() for c in set(text) - {"\n"})
+
+
 def parser_message(err: Exception) -> str:
     text = str(err)
     m = re.search(r"Expected (\d+) fields in line (\d+), saw (\d+)", text)
@@ -157,7 +242,8 @@ MISSING_CELLS = ("", "nan", "NaN", "NA", "N/A", "null")
 
 
 def to_numbers(
-    values, path: Path, column: str, rows, decimal: str = ".", *, allow_missing: bool = False
+    values, path: Path, column: str, rows, decimal: str = ".", *, allow_missing: bool = False,
+    stripped: bool = False,
 ) -> np.ndarray:
     """Convert a column of strings to finite floats, or name the first bad cell.
 
@@ -165,26 +251,43 @@ def to_numbers(
     when the rows are consecutive.  ``allow_missing``: empty cells and the words
     of :data:`MISSING_WORDS` become NaN (a log's missing samples) instead of an
     error (a calibration point must have every number).  Infinities are errors.
+    ``values`` may be an object array of ``str`` (:func:`read_cells`' cells), read
+    without a pandas Series; ``stripped``: its cells are stripped already.
     """
     import pandas as pd
 
-    values = pd.Series(values, dtype=object) if not isinstance(values, pd.Series) else values
-    text = values.astype(str).str.strip()
-    if decimal != ".":
-        text = text.str.replace(decimal, ".", regex=False)
-    nums = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
+    if isinstance(values, np.ndarray) and values.dtype == object:  # str cells, as read
+        # Python's str.strip strips what pandas' .str.strip does (every Unicode space)
+        text = values if stripped else np.array([c.strip() for c in values], dtype=object)
+        if decimal != ".":
+            text = np.array([t.replace(decimal, ".") for t in text], dtype=object)
+        cells = values
+    else:
+        values = pd.Series(values, dtype=object) if not isinstance(values, pd.Series) else values
+        text = values.astype(str).str.strip()
+        if decimal != ".":
+            text = text.str.replace(decimal, ".", regex=False)
+        cells = values.array
+    if isinstance(text, np.ndarray):
+        # each distinct cell parsed once (a pose log's loads are one cell a thousand times):
+        # to_numeric's value of a cell depends on the kinds of cells beside it (all whole
+        # numbers or not), which the distinct cells share with the column
+        codes, distinct = pd.factorize(text)
+        nums = np.asarray(pd.to_numeric(distinct, errors="coerce"), dtype=float)[codes]
+    else:
+        nums = np.asarray(pd.to_numeric(text, errors="coerce"), dtype=float)
     bad = ~np.isfinite(nums)
     if allow_missing and bad.any():
-        missing = text.str.lower().str.lstrip("+-").isin(MISSING_WORDS).to_numpy()
+        words = text if isinstance(text, pd.Series) else pd.Series(text, dtype=str)
+        missing = words.str.lower().str.lstrip("+-").isin(MISSING_WORDS).to_numpy()
         bad &= ~(np.isnan(nums) & missing)
     if bad.any():
         i = int(np.argmax(bad))
         row = int(rows[i]) if np.ndim(rows) else int(rows) + i
-        cell = str(values.iloc[i]).strip()
+        cell = str(cells[i]).strip()
         what = "is empty" if cell == "" else f"is {excerpt(repr(cell))}"
         raise InputError(f"{where(path, row, column)}: {what}, expected a finite number")
     return nums
-
 
 
 def require_utf8(body: bytes, path: Path, first_row: int, header: list[str], sep: str,

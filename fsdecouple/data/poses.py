@@ -33,27 +33,28 @@ def timestamp_column(header) -> str | None:
     return next((h for h in header if parse_name(str(h))[0] in TIMESTAMP_NAMES), None)
 
 
-def average_poses(frame, keys: list[str], outputs: list[str]):
+def average_poses(frame: dict, keys: list[str], outputs: list[str]):
     """``(frame, ss, dof, runs)``: runs of equal ``keys`` in consecutive rows averaged.
 
-    ``frame`` (pandas, file order) holds ``row``, ``keys`` and ``outputs``; each run of two
-    or more rows keeps its first row with the mean outputs.  ``ss`` (per output) and
+    ``frame`` (column name to array, file order) holds ``row``, ``keys`` and ``outputs``;
+    each run of two or more rows keeps its first row with the mean outputs.  ``ss`` (per output) and
     ``dof``: the within-run sums of squares and degrees of freedom; ``runs``: (first line,
     last line, samples) per averaged run, and ``inverse``: sum over the runs of 1 / n.
     """
-    n = len(frame)
+    n = len(frame["row"])
     if n < 2:
         return frame, np.zeros(len(outputs)), 0, [], 0.0
-    k = frame[keys].to_numpy()
     same = np.ones(n - 1, dtype=bool)
-    for c in range(k.shape[1]):
-        same &= k[1:, c] == k[:-1, c]
+    for key in keys:
+        k = frame[key]
+        same &= k[1:] == k[:-1]
     start = np.concatenate([[True], ~same])
     run = np.cumsum(start) - 1
     counts = np.bincount(run)
     if counts.max() < 2:
         return frame, np.zeros(len(outputs)), 0, [], 0.0
-    u = frame[outputs].to_numpy(dtype=float)
+    # column-major, as a DataFrame's: a sum's rounding depends on the order it runs in
+    u = np.vstack([frame[c] for c in outputs]).astype(float).T
     keep = robust_keep(u, run, counts)
     kept = np.bincount(run[keep], minlength=counts.size)
     sums = np.zeros((counts.size, u.shape[1]))
@@ -61,14 +62,14 @@ def average_poses(frame, keys: list[str], outputs: list[str]):
     means = sums / kept[:, None]
     ss = ((u[keep] - means[run[keep]]) ** 2).sum(axis=0)
     dof = int((kept - 1).sum())
-    rows = frame["row"].to_numpy()
+    rows = frame["row"]
     first = np.flatnonzero(start)
     last = np.append(first[1:], n) - 1
     runs = [(int(rows[a]), int(rows[b]), int(c), int(c - k))
             for a, b, c, k in zip(first, last, counts, kept, strict=True) if c > 1]
-    out = frame.iloc[first].copy()
-    out[outputs] = means
-    return out.reset_index(drop=True), ss, dof, runs, float((1.0 / kept[counts > 1]).sum())
+    out = {c: v[first] for c, v in frame.items()}
+    out.update({c: means[:, j] for j, c in enumerate(outputs)})
+    return out, ss, dof, runs, float((1.0 / kept[counts > 1]).sum())
 
 
 # A sample further than this many robust sigmas (1.4826 MAD, at least the readings' quantum)

@@ -62,11 +62,8 @@ def chi_training_data(calib: CalibrationSet, name: str) -> tuple[np.ndarray, np.
     """
     layout = calib.layout
     a, b = layout.pair(name)
-    s = calib.sweep(layout.labels[b])
-    return (
-        s[layout.outputs[b]].to_numpy(dtype=float),
-        s[layout.outputs[a]].to_numpy(dtype=float),
-    )
+    prime, coupling = calib.sweep_columns(layout.labels[b], [layout.outputs[b], layout.outputs[a]])
+    return prime.astype(float, copy=False), coupling.astype(float, copy=False)
 
 
 def fit(
