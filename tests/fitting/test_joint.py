@@ -167,12 +167,12 @@ def test_rows_with_blank_loads_are_skipped_with_their_lines_or_refused_with_stri
         load_calibration(bad, settings, strict=True)
 
 
-def test_rig_rows_get_an_own_load_chi_per_component_and_single_axis_sweeps_none(tmp_path, model):
+def test_rig_rows_get_an_own_load_chi_per_component_and_single_axis_sweeps_none(rig_model, model):
     """The joint fit adds chi_aa (a rig's readings bend with their own load); the paper's
-    single-axis model (the session's sample fit) has none, so it is today's model."""
-    _, settings, calib = rig(tmp_path, kind="quadratic")
-    fitted = fit(calib, settings, tables=False)
-    assert sorted(fitted.own) == sorted(f"{c}:{c}" for c in settings.layout.labels)
+    single-axis model (the session's sample fit) has none, so it is today's model.  The rig's
+    fit is the session's (``rig_model``: this module's quadratic rig, seed 0, init's config)."""
+    fitted = rig_model
+    assert sorted(fitted.own) == sorted(f"{c}:{c}" for c in fitted.settings.layout.labels)
     assert all(c.output_axis == c.input_axis for c in fitted.own.values())
     assert model.own == {}
 
