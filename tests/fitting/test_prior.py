@@ -10,7 +10,7 @@ import pytest
 from conftest import assert_one_line_error, invoke
 
 from fsdecouple.config import load_config
-from fsdecouple.core.modelfile import load_model
+from fsdecouple.core.modelfile import load_model, save_model
 from fsdecouple.data.calibration import load_calibration
 from fsdecouple.data.init_config import init_config
 from fsdecouple.evaluation.calibrate import fit
@@ -121,13 +121,12 @@ def test_fit_with_a_prior_says_what_it_chose_and_writes_it(old, prior_fit):
                                atol=1e-9)
 
 
-def test_a_prior_of_another_sensor_is_refused(tmp_path):
+def test_a_prior_of_another_sensor_is_refused(tmp_path, rig_model):
     path = tmp_path / "poses.csv"
     path.write_text("\n".join(pose_lines(simulate_poses(0, 10))) + "\n")
     init_config(path, tmp_path / "cfg.yaml")
-    rig = write_rig(tmp_path / "rig")[0]
-    init_config(rig, tmp_path / "rig.yaml")
-    invoke(["fit", rig, "-c", tmp_path / "rig.yaml", "-o", tmp_path / "rig.json", "--no-verdict"])
+    # a rig's model (six outputs, not the poses' eight gauges): the session's rig fit, written
+    save_model(rig_model, tmp_path / "rig.json")
     r = invoke(["fit", path, "-c", tmp_path / "cfg.yaml", "-o", tmp_path / "m.json",
                 "--prior", tmp_path / "rig.json"], code=2)
     assert_one_line_error(r, "--prior", "same sensor and layout")
