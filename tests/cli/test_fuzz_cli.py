@@ -22,10 +22,7 @@ from typer.testing import CliRunner
 pytestmark = pytest.mark.slow
 
 LOG_LINES = (SAMPLE / "task_voltages.csv").read_bytes().split(b"\n")[:41]  # header + 40 rows
-# three of the sample's six repetitions (the config below asks for three): the readers see
-# the same files, each fit and each read costs half
-REPS = sorted((SAMPLE / "calibration").iterdir())[:3]
-THREE = "min_repetitions: 3\n"
+REPS = sorted((SAMPLE / "calibration").iterdir())
 SETTINGS = settings(max_examples=50, deadline=None,
                     suppress_health_check=[HealthCheck.function_scoped_fixture,
                                            HealthCheck.too_slow])
@@ -150,7 +147,7 @@ def test_fit_never_crashes(rep, data):
         (d / "out").mkdir()
         # Table 2's libsvm tolerance, obeyed as written: the readers are under test here,
         # not the solver (the noise-derived default costs ~3x the CPU per fit)
-        (d / "fast.yaml").write_text(THREE + "svr: {tolerance: 0.001}\n")
+        (d / "fast.yaml").write_text("svr: {tolerance: 0.001}\n")
         code, _ = run(["fit", cal, "-c", d / "fast.yaml", "-o", d / "out" / "model.json",
                        "--no-verdict"])
         check_outputs(d / "out", code, ["model.json"])
@@ -163,6 +160,5 @@ def test_ingest_never_crashes(rep, data):
         d = Path(d)
         cal = calibration(d, rep, data)
         (d / "out").mkdir()
-        (d / "three.yaml").write_text(THREE)
-        code, _ = run(["ingest", cal, "-c", d / "three.yaml", "-o", d / "out" / "tidy.csv"])
+        code, _ = run(["ingest", cal, "-o", d / "out" / "tidy.csv"])
         check_outputs(d / "out", code, ["tidy.csv"])
