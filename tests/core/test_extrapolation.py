@@ -125,9 +125,13 @@ def test_fast_paths_equal_the_exact_path_beyond_the_range(tangent, refine):
     assert np.array_equal(ok, np.isfinite(fast).all(axis=1)) and ok.mean() > 0.9
     bound = PROMISE * np.asarray(tangent.settings.full_scale)  # as test_fast: 1e-9 F.S.
     assert (np.abs(fast[ok] - exact[ok]) <= bound).all()
+    # the one-vector function, a Python call a row (~0.6 ms with refine 3): on 500 rows,
+    # the tables' and the tangents' both (2000 cost 1.3 s of CPU)
     one = tangent.decoupler(refine=refine)
-    got = np.array([one(*row) for row in u[:2000].tolist()])
-    np.testing.assert_allclose(got, fast[:2000], rtol=0, atol=1e-12 * np.abs(fast[:2000]).max())
+    n = 500
+    assert 0.1 < covered[:n].mean() < 0.9
+    got = np.array([one(*row) for row in u[:n].tolist()])
+    np.testing.assert_allclose(got, fast[:n], rtol=0, atol=1e-12 * np.abs(fast[:n]).max())
 
 
 def test_tables_of_a_tangent_model_are_exact_straight_lines_beyond_the_range(tangent):
