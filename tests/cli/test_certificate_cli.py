@@ -17,6 +17,8 @@ from fsdecouple import decouple_frame, load_model
 from fsdecouple.reporting.certificate_html import fmt
 from fsdecouple.sim.simulate import simulate
 
+THREE = "min_repetitions: 3\n"
+
 
 @pytest.fixture(scope="module")
 def fitted(sim_model_file):
@@ -174,9 +176,11 @@ def test_a_copied_repetition_is_refused_naming_the_file(fitted, sim_dir, tmp_pat
 
 @pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_certificate_takes_the_config_fit_was_given_on_sweeps_out_and_back(tmp_path):
-    simulate(tmp_path / "s", seed=4, hysteresis=0.001)
+    # three repetitions (min_repetitions: 3): the config's keys are the point, and the
+    # verdict fit the certificate needs costs about half of six's
+    simulate(tmp_path / "s", seed=4, hysteresis=0.001, repetitions=3)
     config = tmp_path / "lab.yaml"
-    config.write_text("serial: SN-7\nreference_uncertainty: 0.01\n" + FAST_SVR)  # no zero key
+    config.write_text("serial: SN-7\nreference_uncertainty: 0.01\n" + THREE + FAST_SVR)  # no zero key
     model = tmp_path / "m.json"
     r = invoke(["fit", tmp_path / "s" / "calibration", "-c", config, "-o", model])
     assert "zero: fit" in r.stdout + r.stderr  # fit chose zero: fit itself
@@ -184,7 +188,7 @@ def test_certificate_takes_the_config_fit_was_given_on_sweeps_out_and_back(tmp_p
                              "--json"]).stdout)
     assert doc["serial"] == "SN-7" and all(r["value"] >= 0 for r in doc["records"]
                                            if r["metric"] == "v")
-    config.write_text("zero: rows\n")  # a zero the config does state is compared
+    config.write_text("zero: rows\n" + THREE)  # a zero the config does state is compared
     r = invoke(["certificate", model, tmp_path / "s" / "calibration", "-c", config], 2)
     assert_one_line_error(r, "zero is not the model's")
 
@@ -230,9 +234,9 @@ def test_a_creep_column_that_is_not_time_is_one_line(timed, tmp_path, column, ne
 @pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
 def test_certificate_drift_from_compare_json(fitted, sim_dir, tmp_path):
     other = tmp_path / "other"
-    simulate(other, seed=12)
+    simulate(other, seed=12, repetitions=3)  # a later calibration of three repetitions
     m2 = tmp_path / "m2.json"
-    (tmp_path / "fast.yaml").write_text(FAST_SVR)
+    (tmp_path / "fast.yaml").write_text(THREE + FAST_SVR)
     invoke(["fit", other / "calibration", "-c", tmp_path / "fast.yaml", "-o", m2])
     cmp = tmp_path / "cmp.json"
     from fsdecouple.fleet.drift import compare  # what compare --json prints; it exits 1 on E_n > 1

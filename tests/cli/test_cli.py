@@ -56,8 +56,18 @@ def test_ingest_summary_and_tidy_output(tmp_path):
     assert np.abs(zero.groupby(["repetition", "axis"])[["ux", "uy", "uz"]].mean()).max().max() < 1e-12
 
 
+@pytest.fixture(scope="module")
+def fast_sim_model(tmp_path_factory, sim_dir):
+    """`fsdecouple fit` of the session's simulated set at Table 2's tolerance (FAST_CONFIG),
+    without its verdict: the model the same data read another way must give, fit for fit
+    (three such fits cost less than two at the default tolerance)."""
+    path = tmp_path_factory.mktemp("fast_sim") / "model.json"
+    invoke(["fit", sim_dir / "calibration", "-o", path, "-c", FAST_CONFIG, "--no-verdict"])
+    return path
+
+
 @pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
-def test_single_csv_with_repetition_column_gives_same_model(tmp_path, sim_dir, sim_model_file):
+def test_single_csv_with_repetition_column_gives_same_model(tmp_path, sim_dir, fast_sim_model):
     frames = []
     for rep in range(1, 7):
         df = pd.read_csv(sim_dir / "calibration" / f"rep{rep}.csv", dtype=str)
@@ -65,21 +75,21 @@ def test_single_csv_with_repetition_column_gives_same_model(tmp_path, sim_dir, s
         frames.append(df)
     single = tmp_path / "all.csv"
     pd.concat(frames).to_csv(single, index=False)
-    a, b = tmp_path / "a.json", sim_model_file
-    invoke(["fit", single, "-o", a, "--no-verdict"])  # the held-out verdict is not compared
+    a, b = tmp_path / "a.json", fast_sim_model
+    invoke(["fit", single, "-o", a, "-c", FAST_CONFIG, "--no-verdict"])
     da, db = json.loads(a.read_text()), json.loads(b.read_text())
     assert da["chi"] == db["chi"] and da["omega"] == db["omega"]
 
 
 @pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
-def test_axis_column_is_optional(tmp_path, sim_dir, sim_model_file):
+def test_axis_column_is_optional(tmp_path, sim_dir, fast_sim_model):
     """Without `axis`, sweeps are inferred from consecutive rows: same model."""
     d = tmp_path / "noaxis"
     d.mkdir()
     for f in (sim_dir / "calibration").glob("*.csv"):
         pd.read_csv(f, dtype=str).drop(columns="axis").to_csv(d / f.name, index=False)
-    a, b = tmp_path / "a.json", sim_model_file
-    invoke(["fit", d, "-o", a, "--no-verdict"])  # the held-out verdict is not compared
+    a, b = tmp_path / "a.json", fast_sim_model
+    invoke(["fit", d, "-o", a, "-c", FAST_CONFIG, "--no-verdict"])
     assert json.loads(a.read_text())["chi"] == json.loads(b.read_text())["chi"]
 
 
@@ -193,12 +203,19 @@ def test_outputs_get_the_usual_file_mode(tmp_path):
 
 # The commands of one _on_a_terminal call, run one after the other by the CLI's app in
 # one process (what `python -m fsdecouple` runs, less main()'s signal handling), each
-# output headed by a line of its own
+# output headed by a line of its own; an entry {"NAME": "value"} instead of a command
+# sets that environment variable for the commands after it (the CLI reads CI when a
+# command runs: cli/app.py, interactive())
 _TERMINAL_RUNNER = """
-import json, sys
+import json, os, sys
 from fsdecouple.cli.app import app
-for i, args in enumerate(json.loads(sys.argv[1])):
+i = 0
+for args in json.loads(sys.argv[1]):
+    if isinstance(args, dict):
+        os.environ.update(args)
+        continue
     print(f"@@ command {i} @@", flush=True)
+    i += 1
     try:
         code = app(args, prog_name="fsdecouple", standalone_mode=False)
     except SystemExit as stop:
@@ -210,9 +227,10 @@ for i, args in enumerate(json.loads(sys.argv[1])):
 
 
 def _on_a_terminal(commands, env) -> list[str]:
-    """Run ``commands`` (lists of CLI arguments) in one Python process with a
-    pseudo-terminal as stdout and stderr; each one's output.  One interpreter for all:
-    each start-up costs ~1 s of CPU, and the terminal, not the process, is the point."""
+    """Run ``commands`` (lists of CLI arguments, or a dict of environment variables to set
+    for the commands after it) in one Python process with a pseudo-terminal as stdout and
+    stderr; each command's output.  One interpreter for all: each start-up costs ~1 s of
+    CPU, and the terminal, not the process, is the point."""
     import json
     import os
     import pty
@@ -222,7 +240,8 @@ def _on_a_terminal(commands, env) -> list[str]:
 
     master, slave = pty.openpty()
     proc = subprocess.Popen([sys.executable, "-c", _TERMINAL_RUNNER,
-                             json.dumps([list(map(str, args)) for args in commands])],
+                             json.dumps([args if isinstance(args, dict) else list(map(str, args))
+                                         for args in commands])],
                             stdin=slave, stdout=slave, stderr=slave, env=env)
     os.close(slave)
     chunks = []
@@ -238,7 +257,7 @@ def _on_a_terminal(commands, env) -> list[str]:
     text = b"".join(chunks).decode(errors="replace")
     assert proc.wait(timeout=120) == 0, text
     parts = re.split(r"@@ command \d+ @@\r?\n", text)[1:]
-    assert len(parts) == len(commands), text
+    assert len(parts) == len([c for c in commands if not isinstance(c, dict)]), text
     for part in parts:
         assert re.search(r"@@ exit 0 @@\r?\n$", part), part
     return parts
@@ -258,12 +277,12 @@ def test_progress_bars_show_on_a_terminal_and_never_in_ci(tmp_path, sample_model
     cv_args = ["cv", cal, "--folds", "1,2", "-c", FAST_CONFIG, "-o", tmp_path / "cv.json", "--force"]
     fit_args = ["fit", cal, "-c", FAST_CONFIG, "-o", tmp_path / "m.json", "--force", "--no-verdict"]
     hide_cursor = "\x1b[?25l"  # rich hides the cursor while a live bar is drawn
-    outs = _on_a_terminal([apply_args, cv_args, fit_args], env)
-    for out, label in zip(outs, ("decoupling", "training", "fitting"), strict=True):
-        assert hide_cursor in out and label in out, out
-        assert "[progress" not in out and "tuning" not in out, out  # styles, not markup text
-    env["CI"] = "true"
-    out, cv_out = _on_a_terminal([apply_args, cv_args], env)
+    # the same terminal, then CI=true set (one interpreter: the CLI reads CI per command)
+    *outs, out, cv_out = _on_a_terminal([apply_args, cv_args, fit_args, {"CI": "true"},
+                                         apply_args, cv_args], env)
+    for out_, label in zip(outs, ("decoupling", "training", "fitting"), strict=True):
+        assert hide_cursor in out_ and label in out_, out_
+        assert "[progress" not in out_ and "tuning" not in out_, out_  # styles, not markup text
     assert "decoupling" not in out and hide_cursor not in out
     assert hide_cursor not in cv_out
 

@@ -43,7 +43,10 @@ def tangent(sample_model):
 
 @pytest.fixture(scope="module")
 def kernel():
-    settings = load_config(extrapolation="kernel")
+    """The sample fitted with extrapolation: kernel, at Table 2's libsvm tolerance: its
+    tests check what a chi is beyond the range and what the file keeps, whatever the
+    solver's last digits (~1 s of CPU -> ~0.3 s)."""
+    settings = load_config(extrapolation="kernel", tolerance=1e-3)
     return fit(load_calibration(SAMPLE / "calibration", settings), settings)
 
 
@@ -60,8 +63,9 @@ def beyond(model, n: int, reach: float, seed: int = 0) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def scaled():
-    """Kernel inputs and targets in full-scale units: input_scale and output_scale != 1."""
-    settings = load_config(scaling="full_scale")
+    """Kernel inputs and targets in full-scale units: input_scale and output_scale != 1
+    (at Table 2's libsvm tolerance: the continuity at the edges holds for any chi)."""
+    settings = load_config(scaling="full_scale", tolerance=1e-3)
     return fit(load_calibration(SAMPLE / "calibration", settings), settings)
 
 
@@ -121,9 +125,13 @@ def test_fast_paths_equal_the_exact_path_beyond_the_range(tangent, refine):
     assert np.array_equal(ok, np.isfinite(fast).all(axis=1)) and ok.mean() > 0.9
     bound = PROMISE * np.asarray(tangent.settings.full_scale)  # as test_fast: 1e-9 F.S.
     assert (np.abs(fast[ok] - exact[ok]) <= bound).all()
+    # the one-vector function, a Python call a row (~0.6 ms with refine 3): on 500 rows,
+    # the tables' and the tangents' both (2000 cost 1.3 s of CPU)
     one = tangent.decoupler(refine=refine)
-    got = np.array([one(*row) for row in u[:2000].tolist()])
-    np.testing.assert_allclose(got, fast[:2000], rtol=0, atol=1e-12 * np.abs(fast[:2000]).max())
+    n = 500
+    assert 0.1 < covered[:n].mean() < 0.9
+    got = np.array([one(*row) for row in u[:n].tolist()])
+    np.testing.assert_allclose(got, fast[:n], rtol=0, atol=1e-12 * np.abs(fast[:n]).max())
 
 
 def test_tables_of_a_tangent_model_are_exact_straight_lines_beyond_the_range(tangent):
@@ -251,6 +259,12 @@ def test_tangent_beats_kernel_on_loads_up_to_120_percent_of_full_scale(tmp_path)
     0.84 (0.75 for seeds 0-2).  So per seed at most SEED_LIMIT = 1.2 (the max x 1.25:
     one seed's fit moves between machines) and over the three at most MEAN_LIMIT =
     0.92 (mean + 3 sd, the max x 1.1): the tangent is better on average.
+
+    The fits stop at Table 2's libsvm tolerance (1e-3, a third of the CPU of the
+    noise-derived default).  The scatter was derived again at that tolerance over seeds
+    0-23: per seed mean 0.691, sd 0.130, max 0.951 (seed 19; 0.855 for seed 0); three
+    consecutive seeds mean 0.658, sd 0.085, max 0.841 (0.748 for seeds 0-2).  That is
+    the default's scatter to its last printed digit, so the limits stand.
     """
     seed_limit, mean_limit = 1.2, 0.92  # SEED_LIMIT, MEAN_LIMIT above
     sensor = SimulatedSensor()
@@ -265,8 +279,9 @@ def test_tangent_beats_kernel_on_loads_up_to_120_percent_of_full_scale(tmp_path)
         # one fit per seed: the chi are the same whatever the mode (it decides only what a
         # chi is beyond its range); each mode's model is that fit with the mode's settings,
         # decoupled on the exact path (the tables' 1e-9 F.S. is far below these figures)
-        fitted = fit(load_calibration(tmp_path / str(seed) / "calibration", load_config()),
-                     load_config(), tables=False)
+        fast = load_config(tolerance=1e-3)  # Table 2's tolerance: the scatter above
+        fitted = fit(load_calibration(tmp_path / str(seed) / "calibration", fast), fast,
+                     tables=False)
         for mode in worst:
             settings = load_config(extrapolation=mode)
             model = replace(fitted, settings=settings)

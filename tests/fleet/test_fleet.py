@@ -35,7 +35,9 @@ def drift_models(tmp_path_factory):
     simulated calibrations of one sensor whose gain rose by 1 % in between, all at
     Table 2's libsvm tolerance (FAST_SVR, a third of the CPU of the default's): over
     10 seed pairs at that tolerance the 1 % gain change gave slope changes of
-    0.90-1.04 %, forces 0.95-1.23 %, chi at most 0.17 %; the no-drift bound below."""
+    0.90-1.04 %, forces 0.95-1.23 %, chi at most 0.17 %; the no-drift bound below.
+    The sample's two carry their verdict (its certificate data: compare's E_n); the
+    simulated pair's tests gate by --max-drift and fit-many's drift, which need none."""
     tmp = tmp_path_factory.mktemp("drift")
     config = tmp / "three.yaml"
     config.write_text(THREE_REPS + FAST_SVR)
@@ -50,8 +52,8 @@ def drift_models(tmp_path_factory):
     return {
         "first": _fit(tmp / "first", config, tmp / "first.json"),
         "second": _fit(tmp / "second", config, tmp / "second.json"),
-        "before": _fit(tmp / "before" / "calibration", config, tmp / "before.json"),
-        "after": _fit(tmp / "after" / "calibration", config, tmp / "after.json"),
+        "before": _fit(tmp / "before" / "calibration", config, tmp / "before.json", verdict=False),
+        "after": _fit(tmp / "after" / "calibration", config, tmp / "after.json", verdict=False),
     }
 
 
@@ -233,28 +235,36 @@ def fleet(tmp_path_factory, drift_models):
     return root
 
 
-def test_fit_many_fits_each_sensor_as_fit_does(fleet, tmp_path):
-    from fsdecouple.core.modelfile import model_to_dict
-    from fsdecouple.fleet.sensors import fit_many
+@pytest.fixture(scope="module")
+def fleet_fitted(fleet, tmp_path_factory):
+    """`fsdecouple fit-many` of the whole fleet with --json, in two worker processes (the
+    command's own executor), once for the module: (its document, its stderr, the models
+    directory).  The worker processes' models are checked against `fit`, the document
+    and the errors as the command shows them: one fleet's fits for both tests."""
+    out = tmp_path_factory.mktemp("fleet_models") / "models"
+    r = invoke(["fit-many", fleet / "sensors", "-o", out, "--json", "--workers", 2], 2)
+    return json.loads(r.stdout), r.stderr, out
 
-    result = fit_many(fleet / "sensors", tmp_path / "models", workers=2)
-    assert [s.sensor for s in result.sensors] == ["alpha", "beta", "broken", "gamma"]
-    assert [s.sensor for s in result.failed] == ["broken"]
-    assert "no sensor.yaml" in result.failed[0].error
-    assert sorted(p.name for p in (tmp_path / "models").iterdir()) == ["alpha.json", "beta.json",
-                                                                        "gamma.json"]
+
+def test_fit_many_fits_each_sensor_as_fit_does(fleet, fleet_fitted, tmp_path):
+    from fsdecouple.core.modelfile import model_to_dict
+
+    doc, _, models = fleet_fitted
+    assert [s["sensor"] for s in doc["sensors"]] == ["alpha", "beta", "broken", "gamma"]
+    assert doc["failed"] == ["broken"] and "no sensor.yaml" in doc["sensors"][2]["error"]
+    assert sorted(p.name for p in models.iterdir()) == ["alpha.json", "beta.json", "gamma.json"]
     # each model is the one `fit` writes for the same data and config (digests leave
     # out the creation time): parallel worker processes change nothing
     config = fleet / "sensors" / "alpha" / "sensor.yaml"
     for name, calib in (("alpha", fleet / "sensors" / "alpha"),
                         ("beta", fleet / "sensors" / "beta" / "calibration")):
         invoke(["fit", calib, "-c", config, "-o", tmp_path / f"{name}-fit.json"])
-        ours = model_to_dict(load_model(tmp_path / "models" / f"{name}.json"))
+        ours = model_to_dict(load_model(models / f"{name}.json"))
         assert ours["integrity"] == model_to_dict(load_model(tmp_path / f"{name}-fit.json"))["integrity"]
-    alpha = result.sensors[0]
-    verdict = load_model(tmp_path / "models" / "alpha.json").report.verdict
-    assert alpha.worst_gamma == verdict["heldout"]["svr"]["worst_gamma"] and alpha.method == "svr"
-    assert alpha.k["x"] == pytest.approx(1 / 75.065, rel=1e-3)  # the sample sensor's slope
+    alpha = doc["sensors"][0]
+    verdict = load_model(models / "alpha.json").report.verdict
+    assert alpha["worst_gamma"] == verdict["heldout"]["svr"]["worst_gamma"] and alpha["method"] == "svr"
+    assert alpha["k"]["x"] == pytest.approx(1 / 75.065, rel=1e-3)  # the sample sensor's slope
 
 
 @pytest.fixture
@@ -262,8 +272,8 @@ def in_threads(monkeypatch):
     """fit-many's sensors fitted on threads of this process (``executor="thread"``), not
     in worker processes: for the CLI tests whose point is the summary, the gates, the
     errors and the baselines.  That a worker process fits as `fit` does is
-    test_fit_many_fits_each_sensor_as_fit_does's point, and keeps its processes; each
-    process started costs ~1 s of CPU to import the package again."""
+    test_fit_many_fits_each_sensor_as_fit_does's point, and fleet_fitted keeps its
+    processes; each process started costs ~1 s of CPU to import the package again."""
     import functools
 
     import fsdecouple.fleet.sensors as sensors
@@ -271,13 +281,11 @@ def in_threads(monkeypatch):
     monkeypatch.setattr(sensors, "fit_many", functools.partial(sensors.fit_many, executor="thread"))
 
 
-def test_fit_many_cli_gates_and_errors(fleet, tmp_path, in_threads):
-    out = tmp_path / "models"
-    r = invoke(["fit-many", fleet / "sensors", "-o", out, "--json", "--workers", 2], 2)
-    doc = json.loads(r.stdout)
+def test_fit_many_cli_gates_and_errors(fleet, fleet_fitted, tmp_path, in_threads):
+    doc, stderr, _ = fleet_fitted  # the whole fleet: exit 2, for broken
     assert doc["format"] == "fsdecouple.fleet" and doc["failed"] == ["broken"]
     assert [s["sensor"] for s in doc["sensors"]] == ["alpha", "beta", "broken", "gamma"]
-    assert "error: broken:" in r.stderr and "no sensor.yaml" in r.stderr
+    assert "error: broken:" in stderr and "no sensor.yaml" in stderr
     # the gates on the sensor with the worst held-out gamma (a fleet of one: a third of
     # the fits of the whole fleet's, four times over)
     worst, name = max((s["worst_gamma"], s["sensor"]) for s in doc["sensors"] if s["error"] is None)
@@ -285,12 +293,14 @@ def test_fit_many_cli_gates_and_errors(fleet, tmp_path, in_threads):
     if not (good / name).exists():
         shutil.copytree(fleet / "sensors" / name, good / name)
     invoke(["fit-many", good, "-o", tmp_path / "ok", "--max-gamma", worst * 1.01])
-    r = invoke(["fit-many", good, "-o", tmp_path / "strict", "--max-gamma", worst * 0.99], 1)
-    assert "gate failed" in r.stderr and "exceeds --max-gamma" in r.stderr
     # existing models are not overwritten without --force: each sensor's own error
     r = invoke(["fit-many", good, "-o", tmp_path / "ok"], 2)
     assert "already exists; pass --force" in r.stderr
-    invoke(["fit-many", good, "-o", tmp_path / "ok", "--force"])
+    # with --force the sensor is fitted again, and the stricter gate fails it: exit 1, not
+    # the 2 of a refused overwrite (one fit for both)
+    r = invoke(["fit-many", good, "-o", tmp_path / "ok", "--force", "--max-gamma", worst * 0.99], 1)
+    assert "gate failed" in r.stderr and "exceeds --max-gamma" in r.stderr
+    assert "already exists" not in r.stderr
 
 
 def test_fit_many_baseline_reports_drift(fleet, drift_models, tmp_path, in_threads):
@@ -301,7 +311,9 @@ def test_fit_many_baseline_reports_drift(fleet, drift_models, tmp_path, in_threa
     base.mkdir()
     shutil.copy(drift_models["first"], base / "alpha.json")  # the same sensor, fitted on reps 1-3
     shutil.copy(drift_models["before"], base / "gamma.json")  # gamma's sensor before its gain rose
-    r = invoke(["fit-many", good, "-o", tmp_path / "new", "--baseline", base, "--max-drift", 0.5,
+    # the baseline is the output directory: old models are read before they are replaced
+    # (gamma's drift below is from its old model; from its new one it would be 0)
+    r = invoke(["fit-many", good, "-o", base, "--baseline", base, "--force", "--max-drift", 0.5,
                 "--json"], 1)
     doc = json.loads(r.stdout)
     alpha, gamma = doc["sensors"]
@@ -310,8 +322,6 @@ def test_fit_many_baseline_reports_drift(fleet, drift_models, tmp_path, in_threa
     assert largest(alpha["drift"]) == 0.0 and alpha["gate"] == []
     assert gamma["drift"]["components"]["x"]["slope_change_pct"] == pytest.approx(1.0, abs=0.15)
     assert doc["gate_failed"] == ["gamma"] and "drift exceeds --max-drift" in r.stderr
-    # the baseline may be the output directory: old models are read before they are replaced
-    invoke(["fit-many", good, "-o", base, "--baseline", base, "--force"])
 
 
 @pytest.mark.parametrize("args, message", [
