@@ -22,6 +22,7 @@ from ..files.outputs import atomic_write
 from ..schema import LEGACY_EXTRAPOLATION
 from .decouple import MAX_SURROGATE_ERROR, usable
 from .model import Chi, CouplingErrorModel, FitReport
+from .modeljson import dump_forms, join_indented
 from .surrogate import spot_check
 from .temperature import TemperatureTerms
 
@@ -57,6 +58,17 @@ METHODS = ("svr", "linear")
 
 def model_to_dict(model: CouplingErrorModel) -> dict[str, Any]:
     """The model file's document, ``integrity`` digest included."""
+    doc = _document(model)
+    doc["integrity"] = _integrity(content_digest(doc))
+    return doc
+
+
+def _integrity(digest: str) -> dict[str, str]:
+    return {"algorithm": "sha256", "digest": digest}
+
+
+def _document(model: CouplingErrorModel) -> dict[str, Any]:
+    """The model file's document without its ``integrity``."""
     doc = {
         "format": FORMAT,
         "format_version": IMPORTED_FORMAT_VERSION if model.imported or model.temperature
@@ -88,15 +100,25 @@ def model_to_dict(model: CouplingErrorModel) -> dict[str, Any]:
         doc["zero"] = {"method": "intercept", "offsets": dict(zip(
             model.layout.outputs, (float(v) for v in model.zero), strict=True))}
         doc["format_version"] = ZERO_FORMAT_VERSION
-    doc["integrity"] = {"algorithm": "sha256", "digest": content_digest(doc)}
     return doc
 
 
 def save_model(model: CouplingErrorModel, path: str | Path, *, force: bool = True) -> None:
-    """Write the model file atomically (sorted keys, no NaN)."""
-    text = json.dumps(model_to_dict(model), indent=1, sort_keys=True, allow_nan=False)
+    """Write the model file atomically (sorted keys, no NaN).
+
+    The text is ``json.dumps(model_to_dict(model), indent=1, sort_keys=True,
+    allow_nan=False)`` plus a newline, written with its digest's canonical text in one
+    pass (:mod:`fsdecouple.core.modeljson`).
+    """
+    doc = _document(model)
+    canonical, indented = dump_forms(doc, leave_out=_NOT_DIGESTED)
+    indented.update(dump_forms({"integrity": _integrity(_sha256(canonical))}, ())[1])
+    text = join_indented(indented)
     with atomic_write(path, force=force) as fh:
         fh.write(text + "\n")
+
+
+_NOT_DIGESTED = ("integrity", "created")
 
 
 def content_digest(doc: dict[str, Any]) -> str:
@@ -105,12 +127,21 @@ def content_digest(doc: dict[str, Any]) -> str:
     Leaving out the creation time makes refits of the same data byte-identical
     in everything but that one field.
     """
-    body = {k: v for k, v in doc.items() if k not in ("integrity", "created")}
-    canonical = json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    body = {k: v for k, v in doc.items() if k not in _NOT_DIGESTED}
+    return _sha256(json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=False))
+
+
+def _sha256(canonical: str) -> str:
     return hashlib.sha256(canonical.encode("utf-8")).hexdigest()
 
 
 def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
+    """The model of a model file's document, verified as :func:`load_model` verifies it."""
+    return _model_from_dict(doc, source)
+
+
+def _model_from_dict(doc: Any, source: str, computed: str | None = None) -> CouplingErrorModel:
+    """``computed``: :func:`content_digest` of ``doc`` when the caller has it already."""
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise ModelFileError(f"{source}: not an fsdecouple model file (format is not '{FORMAT}')")
     version = doc.get("format_version")
@@ -134,7 +165,7 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
             "or by another tool?); refit the model"
         )
     try:
-        expected = content_digest(doc)
+        expected = content_digest(doc) if computed is None else computed
     except (TypeError, ValueError) as err:  # NaN, inf or non-JSON values in a dict
         raise ModelFileError(f"{source}: malformed model file ({err})") from None
     if digest != expected:
@@ -458,8 +489,40 @@ def load_model(path: str | Path) -> CouplingErrorModel:
         raise ModelFileError(f"{path}: model file not found") from None
     except (OSError, UnicodeDecodeError) as err:
         raise ModelFileError(f"{path}: cannot read model file ({err})") from None
+    doc, computed = _parse(text, path)
+    return _model_from_dict(doc, str(path), computed)
+
+
+def _parse(text: str, path: Path) -> tuple[Any, str | None]:
+    """The document of a model file's text, every number finite, and its digest.
+
+    The decoder parses floats natively; one canonical dump with ``allow_nan=False``
+    then both refuses a number that overflowed to infinity (``1e999``) and gives
+    :func:`content_digest`, so a model file costs one parse and one dump.  Any failure
+    parses the text again as :func:`_parse_checked` does, which names the first bad
+    value or position exactly as it always has: the fast path never decides a message.
+    """
     try:
-        doc = json.loads(
+        doc = json.loads(text, parse_constant=_refuse_constant, object_pairs_hook=_unique_keys)
+        if isinstance(doc, dict):
+            _dump_finite([doc.get("created"), doc.get("integrity")])
+            return doc, content_digest(doc)
+        _dump_finite(doc)
+        return doc, None
+    except (ValueError, RecursionError):  # JSONDecodeError, _NonFinite, _DuplicateKey too
+        pass
+    return _parse_checked(text, path), None
+
+
+def _dump_finite(value: Any) -> None:
+    """Raise ValueError if ``value`` holds a NaN or an infinity (as json.dumps does)."""
+    json.dumps(value, allow_nan=False)
+
+
+def _parse_checked(text: str, path: Path) -> Any:
+    """Parse with a check per float: the slow path that names the first bad value."""
+    try:
+        return json.loads(
             text, parse_constant=_refuse_constant, parse_float=_finite_float,
             object_pairs_hook=_unique_keys,
         )
@@ -480,4 +543,3 @@ def load_model(path: str | Path) -> CouplingErrorModel:
         raise ModelFileError(f"{path}: not a model file (JSON too deeply nested)") from None
     except ValueError as err:  # e.g. an integer of more than 4300 digits
         raise ModelFileError(f"{path}: not a model file ({excerpt(err)})") from None
-    return model_from_dict(doc, str(path))
