@@ -401,10 +401,7 @@ def _certificate_problem(cert: Any, labels, full_scale) -> str | None:
     result depends on is checked as the chi tables are (negative or unsorted scores gave
     intervals with lo > hi, sigma = 0 intervals of zero width, U = 0 an E_n of 0/0).
     """
-    def numbers(v, n=None):
-        return isinstance(v, list) and (n is None or len(v) == n) and all(
-            isinstance(x, int | float) and not isinstance(x, bool) for x in v)
-
+    numbers = _numbers
     try:
         for a, fs in zip(labels, full_scale, strict=True):
             st = cert["steps"][a]
@@ -439,6 +436,21 @@ def _certificate_problem(cert: Any, labels, full_scale) -> str | None:
     except (KeyError, TypeError):
         return "certificate needs steps and interval scores per component"
     return None
+
+
+_PLAIN_NUMBERS = frozenset({int, float})
+
+
+def _numbers(v: Any, n: int | None = None) -> bool:
+    """A list (of ``n`` items) of numbers, bools not counted as numbers.
+
+    The types of a parsed list are gathered at C speed (a certificate holds ~10^4
+    numbers); only a list holding other types (a float subclass, say) is checked
+    item by item.
+    """
+    return isinstance(v, list) and (n is None or len(v) == n) and (
+        set(map(type, v)) <= _PLAIN_NUMBERS
+        or all(isinstance(x, int | float) and not isinstance(x, bool) for x in v))
 
 
 def _settings_yaml_form(d: dict[str, Any]) -> dict[str, Any]:

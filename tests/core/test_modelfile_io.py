@@ -207,3 +207,30 @@ def test_a_bom_is_not_content(tmp_path, saved):
     shutil.copy(path, copy)
     copy.write_bytes(b"\xef\xbb\xbf" + path.read_bytes())
     assert model_to_dict(load_model(copy)) == model_to_dict(load_model(path))
+
+
+@pytest.mark.parametrize("where, value, loads", [
+    ("outputs", True, False),  # a bool is no number
+    ("outputs", "1.0", False),
+    ("outputs", None, False),
+    ("U", True, False),
+    ("load", [1.0], False),
+    ("outputs", np.float64(0.25), True),  # a float subclass, as a document built in memory holds
+    ("outputs", 3, True),  # an int is a number
+])
+def test_a_certificates_numbers_are_numbers(six_model_file, where, value, loads):
+    """The certificate's lists are checked item by item: one wrong item in the ~10^4 of a
+    six-axis certificate is refused, with a valid digest; a number of another type is not."""
+    from fsdecouple.core.modelfile import model_from_dict
+
+    doc = json.loads(six_model_file.read_text(encoding="utf-8"))
+    steps = doc["report"]["certificate"]["steps"]
+    axis = sorted(steps)[-1]
+    row = steps[axis][where][-1] if where == "outputs" else steps[axis][where]
+    row[-1] = value
+    doc["integrity"]["digest"] = content_digest(doc)
+    if loads:
+        assert model_from_dict(doc).report.certificate["steps"][axis][where][-1][-1] == value
+    else:
+        with pytest.raises(ModelFileError, match="certificate needs steps and interval scores"):
+            model_from_dict(doc)
