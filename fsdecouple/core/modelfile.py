@@ -22,6 +22,7 @@ from ..files.outputs import atomic_write
 from ..schema import LEGACY_EXTRAPOLATION
 from .decouple import MAX_SURROGATE_ERROR, usable
 from .model import Chi, CouplingErrorModel, FitReport
+from .modeljson import canonical_body, dump_forms, join_indented, parse_object
 from .surrogate import spot_check
 from .temperature import TemperatureTerms
 
@@ -57,6 +58,17 @@ METHODS = ("svr", "linear")
 
 def model_to_dict(model: CouplingErrorModel) -> dict[str, Any]:
     """The model file's document, ``integrity`` digest included."""
+    doc = _document(model)
+    doc["integrity"] = _integrity(content_digest(doc))
+    return doc
+
+
+def _integrity(digest: str) -> dict[str, str]:
+    return {"algorithm": "sha256", "digest": digest}
+
+
+def _document(model: CouplingErrorModel) -> dict[str, Any]:
+    """The model file's document without its ``integrity``."""
     doc = {
         "format": FORMAT,
         "format_version": IMPORTED_FORMAT_VERSION if model.imported or model.temperature
@@ -88,15 +100,25 @@ def model_to_dict(model: CouplingErrorModel) -> dict[str, Any]:
         doc["zero"] = {"method": "intercept", "offsets": dict(zip(
             model.layout.outputs, (float(v) for v in model.zero), strict=True))}
         doc["format_version"] = ZERO_FORMAT_VERSION
-    doc["integrity"] = {"algorithm": "sha256", "digest": content_digest(doc)}
     return doc
 
 
 def save_model(model: CouplingErrorModel, path: str | Path, *, force: bool = True) -> None:
-    """Write the model file atomically (sorted keys, no NaN)."""
-    text = json.dumps(model_to_dict(model), indent=1, sort_keys=True, allow_nan=False)
+    """Write the model file atomically (sorted keys, no NaN).
+
+    The text is ``json.dumps(model_to_dict(model), indent=1, sort_keys=True,
+    allow_nan=False)`` plus a newline, written with its digest's canonical text in one
+    pass (:mod:`fsdecouple.core.modeljson`).
+    """
+    doc = _document(model)
+    canonical, indented = dump_forms(doc, leave_out=_NOT_DIGESTED)
+    indented.update(dump_forms({"integrity": _integrity(_sha256(canonical))}, ())[1])
+    text = join_indented(indented)
     with atomic_write(path, force=force) as fh:
         fh.write(text + "\n")
+
+
+_NOT_DIGESTED = ("integrity", "created")
 
 
 def content_digest(doc: dict[str, Any]) -> str:
@@ -105,12 +127,21 @@ def content_digest(doc: dict[str, Any]) -> str:
     Leaving out the creation time makes refits of the same data byte-identical
     in everything but that one field.
     """
-    body = {k: v for k, v in doc.items() if k not in ("integrity", "created")}
-    canonical = json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    body = {k: v for k, v in doc.items() if k not in _NOT_DIGESTED}
+    return _sha256(json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=False))
+
+
+def _sha256(canonical: str) -> str:
     return hashlib.sha256(canonical.encode("utf-8")).hexdigest()
 
 
 def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
+    """The model of a model file's document, verified as :func:`load_model` verifies it."""
+    return _model_from_dict(doc, source)
+
+
+def _model_from_dict(doc: Any, source: str, computed: str | None = None) -> CouplingErrorModel:
+    """``computed``: :func:`content_digest` of ``doc`` when the caller has it already."""
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise ModelFileError(f"{source}: not an fsdecouple model file (format is not '{FORMAT}')")
     version = doc.get("format_version")
@@ -134,7 +165,7 @@ def model_from_dict(doc: Any, source: str = "model") -> CouplingErrorModel:
             "or by another tool?); refit the model"
         )
     try:
-        expected = content_digest(doc)
+        expected = content_digest(doc) if computed is None else computed
     except (TypeError, ValueError) as err:  # NaN, inf or non-JSON values in a dict
         raise ModelFileError(f"{source}: malformed model file ({err})") from None
     if digest != expected:
@@ -370,10 +401,7 @@ def _certificate_problem(cert: Any, labels, full_scale) -> str | None:
     result depends on is checked as the chi tables are (negative or unsorted scores gave
     intervals with lo > hi, sigma = 0 intervals of zero width, U = 0 an E_n of 0/0).
     """
-    def numbers(v, n=None):
-        return isinstance(v, list) and (n is None or len(v) == n) and all(
-            isinstance(x, int | float) and not isinstance(x, bool) for x in v)
-
+    numbers = _numbers
     try:
         for a, fs in zip(labels, full_scale, strict=True):
             st = cert["steps"][a]
@@ -408,6 +436,21 @@ def _certificate_problem(cert: Any, labels, full_scale) -> str | None:
     except (KeyError, TypeError):
         return "certificate needs steps and interval scores per component"
     return None
+
+
+_PLAIN_NUMBERS = frozenset({int, float})
+
+
+def _numbers(v: Any, n: int | None = None) -> bool:
+    """A list (of ``n`` items) of numbers, bools not counted as numbers.
+
+    The types of a parsed list are gathered at C speed (a certificate holds ~10^4
+    numbers); only a list holding other types (a float subclass, say) is checked
+    item by item.
+    """
+    return isinstance(v, list) and (n is None or len(v) == n) and (
+        set(map(type, v)) <= _PLAIN_NUMBERS
+        or all(isinstance(x, int | float) and not isinstance(x, bool) for x in v))
 
 
 def _settings_yaml_form(d: dict[str, Any]) -> dict[str, Any]:
@@ -458,8 +501,76 @@ def load_model(path: str | Path) -> CouplingErrorModel:
         raise ModelFileError(f"{path}: model file not found") from None
     except (OSError, UnicodeDecodeError) as err:
         raise ModelFileError(f"{path}: cannot read model file ({err})") from None
+    doc, computed = _parse(text, path)
+    return _model_from_dict(doc, str(path), computed)
+
+
+def _parse(text: str, path: Path) -> tuple[Any, str | None]:
+    """The document of a model file's text, every number finite, and its digest.
+
+    The decoder parses floats natively.  A file as save_model wrote it is checked
+    against its digest from its own text (:func:`modeljson.canonical_body`, no float
+    written again), and a match proves its content the writer's, finite.  Any other
+    file gets the canonical dump of :func:`content_digest`, whose ``allow_nan=False``
+    refuses a number that overflowed to infinity (``1e999``).  Any failure parses the
+    text again as :func:`_parse_checked` does, which names the first bad value or
+    position exactly as it always has: the fast path never decides a message.
+    """
+    decoder = json.JSONDecoder(parse_constant=_refuse_constant, object_pairs_hook=_unique_keys)
     try:
-        doc = json.loads(
+        parsed = parse_object(text, decoder)
+        if parsed is None:  # a list, a number: not a model, but a NaN in it is what is wrong
+            doc = decoder.decode(text)
+            _dump_finite(doc)
+            return doc, None
+        doc, spans = parsed
+        integrity = doc.get("integrity")
+        stored = integrity.get("digest") if isinstance(integrity, dict) else None
+        if isinstance(stored, str) and _sha256(canonical_body(text, spans, _NOT_DIGESTED)) == stored:
+            # json.dumps never writes 1e999, but a digest made by hand could cover it
+            if not _finite(doc):
+                raise ValueError("not finite")
+            return doc, stored
+        _dump_finite([doc.get("created"), doc.get("integrity")])  # outside the digest
+        return doc, content_digest(doc)
+    except (ValueError, StopIteration, RecursionError):  # JSONDecodeError, _NonFinite too
+        pass
+    return _parse_checked(text, path), None
+
+
+_INFINITIES = (float("inf"), float("-inf"))
+_SCALARS = frozenset({int, float, str, bool, type(None)})
+
+
+def _finite(doc: Any) -> bool:
+    """No infinity in a parsed document (the decoder makes no NaN: it refuses the constant).
+
+    Each list is searched for an infinity at C speed; only containers are walked.
+    """
+    stack = [doc]
+    while stack:
+        v = stack.pop()
+        if isinstance(v, list):
+            if _INFINITIES[0] in v or _INFINITIES[1] in v:
+                return False
+            if not set(map(type, v)) <= _SCALARS:
+                stack.extend(x for x in v if isinstance(x, list | dict))
+        elif isinstance(v, dict):
+            stack.extend(v.values())
+        elif isinstance(v, float) and v in _INFINITIES:
+            return False
+    return True
+
+
+def _dump_finite(value: Any) -> None:
+    """Raise ValueError if ``value`` holds a NaN or an infinity (as json.dumps does)."""
+    json.dumps(value, allow_nan=False)
+
+
+def _parse_checked(text: str, path: Path) -> Any:
+    """Parse with a check per float: the slow path that names the first bad value."""
+    try:
+        return json.loads(
             text, parse_constant=_refuse_constant, parse_float=_finite_float,
             object_pairs_hook=_unique_keys,
         )
@@ -480,4 +591,3 @@ def load_model(path: str | Path) -> CouplingErrorModel:
         raise ModelFileError(f"{path}: not a model file (JSON too deeply nested)") from None
     except ValueError as err:  # e.g. an integer of more than 4300 digits
         raise ModelFileError(f"{path}: not a model file ({excerpt(err)})") from None
-    return model_from_dict(doc, str(path))

@@ -1,0 +1,359 @@
+"""The model file read and written cheaply: the same bytes as json's own writer, the same
+digest, and the same refusals as a parse that checks every float on its own.
+
+The references are json itself (``json.dumps(indent=1, sort_keys=True)`` for the file,
+the canonical dump for the digest) and, for where a bad value is, the test's own
+knowledge of what it put where.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from fsdecouple.core.modelfile import content_digest, load_model, model_to_dict, save_model
+from fsdecouple.core.modeljson import dump_forms, join_indented
+from fsdecouple.errors import ModelFileError
+
+FLOAT = re.compile(r"-?\d+\.\d+(?:e-?\d+)?")
+
+
+def json_text(doc) -> str:
+    """What the model file was always: json's indented, sorted dump and a newline."""
+    return json.dumps(doc, indent=1, sort_keys=True, allow_nan=False) + "\n"
+
+
+@pytest.fixture(scope="module")
+def saved(tmp_path_factory, model):
+    """The session's fitted model, saved: (path, its text)."""
+    path = tmp_path_factory.mktemp("modelio") / "m.json"
+    save_model(model, path)
+    return path, path.read_text(encoding="utf-8")
+
+
+def test_saved_bytes_are_jsons_and_the_digest_content_digest(saved, model):
+    path, text = saved
+    doc = model_to_dict(model)
+    assert text == json_text(doc)
+    assert json.loads(text)["integrity"]["digest"] == content_digest(doc)
+
+
+def test_saved_bytes_of_own_chi_and_six_axis_models(tmp_path, rig_model, six_model_file):
+    """A joint fit's chi_own and tables, and a six-axis fit with its verdict and certificate:
+    the keys and arrays a three-axis model has none of."""
+    six = load_model(six_model_file)
+    for m in (rig_model, six):
+        path = tmp_path / "m.json"
+        save_model(m, path)
+        assert path.read_text(encoding="utf-8") == json_text(model_to_dict(m))
+    # a load and a save give back the file fit wrote, byte for byte
+    assert path.read_bytes() == six_model_file.read_bytes()
+
+
+scalars = st.one_of(
+    st.none(), st.booleans(), st.integers(min_value=-(10**40), max_value=10**40),
+    st.floats(allow_nan=False, allow_infinity=False), st.text(max_size=8),
+)
+# lists of numbers only (json's C encoder writes them), with a bool now and then (not a number)
+number_lists = st.lists(st.one_of(st.floats(allow_nan=False, allow_infinity=False),
+                                  st.integers(), st.booleans()),
+                        max_size=6)
+values = st.recursive(
+    scalars | number_lists,
+    lambda inner: st.lists(inner, max_size=4) | st.tuples(inner, inner)
+    | st.dictionaries(st.text(max_size=6), inner, max_size=4),
+    max_leaves=20,
+)
+documents = st.dictionaries(
+    st.sampled_from(["chi", "created", "integrity", "omega", "r\u00e9port", "a\"b\\c", "k\n"])
+    | st.text(max_size=5), values, max_size=6)
+
+
+@pytest.mark.slow  # a property test: seconds of CPU
+@settings(max_examples=300, deadline=None)
+@given(documents)
+def test_both_forms_are_jsons_own(doc):
+    canonical, indented = dump_forms(doc, leave_out=("integrity", "created"))
+    body = {k: v for k, v in doc.items() if k not in ("integrity", "created")}
+    assert canonical == json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    assert join_indented(indented) == json.dumps(doc, indent=1, sort_keys=True, allow_nan=False)
+
+
+@pytest.mark.parametrize("doc", [
+    {"a": np.float64(0.1), "b": [np.float64(1e-300), 2.5], "c": (1, 2.0)},  # float subclass
+    {"a": {1: 2.0, 3: [1.0]}},  # int keys: json writes them as strings
+    {"a": [1.0, {"b": []}, {}, [[]]]},
+])
+def test_what_the_fast_path_leaves_to_json_is_written_as_json_writes_it(doc):
+    canonical, indented = dump_forms(doc, leave_out=())
+    assert canonical == json.dumps(doc, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    assert join_indented(indented) == json.dumps(doc, indent=1, sort_keys=True, allow_nan=False)
+
+
+@pytest.mark.parametrize("doc, error", [
+    ({"a": [1.0, float("nan")]}, ValueError),
+    ({"a": {"b": float("inf")}}, ValueError),
+    ({"a": [1.0, "x", -float("inf")]}, ValueError),
+    ({"a": object()}, TypeError),
+    ({"a": [np.int64(1)]}, TypeError),
+])
+def test_a_document_json_refuses_is_refused(doc, error):
+    with pytest.raises(error):
+        json.dumps(doc, allow_nan=False)
+    with pytest.raises(error):
+        dump_forms(doc, leave_out=())
+
+
+def _replace(text: str, edits: dict[int, str]) -> str:
+    """``text`` with its i-th float literal replaced by ``edits[i]``."""
+    spans = list(FLOAT.finditer(text))
+    for i in sorted(edits, reverse=True):
+        m = spans[i]
+        text = text[:m.start()] + edits[i] + text[m.end():]
+    return text
+
+
+@pytest.mark.parametrize("first, later", [
+    ("1e999", "NaN"), ("NaN", "1e999"), ("-1e999", "Infinity"), ("-Infinity", "1e999"),
+])
+def test_the_first_non_finite_value_is_the_one_named(tmp_path, saved, first, later):
+    _, text = saved
+    n = len(FLOAT.findall(text))
+    for i, j in ((3, n // 2), (n // 3, n - 2)):
+        path = tmp_path / "m.json"
+        path.write_text(_replace(text, {i: first, j: later}), encoding="utf-8")
+        with pytest.raises(ModelFileError, match=re.escape(f"holds '{first}'; NaN and infinity")):
+            load_model(path)
+
+
+def test_a_non_finite_value_before_a_syntax_error_is_named_and_after_it_is_not(tmp_path, saved):
+    _, text = saved
+    path = tmp_path / "m.json"
+    path.write_text(_replace(text, {5: "1e999"})[:-40], encoding="utf-8")  # truncated after
+    with pytest.raises(ModelFileError, match="holds '1e999'"):
+        load_model(path)
+    # a stray brace early, the infinity later: the parse stops at the brace
+    spans = list(FLOAT.finditer(text))
+    edited = _replace(text, {len(spans) - 3: "1e999"})
+    at = spans[5].start()
+    path.write_text(edited[:at] + "}" + edited[at:], encoding="utf-8")
+    row, col = text.count("\n", 0, at) + 1, at - text.rfind("\n", 0, at)
+    with pytest.raises(ModelFileError, match=f"row {row}, column {col}: not valid JSON"):
+        load_model(path)
+
+
+def test_a_duplicate_key_and_an_infinity_the_first_is_named(tmp_path, saved):
+    _, text = saved
+    dup = text.replace('"rho": ', '"rho": 0.5, "rho": ', 1)
+    n, rho = len(FLOAT.findall(dup)), dup.index('"rho": 0.5')
+    path = tmp_path / "m.json"
+    path.write_text(_replace(dup, {n - 2: "1e999"}), encoding="utf-8")  # the infinity after
+    with pytest.raises(ModelFileError, match="key 'rho' appears twice"):
+        load_model(path)
+    assert FLOAT.search(dup).start() < rho  # the first float comes before the second rho
+    path.write_text(_replace(dup, {0: "1e999"}), encoding="utf-8")
+    with pytest.raises(ModelFileError, match="holds '1e999'"):
+        load_model(path)
+
+
+@pytest.mark.parametrize("edit", [
+    lambda t: re.sub(r'"created": "[^"]*"', '"created": 1e999', t, count=1),  # not digested
+    lambda t: t.replace('"integrity": {', '"integrity": {"x": -1e999, ', 1),
+    lambda t: "[1.0, 1e999]",  # not a model at all: the number is still what is wrong
+])
+def test_a_non_finite_value_outside_the_digest_is_refused(tmp_path, saved, edit):
+    _, text = saved
+    path = tmp_path / "m.json"
+    path.write_text(edit(text), encoding="utf-8")
+    with pytest.raises(ModelFileError, match="e999'; NaN and infinity are not allowed"):
+        load_model(path)
+
+
+def test_an_edited_number_is_refused_by_the_digest(tmp_path, saved):
+    """The digest load computes is over the file's content, not a copy of the stored one."""
+    _, text = saved
+    m = list(FLOAT.finditer(text))[len(FLOAT.findall(text)) // 2]
+    last = m.group()[-1]
+    edited = text[:m.end() - 1] + ("1" if last != "1" else "2") + text[m.end():]
+    path = tmp_path / "m.json"
+    path.write_text(edited, encoding="utf-8")
+    with pytest.raises(ModelFileError, match="integrity check failed"):
+        load_model(path)
+
+
+@pytest.mark.parametrize("layout", ["compact", "crlf", "reversed keys"])
+def test_the_same_content_written_otherwise_loads_and_decouples_alike(tmp_path, saved, layout):
+    """The digest covers the parsed content, so another writer's layout of it still loads."""
+    path, text = saved
+    doc = json.loads(text)
+    other = {"compact": lambda: json.dumps(doc, separators=(",", ":")),
+             "crlf": lambda: text.replace("\n", "\r\n"),
+             "reversed keys": lambda: json.dumps(dict(reversed(list(doc.items()))), indent=3),
+             }[layout]()
+    copy = tmp_path / "m.json"
+    copy.write_text(other, encoding="utf-8", newline="")
+    u = np.random.default_rng(0).uniform(-0.05, 0.05, (50, 3))
+    np.testing.assert_array_equal(load_model(copy).decouple(u), load_model(path).decouple(u))
+
+
+def test_a_bom_is_not_content(tmp_path, saved):
+    path, _ = saved
+    copy = tmp_path / "m.json"
+    shutil.copy(path, copy)
+    copy.write_bytes(b"\xef\xbb\xbf" + path.read_bytes())
+    assert model_to_dict(load_model(copy)) == model_to_dict(load_model(path))
+
+
+@pytest.mark.parametrize("where, value, loads", [
+    ("outputs", True, False),  # a bool is no number
+    ("outputs", "1.0", False),
+    ("outputs", None, False),
+    ("U", True, False),
+    ("load", [1.0], False),
+    ("outputs", np.float64(0.25), True),  # a float subclass, as a document built in memory holds
+    ("outputs", 3, True),  # an int is a number
+])
+def test_a_certificates_numbers_are_numbers(six_model_file, where, value, loads):
+    """The certificate's lists are checked item by item: one wrong item in the ~10^4 of a
+    six-axis certificate is refused, with a valid digest; a number of another type is not."""
+    from fsdecouple.core.modelfile import model_from_dict
+
+    doc = json.loads(six_model_file.read_text(encoding="utf-8"))
+    steps = doc["report"]["certificate"]["steps"]
+    axis = sorted(steps)[-1]
+    row = steps[axis][where][-1] if where == "outputs" else steps[axis][where]
+    row[-1] = value
+    doc["integrity"]["digest"] = content_digest(doc)
+    if loads:
+        assert model_from_dict(doc).report.certificate["steps"][axis][where][-1][-1] == value
+    else:
+        with pytest.raises(ModelFileError, match="certificate needs steps and interval scores"):
+            model_from_dict(doc)
+
+
+def test_the_digest_read_from_the_text_is_the_canonical_dumps(saved, six_model_file):
+    """What load hashes for a file as written is json's canonical text of its body."""
+    from fsdecouple.core.modeljson import canonical_body, parse_object
+
+    for text in (saved[1], six_model_file.read_text(encoding="utf-8")):
+        doc, spans = parse_object(text, json.JSONDecoder())
+        body = {k: v for k, v in doc.items() if k not in ("integrity", "created")}
+        assert canonical_body(text, spans, ("integrity", "created")) == json.dumps(
+            body, sort_keys=True, separators=(",", ":"), allow_nan=False)
+
+
+@pytest.mark.slow  # a property test: seconds of CPU
+@settings(max_examples=200, deadline=None)
+@given(documents, st.sampled_from([None, 0, 1, 2, 4]))
+def test_parse_object_reads_as_json_does(doc, indent):
+    from fsdecouple.core.modeljson import canonical_body, parse_object
+
+    text = json.dumps(doc, indent=indent, sort_keys=True)
+    back, spans = parse_object(text, json.JSONDecoder())
+    assert back == json.loads(text)
+    assert {k: json.loads(text[a:b]) for k, (a, b) in spans.items()} == back
+    canonical = json.dumps(back, sort_keys=True, separators=(",", ":"))
+    if indent is not None:  # the layout taken out; compact text has none to take
+        assert canonical_body(text, spans, ()) == canonical
+
+
+@pytest.mark.slow  # a property test: seconds of CPU
+@settings(max_examples=300, deadline=None)
+@given(st.data())
+def test_parse_object_refuses_what_json_refuses(data):
+    """A valid object with one character deleted, replaced or inserted: parse_object
+    raises whenever json.loads raises, and otherwise returns json's document; a text that
+    does not start with ``{`` it leaves to json (None)."""
+    from fsdecouple.core.modeljson import parse_object
+
+    text = json.dumps(data.draw(documents), indent=data.draw(st.sampled_from([None, 1])))
+    i = data.draw(st.integers(0, len(text)))
+    c = data.draw(st.sampled_from(list('{}[]:," \n0e-.\\ax')))
+    text = data.draw(st.sampled_from([text[:i] + text[i + 1:], text[:i] + c + text[i + 1:],
+                                      text[:i] + c + text[i:]]))
+    if not text.lstrip(" \t\n\r").startswith("{"):
+        assert parse_object(text, json.JSONDecoder()) is None
+        return
+    try:
+        expected = json.loads(text)
+    except ValueError:
+        with pytest.raises((ValueError, StopIteration)):
+            parse_object(text, json.JSONDecoder())
+        return
+    assert parse_object(text, json.JSONDecoder())[0] == expected
+
+
+@pytest.mark.parametrize("warnings, before, after", [
+    ([":x"], '":x"', '": x"'),  # a string that starts a line and looks like a key's colon
+    (["abc,", ":y"], '":y"', '": y"'),  # a string after one that ends in a comma
+    (['k": v'], '"k\\": v"', '"k\\":  v"'),  # an escaped quote and a colon
+])
+def test_layout_inside_a_string_is_content(tmp_path, model, warnings, before, after):
+    """load reads the digest of a file as written from its text with the layout taken
+    out: an edit that only adds a space inside a string is still an edit, refused."""
+    from dataclasses import replace
+
+    m = replace(model, report=replace(model.report, warnings=warnings))
+    path = tmp_path / "m.json"
+    save_model(m, path)
+    text = path.read_text(encoding="utf-8")
+    assert load_model(path).report.warnings == warnings
+    assert text.count(before) == 1
+    path.write_text(text.replace(before, after), encoding="utf-8")
+    with pytest.raises(ModelFileError, match="integrity check failed"):
+        load_model(path)
+
+
+def test_the_table_check_sees_the_same_chi_as_decoupling(model, rig_model):
+    """spot_check takes chi and chi' at the knots from one pass over the kernel terms: the
+    same doubles as Chi.__call__ and Chi.slope, in range and beyond it (tangent or kernel
+    extrapolation), with more points than one chunk of the work array holds."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(3)
+    for m in (model, rig_model):
+        for c in [*m.chi.values(), *m.own.values()]:
+            lo, hi = c.input_range
+            u = np.concatenate([rng.uniform(lo - hi + lo, hi + hi - lo, 5000), [lo, hi, 0.0]])
+            for chi in (c, replace(c, extrapolation="tangent"), replace(c, extrapolation="kernel")):
+                value, slope = chi.value_and_slope(u)
+                np.testing.assert_array_equal(value, chi(u))
+                np.testing.assert_array_equal(slope, chi.slope(u))
+            value, slope = c.value_and_slope(u[:5000].reshape(50, 100))
+            assert value.shape == slope.shape == (50, 100)
+            np.testing.assert_array_equal(value.ravel(), c(u[:5000]))
+
+
+@pytest.mark.parametrize("where", ["report", "created", "a list"])
+def test_an_infinity_under_a_digest_made_by_hand_is_refused(tmp_path, saved, where):
+    """json.dumps never writes 1e999, so no digest save_model makes covers one; a digest
+    computed by hand over the file's own text could, and load still names the number."""
+    import hashlib
+
+    from fsdecouple.core.modeljson import canonical_body, parse_object
+
+    _, text = saved
+    doc = json.loads(text)
+    if where == "report":
+        axis = sorted(doc["report"]["r2"])[0]
+        text = text.replace(f'"{axis}": {doc["report"]["r2"][axis]!r}', f'"{axis}": 1e999', 1)
+    elif where == "created":
+        text = re.sub(r'"created": "[^"]*"', '"created": -1e999', text, count=1)
+    else:
+        text = re.sub(r'"warnings": \[', '"warnings": [[2.5, 1e999], ', text, count=1)
+        text = text.replace("1e999], ]", "1e999]]")  # the list was empty
+    assert "1e999" in text
+    body, spans = parse_object(text, json.JSONDecoder())
+    canonical = canonical_body(text, spans, ("integrity", "created"))
+    forged = hashlib.sha256(canonical.encode("utf-8")).hexdigest()
+    text = text.replace(doc["integrity"]["digest"], forged)
+    path = tmp_path / "m.json"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(ModelFileError, match="e999'; NaN and infinity are not allowed"):
+        load_model(path)
