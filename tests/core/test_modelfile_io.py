@@ -328,32 +328,3 @@ def test_the_table_check_sees_the_same_chi_as_decoupling(model, rig_model):
             value, slope = c.value_and_slope(u[:5000].reshape(50, 100))
             assert value.shape == slope.shape == (50, 100)
             np.testing.assert_array_equal(value.ravel(), c(u[:5000]))
-
-
-@pytest.mark.parametrize("where", ["report", "created", "a list"])
-def test_an_infinity_under_a_digest_made_by_hand_is_refused(tmp_path, saved, where):
-    """json.dumps never writes 1e999, so no digest save_model makes covers one; a digest
-    computed by hand over the file's own text could, and load still names the number."""
-    import hashlib
-
-    from fsdecouple.core.modeljson import canonical_body, parse_object
-
-    _, text = saved
-    doc = json.loads(text)
-    if where == "report":
-        axis = sorted(doc["report"]["r2"])[0]
-        text = text.replace(f'"{axis}": {doc["report"]["r2"][axis]!r}', f'"{axis}": 1e999', 1)
-    elif where == "created":
-        text = re.sub(r'"created": "[^"]*"', '"created": -1e999', text, count=1)
-    else:
-        text = re.sub(r'"warnings": \[', '"warnings": [[2.5, 1e999], ', text, count=1)
-        text = text.replace("1e999], ]", "1e999]]")  # the list was empty
-    assert "1e999" in text
-    body, spans = parse_object(text, json.JSONDecoder())
-    canonical = canonical_body(text, spans, ("integrity", "created"))
-    forged = hashlib.sha256(canonical.encode("utf-8")).hexdigest()
-    text = text.replace(doc["integrity"]["digest"], forged)
-    path = tmp_path / "m.json"
-    path.write_text(text, encoding="utf-8")
-    with pytest.raises(ModelFileError, match="e999'; NaN and infinity are not allowed"):
-        load_model(path)
