@@ -197,10 +197,5 @@ def canonical_body(text: str, spans: dict[str, tuple[int, int]], leave_out: tupl
     way) gives some other text: its digest does not match, and the caller dumps the
     parsed document instead.  Never the canonical text of other content.
     """
-    return "{" + ",".join(_quote(k) + ":" + _compact(text[a:b])
+    return "{" + ",".join(_quote(k) + ":" + _BREAK.sub("", _KEY_SPACE.sub(r"\1", text[a:b]))
                           for k, (a, b) in sorted(spans.items()) if k not in leave_out) + "}"
-
-
-def _compact(text: str) -> str:
-    # split keeps the captured line break and key, and leaves the space after it out
-    return _BREAK.sub("", "".join(_KEY_SPACE.split(text)))
