@@ -22,7 +22,7 @@ from ..files.outputs import atomic_write
 from ..schema import LEGACY_EXTRAPOLATION
 from .decouple import MAX_SURROGATE_ERROR, usable
 from .model import Chi, CouplingErrorModel, FitReport
-from .modeljson import canonical_body, dump_forms, join_indented, parse_object
+from .modeljson import dump_forms, join_indented
 from .surrogate import spot_check
 from .temperature import TemperatureTerms
 
@@ -508,29 +508,20 @@ def load_model(path: str | Path) -> CouplingErrorModel:
 def _parse(text: str, path: Path) -> tuple[Any, str | None]:
     """The document of a model file's text, every number finite, and its digest.
 
-    The decoder parses floats natively.  A file as save_model wrote it is checked
-    against its digest from its own text (:func:`modeljson.canonical_body`, no float
-    written again), and a match proves its content the writer's, finite.  Any other
-    file gets the canonical dump of :func:`content_digest`, whose ``allow_nan=False``
-    refuses a number that overflowed to infinity (``1e999``).  Any failure parses the
-    text again as :func:`_parse_checked` does, which names the first bad value or
-    position exactly as it always has: the fast path never decides a message.
+    The decoder parses floats natively; one canonical dump with ``allow_nan=False``
+    then both refuses a number that overflowed to infinity (``1e999``) and gives
+    :func:`content_digest`, so a model file costs one parse and one dump.  Any failure
+    parses the text again as :func:`_parse_checked` does, which names the first bad
+    value or position exactly as it always has: the fast path never decides a message.
     """
-    decoder = json.JSONDecoder(parse_constant=_refuse_constant, object_pairs_hook=_unique_keys)
     try:
-        parsed = parse_object(text, decoder)
-        if parsed is None:  # a list, a number: not a model, but a NaN in it is what is wrong
-            doc = decoder.decode(text)
-            _dump_finite(doc)
-            return doc, None
-        doc, spans = parsed
-        _dump_finite([doc.get("created"), doc.get("integrity")])  # outside the digest
-        integrity = doc.get("integrity")
-        stored = integrity.get("digest") if isinstance(integrity, dict) else None
-        if isinstance(stored, str) and _sha256(canonical_body(text, spans, _NOT_DIGESTED)) == stored:
-            return doc, stored
-        return doc, content_digest(doc)
-    except (ValueError, StopIteration, RecursionError):  # JSONDecodeError, _NonFinite too
+        doc = json.loads(text, parse_constant=_refuse_constant, object_pairs_hook=_unique_keys)
+        if isinstance(doc, dict):
+            _dump_finite([doc.get("created"), doc.get("integrity")])
+            return doc, content_digest(doc)
+        _dump_finite(doc)
+        return doc, None
+    except (ValueError, RecursionError):  # JSONDecodeError, _NonFinite, _DuplicateKey too
         pass
     return _parse_checked(text, path), None
 

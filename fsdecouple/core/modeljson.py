@@ -1,4 +1,4 @@
-"""The model file's JSON text: both of its forms written in one pass, and read back.
+"""The model file's JSON text, written in one pass for both of its forms.
 
 A model file is ``json.dumps(doc, indent=1, sort_keys=True, allow_nan=False)`` and its
 digest covers the canonical ``json.dumps(body, sort_keys=True, separators=(",", ":"),
@@ -12,18 +12,11 @@ with a line break after each comma (a list of numbers holds no string, so no com
 there is inside one).  Anything it does not write the way json would (a non-string
 key, a NaN, a type json does not know) leaves the whole document to json itself,
 which writes or refuses it as always.
-
-Reading, :func:`parse_object` parses as json does and says where each top-level value's
-text lies, and :func:`canonical_body` turns that text back into the canonical form by
-taking its layout out, with no float written again: the digest of a file as written is
-checked without a second dump.
 """
 
 from __future__ import annotations
 
 import json
-import re
-from json.decoder import scanstring
 from json.encoder import encode_basestring_ascii as _quote
 from typing import Any
 
@@ -129,73 +122,3 @@ def _encode(value: Any, newline: str, compact: list[str], pretty: list[str]) -> 
         raise _LeftToJson
     compact.append(text)
     pretty.append(text)
-
-
-_WHITESPACE = re.compile(r"[ \t\n\r]*")
-# json's indented layout: the space after a key that starts a line, then each line break
-# and the indentation after it.  Both start at a line break, and a JSON string holds no
-# raw line break, so neither ever matches inside a string: a string that starts a line
-# and is followed by ": " is a key.  (A pattern not anchored at a line break could start
-# inside a string, at its closing quote, and so take a space out of the next string.)
-_KEY_SPACE = re.compile(r'(\n *"(?:[^"\\\n]|\\.)*":) ')
-_BREAK = re.compile(r"\n *")
-
-
-def parse_object(text: str, decoder: json.JSONDecoder
-                 ) -> tuple[dict[str, Any], dict[str, tuple[int, int]]] | None:
-    """``(decoder.decode(text), spans)`` for a text holding one JSON object, where
-    ``text[start:end]`` is the text of each top-level value (``spans[key]``); None for
-    a text whose first character (after whitespace) is not ``{``.
-
-    The top-level object is read here, each value by json's own scanner with the
-    decoder's hooks, so the document is the one ``decoder.decode`` returns.  Invalid
-    JSON raises ValueError or StopIteration, not always json's: a caller that names
-    the error parses again with json.
-    """
-    i = _WHITESPACE.match(text, 0).end()
-    if text[i:i + 1] != "{":
-        return None
-    scan, pairs, spans = decoder.scan_once, [], {}
-    i = _WHITESPACE.match(text, i + 1).end()
-    if text[i:i + 1] == "}":
-        i += 1
-    else:
-        while True:
-            if text[i:i + 1] != '"':
-                raise ValueError("expected a key")
-            key, i = scanstring(text, i + 1)
-            i = _WHITESPACE.match(text, i).end()
-            if text[i:i + 1] != ":":
-                raise ValueError("expected ':'")
-            start = _WHITESPACE.match(text, i + 1).end()
-            value, i = scan(text, start)
-            pairs.append((key, value))
-            spans[key] = (start, i)
-            i = _WHITESPACE.match(text, i).end()
-            if text[i:i + 1] == ",":
-                i = _WHITESPACE.match(text, i + 1).end()
-            elif text[i:i + 1] == "}":
-                i += 1
-                break
-            else:
-                raise ValueError("expected ',' or '}'")
-    if _WHITESPACE.match(text, i).end() != len(text):
-        raise ValueError("extra data")
-    hook = decoder.object_pairs_hook
-    return (hook(pairs) if hook else dict(pairs)), spans
-
-
-def canonical_body(text: str, spans: dict[str, tuple[int, int]], leave_out: tuple[str, ...]
-                   ) -> str:
-    """The canonical text of the object :func:`parse_object` read, without the top-level
-    keys ``leave_out``, for a text laid out as ``json.dumps(..., indent=n, sort_keys=True)``
-    lays it out.
-
-    Only layout is taken out (line breaks, indentation, the space after a key that starts
-    a line), never anything inside a string, so what is left parses to the same values.
-    A text laid out otherwise (other whitespace, unsorted keys, numbers written another
-    way) gives some other text: its digest does not match, and the caller dumps the
-    parsed document instead.  Never the canonical text of other content.
-    """
-    return "{" + ",".join(_quote(k) + ":" + _BREAK.sub("", _KEY_SPACE.sub(r"\1", text[a:b]))
-                          for k, (a, b) in sorted(spans.items()) if k not in leave_out) + "}"
