@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import typer.testing
+from hypothesis import settings as hypothesis_settings
 from typer.testing import CliRunner
 
 from fsdecouple import load_calibration, load_config
@@ -27,6 +28,13 @@ from fsdecouple.sim.simulate import SimulatedSensor, simulate
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLE = ROOT / "sample_data"
+
+# Property tests draw the same examples on every run (derandomize): a run's cost and its
+# verdict are then the code's, not the draw's (test_fit_contract took 4-24 s of CPU by
+# the examples drawn).  `pytest --hypothesis-profile explore` draws new ones.
+hypothesis_settings.register_profile("fsdecouple", derandomize=True)
+hypothesis_settings.register_profile("explore", derandomize=False)
+hypothesis_settings.load_profile("fsdecouple")
 
 # The package byte-compiled once, as pip install does: the tests start ~150 Python
 # processes (commands, benchmarks, signals), and with PYTHONDONTWRITEBYTECODE set (some
