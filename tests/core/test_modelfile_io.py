@@ -44,6 +44,7 @@ def test_saved_bytes_are_jsons_and_the_digest_content_digest(saved, model):
     assert json.loads(text)["integrity"]["digest"] == content_digest(doc)
 
 
+@pytest.mark.slow  # fits the rig and six-axis models when no earlier test has (2 s)
 def test_saved_bytes_of_own_chi_and_six_axis_models(tmp_path, rig_model, six_model_file):
     """A joint fit's chi_own and tables, and a six-axis fit with its verdict and certificate:
     the keys and arrays a three-axis model has none of."""
@@ -75,6 +76,7 @@ documents = st.dictionaries(
     | st.text(max_size=5), values, max_size=6)
 
 
+@pytest.mark.slow  # a property test: 2 s of CPU
 @settings(max_examples=300, deadline=None)
 @given(documents)
 def test_both_forms_are_jsons_own(doc):
