@@ -397,12 +397,18 @@ def guess_rows(path: Path, names: list[str], raw_rows: list[list[str]], sep: str
     )
 
 
+_POINT = re.compile(r"[+-]?\d*\.\d+([eE][+-]?\d+)?")
+_COMMA = re.compile(r"[+-]?\d*,\d+([eE][+-]?\d+)?")
+
+
 def sniff_decimal(sep: str, rows: list[list[str]], cols: list[int]) -> str:
     """'.' in a comma file; else ',' (European) unless its numbers say otherwise."""
+    if sep == ",":
+        return "."
     cells = [row[i].strip() for row in rows[:1000] for i in cols if i < len(row)]
-    point = sum(bool(re.fullmatch(r"[+-]?\d*\.\d+([eE][+-]?\d+)?", c)) for c in cells)
-    comma = sum(bool(re.fullmatch(r"[+-]?\d*,\d+([eE][+-]?\d+)?", c)) for c in cells)
-    return "." if sep == "," or point > comma else ","
+    point = sum(bool(_POINT.fullmatch(c)) for c in cells)
+    comma = sum(bool(_COMMA.fullmatch(c)) for c in cells)
+    return "." if point > comma else ","
 
 
 def guess_unit(kind: str, hints: dict[str, str | None], peak: float, integers: bool,

@@ -352,14 +352,28 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
 
 
 def _numbers(rows: list[list[str]], cols: list[int], decimal: str) -> np.ndarray:
-    """The rows whose every column in ``cols`` holds a number, as floats (rows, len(cols))."""
+    """The rows whose every column in ``cols`` holds a number, as floats (rows, len(cols)).
+
+    Each distinct cell is read once (a pose log repeats its loads and ADC counts on
+    thousands of lines)."""
+    read: dict[str, float | None] = {}
+
+    def number(cell: str) -> float | None:
+        c = cell.strip().replace(decimal, ".")
+        v = float(c) if NUMBER.fullmatch(c) else None
+        return v if v is not None and math.isfinite(v) else None  # 1e400 matches, but is no reading
+
     out = []
     for row in rows:
-        cells = [row[i].strip().replace(decimal, ".") if i < len(row) else "" for i in cols]
-        if all(NUMBER.fullmatch(c) for c in cells):
-            values = [float(c) for c in cells]
-            if all(math.isfinite(v) for v in values):  # 1e400 matches, but is no reading
-                out.append(values)
+        values = []
+        for i in cols:
+            cell = row[i] if i < len(row) else ""
+            v = read[cell] if cell in read else read.setdefault(cell, number(cell))
+            if v is None:
+                break
+            values.append(v)
+        else:
+            out.append(values)
     return np.array(out, dtype=float).reshape(-1, len(cols))
 
 
