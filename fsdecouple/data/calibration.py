@@ -149,8 +149,11 @@ def split_soak(table: pd.DataFrame, layout: Layout):
         return table, None, []
     zero = (stack(table, layout.loads) == 0.0).all(axis=1)
     files = table["file"].to_numpy()
-    soaks = [f for f in pd.unique(files) if zero[files == f].all()]
-    if not soaks or len(soaks) == len(pd.unique(files)):  # nothing loaded at all: zero.py says so
+    # per file at once (a mask per file over the whole table was quadratic in the files)
+    names, first, of = np.unique(files, return_index=True, return_inverse=True)
+    loaded = np.bincount(of.ravel(), weights=~zero, minlength=names.size) > 0
+    soaks = [names[i] for i in np.argsort(first) if not loaded[i]]  # in file order
+    if not soaks or len(soaks) == names.size:  # nothing loaded at all: zero.py says so
         return table, None, []
     notes = []
     for f in soaks:
