@@ -56,30 +56,3 @@ def rbf_sum_slope(x: np.ndarray, centres: np.ndarray, coef: np.ndarray, gamma: f
         e *= coef
         e.sum(axis=1, out=out[a:a + step])
     return out.reshape(np.shape(x))
-
-
-def rbf_sum_and_slope(x: np.ndarray, centres: np.ndarray, coef: np.ndarray, gamma: float,
-                      bias: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """``(rbf_sum(x, ..., bias), rbf_sum_slope(x, ...))`` with each exponential computed once.
-
-    The same operations in the same order as the two functions, so the same doubles: a
-    model file's table check at load (surrogate.spot_check) needs both at every knot.
-    """
-    flat, out, step = _chunks(x, centres.size)
-    slope = np.empty(flat.size)
-    work = np.empty((3, min(step, flat.size), centres.size))
-    for a in range(0, flat.size, step):
-        n = flat[a:a + step].size
-        d, e, v = work[0, :n], work[1, :n], work[2, :n]
-        np.subtract(flat[a:a + step, None], centres[None, :], out=d)
-        np.multiply(d, d, out=e)
-        e *= -gamma
-        np.exp(e, out=e)
-        np.multiply(e, coef, out=v)
-        v.sum(axis=1, out=out[a:a + step])
-        e *= -2.0 * gamma
-        e *= d
-        e *= coef
-        e.sum(axis=1, out=slope[a:a + step])
-    out += bias
-    return out.reshape(np.shape(x)), slope.reshape(np.shape(x))

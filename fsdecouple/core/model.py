@@ -22,7 +22,7 @@ from .decouple import coupling_errors as _coupling_errors
 from .decouple import exact as _exact_plan
 from .decouple import initial_forces
 from .extrapolation import Edges, continue_slopes, continue_values, edges
-from .kernel import rbf_sum, rbf_sum_and_slope, rbf_sum_slope
+from .kernel import rbf_sum, rbf_sum_slope
 from .plan import Plan, model_plan, temperature_inputs, temperature_step, zero_step
 from .surrogate import ChiSurrogate
 from .table_path import TableDecoupler
@@ -89,16 +89,6 @@ class Chi(NamedChi):
         out = self.kernel_slope(u)
         e = self.edges
         return out if e is None else continue_slopes(u, out, e)
-
-    def value_and_slope(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(self(u), self.slope(u))``, the same doubles, each kernel term computed once."""
-        x = np.asarray(u, dtype=float) / self.input_scale
-        value, slope = rbf_sum_and_slope(x, self.support_vectors, self.dual_coef, self.gamma,
-                                         -self.rho)
-        value, slope = self.output_scale * value, slope * (self.output_scale / self.input_scale)
-        e = self.edges
-        return (value, slope) if e is None else (continue_values(u, value, e),
-                                                 continue_slopes(u, slope, e))
 
     def to_dict(self) -> dict[str, Any]:
         out, inp = chi_labels(self.name)

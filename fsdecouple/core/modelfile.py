@@ -401,14 +401,13 @@ def _certificate_problem(cert: Any, labels, full_scale) -> str | None:
     result depends on is checked as the chi tables are (negative or unsorted scores gave
     intervals with lo > hi, sigma = 0 intervals of zero width, U = 0 an E_n of 0/0).
     """
-    numbers = _numbers
     try:
         for a, fs in zip(labels, full_scale, strict=True):
             st = cert["steps"][a]
             n = len(st["load"])
-            if not (numbers(st["load"]) and numbers(st["U"], n) and numbers(st["model_error"], n)
+            if not (_numbers(st["load"]) and _numbers(st["U"], n) and _numbers(st["model_error"], n)
                     and isinstance(st["outputs"], list) and len(st["outputs"]) == n
-                    and all(numbers(o, len(labels)) for o in st["outputs"])):
+                    and all(_numbers(o, len(labels)) for o in st["outputs"])):
                 return "certificate needs steps and interval scores per component"
             limit = MAX_FULL_SCALES * fs
             for key, low in (("U", "positive"), ("model_error", "non-negative")):
@@ -419,7 +418,7 @@ def _certificate_problem(cert: Any, labels, full_scale) -> str | None:
                             f"most {MAX_FULL_SCALES:g} full scales ({limit:g})")
             c = cert["interval"]["components"][a]
             own = c["scores"] if c["scores"] is not None else cert["interval"]["scores"]
-            if not (numbers([c["sigma"]]) and numbers(own) and own):
+            if not (_numbers([c["sigma"]]) and _numbers(own) and own):
                 return "certificate needs steps and interval scores per component"
             sigma = c["sigma"]
             if not 0.0 < sigma <= limit:

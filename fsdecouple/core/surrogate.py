@@ -240,10 +240,9 @@ def spot_check(chi, table: ChiSurrogate) -> tuple[float, float]:
     xk = table.lo + (table.hi - table.lo) * k / n
     h = (table.hi - table.lo) / n
     with np.errstate(all="ignore"):
-        chi_k, slope_k = chi.value_and_slope(xk)  # chi(xk), chi.slope(xk): the same doubles
         err = np.concatenate([np.abs(table(x) - chi(x)),
-                              np.abs(table.values[k] - chi_k),
-                              np.abs(table.slopes[k] - slope_k) * (4 * h / 27)])
+                              np.abs(table.values[k] - chi(xk)),
+                              np.abs(table.slopes[k] - _slope_fn(chi)(xk)) * (4 * h / 27)])
     err = np.where(np.isnan(err), np.inf, err)
     worst = int(np.argmax(err))
     return float(err[worst]), float(np.concatenate([x, xk, xk])[worst])

@@ -236,23 +236,3 @@ def test_a_certificates_numbers_are_numbers(six_model_file, where, value, loads)
     else:
         with pytest.raises(ModelFileError, match="certificate needs steps and interval scores"):
             model_from_dict(doc)
-
-
-def test_the_table_check_sees_the_same_chi_as_decoupling(model, rig_model):
-    """spot_check takes chi and chi' at the knots from one pass over the kernel terms: the
-    same doubles as Chi.__call__ and Chi.slope, in range and beyond it (tangent or kernel
-    extrapolation), with more points than one chunk of the work array holds."""
-    from dataclasses import replace
-
-    rng = np.random.default_rng(3)
-    for m in (model, rig_model):
-        for c in [*m.chi.values(), *m.own.values()]:
-            lo, hi = c.input_range
-            u = np.concatenate([rng.uniform(lo - hi + lo, hi + hi - lo, 5000), [lo, hi, 0.0]])
-            for chi in (c, replace(c, extrapolation="tangent"), replace(c, extrapolation="kernel")):
-                value, slope = chi.value_and_slope(u)
-                np.testing.assert_array_equal(value, chi(u))
-                np.testing.assert_array_equal(slope, chi.slope(u))
-            value, slope = c.value_and_slope(u[:5000].reshape(50, 100))
-            assert value.shape == slope.shape == (50, 100)
-            np.testing.assert_array_equal(value.ravel(), c(u[:5000]))
