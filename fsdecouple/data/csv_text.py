@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import difflib
+import functools
 import io
 import itertools
 import os
@@ -138,15 +139,11 @@ def read_csv_text(source, settings: Settings, *, path: Path | None = None, **kw)
 # every field unquoted (no quote character) or wholly quoted, a quote opening it after any
 # spaces and closing it right before the separator or the line's end.  Mid-field quotes,
 # text after a closing quote and values running over lines are left to pandas.
-_PLAIN_LINE = {}
-
-
+@functools.cache
 def _plain_line(sep: str) -> re.Pattern:
-    if sep not in _PLAIN_LINE:
-        s = re.escape(sep)
-        field = f'(?: *"(?:[^"]|"")*"|[^"{s}]*)'
-        _PLAIN_LINE[sep] = re.compile(f"{field}(?:{s}{field})*")
-    return _PLAIN_LINE[sep]
+    s = re.escape(sep)
+    field = f'(?: *"(?:[^"]|"")*"|[^"{s}]*)'
+    return re.compile(f"{field}(?:{s}{field})*")
 
 
 def read_cells(data: bytes, settings: Settings, path: Path, width: int) -> tuple[np.ndarray, bool]:

@@ -114,8 +114,11 @@ def assign_sweeps(table: pd.DataFrame, layout: Layout = DEFAULT,
     axis = np.empty(len(table), dtype=object)
     _, first, group = np.unique(table["repetition"].to_numpy(), return_index=True,
                                 return_inverse=True)
+    group = group.ravel()
+    order = np.argsort(group, kind="stable")
+    rows_of = np.split(order, np.flatnonzero(np.diff(group[order])) + 1)  # by group, file order
     for g in np.argsort(first):  # each repetition's rows, repetitions in order of appearance
-        idx = np.flatnonzero(group == g)
+        idx = rows_of[g]
         pending: list[int] = []
         last = -1
         for i in idx:
