@@ -158,9 +158,9 @@ def read_cells(data: bytes, settings: Settings, path: Path, width: int) -> tuple
     every fit, cv and test); anything else is read by pandas itself.  ``spaced``: whether
     a cell may begin or end with white space (False: ``str.strip`` would change none).
     """
-    cells = _split_plain(data, settings.sep, width)
-    if cells is not None:
-        return cells
+    split = _split_plain(data, settings.sep, width)
+    if split is not None:
+        return split
     raw = read_csv_text(io.BytesIO(data), settings, path=path, header=0,
                         names=[str(i) for i in range(width)])
     return raw.to_numpy(dtype=object).reshape(len(raw), width), True
