@@ -10,9 +10,9 @@ evaluates the plan (:func:`~fsdecouple.core.plan.walk`) with them, in three form
 that give the same bits:
 
 * numpy over blocks of rows (:func:`eq11_rows`), on every core;
-* the compiled kernel (:mod:`fsdecouple.core.table_kernel`, numba) for large calls
-  (``compiled``, default from COMPILED_ROWS rows): numba's import costs ~0.4 s, which
-  a one-row ``apply`` or a control loop need not pay, and saves ~0.4 us a row;
+* the compiled kernel (:mod:`fsdecouple.core.table_kernel`, numba) for calls of
+  COMPILED_ROWS rows or more (``compiled``): loading numba and the cached kernel costs
+  ~0.45 s, which a control loop, a model load or ``apply`` need not pay;
 * one vector in plain Python (:meth:`TableDecoupler.one`, a closure over lists).
 
 Rows outside a table (at u or at a refinement step) or holding a NaN go back to the
@@ -48,11 +48,13 @@ from .surrogate import cell, horner
 # Up to this many rows, a call goes row by row through the plain-Python evaluator
 # (~3 us a row, bit-identical) rather than numpy's ~60 calls per block.
 SMALL_ROWS = 32
-# From this many rows a call uses the compiled kernel: its import (~0.4 s with scipy)
-# is paid back at ~0.4 us a row saved against numpy (measured 0.22 against 0.61 us a
-# row on 2 cores).  ``apply`` asks for it on logs this long (logs/apply.py).
-COMPILED_ROWS = 1 << 20
-COMPILED_BYTES = 32_000_000  # a CSV log of about COMPILED_ROWS rows of ~30 bytes
+# From this many rows a call uses the compiled kernel.  Loading numba and the cached
+# kernel takes ~0.45 s of a fresh process; the kernel then saves 20-70 ns a row against
+# numpy (row 1d of docs/benchmarks.md: 22 against 43 ns a row on 10 M rows, 2 cores), so
+# a single call pays it back from about 6-20 M rows.  ``apply`` decouples a log in
+# blocks of at most a million rows and never reaches it: end to end, the kernel made
+# apply no faster on logs of 1-30 M rows (docs/design/performance.md).
+COMPILED_ROWS = 1 << 23
 BLOCK_ROWS = 1 << 15  # rows a task of the thread pool goes through at a time
 
 

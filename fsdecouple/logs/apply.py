@@ -30,7 +30,6 @@ import pyarrow.compute as pc
 from ..axes import FORCE_COLUMNS, VOLTAGE_COLUMNS
 from ..config import Settings
 from ..core.model import FORCE_LIMIT, CouplingErrorModel
-from ..core.table_path import COMPILED_BYTES, COMPILED_ROWS
 from ..data.csv_text import HEADER_ROW, require_columns
 from ..data.zero import tare_offsets
 from ..errors import InputError, where
@@ -286,7 +285,8 @@ def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarra
     """Eq. (11) and a status per row: ``(forces, status code, no-forces mask)``.
 
     ``raw``: outputs as read (after ``scale:``); ``offsets``: the zero subtracted;
-    ``compiled``: the table path's compiled kernel (a long log), as ``model.decouple``.
+    ``compiled``: the table path's compiled kernel, as ``model.decouple`` (default: by
+    the block's rows).
     The one place that decides a row's status (:data:`STATUSES`), for ``apply``'s
     blocks and for :func:`fsdecouple.logs.frame.decouple_frame` alike.
     """
@@ -369,8 +369,6 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
     rows, medians = RowRules(*model.extrapolation_limits().T, sat_lo, sat_hi), []
     # blocks in flight bound the memory (~60 MB each), so not every core of a big box
     workers = workers or min(MAX_WORKERS, os.cpu_count() or 1)
-    # a long log (or a pipe) pays back the compiled kernel's import (core/table_path.py)
-    compiled = log.total is None or log.total >= (COMPILED_ROWS if log.parquet else COMPILED_BYTES)
 
     with atomic_write(out, "wb", force=force) as fh:
         if is_parquet(out):
@@ -389,7 +387,7 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
             # GIL, so blocks overlap on the cores while the main thread writes
             block = job()
             f, code, empty = decouple_rows(model, block.u * scale, summary.offsets, rows,
-                                           truncated=block.truncated, compiled=compiled)
+                                           truncated=block.truncated)
             if interval is not None:
                 f = with_intervals(model, f, interval, model.zero_corrected(block.u * scale, summary.offsets))
             if to_unit != 1.0:

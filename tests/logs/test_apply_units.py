@@ -132,6 +132,28 @@ def test_unit_gf_converts_the_forces(sample_model_file, tmp_path):
     assert decimals == 6  # 2e-10 x 10197 gf = 2.04e-6: six decimals; N had eight
 
 
+def test_apply_leaves_the_compiled_kernel_to_the_rows_of_each_call(sample_model_file, tmp_path,
+                                                                  monkeypatch):
+    """apply asks for no kernel itself: a block takes the compiled one by its rows, as any
+    call (core/table_path.py COMPILED_ROWS, 8 M; measured no faster in apply up to 30 M
+    rows). Here the threshold is lowered to 10 rows, so the sample log's blocks (more
+    than 10 rows each) would take it; the spy records the choice and runs numpy."""
+    from fsdecouple.core import table_path
+
+    chosen = []
+    real = table_path.TableDecoupler._block
+
+    def spy(self, u, out, covered, converged, compiled, refine):
+        chosen.append((len(u), compiled))
+        return real(self, u, out, covered, converged, False, refine)
+
+    monkeypatch.setattr(table_path, "COMPILED_ROWS", 10)
+    monkeypatch.setattr(table_path.TableDecoupler, "_block", spy)
+    apply_file(load_model(sample_model_file), LOG, tmp_path / "f.csv", tare=200)
+    assert chosen and all(compiled == (rows >= 10) for rows, compiled in chosen), chosen
+    assert any(compiled for _, compiled in chosen), chosen
+
+
 def test_unknown_unit_exits_2_and_writes_nothing(sample_model_file, tmp_path):
     out = tmp_path / "f.csv"
     r = invoke(["apply", sample_model_file, LOG, "-o", out, "--unit", "furlong"], code=2)
