@@ -122,9 +122,14 @@ def run_child(args: list[str]) -> tuple[float, float]:
     """Wall time [s] and peak RSS [MB] of one child process.
 
     The peak is the child's own VmHWM, polled every 10 ms: getrusage's
-    ru_maxrss of a child also counts this (large) parent's RSS at fork.
+    ru_maxrss of a child also counts this (large) parent's RSS at fork.  The disk's
+    write-back is flushed first (``os.sync``, outside the timing), so a child does not
+    pay for the files the one before it left dirty: apply's atomic write ends in an
+    fsync, which on ext4's ordered journal can wait for other files' dirty pages too,
+    while pyarrow's copy never syncs.
     """
     env = {**os.environ, "CI": "1", "PYTHONPATH": str(ROOT)}
+    os.sync()
     t0 = time.perf_counter()
     p = subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     peak = 0
