@@ -27,7 +27,6 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.csv as pcsv
-import pyarrow.parquet as pq
 
 from ..config import Settings
 from ..data.csv_text import HEADER_ROW, MAX_HEADER_CHARS, MISSING_CELLS, read_header, require_utf8, to_numbers
@@ -385,6 +384,8 @@ def parquet_blocks(path: Path, names: list[str], settings: Settings, *,
     UTF-8 (the row is named).  A list or struct voltage column is refused either way.
     ``keep``: the columns passed through (:func:`~fsdecouple.logs.passthrough.passed_columns`); default all.
     """
+    import pyarrow.parquet as pq  # Parquet logs only (see parquet_header)
+
     try:
         pf = pq.ParquetFile(path, pre_buffer=False, buffer_size=PARQUET_READ_BUFFER)
     except (pa.ArrowInvalid, OSError) as err:
@@ -430,6 +431,10 @@ def parquet_blocks(path: Path, names: list[str], settings: Settings, *,
 
 def parquet_header(path: Path) -> tuple[list[str], int]:
     """The column names of a Parquet log, and its rows (at least 1)."""
+    # imported for Parquet logs only: pyarrow.parquet loads pyarrow's filesystems (S3's
+    # among them), ~60 ms of a CSV apply's start-up
+    import pyarrow.parquet as pq
+
     try:
         if not stat.S_ISREG(os.stat(path).st_mode):  # a FIFO would block; its footer comes first
             raise InputError(f"{printable(path)}: a Parquet log must be a regular file "

@@ -9,7 +9,6 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.csv as pcsv
-import pyarrow.parquet as pq
 
 from ..axes import FORCE_COLUMNS
 from .arrow import binary, numbers
@@ -176,7 +175,7 @@ class ParquetSink:
         self.columns = columns
         self.extra = extra
         self.metadata = {k.encode(): v.encode() for k, v in (metadata or {}).items()}
-        self.writer: pq.ParquetWriter | None = None
+        self.writer = None  # a pyarrow.parquet.ParquetWriter from the first block
 
     def encode(self, block: Block, f: np.ndarray, empty: np.ndarray, extra: tuple = ()) -> pa.Table:
         table = block.table
@@ -188,6 +187,8 @@ class ParquetSink:
 
     def write(self, table: pa.Table) -> None:
         if self.writer is None:
+            import pyarrow.parquet as pq  # Parquet output only (reader.parquet_header)
+
             schema = table.schema.with_metadata({**(table.schema.metadata or {}), **self.metadata,
                                                  b"pandas": pandas_metadata(table.schema)})
             self.writer = pq.ParquetWriter(self.fh, schema, **parquet_options(table.schema))
