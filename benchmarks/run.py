@@ -388,8 +388,8 @@ def main() -> int:
     model.decouple(u[:1000])  # build the tables
     fast_t = median_time(lambda: model.decouple(u), max(repeats, 5))
     fast_rate = n / fast_t
-    # numpy's table path against the compiled kernel (numba, loaded for calls of
-    # core/table_path.py's COMPILED_ROWS or more only), on 10 M rows whatever --rows
+    # numpy's table path against the compiled kernel (numba, loaded for large calls
+    # only: core/table_path.py COMPILED_WORK), on 10 M rows whatever --rows
     big = np.random.default_rng(2).uniform(r[:, 0], r[:, 1], (10_000_000, 3))
     tables = model.fast_decoupler()
     tables.decouple(big[:100_000], compiled=True)  # compile (or load the cache) first
@@ -398,7 +398,7 @@ def main() -> int:
     big = None  # its 240 MB freed
     row("1d. table path on 10 M rows, numpy vs compiled", numpy_t, "s", numba_t,
         "numba kernel [s]", numpy_t / numba_t,
-        "info (<= 1.5 would drop numba; above, it loads for calls of 8 M rows or more)", True)
+        "info (<= 1.5 would drop numba; above, it loads for large calls only)", True)
     # libsvm trained as the model's chi were: with the settings the model carries, whose
     # solver tolerance fit sets against the noise (fitting/noise.py), not the config's
     libsvm = {}

@@ -68,7 +68,7 @@ def test_commands_write_nothing_into_the_installed_package(installed, tmp_path):
     assert len(log.read_text().splitlines()) > 33  # apply of a real log, tared
     _run([exe, "apply", tmp_path / "model.json", log, "--tare", "200", "-o", tmp_path / "f.csv"],
          env=env, cwd=tmp_path)
-    # the compiled kernel (a call of COMPILED_ROWS rows or more, core/table_path.py; asked
+    # the compiled kernel (a large call, COMPILED_WORK in core/table_path.py; asked
     # for here on a few rows), whose cache must land in the user's cache directory
     big = ("import numpy as np, fsdecouple; "
            f"m = fsdecouple.load_model({str(tmp_path / 'model.json')!r}); "

@@ -393,7 +393,7 @@ class CouplingErrorModel:
             forces are NaN.  All True for K = 0 and for linear models.
         compiled : bool, optional
             Use the compiled table kernel (numba); default: for calls of at least
-            ``table_path.COMPILED_ROWS`` rows (8 M).
+            ``table_path.COMPILED_WORK`` chi evaluations (2.8 M rows of 3 axes).
         temperature, zero : optional
             A temperature model (core/temperature.py): each row's temperature, ``u`` then
             raw, and a raw zero reading with its temperature (``n_inputs``), both

@@ -1,7 +1,7 @@
 """Eq. (11) from the chi tables, compiled: one pass over the rows, everything in registers.
 
-The table path (:mod:`fsdecouple.core.table_path`) calls it for calls of 8 M rows or
-more only: numba, scipy and the cached kernel take ~0.45 s to load.
+The table path (:mod:`fsdecouple.core.table_path`) calls it for large calls only
+(COMPILED_WORK): numba, scipy and the cached kernel take ~0.45 s to load.
 
     f_a = u_a / k_a + h_a(u_a) + sum_{b != a} g_ab(p_b),   g_ab = -chi_ab / k_a,   eq. (11)
 
@@ -17,8 +17,8 @@ the plain-Python evaluator's (:meth:`TableDecoupler.one`), with the same
 the same order and without fused multiply-adds (numba leaves LLVM's contraction off
 unless ``fastmath`` is asked), so all three give the same bits; tests hold them to
 it.  numba is the standard compiler for numeric loops in Python: numpy alone needs
-one pass over memory per operation, seven per chi, and takes two to three times as
-long (row 1d of docs/benchmarks.md: 43 against 22 ns a row on 10 M rows, 2 cores).
+one pass over memory per operation, seven per chi, and takes 1.3-2.4 times as long
+(row 1d of docs/benchmarks.md, 10 M rows of 3 axes; six axes: 5-6 against 12 M rows/s).
 """
 
 from __future__ import annotations

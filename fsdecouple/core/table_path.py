@@ -11,8 +11,8 @@ that give the same bits:
 
 * numpy over blocks of rows (:func:`eq11_rows`), on every core;
 * the compiled kernel (:mod:`fsdecouple.core.table_kernel`, numba) for calls of
-  COMPILED_ROWS rows or more (``compiled``): loading numba and the cached kernel costs
-  ~0.45 s, which a control loop, a model load or ``apply`` need not pay;
+  COMPILED_WORK chi evaluations or more (``compiled``): loading numba and the cached
+  kernel costs ~0.45 s, which a control loop or a model load need not pay;
 * one vector in plain Python (:meth:`TableDecoupler.one`, a closure over lists).
 
 Rows outside a table (at u or at a refinement step) or holding a NaN go back to the
@@ -48,13 +48,17 @@ from .surrogate import cell, horner
 # Up to this many rows, a call goes row by row through the plain-Python evaluator
 # (~3 us a row, bit-identical) rather than numpy's ~60 calls per block.
 SMALL_ROWS = 32
-# From this many rows a call uses the compiled kernel.  Loading numba and the cached
-# kernel takes ~0.45 s of a fresh process; the kernel then saves 20-70 ns a row against
-# numpy (row 1d of docs/benchmarks.md: 22 against 43 ns a row on 10 M rows, 2 cores), so
-# a single call pays it back from about 6-20 M rows.  ``apply`` decouples a log in
-# blocks of at most a million rows and never reaches it: end to end, the kernel made
-# apply no faster on logs of 1-30 M rows (docs/design/performance.md).
-COMPILED_ROWS = 1 << 23
+# From this much work a call uses the compiled kernel: its rows x (K + 1) steps x the
+# chi a step evaluates (N (N - 1), N more with own-load chi), 2.8 M rows of 3 axes or
+# 560,000 of six at K = 0.  numpy spends 5-7 ns on each such evaluation, the kernel
+# 2-4 (row 1d of docs/benchmarks.md; six axes on 1 M rows: 5-6 against 12 M rows/s),
+# and loading numba and the cached kernel takes ~0.45 s of a fresh process: a call
+# that numpy does in ~0.1 s or more is one of many (a long log, a notebook's arrays),
+# and the kernel's steady speed is what counts; a shorter one, a model load and a
+# control loop never load it.  ``apply`` decouples a log in blocks of at most a
+# million rows, each below it at K = 0 and 3 axes: end to end the kernel made apply
+# no faster on logs of 1-30 M rows (docs/design/performance.md).
+COMPILED_WORK = 1 << 24
 # Rows a task of the thread pool goes through at a time.  Each block costs some forty
 # numpy calls whose Python between them holds the GIL, so with two threads larger
 # blocks wait less: on 1 M rows, 2 threads, median of 9, 1 << 16 against 1 << 15 took
@@ -179,6 +183,7 @@ class TableDecoupler:
                 self.tab[b, m, :len(c)] = c
         # own-load chi_aa (joint.py): h_a = -chi_aa / k_a on input a's grid, at the measured u_a
         self.has_own = (0, 0) in tables
+        self.terms = n * (n - 1) + (n if self.has_own else 0)  # chi evaluated a step
         self.own = np.zeros((n, max(count), 4))
         self.own_rows: list[list[tuple[float, ...]]] = [[] for _ in range(n)]
         if self.has_own:
@@ -288,7 +293,7 @@ class TableDecoupler:
         and took the exact path.  ``refine``: K fixed-point steps (default the
         plan's); ``converged`` (n,), if given, is set False where a row did not
         settle (NaN forces).  ``compiled``: use the numba kernel (default: from
-        COMPILED_ROWS rows; numpy without numba installed).  ``before``: steps on the raw
+        COMPILED_WORK chi evaluations; numpy without numba installed).  ``before``: steps on the raw
         inputs ahead of the plan's own (a :class:`~fsdecouple.core.plan.TemperatureCorrection`).
         """
         refine = self.step.refine if refine is None else refine
@@ -299,7 +304,7 @@ class TableDecoupler:
         if covered is not None:
             covered[:] = True
         if compiled is None:
-            compiled = u.shape[0] >= COMPILED_ROWS
+            compiled = u.shape[0] * (int(refine) + 1) * self.terms >= COMPILED_WORK
         if compiled and not _numba_available():
             compiled = False
         workers = default_workers() if workers is None else workers

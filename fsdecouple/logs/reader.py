@@ -432,7 +432,7 @@ def parquet_blocks(path: Path, names: list[str], settings: Settings, *,
 def parquet_header(path: Path) -> tuple[list[str], int]:
     """The column names of a Parquet log, and its rows (at least 1)."""
     # imported for Parquet logs only: pyarrow.parquet loads pyarrow's filesystems (S3's
-    # among them), ~60 ms of a CSV apply's start-up
+    # among them), ~30 ms of a CSV apply's start-up
     import pyarrow.parquet as pq
 
     try:

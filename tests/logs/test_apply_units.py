@@ -132,25 +132,26 @@ def test_unit_gf_converts_the_forces(sample_model_file, tmp_path):
     assert decimals == 6  # 2e-10 x 10197 gf = 2.04e-6: six decimals; N had eight
 
 
-def test_apply_leaves_the_compiled_kernel_to_the_rows_of_each_call(sample_model_file, tmp_path,
-                                                                  monkeypatch):
-    """apply asks for no kernel itself: a block takes the compiled one by its rows, as any
-    call (core/table_path.py COMPILED_ROWS, 8 M; measured no faster in apply up to 30 M
-    rows). Here the threshold is lowered to 10 rows, so the sample log's blocks (more
-    than 10 rows each) would take it; the spy records the choice and runs numpy."""
+def test_apply_leaves_the_compiled_kernel_to_each_block_s_size(sample_model_file, tmp_path,
+                                                               monkeypatch):
+    """apply asks for no kernel itself: a block takes the compiled one by its work, as any
+    call (core/table_path.py COMPILED_WORK: rows x (K + 1) x the chi a step evaluates;
+    the kernel measured no faster in apply on logs of 1-30 M rows). Here the threshold is
+    lowered to 60, ten rows of the sample's six chi, so its blocks take it; the spy
+    records the choice and runs numpy."""
     from fsdecouple.core import table_path
 
     chosen = []
-    real = table_path.TableDecoupler._block
+    real = table_path.TableDecoupler._couple
 
-    def spy(self, u, out, covered, converged, compiled, refine):
+    def spy(self, u, workers, block_rows, covered, converged, compiled, refine):
         chosen.append((len(u), compiled))
-        return real(self, u, out, covered, converged, False, refine)
+        return real(self, u, workers, block_rows, covered, converged, False, refine)
 
-    monkeypatch.setattr(table_path, "COMPILED_ROWS", 10)
-    monkeypatch.setattr(table_path.TableDecoupler, "_block", spy)
+    monkeypatch.setattr(table_path, "COMPILED_WORK", 60)
+    monkeypatch.setattr(table_path.TableDecoupler, "_couple", spy)
     apply_file(load_model(sample_model_file), LOG, tmp_path / "f.csv", tare=200)
-    assert chosen and all(compiled == (rows >= 10) for rows, compiled in chosen), chosen
+    assert chosen and all(compiled == (rows * 6 >= 60) for rows, compiled in chosen), chosen
     assert any(compiled for _, compiled in chosen), chosen
 
 
