@@ -53,6 +53,14 @@ from .untared import block_median, untared
 
 CHUNK_ROWS = 1 << 20  # rows per block at most; blocks are cut at ~4 MB anyway
 MAX_WORKERS = 4
+# A log of this many chi evaluations (rows x (K + 1) x the chi a step evaluates) is
+# decoupled by the compiled kernel.  Measured in apply's CPU time (user, less scattered
+# than the wall clock here): loading the kernel costs ~0.7 s, and it saves 3-6 ns an
+# evaluation (10 M six-axis rows: ~1 s of 300 M; 10 M rows at K = 3: 0.5-1 s of 240 M;
+# 30 M 3-axis rows: ~1.1 s of 180 M), so it pays from about 2^27: a 3-axis log of 22 M
+# rows at K = 0, 5.6 M at K = 3, six axes from 4.5 M (docs/design/performance.md).
+# Below it each block decides as any call (core/table_path.py COMPILED_WORK).
+APPLY_COMPILED_WORK = 1 << 27
 STATUS_COLUMN = "status"
 FORCE_UNIT_KEY, OUTPUT_UNIT_KEY = "fsdecouple.force_unit", "fsdecouple.output_unit"
 # What a row's forces are worth.  Only "ok", "extrapolated" and "saturated" rows
@@ -286,7 +294,7 @@ def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarra
 
     ``raw``: outputs as read (after ``scale:``); ``offsets``: the zero subtracted;
     ``compiled``: the table path's compiled kernel, as ``model.decouple`` (default: by
-    the block's rows).
+    the block's work; ``apply`` asks for it on long logs, :func:`log_compiled`).
     The one place that decides a row's status (:data:`STATUSES`), for ``apply``'s
     blocks and for :func:`fsdecouple.logs.frame.decouple_frame` alike.
     """
@@ -321,6 +329,16 @@ def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarra
     code[outside] = EXTRAPOLATED_
     code[saturated] = SATURATED_
     return f, code, empty
+
+
+def log_compiled(block: Block, per_row: int) -> bool | None:
+    """True when the whole log is APPLY_COMPILED_WORK or more (its rows estimated from
+    the block's progress through the file: bytes of CSV, rows of Parquet); None, the
+    block's own rule, otherwise and for a pipe (its length unknown)."""
+    if not block.total or not block.done or not per_row:
+        return None
+    rows = (block.first_row - HEADER_ROW - 1 + len(block)) * block.total / block.done
+    return True if rows * per_row >= APPLY_COMPILED_WORK else None
 
 
 def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit, force,
@@ -369,6 +387,8 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
     rows, medians = RowRules(*model.extrapolation_limits().T, sat_lo, sat_hi), []
     # blocks in flight bound the memory (~60 MB each), so not every core of a big box
     workers = workers or min(MAX_WORKERS, os.cpu_count() or 1)
+    tables = model.fast_decoupler()
+    per_row = 0 if tables is None else (model.settings.refine + 1) * tables.terms
 
     with atomic_write(out, "wb", force=force) as fh:
         if is_parquet(out):
@@ -387,7 +407,8 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
             # GIL, so blocks overlap on the cores while the main thread writes
             block = job()
             f, code, empty = decouple_rows(model, block.u * scale, summary.offsets, rows,
-                                           truncated=block.truncated)
+                                           truncated=block.truncated,
+                                           compiled=log_compiled(block, per_row))
             if interval is not None:
                 f = with_intervals(model, f, interval, model.zero_corrected(block.u * scale, summary.offsets))
             if to_unit != 1.0:

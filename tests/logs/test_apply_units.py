@@ -132,14 +132,12 @@ def test_unit_gf_converts_the_forces(sample_model_file, tmp_path):
     assert decimals == 6  # 2e-10 x 10197 gf = 2.04e-6: six decimals; N had eight
 
 
-def test_apply_leaves_the_compiled_kernel_to_each_block_s_size(sample_model_file, tmp_path,
-                                                               monkeypatch):
-    """apply asks for no kernel itself: a block takes the compiled one by its work, as any
-    call (core/table_path.py COMPILED_WORK: rows x (K + 1) x the chi a step evaluates;
-    the kernel measured no faster in apply on logs of 1-30 M rows). Here the threshold is
-    lowered to 60, ten rows of the sample's six chi, so its blocks take it; the spy
-    records the choice and runs numpy."""
+def _kernel_choices(model_file, tmp_path, monkeypatch, call_work, log_work):
+    """(rows, compiled) of each table-path call of apply on the sample log, with the
+    thresholds of a call (core/table_path.py COMPILED_WORK) and of a log
+    (logs/apply.py APPLY_COMPILED_WORK) set; the spy runs numpy whatever is chosen."""
     from fsdecouple.core import table_path
+    from fsdecouple.logs import apply as apply_module
 
     chosen = []
     real = table_path.TableDecoupler._couple
@@ -148,11 +146,30 @@ def test_apply_leaves_the_compiled_kernel_to_each_block_s_size(sample_model_file
         chosen.append((len(u), compiled))
         return real(self, u, workers, block_rows, covered, converged, False, refine)
 
-    monkeypatch.setattr(table_path, "COMPILED_WORK", 60)
+    monkeypatch.setattr(table_path, "COMPILED_WORK", call_work)
+    monkeypatch.setattr(apply_module, "APPLY_COMPILED_WORK", log_work)
     monkeypatch.setattr(table_path.TableDecoupler, "_couple", spy)
-    apply_file(load_model(sample_model_file), LOG, tmp_path / "f.csv", tare=200)
-    assert chosen and all(compiled == (rows * 6 >= 60) for rows, compiled in chosen), chosen
-    assert any(compiled for _, compiled in chosen), chosen
+    tmp_path.mkdir()
+    apply_file(load_model(model_file), LOG, tmp_path / "f.csv", tare=200)
+    assert chosen
+    return chosen
+
+
+def test_apply_takes_the_compiled_kernel_by_the_log_s_work_else_each_block_s(
+        sample_model_file, tmp_path, monkeypatch):
+    """A log of APPLY_COMPILED_WORK chi evaluations or more (rows x (K + 1) x chi a
+    step; the sample's model: six chi, K = 0) takes the kernel in every block; below it,
+    each block decides as any call (measured: the kernel's loading costs apply ~0.5 s,
+    docs/design/performance.md)."""
+    rows = len(LOG.read_text().splitlines()) - 1
+    whole = _kernel_choices(sample_model_file, tmp_path / "a", monkeypatch, 1 << 60, 6 * rows)
+    assert all(compiled for _, compiled in whole), whole
+    # a log one row short of the threshold: each block by its own work (ten rows here)
+    blocks = _kernel_choices(sample_model_file, tmp_path / "b", monkeypatch, 60, 6 * rows + 6)
+    assert all(compiled == (n * 6 >= 60) for n, compiled in blocks), blocks
+    assert any(compiled for _, compiled in blocks), blocks
+    none = _kernel_choices(sample_model_file, tmp_path / "c", monkeypatch, 1 << 60, 6 * rows + 6)
+    assert not any(compiled for _, compiled in none), none
 
 
 def test_unknown_unit_exits_2_and_writes_nothing(sample_model_file, tmp_path):
