@@ -50,8 +50,8 @@ from .surrogate import cell, horner
 SMALL_ROWS = 32
 # From this much work a call uses the compiled kernel: its rows x (K + 1) steps x the
 # chi a step evaluates (N (N - 1), N more with own-load chi), 2.8 M rows of 3 axes or
-# 560,000 of six at K = 0.  numpy spends 5-7 ns on each such evaluation, the kernel
-# 2-4 (row 1d of docs/benchmarks.md; six axes on 1 M rows: 5-6 against 12 M rows/s),
+# 560,000 of six at K = 0.  numpy spends 6-8 ns on each such evaluation, the kernel
+# 2.5-5 (row 1d of docs/benchmarks.md; six axes on 1 M rows: 5-6 against 12-14 M rows/s),
 # and loading numba and the cached kernel takes ~0.45 s of a fresh process: a call
 # that numpy does in ~0.1 s or more is one of many (a long log, a notebook's arrays),
 # and the kernel's steady speed is what counts; a shorter one, a model load and a
