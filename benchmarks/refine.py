@@ -58,11 +58,14 @@ def cost(rows: int, repeats: int, k: int, apply_rows: int = 10_000_000,
     r = model.calibrated_range
     u = np.random.default_rng(0).uniform(r[:, 0], r[:, 1], (rows, 3))
     times = {0: [], k: []}
-    model.decouple(u[:100_000], refine=k)  # warm the threads and work arrays
+    # both on numpy: a K = 3 call of a million rows is enough work for the compiled
+    # kernel and K = 0 is not (core/table_path.py COMPILED_WORK), which is not the
+    # refinement's cost
+    model.decouple(u[:100_000], refine=k, compiled=False)  # warm the threads and work arrays
     for _ in range(repeats):
         for kk in times:  # interleaved, so drift hits both
             t0 = time.perf_counter()
-            model.decouple(u, refine=kk)
+            model.decouple(u, refine=kk, compiled=False)
             times[kk].append(time.perf_counter() - t0)
     base, refined = (statistics.median(times[kk]) for kk in (0, k))
     memory = (f"in memory, {rows:,} vectors through the tables, median of {repeats}: K = 0 "

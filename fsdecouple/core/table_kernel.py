@@ -17,8 +17,9 @@ the plain-Python evaluator's (:meth:`TableDecoupler.one`), with the same
 the same order and without fused multiply-adds (numba leaves LLVM's contraction off
 unless ``fastmath`` is asked), so all three give the same bits; tests hold them to
 it.  numba is the standard compiler for numeric loops in Python: numpy alone needs
-one pass over memory per operation, seven per chi, and takes 1.3-2.4 times as long
-(row 1d of docs/benchmarks.md, 10 M rows of 3 axes; six axes: 5-6 against 12 M rows/s).
+one pass over memory per operation, seven per chi: on six axes it decouples 5-6 M
+rows/s of a million, the kernel 12-14; on three axes, with the thread pool's larger
+blocks, the two come closer (row 1d of docs/benchmarks.md: numpy 0.86-1.97x the time).
 """
 
 from __future__ import annotations

@@ -48,16 +48,15 @@ from .surrogate import cell, horner
 # Up to this many rows, a call goes row by row through the plain-Python evaluator
 # (~3 us a row, bit-identical) rather than numpy's ~60 calls per block.
 SMALL_ROWS = 32
-# From this much work a call uses the compiled kernel: its rows x (K + 1) steps x the
-# chi a step evaluates (N (N - 1), N more with own-load chi), 2.8 M rows of 3 axes or
-# 560,000 of six at K = 0.  numpy spends 6-8 ns on each such evaluation, the kernel
-# 2.5-5 (row 1d of docs/benchmarks.md; six axes on 1 M rows: 5-6 against 12-14 M rows/s),
-# and loading numba and the cached kernel takes ~0.45 s of a fresh process: a call
-# that numpy does in ~0.1 s or more is one of many (a long log, a notebook's arrays),
-# and the kernel's steady speed is what counts; a shorter one, a model load and a
-# control loop never load it.  ``apply`` decouples a log in blocks of at most a
-# million rows, each below it at K = 0 and 3 axes: end to end the kernel made apply
-# no faster on logs of 1-30 M rows (docs/design/performance.md).
+# From this many chi evaluations a call uses the compiled kernel (TableDecoupler.work:
+# rows x (K + 1) steps x N (N - 1), plus N own-load chi once), 2.8 M rows of 3 axes or
+# 560,000 of six at K = 0.  On six axes numpy decouples 5-6 M rows/s of a million, the
+# kernel 12-14 (docs/benchmarks.md); on three axes the two are closer (row 1d, 10 M
+# rows: numpy took 0.86-1.97x the kernel's time in four runs).  Loading numba and the
+# cached kernel takes ~0.45 s of a fresh process: a call that numpy does in ~0.1 s or
+# more is one of many (a notebook's arrays, a log in parts), and the kernel's steady
+# speed is what counts; a shorter one, a model load and a control loop never load it.
+# ``apply`` decides for a whole log instead (logs/apply.py APPLY_COMPILED_WORK).
 COMPILED_WORK = 1 << 24
 # Rows a task of the thread pool goes through at a time.  Each block costs some forty
 # numpy calls whose Python between them holds the GIL, so with two threads larger
@@ -183,7 +182,6 @@ class TableDecoupler:
                 self.tab[b, m, :len(c)] = c
         # own-load chi_aa (joint.py): h_a = -chi_aa / k_a on input a's grid, at the measured u_a
         self.has_own = (0, 0) in tables
-        self.terms = n * (n - 1) + (n if self.has_own else 0)  # chi evaluated a step
         self.own = np.zeros((n, max(count), 4))
         self.own_rows: list[list[tuple[float, ...]]] = [[] for _ in range(n)]
         if self.has_own:
@@ -197,6 +195,12 @@ class TableDecoupler:
         sums = [_sum_order(n, a) for a in range(n)]
         self.sum_b = np.array([[b for b, _ in terms] for terms in sums], dtype=np.intp).reshape(n, n - 1)
         self.sum_m = np.array([[m for _, m in terms] for terms in sums], dtype=np.intp).reshape(n, n - 1)
+
+    def work(self, rows: float, refine: int) -> float:
+        """Chi evaluations of ``rows`` rows at K = ``refine``: N (N - 1) a step, K + 1 steps,
+        and the N own-load chi once (at the measured u)."""
+        n = self.n
+        return rows * ((int(refine) + 1) * n * (n - 1) + (n if self.has_own else 0))
 
     @classmethod
     def from_plan(cls, plan: Plan) -> TableDecoupler | None:
@@ -304,7 +308,7 @@ class TableDecoupler:
         if covered is not None:
             covered[:] = True
         if compiled is None:
-            compiled = u.shape[0] * (int(refine) + 1) * self.terms >= COMPILED_WORK
+            compiled = self.work(u.shape[0], refine) >= COMPILED_WORK
         if compiled and not _numba_available():
             compiled = False
         workers = default_workers() if workers is None else workers

@@ -53,13 +53,14 @@ from .untared import block_median, untared
 
 CHUNK_ROWS = 1 << 20  # rows per block at most; blocks are cut at ~4 MB anyway
 MAX_WORKERS = 4
-# A log of this many chi evaluations (rows x (K + 1) x the chi a step evaluates) is
-# decoupled by the compiled kernel.  Measured in apply's CPU time (user, less scattered
-# than the wall clock here): loading the kernel costs ~0.7 s, and it saves 3-6 ns an
-# evaluation (10 M six-axis rows: ~1 s of 300 M; 10 M rows at K = 3: 0.5-1 s of 240 M;
-# 30 M 3-axis rows: ~1.1 s of 180 M), so it pays from about 2^27: a 3-axis log of 22 M
-# rows at K = 0, 5.6 M at K = 3, six axes from 4.5 M (docs/design/performance.md).
-# Below it each block decides as any call (core/table_path.py COMPILED_WORK).
+# A log of this many chi evaluations (core/table_path.py TableDecoupler.work) is
+# decoupled by the compiled kernel, a shorter one in numpy.  Measured in apply's CPU
+# time (user, less scattered than the wall clock here): loading the kernel costs ~0.7 s
+# of CPU (0.45 s of wall clock in a fresh process), and it saved 3-6 ns an evaluation
+# (10 M six-axis rows: ~1 s of 300 M; 10 M 3-axis rows at K = 3: 1.25 s of 240 M; 30 M
+# 3-axis rows: ~1.1 s of 180 M), so it pays from about 2^27: a 3-axis log of 22 M rows
+# at K = 0, 5.6 M at K = 3, six axes from 4.5 M (docs/design/performance.md).  A pipe,
+# whose length is unknown, leaves it to each block (COMPILED_WORK, a call's rule).
 APPLY_COMPILED_WORK = 1 << 27
 STATUS_COLUMN = "status"
 FORCE_UNIT_KEY, OUTPUT_UNIT_KEY = "fsdecouple.force_unit", "fsdecouple.output_unit"
@@ -294,7 +295,7 @@ def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarra
 
     ``raw``: outputs as read (after ``scale:``); ``offsets``: the zero subtracted;
     ``compiled``: the table path's compiled kernel, as ``model.decouple`` (default: by
-    the block's work; ``apply`` asks for it on long logs, :func:`log_compiled`).
+    the block's work; ``apply`` decides for the whole log, :func:`log_compiled`).
     The one place that decides a row's status (:data:`STATUSES`), for ``apply``'s
     blocks and for :func:`fsdecouple.logs.frame.decouple_frame` alike.
     """
@@ -331,14 +332,14 @@ def decouple_rows(model: CouplingErrorModel, raw: np.ndarray, offsets: np.ndarra
     return f, code, empty
 
 
-def log_compiled(block: Block, per_row: int) -> bool | None:
-    """True when the whole log is APPLY_COMPILED_WORK or more (its rows estimated from
-    the block's progress through the file: bytes of CSV, rows of Parquet); None, the
-    block's own rule, otherwise and for a pipe (its length unknown)."""
-    if not block.total or not block.done or not per_row:
+def log_compiled(block: Block, tables, refine: int) -> bool | None:
+    """Whether the whole log is APPLY_COMPILED_WORK or more, its rows estimated from the
+    block's progress through the file (bytes of CSV, rows of Parquet); None, the
+    block's own rule, for a pipe (its length unknown) or a model without tables."""
+    if tables is None or not block.total or not block.done:
         return None
     rows = (block.first_row - HEADER_ROW - 1 + len(block)) * block.total / block.done
-    return True if rows * per_row >= APPLY_COMPILED_WORK else None
+    return tables.work(rows, refine) >= APPLY_COMPILED_WORK
 
 
 def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit, force,
@@ -388,7 +389,6 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
     # blocks in flight bound the memory (~60 MB each), so not every core of a big box
     workers = workers or min(MAX_WORKERS, os.cpu_count() or 1)
     tables = model.fast_decoupler()
-    per_row = 0 if tables is None else (model.settings.refine + 1) * tables.terms
 
     with atomic_write(out, "wb", force=force) as fh:
         if is_parquet(out):
@@ -408,7 +408,8 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
             block = job()
             f, code, empty = decouple_rows(model, block.u * scale, summary.offsets, rows,
                                            truncated=block.truncated,
-                                           compiled=log_compiled(block, per_row))
+                                           compiled=log_compiled(block, tables,
+                                                                 model.settings.refine))
             if interval is not None:
                 f = with_intervals(model, f, interval, model.zero_corrected(block.u * scale, summary.offsets))
             if to_unit != 1.0:

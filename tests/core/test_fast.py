@@ -136,6 +136,32 @@ def test_fast_decouple_does_not_depend_on_blocks_threads_or_compiler(model):
     np.testing.assert_array_equal(model.decouple(u[:5]), ref[:5])
 
 
+def test_a_call_takes_the_compiled_kernel_by_its_chi_evaluations(model, rig_model,
+                                                                    monkeypatch):
+    """COMPILED_WORK counts chi evaluations (TableDecoupler.work): N (N - 1) a step for
+    K + 1 steps, and an own-load chi_aa once (at the measured u). The default choice
+    of ``compiled`` follows it; the spy records it and runs numpy."""
+    from fsdecouple.core import table_path
+
+    three = model.fast_decoupler()
+    assert [three.work(1, k) for k in (0, 3)] == [6, 24]
+    joint = rig_model.fast_decoupler()  # six axes with own-load chi (a joint fit)
+    assert joint.has_own and [joint.work(1, k) for k in (0, 3)] == [30 + 6, 120 + 6]
+    chosen = []
+    real = table_path.TableDecoupler._couple
+
+    def spy(self, u, workers, block_rows, covered, converged, compiled, refine):
+        chosen.append(compiled)
+        return real(self, u, workers, block_rows, covered, converged, False, refine)
+
+    monkeypatch.setattr(table_path.TableDecoupler, "_couple", spy)
+    monkeypatch.setattr(table_path, "COMPILED_WORK", 24 * 100)
+    u = np.full((100, 3), 0.1)
+    for rows, refine, expected in ((100, 0, False), (100, 3, True), (99, 3, False), (400, 0, True)):
+        three.decouple(np.resize(u, (rows, 3)), refine=refine)
+        assert chosen[-1] is expected, (rows, refine)
+
+
 def test_small_calls_are_bit_identical_to_the_block_path(model):
     """Up to SMALL_ROWS rows go row by row (fast for one vector); same bits as a big call."""
     from fsdecouple.core.table_path import SMALL_ROWS

@@ -132,10 +132,10 @@ def test_unit_gf_converts_the_forces(sample_model_file, tmp_path):
     assert decimals == 6  # 2e-10 x 10197 gf = 2.04e-6: six decimals; N had eight
 
 
-def _kernel_choices(model_file, tmp_path, monkeypatch, call_work, log_work):
-    """(rows, compiled) of each table-path call of apply on the sample log, with the
-    thresholds of a call (core/table_path.py COMPILED_WORK) and of a log
-    (logs/apply.py APPLY_COMPILED_WORK) set; the spy runs numpy whatever is chosen."""
+def _kernel_choices(model, tmp_path, monkeypatch, call_work, log_work):
+    """(rows, compiled) of each table-path call of apply on the sample log in blocks of
+    500 rows, with the thresholds of a call (core/table_path.py COMPILED_WORK) and of a
+    log (logs/apply.py APPLY_COMPILED_WORK) set; the spy runs numpy whatever is chosen."""
     from fsdecouple.core import table_path
     from fsdecouple.logs import apply as apply_module
 
@@ -150,26 +150,28 @@ def _kernel_choices(model_file, tmp_path, monkeypatch, call_work, log_work):
     monkeypatch.setattr(apply_module, "APPLY_COMPILED_WORK", log_work)
     monkeypatch.setattr(table_path.TableDecoupler, "_couple", spy)
     tmp_path.mkdir()
-    apply_file(load_model(model_file), LOG, tmp_path / "f.csv", tare=200)
-    assert chosen
+    apply_file(model, LOG, tmp_path / "f.csv", tare=200, chunk_rows=500)
+    assert len(chosen) > 3, chosen  # several blocks, each estimating the log's rows
     return chosen
 
 
-def test_apply_takes_the_compiled_kernel_by_the_log_s_work_else_each_block_s(
-        sample_model_file, tmp_path, monkeypatch):
-    """A log of APPLY_COMPILED_WORK chi evaluations or more (rows x (K + 1) x chi a
-    step; the sample's model: six chi, K = 0) takes the kernel in every block; below it,
-    each block decides as any call (measured: the kernel's loading costs apply ~0.5 s,
-    docs/design/performance.md)."""
+def test_apply_takes_the_compiled_kernel_by_the_log_s_work(sample_model_file, tmp_path,
+                                                            monkeypatch):
+    """A log of APPLY_COMPILED_WORK chi evaluations or more (rows x (K + 1) x the six chi
+    of the sample's model) takes the kernel in every block, a shorter one in none, even
+    where a block alone would be a large call (measured: the kernel's loading costs
+    apply ~0.7 s of CPU, docs/design/performance.md). Each block estimates the log's
+    rows from its progress through the file, so the thresholds keep a margin of 2x."""
+    model = load_model(sample_model_file)
+    assert model.settings.refine == 0
     rows = len(LOG.read_text().splitlines()) - 1
-    whole = _kernel_choices(sample_model_file, tmp_path / "a", monkeypatch, 1 << 60, 6 * rows)
-    assert all(compiled for _, compiled in whole), whole
-    # a log one row short of the threshold: each block by its own work (ten rows here)
-    blocks = _kernel_choices(sample_model_file, tmp_path / "b", monkeypatch, 60, 6 * rows + 6)
-    assert all(compiled == (n * 6 >= 60) for n, compiled in blocks), blocks
-    assert any(compiled for _, compiled in blocks), blocks
-    none = _kernel_choices(sample_model_file, tmp_path / "c", monkeypatch, 1 << 60, 6 * rows + 6)
-    assert not any(compiled for _, compiled in none), none
+    # six evaluations a row at K = 0, 24 at K = 3: a threshold of 12 a row parts them
+    low = _kernel_choices(model, tmp_path / "k0", monkeypatch, 1, 12 * rows)
+    assert not any(compiled for _, compiled in low), low
+    high = _kernel_choices(model.refined(3), tmp_path / "k3", monkeypatch, 1 << 60, 12 * rows)
+    assert all(compiled for _, compiled in high), high
+    big = _kernel_choices(model, tmp_path / "big", monkeypatch, 1 << 60, 3 * rows)
+    assert all(compiled for _, compiled in big), big
 
 
 def test_unknown_unit_exits_2_and_writes_nothing(sample_model_file, tmp_path):
