@@ -136,6 +136,7 @@ def test_fast_decouple_does_not_depend_on_blocks_threads_or_compiler(model):
     np.testing.assert_array_equal(model.decouple(u[:5]), ref[:5])
 
 
+@pytest.mark.slow  # fits the rig model when no earlier test has
 def test_a_call_takes_the_compiled_kernel_by_its_chi_evaluations(model, rig_model,
                                                                     monkeypatch):
     """COMPILED_WORK counts chi evaluations (TableDecoupler.work): N (N - 1) a step for
