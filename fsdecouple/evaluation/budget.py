@@ -45,6 +45,7 @@ from ..data.calibration import CalibrationSet
 from ..data.zero import mean_offset_variance, shift_variance, zero_row_shift
 from .intervals import interval_calibration
 from .iso376 import ComponentSteps, component_steps, resolution
+from .sweep_model import fit_sweep_model
 
 CONTRIBUTIONS = ("reference", "reproducibility", "repeatability", "resolution", "reversibility",
                  "interpolation", "zero", "temperature", "drift", "model")
@@ -219,7 +220,10 @@ def certificate_data(calib: CalibrationSet, model, points: pd.DataFrame,
     sweeps = shares = None
     # the centre takes the zero rows' shift back (intervals.centre: eq. (11)'s refined forces)
     shifts = len(layout.outputs) == layout.n and getattr(model, "method", None) == "svr"
-    if calib.zero == "rows" and np.isfinite(zeros) and {"repetition", "axis"} <= set(points.columns):
+    rows = calib.zero == "rows" and np.isfinite(zeros) and {"repetition", "axis"} <= set(points.columns)
+    # zero rows of single-axis sweeps: the least-squares sweep model's centre and variance
+    swept = fit_sweep_model(calib.points, layout) if rows and shifts else None
+    if rows and swept is None:
         # each held-out sweep's own share apart, and the zero readings' known share
         sweeps = points.groupby(["repetition", "axis"], sort=False).ngroup().to_numpy()
         # the zero readings' mean error the model inherits: what the centre's shift
@@ -227,7 +231,9 @@ def certificate_data(calib: CalibrationSet, model, points: pd.DataFrame,
         shares = (shift_variance if shifts else mean_offset_variance)(calib.points, layout)
     cal = interval_calibration(true, predicted if centred is None else centred, layout.labels,
                                noise, zeros, len(calib.repetitions), trained, sweeps, shares)
-    if shares is not None and shifts:
+    if swept is not None:
+        cal["least_squares"], cal["deviations"] = swept["model"], swept["deviations"]
+    elif shares is not None and shifts:
         cal["zero_shift"] = zero_shift(calib, model.k)
     return {"reference_uncertainty": settings.lab.reference_uncertainty, "steps": steps,
             "interval": cal}

@@ -6,7 +6,15 @@ held-out rounds of the verdict, :mod:`fsdecouple.evaluation.heldout`), each poin
 decoupled where the interval is centred (:func:`centre`).  s_a is the noise of one
 reading in decoupled component a (from the repetitions' scatter).
 
-Zero rows (the default for one-way sweeps).  A residual r = F_hat - F is split in two:
+Zero rows and single-axis sweeps in two repetitions or more (the default for one-way
+sweeps, an svr model of N outputs): the least-squares model of the sweeps
+(:mod:`fsdecouple.evaluation.sweep_model`) centres the interval and gives its error's
+variance at the row, the reading's sigma_a^2 and the model's rho_a^2 sigma_a^2; the
+half-width is sigma_a Q(rho_a), Q from the fits' studentised residuals as below
+(:func:`_swept`).  The SVR's chi follow each step's mean (Table 2: epsilon = 1e-4),
+and their error, fixed per sensor, was of unknown size: docs/design/intervals.md.
+
+Otherwise, with zero rows.  A residual r = F_hat - F is split in two:
 
 * what a sweep shares: its zero reading, and the round's model's inherited zero
   readings.  Every chi_ab (and omega_b) is fitted to the b sweeps less their zero
@@ -57,7 +65,8 @@ fitted from all points estimate it (``zero_shift``, :func:`shifted`); the estima
 own error is the bias the intervals keep (c_b above).
 
 The scores, s, ``load_variance`` (v s^2 n_t / n), ``first_step`` (L_b), ``deviations``,
-``zero_variance`` (c_b) and ``zero_shift`` live in the model file's ``report.certificate["interval"]``;
+``zero_variance`` (c_b), ``zero_shift`` and ``least_squares`` (the sweep model) live in the
+model file's ``report.certificate["interval"]``;
 :func:`check_interval_data` checks them when they are used.  No conformal library is
 used: MAPIE and crepes refit an estimator per fold through scikit-learn's API, where
 these residuals come from the verdict's own rounds and the method is a sort and an index.
@@ -73,6 +82,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
+from .sweep_model import SweepModel, check_sweep_model
 
 EXTRA_STEPS = 3  # refinement steps that estimate eq. (11)'s second-order error
 
@@ -197,6 +207,8 @@ def check_interval_data(cal: Any, labels) -> None:
             raise InputError("intervals: the model file's interval data are damaged (deviations "
                              "are not finite numbers in ascending order); refit the model",
                              argument="interval")
+        check_sweep_model(cal.get("least_squares"), labels)
+    if deviations is not None and cal.get("least_squares") is None:
         shares = cal.get("zero_variance")
         if not isinstance(shares, dict):
             raise bad("zero_variance", shares)
@@ -263,6 +275,9 @@ def half_widths(model, p: float, f: np.ndarray | None = None) -> np.ndarray:
     check_interval_data(cal, labels)
     at_rows = f is not None
     f = np.asarray(f, dtype=float) if at_rows else np.zeros((1, len(labels)))
+    if cal.get("least_squares") is not None:
+        out = _swept(cal, p, f)
+        return out if at_rows else out[0]
     if cal.get("deviations") is not None:
         out = _convolved(cal, p, f, labels)
         return out if at_rows else out[0]
@@ -303,6 +318,21 @@ def _convolved(cal: dict[str, Any], p: float, f: np.ndarray, labels) -> np.ndarr
     return sigma * np.interp(rho, grid, q)
 
 
+def _swept(cal: dict[str, Any], p: float, f: np.ndarray) -> np.ndarray:
+    """Half-widths, shape (n, N), about the least-squares sweep model's forces ``f``:
+    s_a Q(rho_a), s_a^2 the reading's variance in force a at the row and rho_a^2 the
+    model's over it (:meth:`fsdecouple.evaluation.sweep_model.SweepModel.variances`),
+    Q as :func:`_convolved`'s with the model's studentised residuals as the deviations
+    and its error at the row as the bias.  NaN where the model's Jacobian is singular."""
+    reading, model = SweepModel(cal["least_squares"]).variances(f)
+    with np.errstate(all="ignore"):
+        rho = np.sqrt(model / reading)
+    largest = float(np.nanmax(rho, initial=0.0)) if rho.size else 0.0
+    top = 2.0 ** math.ceil(math.log2(max(largest, 0.125)))  # a grid per power of two: cached
+    grid, q = _q_grid(np.asarray(cal["deviations"], dtype=float).tobytes(), p, top)
+    return np.sqrt(reading) * np.interp(rho, grid, q)
+
+
 @functools.lru_cache(maxsize=8)
 def _q_grid(deviations: bytes, p: float, top: float) -> tuple[np.ndarray, np.ndarray]:
     """Q(rho) on ``GRID`` ratios from 0 to ``top`` (every ramp 1: the largest a row has),
@@ -327,12 +357,15 @@ def _q_grid(deviations: bytes, p: float, top: float) -> tuple[np.ndarray, np.nda
 
 
 def centre(model, u: np.ndarray, f: np.ndarray | None = None) -> np.ndarray:
-    """Where an interval is centred: eq. (11)'s forces refined by ``EXTRA_STEPS`` more
-    fixed-point steps (eqs. 5-6), shape (n, N) [load unit], without rotation.
+    """Where an interval is centred, shape (n, N) [load unit], without rotation: the
+    least-squares sweep model's forces where the model file has it
+    (:mod:`fsdecouple.evaluation.sweep_model`, from eq. (11)'s forces ``f``), else
+    eq. (11)'s forces refined by ``EXTRA_STEPS`` more fixed-point steps (eqs. 5-6).
 
     The held-out points are scored here too, so the scores measure the centre's error.
     A row whose refinement does not settle keeps eq. (11)'s force ``f`` (computed
-    from ``u`` if not given).  A final model fitted on zero rows then takes back the
+    from ``u`` if not given), a row the sweep model does not settle the refined one.
+    Without the sweep model, a final model fitted on zero rows then takes back the
     error its chi and omega inherited from them, as the offsets fitted from all points
     estimate it (``zero_shift``, :func:`shifted`); the held-out rounds' models have none.
     """
@@ -340,13 +373,26 @@ def centre(model, u: np.ndarray, f: np.ndarray | None = None) -> np.ndarray:
         f = model.decouple(u, rotate=False)
     if getattr(model, "method", None) != "svr":  # the calibration matrix: nothing to refine
         return f
+    cert = (model.report.certificate if getattr(model, "report", None) is not None else None) or {}
+    cal = cert.get("interval") or {}
+    u = np.asarray(u, dtype=float)
+    if cal.get("least_squares"):
+        swept = SweepModel(cal["least_squares"]).forces(u, f)
+        left = np.flatnonzero(~np.isfinite(swept).all(axis=1))
+        if left.size:
+            swept[left] = _refined(model, u[left], f[left])
+        return swept
+    mid = _refined(model, u, f)
+    return shifted(cal, mid, model.layout.labels) if cal.get("zero_shift") else mid
+
+
+def _refined(model, u: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Eq. (11)'s forces ``f`` refined by ``EXTRA_STEPS`` more steps; ``f`` where that
+    does not settle."""
     with np.errstate(all="ignore"):
         refined = model.decouple(np.nan_to_num(u), rotate=False,
                                  refine=model.settings.refine + EXTRA_STEPS)
-    mid = np.where(np.isfinite(refined), refined, f)
-    cert = (model.report.certificate if getattr(model, "report", None) is not None else None) or {}
-    cal = cert.get("interval") or {}
-    return shifted(cal, mid, model.layout.labels) if cal.get("zero_shift") else mid
+    return np.where(np.isfinite(refined), refined, f)
 
 
 def shifted(cal: dict[str, Any], f: np.ndarray, labels) -> np.ndarray:

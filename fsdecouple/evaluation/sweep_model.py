@@ -1,0 +1,270 @@
+"""The least-squares model of the single-axis sweeps that ``apply --interval`` is
+centred on, and its error's variance at a row (Gauss-Markov) (issue 33).
+
+Eq. (1) with eq. (3)'s coupling, each output the sum of one function of each load:
+u_a = sum_b g_ab(f_b), g_ab(0) = 0 (g_aa is omega_a's line and its nonlinearity, g_ab
+for a != b the coupling error element e_ab of eq. 3).  Here every g_ab is a polynomial
+in s = f_b / L_b (L_b the largest calibrated |f_b|), fitted by least squares to the
+raw outputs a of all the b sweeps together, with one offset per sweep:
+
+    u_a = c_sweep + sum_{k=1..d_ab} beta_k s^k
+
+(the design of :func:`fsdecouple.data.zero.offset_design`, of every degree).  Each
+offset rests on all its sweep's points, not its zero reading alone, and the shape on
+all the repetitions.  The degree d_ab (1 to ``MAX_DEGREE``, at most two below the
+sweep's number of load levels) is the one that predicts held-out repetitions best:
+each sweep left out in turn, the shape fitted to the others and the left-out sweep's
+own offset taken as its residuals' mean (the paper's cross-validation by held-out
+repetitions, Section 4).  A row's forces solve u = sum_b g_b(f_b) by Newton's method
+from eq. (11)'s forces (:meth:`SweepModel.forces`).
+
+Why not the SVR's chi.  The chi of eq. (4) are fitted with Table 2's epsilon = 1e-4
+and C = 1000: they follow the repetitions' mean at every step, so the final model's
+own error (each step's mean of n noisy readings, and each sweep's zero readings) is
+a realisation fixed per sensor that no statistic of the calibration tells apart, and
+the intervals could only guess its size.  A least-squares fit of the same sweeps has
+an error of known covariance: with the reading noise s_a^2 (the fits' pooled residual
+variance), beta_ab has covariance s_a^2 C_ab, C_ab the shape block of (X'X)^-1, so
+g_a at a row errs with variance
+
+    V_a = s_a^2 sum_b x(s_b)' C_ab x(s_b),    x(s) = (s, s^2, ..., s^d_ab),
+
+and the row's forces, through the Jacobian J_ab = dg_a/df_b, with covariance
+J^-1 diag(V) J^-T (the model's part) and J^-1 diag(s^2) J^-T (the reading's).
+
+The assumption: the sensor's outputs add one function of each load (eq. 1), each a
+polynomial of at most ``MAX_DEGREE`` over the calibrated range, the readings
+independent with one variance per output.  A load beyond the calibrated range is the
+polynomials' extrapolation: those rows keep the status ``extrapolated``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..axes import Layout
+from ..errors import InputError
+
+if TYPE_CHECKING:  # apply reads the model, never pandas (tests/core/test_fast.py)
+    import pandas as pd
+
+MAX_DEGREE = 7  # of a g_ab; 9 and 12 measured alike (docs/design/intervals.md)
+NEWTON_STEPS = 30
+NEWTON_TOLERANCE = 1e-10  # of the largest calibrated load: a row has settled (the noise: ~1e-4)
+
+
+def fit_sweep_model(points: pd.DataFrame, layout: Layout) -> dict[str, Any] | None:
+    """The least-squares sweep model of a zero-rows calibration, or None where it
+    cannot be fitted (a component without sweeps in two repetitions or more, fewer
+    than three load levels, a labelled point that loads another component, or more
+    outputs than components).
+
+    ``points``: the calibration's points (``repetition``, ``axis``, the loads and the
+    outputs as eq. (11) takes them).  Returns ``{"model": {"peak": [L_b], "shape":
+    [[beta_ab (d_ab)] per output a] per component b, "covariance": [[C_ab (d_ab x
+    d_ab)] per a] per b, "noise_variance": [s_a^2] [output unit^2]}, "deviations":
+    sorted studentised residuals}``, JSON-ready.
+    """
+    n = layout.n
+    if len(layout.outputs) != n or not {"repetition", "axis"} <= set(points.columns):
+        return None
+    loads = points[list(layout.loads)].to_numpy(dtype=float)
+    u_all = points[list(layout.outputs)].to_numpy(dtype=float)
+    labels = points["axis"].to_numpy()
+    peak, shape, cov = [], [], []
+    rss, dof = np.zeros(n), np.zeros(n)
+    studentised = []
+    for b, label in enumerate(layout.labels):
+        mine = labels == label
+        f = loads[mine, b]
+        others = np.delete(loads[mine], b, axis=1)
+        _, group = np.unique(points["repetition"].to_numpy()[mine], return_inverse=True)
+        groups = int(group.max(initial=-1)) + 1
+        top = min(MAX_DEGREE, np.unique(f).size - 2)
+        L = float(np.abs(f).max(initial=0.0))
+        if groups < 2 or top < 1 or not L > 0 or np.any(others != 0.0) \
+                or not np.isfinite(u_all[mine]).all():
+            return None
+        s, u = f / L, u_all[mine]
+        degree = _cross_validated_degree(s, group, groups, u, top)
+        peak.append(L)
+        shape.append([]), cov.append([])
+        for a in range(n):
+            X = _design(s, group, groups, int(degree[a]))
+            inv = np.linalg.pinv(X.T @ X)
+            beta = inv @ (X.T @ u[:, a])
+            r = u[:, a] - X @ beta
+            lever = np.einsum("ij,jk,ik->i", X, inv, X)
+            rss[a] += float(r @ r)
+            dof[a] += len(r) - X.shape[1]
+            studentised.append((a, r, lever))
+            shape[b].append(beta[groups:].tolist())
+            cov[b].append(inv[groups:, groups:].tolist())
+    if np.any(dof < 1):
+        return None
+    variance = rss / dof
+    if not np.all(variance > 0):
+        return None
+    z = [r[lever < 1.0] / math.sqrt(variance[a]) / np.sqrt(1.0 - lever[lever < 1.0])
+         for a, r, lever in studentised]
+    return {"model": {"peak": peak, "shape": shape, "covariance": cov,
+                      "noise_variance": variance.tolist()},
+            "deviations": np.sort(np.concatenate(z)).tolist()}
+
+
+def _design(s: np.ndarray, group: np.ndarray, groups: int, degree: int) -> np.ndarray:
+    """One column per sweep, then s^1..s^degree."""
+    return np.column_stack([np.eye(groups)[group], *(s ** k for k in range(1, degree + 1))])
+
+
+def _cross_validated_degree(s, group, groups, u, top) -> np.ndarray:
+    """Per output, the degree 1..``top`` whose shape, fitted without one sweep, predicts
+    that sweep best (its own offset its residuals' mean), summed over the sweeps."""
+    error = np.zeros((top, u.shape[1]))
+    for held in range(groups):
+        train, test = group != held, group == held
+        _, g = np.unique(group[train], return_inverse=True)
+        for d in range(1, top + 1):
+            X = _design(s[train], g, groups - 1, d)
+            beta, *_ = np.linalg.lstsq(X, u[train], rcond=None)
+            powers = np.column_stack([s[test] ** k for k in range(1, d + 1)])
+            r = u[test] - powers @ beta[groups - 1:]
+            r -= r.mean(axis=0)
+            error[d - 1] += (r ** 2).sum(axis=0)
+    return np.argmin(error, axis=0) + 1
+
+
+class SweepModel:
+    """The stored model as polynomials in each s_b = f_b / L_b, per output a and load b,
+    coefficients of s^0, s^1, ... (padded to one degree): g_ab, its derivative and the
+    model's variance x(s)' C_ab x(s) (a polynomial of twice the degree)."""
+
+    def __init__(self, doc: dict[str, Any]):
+        self.peak = np.asarray(doc["peak"], dtype=float)
+        n = self.peak.size
+        d = max(len(c) for row in doc["shape"] for c in row)
+        self.g = np.zeros((n, n, d + 1))  # [a, b, power]: g_ab(0) = 0
+        self.quad = np.zeros((n, n, 2 * d + 1))  # x' C x = sum_{k,l} C_kl s^(k+l)
+        for b in range(n):
+            for a in range(n):
+                beta = np.asarray(doc["shape"][b][a], dtype=float)
+                cov = np.asarray(doc["covariance"][b][a], dtype=float).reshape(beta.size, beta.size)
+                self.g[a, b, 1:beta.size + 1] = beta
+                k = np.arange(1, beta.size + 1)
+                np.add.at(self.quad[a, b], (k[:, None] + k[None, :]).ravel(), cov.ravel())
+        powers = np.arange(1, d + 1)
+        self.slope = self.g[..., 1:] * powers / self.peak[None, :, None]  # dg_ab/df_b
+        self.noise = np.asarray(doc["noise_variance"], dtype=float)
+
+    def outputs(self, f: np.ndarray) -> np.ndarray:
+        """g(f) = sum_b g_ab(f_b), shape (n, N) [output unit]."""
+        return _polyval(self.g, f / self.peak).sum(axis=2)
+
+    def jacobian(self, f: np.ndarray) -> np.ndarray:
+        """J_ab = dg_a/df_b at ``f``, shape (n, N, N)."""
+        return _polyval(self.slope, f / self.peak)
+
+    def forces(self, u: np.ndarray, start: np.ndarray) -> np.ndarray:
+        """The forces whose outputs are ``u`` (zero-corrected, (n, N)), from ``start``;
+        NaN where a row does not settle.  Newton's method with the Jacobian of the start
+        kept (the chord method: ``start`` is eq. (11)'s refined forces, within the noise
+        of the solution, where J hardly moves), one inverse a row instead of one a step."""
+        f = np.where(np.isfinite(start), start, 0.0)
+        settled = np.zeros(len(u), dtype=bool)
+        tol = NEWTON_TOLERANCE * self.peak.max()
+        with np.errstate(all="ignore"):
+            inv, ok = _inverse(self.jacobian(f))
+            active = np.flatnonzero(np.isfinite(u).all(axis=1) & ok)
+            for _ in range(NEWTON_STEPS):
+                if not active.size:
+                    break
+                step = np.einsum("nab,nb->na", inv[active], u[active] - self.outputs(f[active]))
+                f[active] += step
+                small = np.abs(step).max(axis=1) <= tol
+                settled[active[small]] = True
+                active = active[~small & np.isfinite(f[active]).all(axis=1)]
+        return np.where(settled[:, None], f, np.nan)
+
+    def variances(self, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """At forces ``f`` (n, N): the variance of each force's error from the reading
+        and from the model, each (n, N) [load unit^2]; NaN where J is singular."""
+        with np.errstate(all="ignore"):
+            x = np.nan_to_num(f)
+            model = self.noise * _polyval(self.quad, x / self.peak).sum(axis=2)
+            inv, ok = _inverse(self.jacobian(x))
+            sq = inv ** 2
+            reading = sq @ self.noise
+            shared = np.einsum("nac,nc->na", sq, model)
+        bad = ~ok | ~np.isfinite(f).all(axis=1)
+        reading[bad] = np.nan
+        shared[bad] = np.nan
+        return reading, shared
+
+
+def _polyval(c: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """sum_k c[a, b, k] s_b^k for every row, shape (n, A, B) (Horner's scheme)."""
+    out = np.zeros((len(s), *c.shape[:2]))
+    for k in range(c.shape[2] - 1, -1, -1):
+        out *= s[:, None, :]
+        out += c[:, :, k]
+    return out
+
+
+def _inverse(jac: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    n = jac.shape[-1]
+    finite = np.isfinite(jac).all(axis=(1, 2))
+    safe = np.where(finite[:, None, None], jac, np.eye(n))
+    # singular where |det J| is below 1e-12 of the product of its rows' norms
+    scale = np.prod(np.linalg.norm(safe, axis=2), axis=1)
+    ok = finite & (np.abs(np.linalg.det(safe)) > 1e-12 * scale)
+    safe[~ok] = np.eye(n)
+    return np.linalg.inv(safe), ok
+
+
+def check_sweep_model(doc: Any, labels) -> None:
+    """Refuse a stored sweep model a fit cannot have written (None: there is none):
+    per component a peak > 0, per component and output a shape of 1 to
+    ``MAX_DEGREE`` finite numbers and its covariance, symmetric and positive
+    semi-definite, and per output a noise variance > 0."""
+    if doc is None:
+        return
+    n = len(labels)
+
+    def damaged(what: str, value, expected: str) -> InputError:
+        return InputError(f"intervals: the model file's interval data are damaged (least_squares "
+                          f"{what} is {value!r}, expected {expected}); refit the model",
+                          argument="interval")
+
+    if not isinstance(doc, dict):
+        raise damaged("", doc, "the sweep model's fields")
+    for key in ("peak", "noise_variance"):
+        v = doc.get(key)
+        if not (isinstance(v, list) and len(v) == n and all(_number(x) and x > 0 for x in v)):
+            raise damaged(key, v, f"{n} finite numbers > 0")
+    for key in ("shape", "covariance"):
+        v = doc.get(key)
+        if not (isinstance(v, list) and len(v) == n and all(isinstance(r, list) and len(r) == n for r in v)):
+            raise damaged(key, v, f"{n} x {n} entries")
+    for b, axis in enumerate(labels):
+        for a in range(n):
+            beta, cov = doc["shape"][b][a], doc["covariance"][b][a]
+            if not (isinstance(beta, list) and 1 <= len(beta) <= MAX_DEGREE
+                    and all(_number(x) for x in beta)):
+                raise damaged(f"shape of {axis}", beta, f"1 to {MAX_DEGREE} finite numbers")
+            k = len(beta)
+            if not (isinstance(cov, list) and len(cov) == k
+                    and all(isinstance(r, list) and len(r) == k and all(_number(x) for x in r)
+                            for r in cov)):
+                raise damaged(f"covariance of {axis}", cov, f"{k} x {k} finite numbers")
+            c = np.asarray(cov, dtype=float)
+            size = np.abs(c).max(initial=0.0)
+            if not (np.abs(c - c.T).max(initial=0.0) <= 1e-9 * size
+                    and np.linalg.eigvalsh(c).min() >= -1e-9 * size):
+                raise damaged(f"covariance of {axis}", cov, "a symmetric positive semi-definite matrix")
+
+
+def _number(x) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
