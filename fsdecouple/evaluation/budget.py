@@ -42,7 +42,7 @@ import numpy as np
 import pandas as pd
 
 from ..data.calibration import CalibrationSet
-from ..data.zero import mean_offset_variance, shift_variance, zero_row_shift
+from ..data.zero import mean_offset_variance, out_and_back, shift_variance, zero_row_shift
 from .intervals import interval_calibration
 from .iso376 import ComponentSteps, component_steps, resolution
 from .sweep_model import fit_sweep_model
@@ -218,11 +218,13 @@ def certificate_data(calib: CalibrationSet, model, points: pd.DataFrame,
     if settings.zero_method == "fit":  # offsets fitted to whole sweeps, not read at zero rows
         zeros = np.inf
     sweeps = shares = None
-    # the centre takes the zero rows' shift back (intervals.centre: eq. (11)'s refined forces)
+    # an svr model of N outputs: a centre other than eq. (11)'s (intervals.centre)
     shifts = len(layout.outputs) == layout.n and getattr(model, "method", None) == "svr"
     rows = calib.zero == "rows" and np.isfinite(zeros) and {"repetition", "axis"} <= set(points.columns)
-    # zero rows of single-axis sweeps: the least-squares sweep model's centre and variance
-    swept = fit_sweep_model(calib.points, layout) if rows and shifts else None
+    # zero rows of one-way single-axis sweeps: the least-squares sweep model's centre and
+    # variance (a lag of sweeps out and back is not in it: docs/design/intervals.md)
+    swept = (fit_sweep_model(calib.points, layout)
+             if rows and shifts and not out_and_back(calib.points, layout) else None)
     if rows and swept is None:
         # each held-out sweep's own share apart, and the zero readings' known share
         sweeps = points.groupby(["repetition", "axis"], sort=False).ngroup().to_numpy()

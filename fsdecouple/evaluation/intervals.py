@@ -55,14 +55,16 @@ split above.  With one repetition s is unknown: each component keeps its own raw
 residuals (sigma = sigma' = 1).  A sweep's zero-load points are its own reference
 (r = 0 by construction) and score nothing.
 
-Under combined loads eq. (11) also errs in second order (each chi is read at an
-output that carries the other components' coupling): the interval is centred on the
-forces refined by ``EXTRA_STEPS`` more fixed-point steps (eqs. 5-6,
-:mod:`fsdecouple.core.decouple`), so it is not symmetric about the row's force, which
-stays eq. (11)'s.  The held-out points are decoupled the same way.  With zero rows the
-final model's centre then takes back the zero readings' mean error as the offsets
-fitted from all points estimate it (``zero_shift``, :func:`shifted`); the estimate's
-own error is the bias the intervals keep (c_b above).
+The centre (:func:`centre`) is not the row's force, which stays eq. (11)'s: with the
+sweep model, its forces (rows it does not settle, or settles beyond the calibrated
+range: as below).  Otherwise, since under combined loads eq. (11) also errs in second
+order (each chi is read at an output that carries the other components' coupling),
+the forces refined by ``EXTRA_STEPS`` more fixed-point steps (eqs. 5-6,
+:mod:`fsdecouple.core.decouple`); the held-out points are decoupled the same way.
+With zero rows (and no sweep model) the final model's centre then takes back the zero
+readings' mean error as the offsets fitted from all points estimate it
+(``zero_shift``, :func:`shifted`); the estimate's own error is the bias the intervals
+keep (c_b above).
 
 The scores, s, ``load_variance`` (v s^2 n_t / n), ``first_step`` (L_b), ``deviations``,
 ``zero_variance`` (c_b), ``zero_shift`` and ``least_squares`` (the sweep model) live in the
@@ -187,7 +189,9 @@ def row_sigma(cal: dict[str, Any], f: np.ndarray, labels) -> np.ndarray:
 def check_interval_data(cal: Any, labels) -> None:
     """Refuse interval data a fit cannot have written: the fields this module added
     (``load_variance``, ``first_step``, ``zero_variance``) must be finite, >= 0, > 0 and
-    >= 0 respectively, and ``deviations`` finite and sorted."""
+    >= 0 respectively, ``deviations`` finite and sorted (and there beside a sweep
+    model), and ``least_squares`` as :func:`fsdecouple.evaluation.sweep_model.check_sweep_model`
+    checks it."""
     def bad(what: str, value) -> InputError:
         return InputError(f"intervals: the model file's interval data are damaged ({what} is "
                           f"{value!r}, expected a finite number {'>= 0' if 'variance' in what else '> 0'}); "
@@ -200,14 +204,17 @@ def check_interval_data(cal: Any, labels) -> None:
         c = cal["components"][axis]
         if "load_variance" in c and not (number(c["load_variance"]) and c["load_variance"] >= 0):
             raise bad(f"load_variance of {axis}", c["load_variance"])
+    check_sweep_model(cal.get("least_squares"), labels)
     deviations = cal.get("deviations")
-    if deviations is not None:
-        if not (isinstance(deviations, list) and deviations and all(number(x) for x in deviations)
-                and all(x <= y for x, y in zip(deviations[:-1], deviations[1:], strict=True))):
-            raise InputError("intervals: the model file's interval data are damaged (deviations "
-                             "are not finite numbers in ascending order); refit the model",
-                             argument="interval")
-        check_sweep_model(cal.get("least_squares"), labels)
+    if deviations is None and cal.get("least_squares") is not None:
+        raise InputError("intervals: the model file's interval data are damaged (deviations "
+                         "are missing beside least_squares); refit the model", argument="interval")
+    if deviations is not None and not (
+            isinstance(deviations, list) and deviations and all(number(x) for x in deviations)
+            and all(x <= y for x, y in zip(deviations[:-1], deviations[1:], strict=True))):
+        raise InputError("intervals: the model file's interval data are damaged (deviations "
+                         "are not finite numbers in ascending order); refit the model",
+                         argument="interval")
     if deviations is not None and cal.get("least_squares") is None:
         shares = cal.get("zero_variance")
         if not isinstance(shares, dict):
@@ -323,14 +330,21 @@ def _swept(cal: dict[str, Any], p: float, f: np.ndarray) -> np.ndarray:
     s_a Q(rho_a), s_a^2 the reading's variance in force a at the row and rho_a^2 the
     model's over it (:meth:`fsdecouple.evaluation.sweep_model.SweepModel.variances`),
     Q as :func:`_convolved`'s with the model's studentised residuals as the deviations
-    and its error at the row as the bias.  NaN where the model's Jacobian is singular."""
-    reading, model = SweepModel(cal["least_squares"]).variances(f)
+    and its error at the row as the bias.  Q is solved on a grid up to the model's
+    largest rho in its calibrated range (the same for every block of a log) and
+    interpolated; beyond it, where the model extrapolates, it grows by K per unit of
+    rho, as Q does for large rho (Q - K rho falls towards a quantile of the deviations:
+    the line is above Q).  NaN where the model's Jacobian is singular."""
+    model = SweepModel(cal["least_squares"])
+    reading, shared = model.variances(f)
     with np.errstate(all="ignore"):
-        rho = np.sqrt(model / reading)
-    largest = float(np.nanmax(rho, initial=0.0)) if rho.size else 0.0
-    top = 2.0 ** math.ceil(math.log2(max(largest, 0.125)))  # a grid per power of two: cached
+        rho = np.sqrt(shared / reading)
+    top = max(model.largest_ratio(), 0.125)
     grid, q = _q_grid(np.asarray(cal["deviations"], dtype=float).tobytes(), p, top)
-    return np.sqrt(reading) * np.interp(rho, grid, q)
+    out = np.interp(rho, grid, q)
+    beyond = rho > top
+    out[beyond] = q[-1] + K * (rho[beyond] - top)
+    return np.sqrt(reading) * out
 
 
 @functools.lru_cache(maxsize=8)
@@ -377,8 +391,9 @@ def centre(model, u: np.ndarray, f: np.ndarray | None = None) -> np.ndarray:
     cal = cert.get("interval") or {}
     u = np.asarray(u, dtype=float)
     if cal.get("least_squares"):
-        swept = SweepModel(cal["least_squares"]).forces(u, f)
-        left = np.flatnonzero(~np.isfinite(swept).all(axis=1))
+        sweep_model = SweepModel(cal["least_squares"])
+        swept = sweep_model.forces(u, f)
+        left = np.flatnonzero(~(np.isfinite(swept).all(axis=1) & sweep_model.inside(swept)))
         if left.size:
             swept[left] = _refined(model, u[left], f[left])
         return swept

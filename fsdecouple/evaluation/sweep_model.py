@@ -40,12 +40,14 @@ polynomials' extrapolation: those rows keep the status ``extrapolated``.
 
 from __future__ import annotations
 
+import itertools
 import math
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..axes import Layout
+from ..core.model import RANGE_MARGIN
 from ..errors import InputError
 
 if TYPE_CHECKING:  # apply reads the model, never pandas (tests/core/test_fast.py)
@@ -53,20 +55,22 @@ if TYPE_CHECKING:  # apply reads the model, never pandas (tests/core/test_fast.p
 
 MAX_DEGREE = 7  # of a g_ab; 9 and 12 measured alike (docs/design/intervals.md)
 NEWTON_STEPS = 30
+RANK_TOLERANCE = 1e-12  # of R's largest diagonal: a design column that is no new direction
 NEWTON_TOLERANCE = 1e-10  # of the largest calibrated load: a row has settled (the noise: ~1e-4)
 
 
 def fit_sweep_model(points: pd.DataFrame, layout: Layout) -> dict[str, Any] | None:
     """The least-squares sweep model of a zero-rows calibration, or None where it
-    cannot be fitted (a component without sweeps in two repetitions or more, fewer
-    than three load levels, a labelled point that loads another component, or more
-    outputs than components).
+    cannot be fitted (a component without sweeps in two repetitions or more, a sweep
+    of fewer than three load levels, a labelled point that loads another component,
+    or more outputs than components).
 
     ``points``: the calibration's points (``repetition``, ``axis``, the loads and the
-    outputs as eq. (11) takes them).  Returns ``{"model": {"peak": [L_b], "shape":
-    [[beta_ab (d_ab)] per output a] per component b, "covariance": [[C_ab (d_ab x
-    d_ab)] per a] per b, "noise_variance": [s_a^2] [output unit^2]}, "deviations":
-    sorted studentised residuals}``, JSON-ready.
+    outputs as eq. (11) takes them).  Returns ``{"model": {"peak": [L_b], "span":
+    [[lo_b, hi_b]] (the calibrated loads), "shape": [[beta_ab (d_ab)] per output a]
+    per component b, "covariance": [[C_ab (d_ab x d_ab)] per a] per b,
+    "noise_variance": [s_a^2] [output unit^2]}, "deviations": sorted studentised
+    residuals}``, JSON-ready.
     """
     n = layout.n
     if len(layout.outputs) != n or not {"repetition", "axis"} <= set(points.columns):
@@ -74,7 +78,7 @@ def fit_sweep_model(points: pd.DataFrame, layout: Layout) -> dict[str, Any] | No
     loads = points[list(layout.loads)].to_numpy(dtype=float)
     u_all = points[list(layout.outputs)].to_numpy(dtype=float)
     labels = points["axis"].to_numpy()
-    peak, shape, cov = [], [], []
+    peak, span, shape, cov = [], [], [], []
     rss, dof = np.zeros(n), np.zeros(n)
     studentised = []
     for b, label in enumerate(layout.labels):
@@ -83,7 +87,10 @@ def fit_sweep_model(points: pd.DataFrame, layout: Layout) -> dict[str, Any] | No
         others = np.delete(loads[mine], b, axis=1)
         _, group = np.unique(points["repetition"].to_numpy()[mine], return_inverse=True)
         groups = int(group.max(initial=-1)) + 1
-        top = min(MAX_DEGREE, np.unique(f).size - 2)
+        # the fewest load levels of one sweep (loads measured, not nominal, differ in
+        # every repetition: their union is no count of levels)
+        levels = min((np.unique(f[group == g]).size for g in range(groups)), default=0)
+        top = min(MAX_DEGREE, levels - 2)
         L = float(np.abs(f).max(initial=0.0))
         if groups < 2 or top < 1 or not L > 0 or np.any(others != 0.0) \
                 or not np.isfinite(u_all[mine]).all():
@@ -91,18 +98,18 @@ def fit_sweep_model(points: pd.DataFrame, layout: Layout) -> dict[str, Any] | No
         s, u = f / L, u_all[mine]
         degree = _cross_validated_degree(s, group, groups, u, top)
         peak.append(L)
+        span.append([float(f.min()), float(f.max())])
         shape.append([]), cov.append([])
         for a in range(n):
-            X = _design(s, group, groups, int(degree[a]))
-            inv = np.linalg.pinv(X.T @ X)
-            beta = inv @ (X.T @ u[:, a])
-            r = u[:, a] - X @ beta
-            lever = np.einsum("ij,jk,ik->i", X, inv, X)
+            fitted = _least_squares(_design(s, group, groups, int(degree[a])), u[:, a])
+            if fitted is None:
+                return None
+            beta, full, r, lever = fitted
             rss[a] += float(r @ r)
-            dof[a] += len(r) - X.shape[1]
+            dof[a] += len(r) - beta.size
             studentised.append((a, r, lever))
             shape[b].append(beta[groups:].tolist())
-            cov[b].append(inv[groups:, groups:].tolist())
+            cov[b].append(full[groups:, groups:].tolist())
     if np.any(dof < 1):
         return None
     variance = rss / dof
@@ -110,9 +117,22 @@ def fit_sweep_model(points: pd.DataFrame, layout: Layout) -> dict[str, Any] | No
         return None
     z = [r[lever < 1.0] / math.sqrt(variance[a]) / np.sqrt(1.0 - lever[lever < 1.0])
          for a, r, lever in studentised]
-    return {"model": {"peak": peak, "shape": shape, "covariance": cov,
+    return {"model": {"peak": peak, "span": span, "shape": shape, "covariance": cov,
                       "noise_variance": variance.tolist()},
             "deviations": np.sort(np.concatenate(z)).tolist()}
+
+
+def _least_squares(X: np.ndarray, y: np.ndarray):
+    """(beta, (X'X)^-1, residuals, leverages) by a QR decomposition, or None where X has
+    no full column rank.  (X'X)^-1 = R^-1 R^-T is symmetric and positive semi-definite
+    as computed, however ill-conditioned X (plain powers of s on a one-sided grid)."""
+    q, r = np.linalg.qr(X)
+    diag = np.abs(np.diag(r))
+    if not diag.min() > RANK_TOLERANCE * diag.max():
+        return None
+    r_inv = np.linalg.inv(r)
+    beta = r_inv @ (q.T @ y)
+    return beta, r_inv @ r_inv.T, y - X @ beta, np.einsum("ij,ij->i", q, q)
 
 
 def _design(s: np.ndarray, group: np.ndarray, groups: int, degree: int) -> np.ndarray:
@@ -122,13 +142,17 @@ def _design(s: np.ndarray, group: np.ndarray, groups: int, degree: int) -> np.nd
 
 def _cross_validated_degree(s, group, groups, u, top) -> np.ndarray:
     """Per output, the degree 1..``top`` whose shape, fitted without one sweep, predicts
-    that sweep best (its own offset its residuals' mean), summed over the sweeps."""
+    that sweep best (its own offset its residuals' mean), summed over the sweeps; a
+    degree the other sweeps cannot determine (too few levels) is not a candidate."""
     error = np.zeros((top, u.shape[1]))
     for held in range(groups):
         train, test = group != held, group == held
         _, g = np.unique(group[train], return_inverse=True)
         for d in range(1, top + 1):
             X = _design(s[train], g, groups - 1, d)
+            if np.linalg.matrix_rank(X) < X.shape[1]:
+                error[d - 1] = np.inf
+                continue
             beta, *_ = np.linalg.lstsq(X, u[train], rcond=None)
             powers = np.column_stack([s[test] ** k for k in range(1, d + 1)])
             r = u[test] - powers @ beta[groups - 1:]
@@ -144,6 +168,7 @@ class SweepModel:
 
     def __init__(self, doc: dict[str, Any]):
         self.peak = np.asarray(doc["peak"], dtype=float)
+        self.span = np.asarray(doc["span"], dtype=float).reshape(-1, 2)
         n = self.peak.size
         d = max(len(c) for row in doc["shape"] for c in row)
         self.g = np.zeros((n, n, d + 1))  # [a, b, power]: g_ab(0) = 0
@@ -158,6 +183,24 @@ class SweepModel:
         powers = np.arange(1, d + 1)
         self.slope = self.g[..., 1:] * powers / self.peak[None, :, None]  # dg_ab/df_b
         self.noise = np.asarray(doc["noise_variance"], dtype=float)
+
+    def inside(self, f: np.ndarray) -> np.ndarray:
+        """Rows (of forces ``f``, (n, N)) whose every load lies in the calibrated span
+        widened by ``RANGE_MARGIN`` of it, as ``apply``'s status ``extrapolated`` judges:
+        beyond it the polynomials extrapolate, and their centre is not used."""
+        margin = RANGE_MARGIN * (self.span[:, 1] - self.span[:, 0])
+        with np.errstate(invalid="ignore"):
+            return np.all((f >= self.span[:, 0] - margin) & (f <= self.span[:, 1] + margin), axis=1)
+
+    def largest_ratio(self) -> float:
+        """rho = sqrt(model's variance / reading's) at its largest where every load is at
+        an end of its span or 0 (3^N rows): the range of the half-widths' grid, the same
+        for every block of a log."""
+        corners = np.array(list(itertools.product(*[(lo, 0.0, hi) for lo, hi in self.span])))
+        reading, model = self.variances(corners)
+        with np.errstate(all="ignore"):
+            rho = np.sqrt(model / reading)
+        return float(np.max(rho[np.isfinite(rho)], initial=0.0))
 
     def outputs(self, f: np.ndarray) -> np.ndarray:
         """g(f) = sum_b g_ab(f_b), shape (n, N) [output unit]."""
@@ -244,6 +287,11 @@ def check_sweep_model(doc: Any, labels) -> None:
         v = doc.get(key)
         if not (isinstance(v, list) and len(v) == n and all(_number(x) and x > 0 for x in v)):
             raise damaged(key, v, f"{n} finite numbers > 0")
+    v = doc.get("span")
+    if not (isinstance(v, list) and len(v) == n
+            and all(isinstance(r, list) and len(r) == 2 and all(_number(x) for x in r) and r[0] < r[1]
+                    for r in v)):
+        raise damaged("span", v, f"{n} pairs of finite loads, the lower first")
     for key in ("shape", "covariance"):
         v = doc.get(key)
         if not (isinstance(v, list) and len(v) == n and all(isinstance(r, list) and len(r) == n for r in v)):
@@ -251,19 +299,22 @@ def check_sweep_model(doc: Any, labels) -> None:
     for b, axis in enumerate(labels):
         for a in range(n):
             beta, cov = doc["shape"][b][a], doc["covariance"][b][a]
+            where = f"{{load {axis}, output {a + 1}}}"
             if not (isinstance(beta, list) and 1 <= len(beta) <= MAX_DEGREE
                     and all(_number(x) for x in beta)):
-                raise damaged(f"shape of {axis}", beta, f"1 to {MAX_DEGREE} finite numbers")
+                raise damaged(f"shape {where}", beta, f"1 to {MAX_DEGREE} finite numbers")
             k = len(beta)
             if not (isinstance(cov, list) and len(cov) == k
                     and all(isinstance(r, list) and len(r) == k and all(_number(x) for x in r)
                             for r in cov)):
-                raise damaged(f"covariance of {axis}", cov, f"{k} x {k} finite numbers")
+                raise damaged(f"covariance {where}", "...", f"{k} x {k} finite numbers")
             c = np.asarray(cov, dtype=float)
+            # as fitted, R^-1 R^-T: symmetric to the bit and positive semi-definite
             size = np.abs(c).max(initial=0.0)
-            if not (np.abs(c - c.T).max(initial=0.0) <= 1e-9 * size
-                    and np.linalg.eigvalsh(c).min() >= -1e-9 * size):
-                raise damaged(f"covariance of {axis}", cov, "a symmetric positive semi-definite matrix")
+            if not (np.abs(c - c.T).max(initial=0.0) <= 1e-6 * size
+                    and np.linalg.eigvalsh(c).min() >= -1e-6 * size):
+                raise damaged(f"covariance {where}", "...",
+                              "a symmetric positive semi-definite matrix")
 
 
 def _number(x) -> bool:

@@ -136,10 +136,12 @@ def _doc():
     (lambda d: d["noise_variance"].__setitem__(1, -1.0), "noise_variance is"),
     (lambda d: d["noise_variance"].__setitem__(1, 0.0), "noise_variance is"),
     (lambda d: d["peak"].__setitem__(0, float("nan")), "peak is"),
-    (lambda d: d["shape"][1].__setitem__(0, []), "shape of y is []"),
-    (lambda d: d["shape"][1][0].__setitem__(0, float("inf")), "shape of y is"),
+    (lambda d: d["shape"][1].__setitem__(0, []), "shape {load y, output 1} is []"),
+    (lambda d: d["shape"][1][0].__setitem__(0, float("inf")), "shape {load y, output 1} is"),
     (lambda d: d["covariance"][2][0].__setitem__(0, [-1.0] + d["covariance"][2][0][0][1:]),
-     "covariance of z is"),
+     "covariance {load z, output 1} is"),
+    (lambda d: d["span"].__setitem__(0, [1.0, -1.0]), "span is"),
+    (lambda d: d.pop("span"), "span is None"),
     (lambda d: d["covariance"].pop(), "covariance is"),
     (lambda d: d.pop("shape"), "shape is None"),
 ])
@@ -158,4 +160,80 @@ def test_a_damaged_sweep_model_is_refused_before_a_log_is_read(sim_model_file):
                                                  "noise_variance": [1.0, -1.0, 1.0]}}
     broken = replace(model, report=replace(model.report, certificate={**cert, "interval": cal}))
     with pytest.raises(InputError, match="damaged"):
+        half_widths(broken, 0.95)
+
+
+def _table(sensor, fractions, repetitions, seed, jitter=0.0):
+    """Single-axis sweeps of every component at ``fractions`` of full scale, each with
+    its own offset and noise, loads recorded with ``jitter`` [N] of scatter."""
+    import pandas as pd
+
+    rng = np.random.default_rng(seed)
+    rows = []
+    for rep in range(1, repetitions + 1):
+        for a, axis in enumerate("xyz"):
+            f = np.zeros((len(fractions), 3))
+            f[:, a] = np.asarray(fractions) * sensor.full_scale[a]
+            f[1:, a] += rng.normal(0.0, jitter, len(fractions) - 1)
+            u = sensor.voltages(f) + rng.uniform(-0.05, 0.05, 3) + rng.normal(0.0, sensor.noise, f.shape)
+            rows += [(rep, axis, *f[i], *u[i]) for i in range(len(f))]
+    return pd.DataFrame(rows, columns=["repetition", "axis", "fx", "fy", "fz", "ux", "uy", "uz"])
+
+
+def test_a_one_sided_uneven_grid_gives_a_model_its_own_check_accepts():
+    """Loads 0-100 % in uneven steps, one way (a load cell's): plain powers of s are
+    ill-conditioned there (pinv of X'X was asymmetric by 4e-9 and refused), the QR's
+    R^-1 R^-T is symmetric to the bit."""
+    grid = [0.0, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0]
+    for seed in range(10):
+        doc = fit_sweep_model(_table(SimulatedSensor(), grid, 6, seed), DEFAULT)["model"]
+        check_sweep_model(doc, DEFAULT.labels)
+        for row in doc["covariance"]:
+            for c in row:
+                assert np.array_equal(np.asarray(c), np.asarray(c).T)
+
+
+def test_measured_loads_count_the_levels_of_one_sweep():
+    """Two repetitions of four levels, each load recorded with its own scatter: eight
+    distinct loads in all, four in a sweep, so no degree above two (the union's count
+    gave degree 5 and intervals a million times too wide)."""
+    doc = fit_sweep_model(_table(SimulatedSensor(), [0.0, 0.3, 0.6, 1.0], 2, 1, jitter=0.01),
+                          DEFAULT)["model"]
+    assert max(len(c) for row in doc["shape"] for c in row) <= 2
+
+
+def test_a_row_s_width_does_not_depend_on_its_neighbours(sim_model_file):
+    """The grid of Q is the model's, not the block's: a row's half-width is the same
+    beside a row far beyond the calibrated range (which made the block's grid coarse,
+    9-13 % wider), and a row beyond it gets a wider one."""
+    model = load_model(sim_model_file)
+    alone = half_widths(model, 0.95, ROWS)
+    far = np.vstack([ROWS, [[300.0, -250.0, -400.0]]])
+    together = half_widths(model, 0.95, far)
+    assert np.array_equal(together[:-1], alone)
+    assert np.all(together[-1] > alone.max(axis=0))
+
+
+def test_rows_beyond_the_calibrated_range_keep_the_refined_centre(sim_model_file):
+    """Beyond the span (1 % of it) the polynomials extrapolate: such a row is centred
+    as without the sweep model, on eq. (11)'s refined forces."""
+    from fsdecouple.evaluation.intervals import _refined
+
+    model = load_model(sim_model_file)
+    sensor = SimulatedSensor()
+    f_true = np.array([[40.0, -30.0, -60.0], [150.0, -30.0, -60.0], [0.0, 0.0, 30.0]])
+    u = sensor.voltages(f_true)
+    f = model.decouple(u, rotate=False)
+    got = centre(model, u, f)
+    refined = _refined(model, u, f)
+    assert np.array_equal(got[1:], refined[1:])
+    assert not np.array_equal(got[0], refined[0])  # inside: the sweep model's
+
+
+def test_a_sweep_model_without_deviations_is_refused(sim_model_file):
+    model = load_model(sim_model_file)
+    cert = model.report.certificate
+    cal = {k: v for k, v in cert["interval"].items() if k != "deviations"}
+    broken = replace(model, report=replace(model.report, certificate={**cert, "interval": cal}))
+    with pytest.raises(InputError, match="deviations are missing"):
         half_widths(broken, 0.95)
