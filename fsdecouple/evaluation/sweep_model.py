@@ -204,11 +204,12 @@ class SweepModel:
 
     def outputs(self, f: np.ndarray) -> np.ndarray:
         """g(f) = sum_b g_ab(f_b), shape (n, N) [output unit]."""
-        return _polyval(self.g, f / self.peak).sum(axis=2)
+        return _sum_of_polynomials(self.g, f / self.peak)
 
     def jacobian(self, f: np.ndarray) -> np.ndarray:
         """J_ab = dg_a/df_b at ``f``, shape (n, N, N)."""
-        return _polyval(self.slope, f / self.peak)
+        x = _powers(f / self.peak, self.slope.shape[2] - 1)
+        return np.stack([x[:, b] @ self.slope[:, b].T for b in range(self.peak.size)], axis=2)
 
     def forces(self, u: np.ndarray, start: np.ndarray) -> np.ndarray:
         """The forces whose outputs are ``u`` (zero-corrected, (n, N)), from ``start``;
@@ -236,7 +237,7 @@ class SweepModel:
         and from the model, each (n, N) [load unit^2]; NaN where J is singular."""
         with np.errstate(all="ignore"):
             x = np.nan_to_num(f)
-            model = self.noise * _polyval(self.quad, x / self.peak).sum(axis=2)
+            model = self.noise * _sum_of_polynomials(self.quad, x / self.peak)
             inv, ok = _inverse(self.jacobian(x))
             sq = inv ** 2
             reading = sq @ self.noise
@@ -247,21 +248,38 @@ class SweepModel:
         return reading, shared
 
 
-def _polyval(c: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """sum_k c[a, b, k] s_b^k for every row, shape (n, A, B) (Horner's scheme)."""
-    out = np.zeros((len(s), *c.shape[:2]))
-    for k in range(c.shape[2] - 1, -1, -1):
-        out *= s[:, None, :]
-        out += c[:, :, k]
+def _powers(s: np.ndarray, degree: int) -> np.ndarray:
+    """s^0 .. s^degree of every load, shape (n, B, degree + 1)."""
+    out = np.empty((*s.shape, degree + 1))
+    out[..., 0] = 1.0
+    for k in range(1, degree + 1):
+        np.multiply(out[..., k - 1], s, out=out[..., k])
     return out
 
 
+def _sum_of_polynomials(c: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """sum_b sum_k c[a, b, k] s_b^k for every row, shape (n, A): one product of the
+    powers (n, B (d + 1)) with the coefficients."""
+    x = _powers(s, c.shape[2] - 1)
+    return x.reshape(len(s), -1) @ c.reshape(c.shape[0], -1).T
+
+
 def _inverse(jac: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """J^-1 of every row, and which rows' J is invertible: singular where |det J| is
+    below 1e-12 of the product of its rows' norms (those rows: the identity's).  Three
+    components: the adjugate, whose columns are the rows' cross products."""
     n = jac.shape[-1]
     finite = np.isfinite(jac).all(axis=(1, 2))
     safe = np.where(finite[:, None, None], jac, np.eye(n))
-    # singular where |det J| is below 1e-12 of the product of its rows' norms
     scale = np.prod(np.linalg.norm(safe, axis=2), axis=1)
+    if n == 3:
+        r0, r1, r2 = safe[:, 0], safe[:, 1], safe[:, 2]
+        adj = np.stack([np.cross(r1, r2), np.cross(r2, r0), np.cross(r0, r1)], axis=2)
+        det = np.einsum("ni,ni->n", r0, adj[:, :, 0])
+        ok = finite & (np.abs(det) > 1e-12 * scale)
+        inv = adj / np.where(ok, det, 1.0)[:, None, None]
+        inv[~ok] = np.eye(n)
+        return inv, ok
     ok = finite & (np.abs(np.linalg.det(safe)) > 1e-12 * scale)
     safe[~ok] = np.eye(n)
     return np.linalg.inv(safe), ok
