@@ -237,3 +237,20 @@ def test_a_sweep_model_without_deviations_is_refused(sim_model_file):
     broken = replace(model, report=replace(model.report, certificate={**cert, "interval": cal}))
     with pytest.raises(InputError, match="deviations are missing"):
         half_widths(broken, 0.95)
+
+
+@pytest.mark.parametrize("n", [3, 6])
+def test_the_jacobians_inverse_is_lapack_s_and_singular_rows_are_named(n):
+    """Three components: the adjugate; six: LAPACK's; either way numpy's inverse to
+    rounding, and a zero or rank-deficient J flagged (its rows get the identity)."""
+    from fsdecouple.evaluation.sweep_model import _inverse
+
+    rng = np.random.default_rng(n)
+    jac = rng.normal(size=(200, n, n)) + 3 * np.eye(n)  # well conditioned
+    jac[5] = 0.0
+    jac[6, 1] = 2 * jac[6, 0]
+    jac[7, 0, 0] = np.nan
+    inv, ok = _inverse(jac)
+    assert ok.tolist() == [i not in (5, 6, 7) for i in range(200)]
+    assert inv[ok] == pytest.approx(np.linalg.inv(jac[ok]), abs=1e-12)
+    assert np.array_equal(inv[~ok], np.broadcast_to(np.eye(n), (3, n, n)))
