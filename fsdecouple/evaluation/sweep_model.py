@@ -12,7 +12,7 @@ raw outputs a of all the b sweeps together, with one offset per sweep:
 (the design of :func:`fsdecouple.data.zero.offset_design`, of every degree).  Each
 offset rests on all its sweep's points, not its zero reading alone, and the shape on
 all the repetitions.  The degree d_ab (1 to ``MAX_DEGREE``, at most two below the
-sweep's number of load levels) is the one that predicts held-out repetitions best:
+load levels of one sweep) is the one that predicts held-out repetitions best:
 each sweep left out in turn, the shape fitted to the others and the left-out sweep's
 own offset taken as its residuals' mean (the paper's cross-validation by held-out
 repetitions, Section 4).  A row's forces solve u = sum_b g_b(f_b) by Newton's method
@@ -30,12 +30,16 @@ g_a at a row errs with variance
     V_a = s_a^2 sum_b x(s_b)' C_ab x(s_b),    x(s) = (s, s^2, ..., s^d_ab),
 
 and the row's forces, through the Jacobian J_ab = dg_a/df_b, with covariance
-J^-1 diag(V) J^-T (the model's part) and J^-1 diag(s^2) J^-T (the reading's).
+J^-1 diag(V) J^-T (the model's part) and J^-1 diag(s^2) J^-T (the reading's).  The
+degree chosen from the data adds a scatter the chosen degree's variance leaves out
+(1.15-1.7 times it, tests/evaluation/test_sweep_model.py), which the intervals' bias
+tolerance absorbs (:mod:`fsdecouple.evaluation.intervals`).
 
 The assumption: the sensor's outputs add one function of each load (eq. 1), each a
 polynomial of at most ``MAX_DEGREE`` over the calibrated range, the readings
 independent with one variance per output.  A load beyond the calibrated range is the
-polynomials' extrapolation: those rows keep the status ``extrapolated``.
+polynomials' extrapolation: those rows keep the status ``extrapolated``, and the
+interval's centre there is eq. (11)'s refined forces (:meth:`SweepModel.inside`).
 """
 
 from __future__ import annotations
