@@ -6,8 +6,8 @@ held-out rounds of the verdict, :mod:`fsdecouple.evaluation.heldout`), each poin
 decoupled where the interval is centred (:func:`centre`).  s_a is the noise of one
 reading in decoupled component a (from the repetitions' scatter).
 
-Zero rows and single-axis sweeps in two repetitions or more (the default for one-way
-sweeps, an svr model of N outputs): the least-squares model of the sweeps
+Zero rows and one-way single-axis sweeps in two repetitions or more (an svr model of
+N outputs): the least-squares model of the sweeps
 (:mod:`fsdecouple.evaluation.sweep_model`) centres the interval and gives its error's
 variance at the row, the reading's sigma_a^2 and the model's rho_a^2 sigma_a^2; the
 half-width is sigma_a Q(rho_a), Q from the fits' studentised residuals as below
