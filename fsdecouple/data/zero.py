@@ -337,7 +337,12 @@ def offset_design(f: np.ndarray, col: np.ndarray, groups: int) -> np.ndarray | N
     peak = np.abs(f).max(initial=0.0)
     if degree < 1 or not peak > 0:
         return None
-    s = f / peak
+    return sweep_design(f / peak, col, groups, degree)
+
+
+def sweep_design(s: np.ndarray, col: np.ndarray, groups: int, degree: int) -> np.ndarray:
+    """One column per sweep (``col`` each point's, of ``groups``), then s^1..s^degree:
+    a sweep's offset and the shape all its sweeps share."""
     return np.column_stack([np.eye(groups)[col], *(s ** p for p in range(1, degree + 1))])
 
 

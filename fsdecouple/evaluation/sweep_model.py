@@ -9,7 +9,7 @@ raw outputs a of all the b sweeps together, with one offset per sweep:
 
     u_a = c_sweep + sum_{k=1..d_ab} beta_k s^k
 
-(the design of :func:`fsdecouple.data.zero.offset_design`, of every degree).  Each
+(:func:`fsdecouple.data.zero.sweep_design`, as ``offset_design`` builds it, of every degree).  Each
 offset rests on all its sweep's points, not its zero reading alone, and the shape on
 all the repetitions.  The degree d_ab (1 to ``MAX_DEGREE``, at most two below the
 load levels of one sweep) is the one that predicts held-out repetitions best:
@@ -52,6 +52,7 @@ import numpy as np
 
 from ..axes import Layout
 from ..core.model import RANGE_MARGIN
+from ..data.zero import sweep_design
 from ..errors import InputError
 
 if TYPE_CHECKING:  # apply reads the model, never pandas (tests/core/test_fast.py)
@@ -105,7 +106,7 @@ def fit_sweep_model(points: pd.DataFrame, layout: Layout) -> dict[str, Any] | No
         span.append([float(f.min()), float(f.max())])
         shape.append([]), cov.append([])
         for a in range(n):
-            fitted = _least_squares(_design(s, group, groups, int(degree[a])), u[:, a])
+            fitted = _least_squares(sweep_design(s, group, groups, int(degree[a])), u[:, a])
             if fitted is None:
                 return None
             beta, full, r, lever = fitted
@@ -128,20 +129,17 @@ def fit_sweep_model(points: pd.DataFrame, layout: Layout) -> dict[str, Any] | No
 
 def _least_squares(X: np.ndarray, y: np.ndarray):
     """(beta, (X'X)^-1, residuals, leverages) by a QR decomposition, or None where X has
-    no full column rank.  (X'X)^-1 = R^-1 R^-T is symmetric and positive semi-definite
-    as computed, however ill-conditioned X (plain powers of s on a one-sided grid)."""
+    no full column rank.  (X'X)^-1 = R^-1 R^-T is positive semi-definite however
+    ill-conditioned X (plain powers of s on a one-sided grid), and made symmetric."""
     q, r = np.linalg.qr(X)
     diag = np.abs(np.diag(r))
     if not diag.min() > RANK_TOLERANCE * diag.max():
         return None
     r_inv = np.linalg.inv(r)
     beta = r_inv @ (q.T @ y)
-    return beta, r_inv @ r_inv.T, y - X @ beta, np.einsum("ij,ij->i", q, q)
-
-
-def _design(s: np.ndarray, group: np.ndarray, groups: int, degree: int) -> np.ndarray:
-    """One column per sweep, then s^1..s^degree."""
-    return np.column_stack([np.eye(groups)[group], *(s ** k for k in range(1, degree + 1))])
+    full = r_inv @ r_inv.T
+    full = (full + full.T) / 2.0  # symmetric to the bit whatever order BLAS sums in
+    return beta, full, y - X @ beta, np.einsum("ij,ij->i", q, q)
 
 
 def _cross_validated_degree(s, group, groups, u, top) -> np.ndarray:
@@ -153,7 +151,7 @@ def _cross_validated_degree(s, group, groups, u, top) -> np.ndarray:
         train, test = group != held, group == held
         _, g = np.unique(group[train], return_inverse=True)
         for d in range(1, top + 1):
-            X = _design(s[train], g, groups - 1, d)
+            X = sweep_design(s[train], g, groups - 1, d)
             if np.linalg.matrix_rank(X) < X.shape[1]:
                 error[d - 1] = np.inf
                 continue

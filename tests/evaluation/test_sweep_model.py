@@ -183,7 +183,7 @@ def _table(sensor, fractions, repetitions, seed, jitter=0.0):
 def test_a_one_sided_uneven_grid_gives_a_model_its_own_check_accepts():
     """Loads 0-100 % in uneven steps, one way (a load cell's): plain powers of s are
     ill-conditioned there (pinv of X'X was asymmetric by 4e-9 and refused), the QR's
-    R^-1 R^-T is symmetric to the bit."""
+    symmetrised R^-1 R^-T is symmetric to the bit on any machine."""
     grid = [0.0, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0]
     for seed in range(10):
         doc = fit_sweep_model(_table(SimulatedSensor(), grid, 6, seed), DEFAULT)["model"]
@@ -210,7 +210,7 @@ def test_a_row_s_width_does_not_depend_on_its_neighbours(sim_model_file):
     alone = half_widths(model, 0.95, ROWS)
     far = np.vstack([ROWS, [[300.0, -250.0, -400.0]]])
     together = half_widths(model, 0.95, far)
-    assert np.array_equal(together[:-1], alone)
+    assert together[:-1] == pytest.approx(alone, rel=1e-12)  # the old grid: 9-13 % apart
     assert np.all(together[-1] > alone.max(axis=0))
 
 
@@ -226,8 +226,8 @@ def test_rows_beyond_the_calibrated_range_keep_the_refined_centre(sim_model_file
     f = model.decouple(u, rotate=False)
     got = centre(model, u, f)
     refined = _refined(model, u, f)
-    assert np.array_equal(got[1:], refined[1:])
-    assert not np.array_equal(got[0], refined[0])  # inside: the sweep model's
+    assert got[1:] == pytest.approx(refined[1:], rel=1e-12)
+    assert got[0] != pytest.approx(refined[0], rel=1e-6)  # inside: the sweep model's
 
 
 def test_a_sweep_model_without_deviations_is_refused(sim_model_file):
