@@ -188,8 +188,9 @@ class SweepModel:
 
     def inside(self, f: np.ndarray) -> np.ndarray:
         """Rows (of forces ``f``, (n, N)) whose every load lies in the calibrated span
-        widened by ``RANGE_MARGIN`` of it, as ``apply``'s status ``extrapolated`` judges:
-        beyond it the polynomials extrapolate, and their centre is not used."""
+        widened by ``RANGE_MARGIN`` of it (the margin ``apply``'s status ``extrapolated``
+        gives the outputs): beyond it the polynomials extrapolate, and their centre is
+        not used."""
         margin = RANGE_MARGIN * (self.span[:, 1] - self.span[:, 0])
         with np.errstate(invalid="ignore"):
             return np.all((f >= self.span[:, 0] - margin) & (f <= self.span[:, 1] + margin), axis=1)
