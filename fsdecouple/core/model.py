@@ -320,6 +320,11 @@ class CouplingErrorModel:
             r[b] = (min(lo for lo, _ in ranges), max(hi for _, hi in ranges))
         return r
 
+    @property
+    def calibrated_loads(self) -> np.ndarray:
+        """The calibrated range over k: the loads it spans, lower end first, shape (N, 2)."""
+        return np.sort(self.calibrated_range / self.k[:, None], axis=1)
+
     def extrapolation_limits(self) -> np.ndarray:
         """The calibrated range widened by RANGE_MARGIN of its span, shape (N, 2).
 

@@ -16,11 +16,12 @@ import numpy as np
 
 from .. import __version__
 from ..config import settings_from_dict
-from ..errors import ModelFileError, excerpt
+from ..errors import InputError, ModelFileError, excerpt
 from ..files.inputs import MODEL_LIMIT, read_bounded
 from ..files.outputs import atomic_write
 from ..schema import LEGACY_EXTRAPOLATION
 from .decouple import MAX_SURROGATE_ERROR, usable
+from .interval_data import MAX_FULL_SCALES, check_interval_data
 from .model import Chi, CouplingErrorModel, FitReport
 from .modeljson import dump_forms, join_indented
 from .surrogate import spot_check
@@ -218,7 +219,21 @@ def _model_from_dict(doc: Any, source: str, computed: str | None = None) -> Coup
     )
     _check_slopes(model, source)
     _check_tables(model, source)
+    _check_intervals(model, source)
     return model
+
+
+def _check_intervals(model: CouplingErrorModel, source: str) -> None:
+    """The interval data beyond the scores (issue 33: refused when the file loads, not
+    when a log is half read), as :func:`fsdecouple.core.interval_data.check_interval_data`
+    checks them; the sweep model's span against the model's own calibrated loads."""
+    cert = model.report.certificate if model.report is not None else None
+    if not cert or not cert.get("interval"):
+        return
+    try:
+        check_interval_data(cert["interval"], model.layout.labels, model.calibrated_loads)
+    except InputError as err:
+        raise ModelFileError(f"{source}: {err}") from None
 
 
 def _zero(doc: dict, layout, version: int, source: str) -> np.ndarray | None:
@@ -387,10 +402,6 @@ def _check_report(report: Any, source: str, labels, full_scale) -> None:
         raise ModelFileError(f"{source}: malformed model file (report: {problem}); refit it")
 
 
-# [full scales of the component] a held-out score times its sigma, an expanded uncertainty
-# U or a model error beyond this is no calibration: an edited file (issue 34: sigma 1e300,
-# scores 1e308 gave interval bounds of 1e300 with status ok)
-MAX_FULL_SCALES = 1e3
 
 
 def _certificate_problem(cert: Any, labels, full_scale) -> str | None:
@@ -429,6 +440,9 @@ def _certificate_problem(cert: Any, labels, full_scale) -> str | None:
                 bad = own[0] if own[0] < 0.0 else unsorted[0]
                 return (f"interval: {a}: held-out score {bad!r} out of place; expected "
                         "non-negative scores in ascending order")
+            if not own[-1] > 0.0:  # held-out errors of noisy readings: never all exact
+                return (f"interval: {a}: held-out scores all {own[-1]!r}; expected the held-out "
+                        "errors' sizes, not all zero (intervals of zero width)")
             if own[-1] * sigma > limit:
                 return (f"interval: {a}: held-out score {own[-1]!r} times sigma {sigma!r} is "
                         f"more than {MAX_FULL_SCALES:g} full scales ({limit:g})")

@@ -69,7 +69,8 @@ keep (c_b above).
 The scores, s, ``load_variance`` (v s^2 n_t / n), ``first_step`` (L_b), ``deviations``,
 ``zero_variance`` (c_b), ``zero_shift`` and ``least_squares`` (the sweep model) live in the
 model file's ``report.certificate["interval"]``;
-:func:`check_interval_data` checks them when they are used.  No conformal library is
+:func:`check_interval_data` checks them when the model file loads
+(:mod:`fsdecouple.core.modelfile`) and again when they are used.  No conformal library is
 used: MAPIE and crepes refit an estimator per fold through scikit-learn's API, where
 these residuals come from the verdict's own rounds and the method is a sort and an index.
 """
@@ -83,8 +84,8 @@ from typing import Any
 
 import numpy as np
 
+from ..core.interval_data import SweepModel, check_interval_data
 from ..errors import InputError
-from .sweep_model import SweepModel, check_sweep_model
 
 EXTRA_STEPS = 3  # refinement steps that estimate eq. (11)'s second-order error
 
@@ -186,61 +187,6 @@ def row_sigma(cal: dict[str, Any], f: np.ndarray, labels) -> np.ndarray:
     return out
 
 
-def check_interval_data(cal: Any, labels) -> None:
-    """Refuse interval data a fit cannot have written: the fields this module added
-    (``load_variance``, ``first_step``, ``zero_variance``) must be finite, >= 0, > 0 and
-    >= 0 respectively, ``deviations`` finite and sorted (and there beside a sweep
-    model), and ``least_squares`` as :func:`fsdecouple.evaluation.sweep_model.check_sweep_model`
-    checks it."""
-    def bad(what: str, value) -> InputError:
-        return InputError(f"intervals: the model file's interval data are damaged ({what} is "
-                          f"{value!r}, expected a finite number {'>= 0' if 'variance' in what else '> 0'}); "
-                          "refit the model", argument="interval")
-
-    def number(x) -> bool:
-        return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
-
-    for axis in labels:
-        c = cal["components"][axis]
-        if "load_variance" in c and not (number(c["load_variance"]) and c["load_variance"] >= 0):
-            raise bad(f"load_variance of {axis}", c["load_variance"])
-    check_sweep_model(cal.get("least_squares"), labels)
-    deviations = cal.get("deviations")
-    if deviations is None and cal.get("least_squares") is not None:
-        raise InputError("intervals: the model file's interval data are damaged (deviations "
-                         "are missing beside least_squares); refit the model", argument="interval")
-    if deviations is not None and not (
-            isinstance(deviations, list) and deviations and all(number(x) for x in deviations)
-            and all(x <= y for x, y in zip(deviations[:-1], deviations[1:], strict=True))):
-        raise InputError("intervals: the model file's interval data are damaged (deviations "
-                         "are not finite numbers in ascending order); refit the model",
-                         argument="interval")
-    if deviations is not None and cal.get("least_squares") is None:
-        shares = cal.get("zero_variance")
-        if not isinstance(shares, dict):
-            raise bad("zero_variance", shares)
-        for axis, value in shares.items():
-            if axis not in labels or not (number(value) and value >= 0):
-                raise bad(f"zero_variance of {axis}", value)
-    shift = cal.get("zero_shift")
-    if shift is not None:
-        if not isinstance(shift, dict):
-            raise bad("zero_shift", shift)
-        for axis, row in shift.items():
-            if axis not in labels or not (isinstance(row, list) and len(row) == len(labels)
-                                          and all(number(x) for x in row)):
-                raise InputError(f"intervals: the model file's interval data are damaged "
-                                 f"(zero_shift of {axis} is {row!r}, expected {len(labels)} finite "
-                                 "numbers); refit the model", argument="interval")
-    steps = cal.get("first_step")
-    if steps is not None:
-        if not isinstance(steps, dict):
-            raise bad("first_step", steps)
-        for axis, value in steps.items():
-            if axis not in labels or not (number(value) and value > 0):
-                raise bad(f"first_step of {axis}", value)
-
-
 def check_coverage(p: Any) -> float:
     """``--interval P``: a coverage probability strictly between 0 and 1."""
     if isinstance(p, bool) or not isinstance(p, int | float) or not 0.0 < p < 1.0:
@@ -328,7 +274,7 @@ def _convolved(cal: dict[str, Any], p: float, f: np.ndarray, labels) -> np.ndarr
 def _swept(cal: dict[str, Any], p: float, f: np.ndarray) -> np.ndarray:
     """Half-widths, shape (n, N), about the least-squares sweep model's forces ``f``:
     s_a Q(rho_a), s_a^2 the reading's variance in force a at the row and rho_a^2 the
-    model's over it (:meth:`fsdecouple.evaluation.sweep_model.SweepModel.variances`),
+    model's over it (:meth:`fsdecouple.core.interval_data.SweepModel.variances`),
     Q as :func:`_convolved`'s with the model's studentised residuals as the deviations
     and its error at the row as the bias.  Q is solved on a grid up to the model's
     largest rho in its calibrated range (the same for every block of a log) and

@@ -309,6 +309,22 @@ def _edited(path, tmp_path, edit):
     return out
 
 
+def _least_squares(cert):
+    return cert["interval"]["least_squares"]
+
+
+def _earlier_construction(cert):
+    """The interval data as a zero-rows fit without a sweep model writes them."""
+    cal = cert["interval"]
+    cal.pop("least_squares")
+    cal["zero_variance"] = {axis: 0.01 for axis in cal["components"]}
+    return cal
+
+
+def _scaled(matrix, factor):
+    return [[x * factor for x in row] for row in matrix]
+
+
 def _scores(cert, a="x"):
     c = cert["interval"]["components"][a]
     return c["scores"] if c["scores"] is not None else cert["interval"]["scores"]
@@ -323,6 +339,22 @@ def _scores(cert, a="x"):
     (lambda c: c["steps"]["y"]["U"].__setitem__(0, 0.0), "y: U = 0.0"),  # E_n of x/0
     (lambda c: c["steps"]["z"]["model_error"].__setitem__(1, 1e300), "model_error = 1e+300"),
     (lambda c: c["steps"]["z"]["model_error"].__setitem__(1, -1.0), "model_error = -1.0"),
+    # the sweep model (issue 33): checked at load too, not when a log is half read
+    (lambda c: _least_squares(c).update(peak=[1e-300] * 3, span=[[-1e-300, 1e-300]] * 3),
+     "span of x is [-1e-300, 1e-300], expected the calibrated loads"),  # bounds NaN, status ok
+    (lambda c: _least_squares(c)["peak"].__setitem__(1, 50.0), "peak of y is 50.0"),
+    (lambda c: _least_squares(c)["covariance"][0].__setitem__(0, _scaled(
+        _least_squares(c)["covariance"][0][0], 1e300)), "model's standard deviation"),  # 1e147 wide
+    (lambda c: _least_squares(c)["noise_variance"].__setitem__(2, 1e300), "reading's standard"),
+    (lambda c: c["interval"]["deviations"].reverse(), "deviations are not finite numbers in ascending"),
+    # zero-width intervals, status ok (a helper's check): every score 0, every deviation 0
+    (lambda c: _scores(c).__setitem__(slice(None), [0.0] * len(_scores(c))), "held-out scores all 0.0"),
+    (lambda c: c["interval"].__setitem__("deviations", [0.0] * len(c["interval"]["deviations"])),
+     "deviations' mean square is 0.0"),
+    (lambda c: c["interval"].__setitem__("deviations", [x / 10 for x in c["interval"]["deviations"]]),
+     "deviations' mean square is 0.00"),
+    (lambda c: _earlier_construction(c)["deviations"].__setitem__(
+        slice(None), [0.0] * len(c["interval"]["deviations"])), "expected more than 0"),
 ])
 def test_edited_interval_and_step_data_are_refused_at_load_even_with_a_digest(
         sample_model, tmp_path, edit, needle):
@@ -339,14 +371,18 @@ def test_edited_interval_and_step_data_are_refused_at_load_even_with_a_digest(
     (["compare", "{m}", "{e}", "--json"], lambda c: c["steps"]["x"]["U"].__setitem__(2, 0.0)),
     (["certificate", "{e}", str(SAMPLE / "calibration"), "--json"],
      lambda c: c["steps"]["x"]["model_error"].__setitem__(0, 1e300)),
+    (["apply", "{e}", str(SAMPLE / "task_voltages.csv"), "--tare", "200", "--interval", "0.95",
+      "-o", "{o}"], lambda c: _least_squares(c).update(peak=[1e-300] * 3, span=[[-1e-300, 1e-300]] * 3)),
 ])
 def test_compare_and_certificate_json_refuse_an_edited_model_in_one_line(
         sample_model, tmp_path, args, edit):
-    """Issue 34: E_n of x/0 and a model error of 1e300 were JSON ValueError tracebacks."""
+    """Issue 34: E_n of x/0 and a model error of 1e300 were JSON ValueError tracebacks.
+    Issue 33: a sweep model's span edited with its peak gave NaN bounds, exit 0."""
 
-    e = _edited(sample_model, tmp_path, edit)
-    r = invoke([a.format(m=sample_model, e=e) for a in args], 2)
-    assert_one_line_error(r, str(e), "refit it")
+    e, out = _edited(sample_model, tmp_path, edit), tmp_path / "out.csv"
+    r = invoke([a.format(m=sample_model, e=e, o=out) for a in args], 2)
+    assert_one_line_error(r, str(e), "refit")
+    assert not out.exists()
 
 
 def test_the_zero_rows_shift_is_the_mean_error_of_their_readings():

@@ -1,0 +1,78 @@
+"""The interval data a model file carries (core/interval_data.py, issue 33): the
+stored sweep model's checks, the span against the model's calibrated loads, and
+the Jacobians' inverse its variances use.  Its fit and its variance against Monte
+Carlo: tests/evaluation/test_sweep_model.py; the checks at load:
+tests/evaluation/test_intervals.py."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from fsdecouple.axes import DEFAULT
+from fsdecouple.core.interval_data import _inverse, check_sweep_model
+from fsdecouple.errors import InputError
+from fsdecouple.evaluation.sweep_model import fit_sweep_model
+from fsdecouple.sim.simulate import SimulatedSensor, simulate_calibration
+
+
+def _doc():
+    return fit_sweep_model(simulate_calibration(SimulatedSensor(), 2, 2), DEFAULT)["model"]
+
+
+@pytest.mark.parametrize("edit, match", [
+    (lambda d: d["noise_variance"].__setitem__(1, -1.0), "noise_variance is"),
+    (lambda d: d["noise_variance"].__setitem__(1, 0.0), "noise_variance is"),
+    (lambda d: d["peak"].__setitem__(0, float("nan")), "peak is"),
+    (lambda d: d["shape"][1].__setitem__(0, []), "shape {load y, output 1} is []"),
+    (lambda d: d["shape"][1][0].__setitem__(0, float("inf")), "shape {load y, output 1} is"),
+    (lambda d: d["covariance"][2][0].__setitem__(0, [-1.0] + d["covariance"][2][0][0][1:]),
+     "covariance {load z, output 1} is"),
+    (lambda d: d["span"].__setitem__(0, [1.0, -1.0]), "span is"),
+    (lambda d: d.pop("span"), "span is None"),
+    (lambda d: d["covariance"].pop(), "covariance is"),
+    (lambda d: d.pop("shape"), "shape is None"),
+    (lambda d: d["peak"].__setitem__(1, 50.0), "peak of y is 50.0, expected the largest |load|"),
+    (lambda d: d["shape"][0].__setitem__(0, [1e300] * len(d["shape"][0][0])),
+     "reading's standard deviation at the spans' ends is nan"),
+    (lambda d: d["noise_variance"].__setitem__(0, 1e300), "reading's standard deviation"),
+])
+def test_damaged_sweep_models_are_refused(edit, match):
+    doc = _doc()
+    check_sweep_model(doc, DEFAULT.labels)  # as fitted: accepted
+    edit(doc)
+    with pytest.raises(InputError, match=f"damaged \\(least_squares {re.escape(match)}"):
+        check_sweep_model(doc, DEFAULT.labels)
+
+
+@pytest.mark.parametrize("n", [3, 6])
+def test_the_jacobians_inverse_is_lapack_s_and_singular_rows_are_named(n):
+    """Three components: the adjugate; six: LAPACK's; either way numpy's inverse to
+    rounding, and a zero or rank-deficient J flagged (its rows get the identity)."""
+    rng = np.random.default_rng(n)
+    jac = rng.normal(size=(200, n, n)) + 3 * np.eye(n)  # well conditioned
+    jac[5] = 0.0
+    jac[6, 1] = 2 * jac[6, 0]
+    jac[7, 0, 0] = np.nan
+    inv, ok = _inverse(jac)
+    assert ok.tolist() == [i not in (5, 6, 7) for i in range(200)]
+    assert inv[ok] == pytest.approx(np.linalg.inv(jac[ok]), abs=1e-12)
+    assert np.array_equal(inv[~ok], np.broadcast_to(np.eye(n), (3, n, n)))
+
+
+def test_the_span_must_be_the_model_s_calibrated_loads():
+    """A span scaled with its peak (both 1e-300) left every log row beyond it and the
+    bounds NaN with status ok; within a tenth of the span the noise's difference passes.
+    Without the loads to compare with, the reading's standard deviation, 1e297 spans
+    of that span, refuses it too."""
+    doc = _doc()
+    loads = np.array(doc["span"])
+    check_sweep_model(doc, DEFAULT.labels, loads + 0.05 * (loads[:, 1:] - loads[:, :1]))
+    doc["peak"], doc["span"] = [1e-300] * 3, [[-1e-300, 1e-300]] * 3
+    with pytest.raises(InputError, match=re.escape("span of x is [-1e-300, 1e-300], expected the "
+                                                   "calibrated loads")):
+        check_sweep_model(doc, DEFAULT.labels, loads)
+    with pytest.raises(InputError, match="reading's standard deviation at the spans' ends"):
+        check_sweep_model(doc, DEFAULT.labels)
