@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
@@ -54,7 +55,12 @@ def certificate(
             check_certificate_path(output)
             check_output(output, force=force)
         changes = read_drift(drift) if drift is not None else None
-        cs = load_calibration(calib, settings or model.settings)
+        read_as = settings or model.settings
+        if model.provenance.get("files"):
+            # the set is matched file by file with the model's (check_matches): a missing
+            # repetition is named there, not counted against min_repetitions first
+            read_as = replace(read_as, min_repetitions=1)
+        cs = load_calibration(calib, read_as)
         doc = build(model, cs, source=str(model_file), settings=settings, drift=changes)
         if output is not None:
             refuse_overwriting_input(output, [model_file, *_read(cs), *_given(config),

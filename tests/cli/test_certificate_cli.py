@@ -167,7 +167,9 @@ def test_a_copied_repetition_is_refused_naming_the_file(fitted, sim_dir, tmp_pat
     (copy / "rep6.csv").rename(copy / "rep8.csv")  # renamed, content unchanged
     r = invoke(["certificate", fitted, copy], 2)
     assert_one_line_error(r, "rep8.csv", "rep6.csv")
-    (copy / "rep8.csv").unlink()  # a repetition missing (min_repetitions would say so first)
+    (copy / "rep8.csv").unlink()  # a repetition missing: named, not counted (it said "5
+    r = invoke(["certificate", fitted, copy], 2)  # repetitions, the config requires 6")
+    assert_one_line_error(r, "fitted on rep6.csv too")
     config = tmp_path / "five.yaml"
     config.write_text("min_repetitions: 5\n")
     r = invoke(["certificate", fitted, copy, "-c", config], 2)
