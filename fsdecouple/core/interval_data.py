@@ -221,7 +221,7 @@ def check_sweep_model(doc: Any, labels, loads: np.ndarray | None = None) -> None
         if loads is not None and np.isfinite(loads[b]).all() \
                 and np.abs(span[b] - loads[b]).max() > SPAN_AGREEMENT * (span[b, 1] - span[b, 0]):
             raise damaged(f"span of {axis}", doc["span"][b],
-                          f"the calibrated loads, {[float(x) for x in loads[b]]!r}")
+                          f"the calibrated loads, [{loads[b, 0]:.6g}, {loads[b, 1]:.6g}]")
     corners = np.array(list(itertools.product(*[(lo, 0.0, hi) for lo, hi in span])))
     reading, model = SweepModel(doc).variances(corners)
     limit = MAX_FULL_SCALES * (span[:, 1] - span[:, 0])
