@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
-from .model import RANGE_MARGIN
+from .model import RANGE_MARGIN, CouplingErrorModel
 
 MAX_DEGREE = 7  # of a g_ab; 9 and 12 measured alike (docs/design/intervals.md)
 NEWTON_STEPS = 30
@@ -29,6 +29,16 @@ NEWTON_TOLERANCE = 1e-10  # of the largest calibrated load: a row has settled (t
 # U or a model error beyond this is no calibration: an edited file (issue 34: sigma 1e300,
 # scores 1e308 gave interval bounds of 1e300 with status ok)
 MAX_FULL_SCALES = 1e3
+# Bounds on what a fit writes (a file beyond them was edited), each with wide margin:
+SPAN_AGREEMENT = 0.1  # of the span: its ends against the model's calibrated loads (~1e-3)
+OWN_SLOPE = (0.5, 2.0)  # dg_bb/df_b over k_b along the span (0.996-1.005 measured)
+SLOPE_GRID = 33  # loads along each span at which it is judged
+MEAN_SQUARE = (0.5, 2.0)  # a sweep model's studentised residuals: E z^2 = 1 (0.9-1.03 measured)
+# normalised held-out scores and deviations: a held-out error carries a reading's own
+# noise, so their mean square is about 1 or more (1.06-39 measured); and a sweep model's
+# reading noise over the held-out sigma (0.98-13 measured)
+MIN_MEAN_SQUARE = 0.01
+MIN_NOISE_RATIO = 0.1
 
 
 class SweepModel:
@@ -156,19 +166,19 @@ def _inverse(jac: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.linalg.inv(safe), ok
 
 
-SPAN_AGREEMENT = 0.1  # of the span: its ends against the model's calibrated loads
-MEAN_SQUARE = (0.5, 2.0)  # of a sweep model's studentised residuals, whose expectation is 1
-
-
-def check_sweep_model(doc: Any, labels, loads: np.ndarray | None = None) -> None:
+def check_sweep_model(doc: Any, labels, model: CouplingErrorModel | None = None) -> None:
     """Refuse a stored sweep model a fit cannot have written (None: there is none):
     per component a peak > 0 that is the largest |load| of its span, per component and
     output a shape of 1 to ``MAX_DEGREE`` finite numbers and its covariance, symmetric
-    and positive semi-definite, per output a noise variance > 0, and a finite model
-    variance at every corner of the spans.  ``loads`` ((N, 2), the model's calibrated
-    range over k, lower end first): the span's ends must lie within ``SPAN_AGREEMENT``
-    of the span from them (as fitted they agree to the noise: ~1e-3), so that a span
-    edited with its peak (both 1e-300: every log row beyond it, bounds NaN) is refused."""
+    and positive semi-definite, per output a noise variance > 0, and the reading's and
+    the model's standard deviations finite and at most ``MAX_FULL_SCALES`` spans where
+    the calibration loaded (each end of each span, one component at a time).
+
+    With the ``model`` it belongs to: the span's ends within ``SPAN_AGREEMENT`` of the
+    span from the model's calibrated loads (a span edited with its peak, both 1e-300,
+    put every log row beyond it: bounds NaN, status ok), and each own-load slope
+    dg_bb/df_b within ``OWN_SLOPE`` of k_b along its span (a shape edited to a root
+    inside the span moved the centre and widened the bounds 50-fold)."""
     if doc is None:
         return
     n = len(labels)
@@ -214,23 +224,37 @@ def check_sweep_model(doc: Any, labels, loads: np.ndarray | None = None) -> None
                               "a symmetric positive semi-definite matrix")
     span = np.asarray(doc["span"], dtype=float)
     for b, axis in enumerate(labels):
-        ends = np.abs(span[b]).max()
-        if abs(doc["peak"][b] - ends) > 1e-12 * ends:
+        largest = np.abs(span[b]).max()
+        if abs(doc["peak"][b] - largest) > 1e-12 * largest:
             raise damaged(f"peak of {axis}", doc["peak"][b],
-                          f"the largest |load| of its span, {float(ends)!r}")
-        if loads is not None and np.isfinite(loads[b]).all() \
-                and np.abs(span[b] - loads[b]).max() > SPAN_AGREEMENT * (span[b, 1] - span[b, 0]):
-            raise damaged(f"span of {axis}", doc["span"][b],
-                          f"the calibrated loads, [{loads[b, 0]:.6g}, {loads[b, 1]:.6g}]")
-    corners = np.array(list(itertools.product(*[(lo, 0.0, hi) for lo, hi in span])))
-    reading, model = SweepModel(doc).variances(corners)
+                          f"the largest |load| of its span, {float(largest)!r}")
+    sweeps = SweepModel(doc)
+    if model is not None:
+        loads = model.calibrated_loads
+        for b, axis in enumerate(labels):
+            if np.isfinite(loads[b]).all() \
+                    and np.abs(span[b] - loads[b]).max() > SPAN_AGREEMENT * (span[b, 1] - span[b, 0]):
+                raise damaged(f"span of {axis}", doc["span"][b],
+                              f"the calibrated loads, [{loads[b, 0]:.6g}, {loads[b, 1]:.6g}]")
+            along = np.zeros((SLOPE_GRID, n))
+            along[:, b] = np.linspace(*span[b], SLOPE_GRID)
+            with np.errstate(all="ignore"):
+                ratio = sweeps.jacobian(along)[:, b, b] / model.k[b]
+            if not ((ratio >= OWN_SLOPE[0]) & (ratio <= OWN_SLOPE[1])).all():
+                raise damaged(f"shape {{load {axis}, output {b + 1}}}", "...",
+                              f"a slope within {OWN_SLOPE[0]:g}-{OWN_SLOPE[1]:g} times omega's k "
+                              "along its span")
+    ends = np.zeros((2 * n + 1, n))
+    for b in range(n):
+        ends[2 * b + 1:2 * b + 3, b] = span[b]
+    reading, shared = sweeps.variances(ends)
     limit = MAX_FULL_SCALES * (span[:, 1] - span[:, 0])
-    for what, v in (("reading's", reading), ("model's", model)):
+    for what, v in (("reading's", reading), ("model's", shared)):
         with np.errstate(invalid="ignore"):
             sd = np.sqrt(v)
         bad = ~(np.isfinite(sd) & (sd <= limit))
         if bad.any():
-            raise damaged(f"{what} standard deviation at the spans' ends", float(sd[bad][0]),
+            raise damaged(f"{what} standard deviation at the span's ends", float(sd[bad][0]),
                           f"finite numbers of at most {MAX_FULL_SCALES:g} spans")
 
 
@@ -238,27 +262,30 @@ def _number(x) -> bool:
     return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
 
 
-def check_interval_data(cal: Any, labels, loads: np.ndarray | None = None) -> None:
-    """Refuse interval data a fit cannot have written: the fields this module added
-    (``load_variance``, ``first_step``, ``zero_variance``) must be finite, >= 0, > 0 and
-    >= 0 respectively, ``deviations`` finite and sorted (and there beside a sweep
-    model), and ``least_squares`` as :func:`check_sweep_model`
-    checks it (``loads``: the model's calibrated loads, which its span must be)."""
+def check_interval_data(cal: Any, labels, model: CouplingErrorModel | None = None) -> None:
+    """Refuse interval data a fit cannot have written: ``load_variance``, ``first_step``
+    and ``zero_variance`` must be finite, >= 0, > 0 and >= 0 respectively,
+    ``deviations`` finite and sorted (and there beside a sweep model) with a mean square
+    of a fit's (``MEAN_SQUARE`` beside a sweep model, else at least
+    ``MIN_MEAN_SQUARE``), and ``least_squares`` as :func:`check_sweep_model` checks it.
+
+    With the ``model`` it belongs to (the model file checks at load; the held-out
+    scores and sigma it checks itself): the deviations times sigma at most
+    ``MAX_FULL_SCALES`` full scales, a sweep model's reading noise at least
+    ``MIN_NOISE_RATIO`` of sigma, and the sweep model against the model."""
     def bad(what: str, value) -> InputError:
         return InputError(f"intervals: the model file's interval data are damaged ({what} is "
                           f"{value!r}, expected a finite number {'>= 0' if 'variance' in what else '> 0'}); "
                           "refit the model", argument="interval")
 
-    def number(x) -> bool:
-        return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
-
     for axis in labels:
         c = cal["components"][axis]
-        if "load_variance" in c and not (number(c["load_variance"]) and c["load_variance"] >= 0):
+        if "load_variance" in c and not (_number(c["load_variance"]) and c["load_variance"] >= 0):
             raise bad(f"load_variance of {axis}", c["load_variance"])
-    check_sweep_model(cal.get("least_squares"), labels, loads)
+    swept = cal.get("least_squares")
+    check_sweep_model(swept, labels, model)
     deviations = cal.get("deviations")
-    if deviations is None and cal.get("least_squares") is not None:
+    if deviations is None and swept is not None:
         raise InputError("intervals: the model file's interval data are damaged (deviations "
                          "are missing beside least_squares); refit the model", argument="interval")
     if deviations is not None and not _ascending(deviations):
@@ -268,22 +295,21 @@ def check_interval_data(cal: Any, labels, loads: np.ndarray | None = None) -> No
     if deviations is not None:
         with np.errstate(over="ignore"):
             square = float(np.mean(np.square(deviations)))
-        # beside a sweep model, studentised residuals r/(s sqrt(1 - h)): E z^2 = 1 by their
-        # construction (0.97-1.03 measured, 135 to 1314 of them); else held-out residuals
-        # less their sweep's mean, never all exact
-        swept = cal.get("least_squares") is not None
-        if not (MEAN_SQUARE[0] <= square <= MEAN_SQUARE[1] if swept else square > 0.0):
-            expected = (f"{MEAN_SQUARE[0]:g} to {MEAN_SQUARE[1]:g}, as studentised residuals have"
-                        if swept else "more than 0: held-out errors, not all exact")
+        lo, hi = MEAN_SQUARE if swept is not None else (MIN_MEAN_SQUARE, math.inf)
+        if not lo <= square <= hi:
+            expected = (f"{lo:g} to {hi:g}, as studentised residuals have" if swept is not None
+                        else f"at least {lo:g}: held-out errors carry a reading's noise")
             raise InputError(f"intervals: the model file's interval data are damaged (deviations' "
                              f"mean square is {square!r}, expected {expected}); refit the model",
                              argument="interval")
-    if deviations is not None and cal.get("least_squares") is None:
+    if model is not None:
+        _check_against_sigma(cal, labels, model, deviations, swept)
+    if deviations is not None and swept is None:
         shares = cal.get("zero_variance")
         if not isinstance(shares, dict):
             raise bad("zero_variance", shares)
         for axis, value in shares.items():
-            if axis not in labels or not (number(value) and value >= 0):
+            if axis not in labels or not (_number(value) and value >= 0):
                 raise bad(f"zero_variance of {axis}", value)
     shift = cal.get("zero_shift")
     if shift is not None:
@@ -291,7 +317,7 @@ def check_interval_data(cal: Any, labels, loads: np.ndarray | None = None) -> No
             raise bad("zero_shift", shift)
         for axis, row in shift.items():
             if axis not in labels or not (isinstance(row, list) and len(row) == len(labels)
-                                          and all(number(x) for x in row)):
+                                          and all(_number(x) for x in row)):
                 raise InputError(f"intervals: the model file's interval data are damaged "
                                  f"(zero_shift of {axis} is {row!r}, expected {len(labels)} finite "
                                  "numbers); refit the model", argument="interval")
@@ -300,15 +326,52 @@ def check_interval_data(cal: Any, labels, loads: np.ndarray | None = None) -> No
         if not isinstance(steps, dict):
             raise bad("first_step", steps)
         for axis, value in steps.items():
-            if axis not in labels or not (number(value) and value > 0):
+            if axis not in labels or not (_number(value) and value > 0):
                 raise bad(f"first_step of {axis}", value)
 
 
+def _check_against_sigma(cal, labels, model: CouplingErrorModel, deviations, swept) -> None:
+    """The deviations and a sweep model's noise against each component's held-out sigma."""
+    sigma = np.array([cal["components"][a]["sigma"] for a in labels], dtype=float)
+    limit = MAX_FULL_SCALES * np.asarray(model.settings.full_scale, dtype=float)
+    if deviations is not None:
+        largest = max(abs(deviations[0]), abs(deviations[-1]))
+        worst = int(np.argmax(largest * sigma / limit))
+        if largest * sigma[worst] > limit[worst]:
+            raise InputError(f"intervals: the model file's interval data are damaged (deviation "
+                             f"{largest!r} times {labels[worst]}'s sigma {sigma[worst]!r} is more "
+                             f"than {MAX_FULL_SCALES:g} full scales); refit the model",
+                             argument="interval")
+    if swept is not None:
+        noise = np.sqrt(np.asarray(swept["noise_variance"], dtype=float)) / np.abs(model.k)
+        low = noise < MIN_NOISE_RATIO * sigma
+        if low.any():
+            a = int(np.flatnonzero(low)[0])
+            raise InputError(f"intervals: the model file's interval data are damaged (least_squares "
+                             f"noise_variance of output {a + 1} is {swept['noise_variance'][a]!r}, "
+                             f"expected a reading noise of at least {MIN_NOISE_RATIO:g} of "
+                             f"{labels[a]}'s held-out sigma); refit the model", argument="interval")
+
+
 def _ascending(values) -> bool:
-    """A non-empty list of finite numbers (no bools) in ascending order: the types gathered
-    and the order compared at C speed (a model file holds ~10^3 deviations, checked at
-    every load)."""
-    if not (isinstance(values, list) and values and set(map(type, values)) <= {int, float}):
+    """A non-empty list of finite numbers (no bools) in ascending order, compared at C
+    speed (a model file holds ~10^3 deviations, checked at every load)."""
+    if not (numbers(values) and values):
         return False
     v = np.asarray(values, dtype=float)
     return bool(np.isfinite(v).all() and (v[1:] >= v[:-1]).all())
+
+
+_PLAIN_NUMBERS = frozenset({int, float})
+
+
+def numbers(v: Any, n: int | None = None) -> bool:
+    """A list (of ``n`` items) of numbers, bools not counted as numbers.
+
+    The types of a parsed list are gathered at C speed (a certificate holds ~10^4
+    numbers); only a list holding other types (a float subclass, say) is checked
+    item by item.
+    """
+    return isinstance(v, list) and (n is None or len(v) == n) and (
+        set(map(type, v)) <= _PLAIN_NUMBERS
+        or all(isinstance(x, int | float) and not isinstance(x, bool) for x in v))

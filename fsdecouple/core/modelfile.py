@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +22,7 @@ from ..files.inputs import MODEL_LIMIT, read_bounded
 from ..files.outputs import atomic_write
 from ..schema import LEGACY_EXTRAPOLATION
 from .decouple import MAX_SURROGATE_ERROR, usable
-from .interval_data import MAX_FULL_SCALES, check_interval_data
+from .interval_data import MAX_FULL_SCALES, MIN_MEAN_SQUARE, check_interval_data, numbers
 from .model import Chi, CouplingErrorModel, FitReport
 from .modeljson import dump_forms, join_indented
 from .surrogate import spot_check
@@ -231,7 +232,7 @@ def _check_intervals(model: CouplingErrorModel, source: str) -> None:
     if not cert or not cert.get("interval"):
         return
     try:
-        check_interval_data(cert["interval"], model.layout.labels, model.calibrated_loads)
+        check_interval_data(cert["interval"], model.layout.labels, model)
     except InputError as err:
         raise ModelFileError(f"{source}: {err}") from None
 
@@ -402,8 +403,6 @@ def _check_report(report: Any, source: str, labels, full_scale) -> None:
         raise ModelFileError(f"{source}: malformed model file (report: {problem}); refit it")
 
 
-
-
 def _certificate_problem(cert: Any, labels, full_scale) -> str | None:
     """What is wrong with the step data compare and certificate read and the scores apply
     --interval reads (evaluation.budget), or None.
@@ -416,9 +415,9 @@ def _certificate_problem(cert: Any, labels, full_scale) -> str | None:
         for a, fs in zip(labels, full_scale, strict=True):
             st = cert["steps"][a]
             n = len(st["load"])
-            if not (_numbers(st["load"]) and _numbers(st["U"], n) and _numbers(st["model_error"], n)
+            if not (numbers(st["load"]) and numbers(st["U"], n) and numbers(st["model_error"], n)
                     and isinstance(st["outputs"], list) and len(st["outputs"]) == n
-                    and all(_numbers(o, len(labels)) for o in st["outputs"])):
+                    and all(numbers(o, len(labels)) for o in st["outputs"])):
                 return "certificate needs steps and interval scores per component"
             limit = MAX_FULL_SCALES * fs
             for key, low in (("U", "positive"), ("model_error", "non-negative")):
@@ -429,7 +428,7 @@ def _certificate_problem(cert: Any, labels, full_scale) -> str | None:
                             f"most {MAX_FULL_SCALES:g} full scales ({limit:g})")
             c = cert["interval"]["components"][a]
             own = c["scores"] if c["scores"] is not None else cert["interval"]["scores"]
-            if not (_numbers([c["sigma"]]) and _numbers(own) and own):
+            if not (numbers([c["sigma"]]) and numbers(own) and own):
                 return "certificate needs steps and interval scores per component"
             sigma = c["sigma"]
             if not 0.0 < sigma <= limit:
@@ -446,24 +445,14 @@ def _certificate_problem(cert: Any, labels, full_scale) -> str | None:
             if own[-1] * sigma > limit:
                 return (f"interval: {a}: held-out score {own[-1]!r} times sigma {sigma!r} is "
                         f"more than {MAX_FULL_SCALES:g} full scales ({limit:g})")
+            # pooled scores are errors over sigma, ~1 or more; a component's own are raw
+            square = float(np.mean(np.square(own))) if c["scores"] is None else math.inf
+            if square < MIN_MEAN_SQUARE:
+                return (f"interval: {a}: held-out scores' mean square {square!r}; expected at "
+                        f"least {MIN_MEAN_SQUARE:g} (scores are errors over their noise)")
     except (KeyError, TypeError):
         return "certificate needs steps and interval scores per component"
     return None
-
-
-_PLAIN_NUMBERS = frozenset({int, float})
-
-
-def _numbers(v: Any, n: int | None = None) -> bool:
-    """A list (of ``n`` items) of numbers, bools not counted as numbers.
-
-    The types of a parsed list are gathered at C speed (a certificate holds ~10^4
-    numbers); only a list holding other types (a float subclass, say) is checked
-    item by item.
-    """
-    return isinstance(v, list) and (n is None or len(v) == n) and (
-        set(map(type, v)) <= _PLAIN_NUMBERS
-        or all(isinstance(x, int | float) and not isinstance(x, bool) for x in v))
 
 
 def _settings_yaml_form(d: dict[str, Any]) -> dict[str, Any]:

@@ -7,6 +7,7 @@ tests/evaluation/test_intervals.py."""
 from __future__ import annotations
 
 import re
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -36,7 +37,7 @@ def _doc():
     (lambda d: d.pop("shape"), "shape is None"),
     (lambda d: d["peak"].__setitem__(1, 50.0), "peak of y is 50.0, expected the largest |load|"),
     (lambda d: d["shape"][0].__setitem__(0, [1e300] * len(d["shape"][0][0])),
-     "reading's standard deviation at the spans' ends is nan"),
+     "reading's standard deviation at the span's ends is nan"),
     (lambda d: d["noise_variance"].__setitem__(0, 1e300), "reading's standard deviation"),
 ])
 def test_damaged_sweep_models_are_refused(edit, match):
@@ -62,17 +63,42 @@ def test_the_jacobians_inverse_is_lapack_s_and_singular_rows_are_named(n):
     assert np.array_equal(inv[~ok], np.broadcast_to(np.eye(n), (3, n, n)))
 
 
+def _owner(loads):
+    """What the checks read of the model a sweep model belongs to: its calibrated loads
+    and omega's slopes k (the simulator's, which the fit's k estimates to ~1e-3)."""
+    return SimpleNamespace(calibrated_loads=np.asarray(loads, dtype=float), k=SimulatedSensor().k)
+
+
 def test_the_span_must_be_the_model_s_calibrated_loads():
     """A span scaled with its peak (both 1e-300) left every log row beyond it and the
     bounds NaN with status ok; within a tenth of the span the noise's difference passes.
-    Without the loads to compare with, the reading's standard deviation, 1e297 spans
+    Without the model to compare with, the reading's standard deviation, 1e297 spans
     of that span, refuses it too."""
     doc = _doc()
     loads = np.array(doc["span"])
-    check_sweep_model(doc, DEFAULT.labels, loads + 0.05 * (loads[:, 1:] - loads[:, :1]))
+    check_sweep_model(doc, DEFAULT.labels, _owner(loads + 0.05 * (loads[:, 1:] - loads[:, :1])))
     doc["peak"], doc["span"] = [1e-300] * 3, [[-1e-300, 1e-300]] * 3
     with pytest.raises(InputError, match=re.escape("span of x is [-1e-300, 1e-300], expected the "
                                                    "calibrated loads")):
-        check_sweep_model(doc, DEFAULT.labels, loads)
-    with pytest.raises(InputError, match="reading's standard deviation at the spans' ends"):
+        check_sweep_model(doc, DEFAULT.labels, _owner(loads))
+    with pytest.raises(InputError, match="reading's standard deviation at the span's ends"):
         check_sweep_model(doc, DEFAULT.labels)
+
+
+def test_the_own_slope_must_be_omega_s_along_the_span():
+    """A shape edited so that g_xx' has a root inside the span (J singular there: the
+    centre moved, the bounds 50 times wider; the span's ends alone did not show it),
+    or with its slope doubled and more, is refused; the fitted one, within 1 % of k, not."""
+    doc = _doc()
+    owner = _owner(doc["span"])
+    check_sweep_model(doc, DEFAULT.labels, owner)
+    beta = doc["shape"][0][0]
+    L = doc["peak"][0]
+    slope = beta[0] / L  # dg_xx/df_x at 0 [V/N]
+    # g = c (s - s^3 / (3 r^2)): g' = 0 at s = r = 0.3, g'(0) = omega's slope
+    doc["shape"][0][0] = [beta[0], 0.0, -beta[0] / (3 * 0.3 ** 2)]
+    doc["covariance"][0][0] = np.diag(np.full(3, 1e-12)).tolist()
+    assert abs(slope / owner.k[0] - 1) < 0.01
+    with pytest.raises(InputError, match=re.escape("shape {load x, output 1} is '...', expected a "
+                                                   "slope within 0.5-2 times omega's k")):
+        check_sweep_model(doc, DEFAULT.labels, owner)

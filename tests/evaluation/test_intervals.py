@@ -354,7 +354,17 @@ def _scores(cert, a="x"):
     (lambda c: c["interval"].__setitem__("deviations", [x / 10 for x in c["interval"]["deviations"]]),
      "deviations' mean square is 0.00"),
     (lambda c: _earlier_construction(c)["deviations"].__setitem__(
-        slice(None), [0.0] * len(c["interval"]["deviations"])), "expected more than 0"),
+        slice(None), [0.0] * len(c["interval"]["deviations"])), "expected at least 0.01"),
+    # scaled down or up (a reviewer's checks): bounds 0 wide, or 1e199 N with status ok
+    (lambda c: _earlier_construction(c)["deviations"].__setitem__(
+        slice(None), [x * 1e-3 for x in c["interval"]["deviations"]]), "expected at least 0.01"),
+    (lambda c: _earlier_construction(c)["deviations"].__setitem__(
+        slice(None), [x * 1e200 for x in c["interval"]["deviations"]]), "more than 1000 full scales"),
+    (lambda c: c["interval"].__setitem__("scores", [x * 1e-3 for x in c["interval"]["scores"]]),
+     "held-out scores' mean square"),
+    (lambda c: _least_squares(c).__setitem__(
+        "noise_variance", [x * 1e-20 for x in _least_squares(c)["noise_variance"]]),
+     "expected a reading noise of at least 0.1 of x's held-out sigma"),
 ])
 def test_edited_interval_and_step_data_are_refused_at_load_even_with_a_digest(
         sample_model, tmp_path, edit, needle):
