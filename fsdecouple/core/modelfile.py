@@ -227,7 +227,7 @@ def _model_from_dict(doc: Any, source: str, computed: str | None = None) -> Coup
 def _check_intervals(model: CouplingErrorModel, source: str) -> None:
     """The interval data beyond the scores (issue 33: refused when the file loads, not
     when a log is half read), as :func:`fsdecouple.core.interval_data.check_interval_data`
-    checks them; the sweep model's span against the model's own calibrated loads."""
+    checks them against the model they belong to (its calibrated loads, k, full scale)."""
     cert = model.report.certificate if model.report is not None else None
     if not cert or not cert.get("interval"):
         return
