@@ -95,8 +95,8 @@ class SweepModel:
     def forces(self, u: np.ndarray, start: np.ndarray) -> np.ndarray:
         """The forces whose outputs are ``u`` (zero-corrected, (n, N)), from ``start``;
         NaN where a row does not settle.  Newton's method with the Jacobian of the start
-        kept (the chord method: ``start`` is eq. (11)'s refined forces, within the noise
-        of the solution, where J hardly moves), one inverse a row instead of one a step."""
+        kept (the chord method: ``start`` is eq. (11)'s forces, within the noise of the
+        solution, where J hardly moves), one inverse a row instead of one a step."""
         f = np.where(np.isfinite(start), start, 0.0)
         settled = np.zeros(len(u), dtype=bool)
         tol = NEWTON_TOLERANCE * self.peak.max()
@@ -184,9 +184,7 @@ def check_sweep_model(doc: Any, labels, model: CouplingErrorModel | None = None)
     n = len(labels)
 
     def damaged(what: str, value, expected: str) -> InputError:
-        return InputError(f"intervals: the model file's interval data are damaged (least_squares "
-                          f"{what} is {value!r}, expected {expected}); refit the model",
-                          argument="interval")
+        return _damaged(f"least_squares {what} is {value!r}, expected {expected}")
 
     if not isinstance(doc, dict):
         raise damaged("", doc, "the sweep model's fields")
@@ -258,6 +256,12 @@ def check_sweep_model(doc: Any, labels, model: CouplingErrorModel | None = None)
                           f"finite numbers of at most {MAX_FULL_SCALES:g} spans")
 
 
+def _damaged(detail: str) -> InputError:
+    """The one refusal of interval data a fit cannot have written (issue 33)."""
+    return InputError(f"intervals: the model file's interval data are damaged ({detail}); "
+                      "refit the model", argument="interval")
+
+
 def _number(x) -> bool:
     return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
 
@@ -274,9 +278,8 @@ def check_interval_data(cal: Any, labels, model: CouplingErrorModel | None = Non
     ``MAX_FULL_SCALES`` full scales, a sweep model's reading noise at least
     ``MIN_NOISE_RATIO`` of sigma, and the sweep model against the model."""
     def bad(what: str, value) -> InputError:
-        return InputError(f"intervals: the model file's interval data are damaged ({what} is "
-                          f"{value!r}, expected a finite number {'>= 0' if 'variance' in what else '> 0'}); "
-                          "refit the model", argument="interval")
+        return _damaged(f"{what} is {value!r}, expected a finite number "
+                        f"{'>= 0' if 'variance' in what else '> 0'}")
 
     for axis in labels:
         c = cal["components"][axis]
@@ -286,12 +289,9 @@ def check_interval_data(cal: Any, labels, model: CouplingErrorModel | None = Non
     check_sweep_model(swept, labels, model)
     deviations = cal.get("deviations")
     if deviations is None and swept is not None:
-        raise InputError("intervals: the model file's interval data are damaged (deviations "
-                         "are missing beside least_squares); refit the model", argument="interval")
+        raise _damaged("deviations are missing beside least_squares")
     if deviations is not None and not _ascending(deviations):
-        raise InputError("intervals: the model file's interval data are damaged (deviations "
-                         "are not finite numbers in ascending order); refit the model",
-                         argument="interval")
+        raise _damaged("deviations are not finite numbers in ascending order")
     if deviations is not None:
         with np.errstate(over="ignore"):
             square = float(np.mean(np.square(deviations)))
@@ -299,9 +299,7 @@ def check_interval_data(cal: Any, labels, model: CouplingErrorModel | None = Non
         if not lo <= square <= hi:
             expected = (f"{lo:g} to {hi:g}, as studentised residuals have" if swept is not None
                         else f"at least {lo:g}: held-out errors carry a reading's noise")
-            raise InputError(f"intervals: the model file's interval data are damaged (deviations' "
-                             f"mean square is {square!r}, expected {expected}); refit the model",
-                             argument="interval")
+            raise _damaged(f"deviations' mean square is {square!r}, expected {expected}")
     if model is not None:
         _check_against_sigma(cal, labels, model, deviations, swept)
     if deviations is not None and swept is None:
@@ -318,9 +316,8 @@ def check_interval_data(cal: Any, labels, model: CouplingErrorModel | None = Non
         for axis, row in shift.items():
             if axis not in labels or not (isinstance(row, list) and len(row) == len(labels)
                                           and all(_number(x) for x in row)):
-                raise InputError(f"intervals: the model file's interval data are damaged "
-                                 f"(zero_shift of {axis} is {row!r}, expected {len(labels)} finite "
-                                 "numbers); refit the model", argument="interval")
+                raise _damaged(f"zero_shift of {axis} is {row!r}, expected {len(labels)} finite "
+                               "numbers")
     steps = cal.get("first_step")
     if steps is not None:
         if not isinstance(steps, dict):
@@ -338,19 +335,16 @@ def _check_against_sigma(cal, labels, model: CouplingErrorModel, deviations, swe
         largest = max(abs(deviations[0]), abs(deviations[-1]))
         worst = int(np.argmax(largest * sigma / limit))
         if largest * sigma[worst] > limit[worst]:
-            raise InputError(f"intervals: the model file's interval data are damaged (deviation "
-                             f"{largest!r} times {labels[worst]}'s sigma {sigma[worst]!r} is more "
-                             f"than {MAX_FULL_SCALES:g} full scales); refit the model",
-                             argument="interval")
+            raise _damaged(f"deviation {largest!r} times {labels[worst]}'s sigma {sigma[worst]!r} "
+                           f"is more than {MAX_FULL_SCALES:g} full scales")
     if swept is not None:
         noise = np.sqrt(np.asarray(swept["noise_variance"], dtype=float)) / np.abs(model.k)
         low = noise < MIN_NOISE_RATIO * sigma
         if low.any():
             a = int(np.flatnonzero(low)[0])
-            raise InputError(f"intervals: the model file's interval data are damaged (least_squares "
-                             f"noise_variance of output {a + 1} is {swept['noise_variance'][a]!r}, "
-                             f"expected a reading noise of at least {MIN_NOISE_RATIO:g} of "
-                             f"{labels[a]}'s held-out sigma); refit the model", argument="interval")
+            raise _damaged(f"least_squares noise_variance of output {a + 1} is "
+                           f"{swept['noise_variance'][a]!r}, expected a reading noise of at least "
+                           f"{MIN_NOISE_RATIO:g} of {labels[a]}'s held-out sigma")
 
 
 def _ascending(values) -> bool:

@@ -52,7 +52,7 @@ import numpy as np
 
 from ..axes import Layout
 from ..core.interval_data import MAX_DEGREE
-from ..data.zero import sweep_design
+from ..data.zero import rows_by_group, sweep_design
 
 if TYPE_CHECKING:  # apply reads the model, never pandas (tests/core/test_fast.py)
     import pandas as pd
@@ -90,7 +90,7 @@ def fit_sweep_model(points: pd.DataFrame, layout: Layout) -> dict[str, Any] | No
         groups = int(group.max(initial=-1)) + 1
         # the fewest load levels of one sweep (loads measured, not nominal, differ in
         # every repetition: their union is no count of levels)
-        levels = min((np.unique(f[group == g]).size for g in range(groups)), default=0)
+        levels = min((np.unique(f[idx]).size for idx in rows_by_group(group)), default=0)
         top = min(MAX_DEGREE, levels - 2)
         L = float(np.abs(f).max(initial=0.0))
         if groups < 2 or top < 1 or not L > 0 or np.any(others != 0.0) \
