@@ -192,6 +192,9 @@ def _check_comparable(old: CouplingErrorModel, new: CouplingErrorModel, a: str, 
         raise InputError(f"{b}: has {new.n_components} components ({', '.join(new.layout.labels)}), "
                          f"{a} has {old.n_components} ({', '.join(old.layout.labels)}); "
                          "compare two calibrations of one sensor")
+    if not same_components(old.layout.labels, new.layout.labels):
+        raise InputError(f"{b}: its components are {', '.join(new.layout.labels)}, {a}'s "
+                         f"{', '.join(old.layout.labels)}; compare two calibrations of one sensor")
     if old.n_outputs != new.n_outputs:
         raise InputError(f"{b}: takes {new.n_outputs} outputs ({', '.join(new.layout.outputs)}), "
                          f"{a} {old.n_outputs} ({', '.join(old.layout.outputs)}); compare two "
@@ -200,6 +203,16 @@ def _check_comparable(old: CouplingErrorModel, new: CouplingErrorModel, a: str, 
         raise InputError(f"{b}: is in {new.settings.units.load} and {new.settings.units.output}, "
                          f"{a} in {old.settings.units.load} and {old.settings.units.output}; "
                          "compare models in the same units")
+
+
+def same_components(a, b) -> bool:
+    """Whether two models' component names are one sensor's, in the same order: names may
+    differ only in case and as ATI's torques (``tx``, data/ati_model.py) against
+    fsdecouple's moments (``mx``)."""
+    def key(label: str) -> str:
+        label = label.lower()
+        return "m" + label[1:] if len(label) == 2 and label[0] == "t" else label
+    return [key(x) for x in a] == [key(x) for x in b]
 
 
 # The range both calibrations cover must be at least this fraction of each one's span:

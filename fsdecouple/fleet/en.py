@@ -41,8 +41,9 @@ def en_figures(a: CouplingErrorModel, b: CouplingErrorModel, names=("old", "new"
     if len(missing) == 1 and factory[names.index(missing[0])]:
         # an imported factory matrix (data/ati_cal.py) states no uncertainty: E_n at the
         # other calibration's steps with U = 0 for the factory's, an upper bound on |E_n|
-        zero = {axis: {"load": [], "U": []} for axis in a.layout.labels}
-        sa, sb = (zero, sb) if sa is None else (sa, zero)
+        def zero(m):
+            return {axis: {"load": [], "U": []} for axis in m.layout.labels}
+        sa, sb = (zero(a), sb) if sa is None else (sa, zero(b))
         note = (f"the {missing[0]} model is a factory matrix with no stated uncertainty: E_n "
                 f"at the other's steps with U_{missing[0]} = 0 (|E_n| is at most this)")
     elif all(factory):
@@ -54,7 +55,10 @@ def en_figures(a: CouplingErrorModel, b: CouplingErrorModel, names=("old", "new"
     out, steps = {}, []
     for i, axis in enumerate(a.layout.labels):
         worst = 0.0
-        for own, data, other in ((names[0], sa[axis], sb[axis]), (names[1], sb[axis], sa[axis])):
+        # by position: the names may be ATI's torques in one and moments in the other
+        # (fleet/drift.py checks they are one sensor's)
+        da, db = sa[axis], sb[b.layout.labels[i]]
+        for own, data, other in ((names[0], da, db), (names[1], db, da)):
             if not data["load"]:
                 continue  # the factory matrix's: no steps of its own
             loads = np.asarray(data["load"], dtype=float)
@@ -67,7 +71,7 @@ def en_figures(a: CouplingErrorModel, b: CouplingErrorModel, names=("old", "new"
                                 np.asarray(other["U"], dtype=float)[order]) if other["load"] \
                 else np.zeros_like(loads)
             u_a, u_b = (u_own, u_other) if own == names[0] else (u_other, u_own)
-            en = (f_a - f_b) / np.sqrt(u_a ** 2 + u_b ** 2)
+            en = (f_a - f_b) / np.hypot(u_a, u_b)  # hypot: U of 1e-200 squares to 0
             worst = max(worst, float(np.abs(en).max(initial=0.0)))
             steps += [{"axis": axis, "load": float(f), "steps_of": own, f"F_{names[0]}": float(x),
                        f"F_{names[1]}": float(y), f"U_{names[0]}": float(p), f"U_{names[1]}": float(q),

@@ -74,3 +74,21 @@ def test_compare_gates_on_en_and_an_old_model_falls_back_with_a_note(pair, tmp_p
     assert doc["en"] is None and "no certificate data" in doc["en_note"]
     assert doc["passed"] is None  # neither E_n nor --max-drift: nothing to gate on
     assert compare(old, b, max_drift=0.5)["passed"] is False  # the fixed threshold stays
+
+
+def test_an_uncertainty_whose_square_underflows_gives_finite_en(sim_model_file, tmp_path):
+    """U = 1e-200 passes the load-time check (U > 0), but U^2 underflows to 0: E_n was
+    0/0 (NaN) or x/0, and `compare --json` a traceback. sqrt(U_A^2 + U_B^2) is taken
+    as hypot(U_A, U_B), which does not underflow."""
+    from fsdecouple.core.modelfile import content_digest
+
+    doc = json.loads(sim_model_file.read_text())
+    for steps in doc["report"]["certificate"]["steps"].values():
+        steps["U"] = [1e-200] * len(steps["U"])
+    doc["integrity"]["digest"] = content_digest(doc)
+    edited = tmp_path / "tiny-u.json"
+    edited.write_text(json.dumps(doc))
+    r = invoke(["compare", edited, edited, "--json"])  # the same model: every F_A - F_B = 0
+    out = json.loads(r.stdout)
+    assert out["passed"] is True and out["en"] == {"x": 0.0, "y": 0.0, "z": 0.0}
+    assert all(s["U_old"] == 1e-200 and s["en"] == 0.0 for s in out["en_steps"])

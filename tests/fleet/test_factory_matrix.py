@@ -89,6 +89,38 @@ def test_compare_factory_against_recalibration(lab, tmp_path):
     assert "factory matrix with no stated uncertainty" in r.stdout + r.stderr
 
 
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
+def test_compare_factory_torques_against_a_recalibration_naming_moments(lab, tmp_path):
+    """ATI names torques tx..tz, fsdecouple's six-axis configs moments mx..mz: one sensor's
+    components in one order, compared by position (a KeyError traceback before); other
+    names are refused in one line."""
+    d, factory, w_true, fs = lab
+    moments = tmp_path / "set"
+    moments.mkdir()
+    for rep in sorted((d / "set").iterdir()):
+        lines = rep.read_text().splitlines()
+        lines[0] = lines[0].replace(",tx,ty,tz,", ",mx,my,mz,")
+        body = [line.replace("t", "m", 1) if line[:1] == "t" else line for line in lines[1:]]
+        (moments / rep.name).write_text("\n".join([lines[0], *body]) + "\n")
+    cfg = tmp_path / "sensor.yaml"
+    cfg.write_text(CONFIG.replace("tx", "mx").replace("ty", "my").replace("tz", "mz"))
+    invoke(["fit", moments, "-c", cfg, "-o", tmp_path / "recal.json", "--method", "linear"])
+    r = invoke(["compare", d / "factory.json", tmp_path / "recal.json", "--json"], code=1)
+    doc = json.loads(r.stdout)
+    m = (w_true - factory.matrix) @ np.linalg.inv(factory.matrix)
+    got = np.array([doc["components"][a]["force_max_pct"] for a in factory.layout.labels])
+    assert got == pytest.approx(100 * (np.abs(m) @ fs) / fs, abs=1e-3)
+    assert set(doc["en"]) == set(factory.layout.labels)
+    other = tmp_path / "other.yaml"
+    other.write_text(CONFIG.replace("tx", "qx").replace("ty", "qy").replace("tz", "qz"))
+    for rep in moments.iterdir():
+        rep.write_text(rep.read_text().replace("m", "q"))
+    invoke(["fit", moments, "-c", other, "-o", tmp_path / "q.json", "--method", "linear"])
+    r = invoke(["compare", d / "factory.json", tmp_path / "q.json"], code=2)
+    assert "its components are fx, fy, fz, qx, qy, qz" in r.stderr
+    assert "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
 def test_compare_reports_the_drift_of_the_temperature_terms(tmp_path):
     """Two temperature-compensated files: b and g change by minus the change of ATI's
     BiasSlope and GainSlope (b = -BS, g = -GS), T0 by that of Thermistor."""
