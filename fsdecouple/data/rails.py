@@ -14,7 +14,10 @@ other poses; leaving them out raised the held-out error of a least-squares matri
 13 %).  So a near point is left out only when its reading is more than :data:`FOLLOWS`
 robust sigmas (1.4826 MAD of the other points' residuals) from the channel's linear
 response to the loads with an offset, least squares on the points not near; the points
-near but following are kept, named in one note.  Only poses are
+near but following are kept, named in one note.  With too few other points to judge
+(fewer than twice the response's unknowns: ten poses of six loads) the near points are
+kept too, with a note that says so: left out, a prior's ten poses fell to five, too few
+to fit.  Only poses are
 checked (the averaged samples of files with a timestamp column, data/poses.py): a sweep's
 single readings keep ``limits:`` for ``apply``'s saturated status, as before.
 """
@@ -43,14 +46,14 @@ def ranges(settings, outputs, raw: np.ndarray, bits: int | None) -> dict[str, tu
     return out
 
 
-def following(f: np.ndarray, u: np.ndarray, near: np.ndarray) -> np.ndarray:
+def following(f: np.ndarray, u: np.ndarray, near: np.ndarray) -> np.ndarray | None:
     """Which ``near`` points still follow the load: within :data:`FOLLOWS` robust sigmas of
-    the linear response u ~ f b + c fitted by least squares on the other points.  With too
-    few other points to fit and judge it, none is said to follow."""
+    the linear response u ~ f b + c fitted by least squares on the other points.  None when
+    there are too few other points to fit and judge it (fewer than twice its unknowns)."""
     out = np.zeros(len(u), dtype=bool)
     rest = ~near
     if rest.sum() < 2 * (f.shape[1] + 1):
-        return out
+        return None
     design = np.column_stack([f, np.ones(len(u))])
     b, *_ = np.linalg.lstsq(design[rest], u[rest], rcond=None)
     r = u - design @ b
@@ -59,6 +62,16 @@ def following(f: np.ndarray, u: np.ndarray, near: np.ndarray) -> np.ndarray:
         return out
     out[near] = np.abs(r[near]) <= FOLLOWS * scale
     return out
+
+
+def _points(mask, files, rows, single: bool) -> str:
+    """``3 points (lines 4, 9, 12)`` of one file, ``1 point (pose26.csv line 2)`` of several."""
+    n = int(mask.sum())
+    at = [str(r) if single else f"{Path(f).name} line {r}"
+          for f, r in zip(files[mask][:6], rows[mask][:6], strict=True)]
+    listed = ", ".join(at) + (", ..." if n > 6 else "")
+    plural = "s" if n > 1 else ""
+    return f"{n} point{plural} ({f'line{plural} ' if single else ''}{listed})"
 
 
 def at_rail(frame, outputs, known: dict, strict: bool, loads=()) -> tuple[np.ndarray, list[str]]:
@@ -87,31 +100,28 @@ def at_rail(frame, outputs, known: dict, strict: bool, loads=()) -> tuple[np.nda
         end = "upper" if u[i] >= hi - margin else "lower"
         if strict:
             raise InputError(f"{where(files[i], int(rows[i]), c)}: {u[i]:g} is within {RAIL:.0%} of "
-                             f"the {end} end of its range {lo:g} .. {hi:g} ({whence}): a channel "
-                             "at its rail no longer follows the load; strict mode refuses it",
-                             argument="strict")
+                             f"the {end} end of its range {lo:g} .. {hi:g} ({whence}): strict mode "
+                             "refuses readings near a rail, where a channel may no longer follow "
+                             "the load", argument="strict")
         path = files[i] if single else Path(files[i]).parent
         f = frame[list(loads)].to_numpy(dtype=float) if len(loads) else np.zeros((len(u), 0))
         kept = following(f, u, near) if len(loads) else np.zeros(len(u), dtype=bool)
-
-        def lines(mask):
-            at = [str(r) if single else f"{Path(f).name} {r}"
-                  for f, r in zip(files[mask][:6], rows[mask][:6], strict=True)]
-            return ", ".join(at) + (", ..." if mask.sum() > 6 else "")
-
-        def points(mask):
-            return f"{int(mask.sum())} point{'s' if mask.sum() > 1 else ''} (lines {lines(mask)})"
-
         head = f"{path}: output {c} is within {RAIL:.0%} of an end of its range {lo:g} .. {hi:g} ({whence})"
+        if kept is None:  # too few points to tell: near is not at, and leaving them out
+            # can leave a small set (a prior's ten poses) with too few to fit
+            notes.append(f"{head} on {_points(near, files, rows, single)}; {int((~near).sum())} "
+                         "other points are too few to judge whether it still follows the load "
+                         "there, so they are kept (strict mode refuses them)")
+            continue
         out = near & ~kept
         if out.any():
-            notes.append(f"{head} on {points(out)}: a channel at its rail no longer follows the "
-                         f"load (more than {FOLLOWS:g} robust sigmas from its linear response to "
-                         "the loads on the other points), so they are left out (strict mode "
-                         "refuses them)")
+            notes.append(f"{head} on {_points(out, files, rows, single)}: a channel at its rail "
+                         f"no longer follows the load (more than {FOLLOWS:g} robust sigmas from "
+                         "its linear response to the loads on the other points), so they are "
+                         "left out (strict mode refuses them)")
         if kept.any():
-            notes.append(f"{head} on {points(kept)}, but follows the load there (within "
-                         f"{FOLLOWS:g} robust sigmas of its linear response to the loads on the "
-                         "other points), so they are kept (strict mode refuses them)")
+            notes.append(f"{head} on {_points(kept, files, rows, single)}, but follows the load "
+                         f"there (within {FOLLOWS:g} robust sigmas of its linear response to the "
+                         "loads on the other points), so they are kept (strict mode refuses them)")
         keep &= ~out
     return keep, notes

@@ -55,8 +55,27 @@ def test_a_pinned_channel_leaves_its_poses_out_and_a_near_one_that_follows_is_ke
     # strict mode refuses any near reading, following or not
     r = invoke(["fit", path, "-c", tmp_path / "cfg.yaml", "-o", tmp_path / "m.json", "--strict"],
                code=2)
-    assert_one_line_error(r, "within 5% of the", "strict mode refuses it")
+    assert_one_line_error(r, "within 5% of the", "strict mode refuses readings near a rail")
+    assert "no longer follows" not in r.stderr  # it may still: the warning above says so
     assert not (tmp_path / "m.json").exists()
+
+
+def test_too_few_poses_to_judge_a_near_channel_keep_it_with_a_note(tmp_path):
+    """Ten poses (a prior's recalibration) cannot fit a channel's response to six loads and
+    judge a near reading by it: every near pose was left out, so ten poses fell to five and
+    the set was refused ("5 rows for 7 unknowns") without a word of why.  Near is not at:
+    they are kept, and the note says they could not be judged."""
+    poses, stuck, top, low, bottom = pinned(2)
+    few = sorted({*bottom[:2], *range(0, 60, 7)})[:10]
+    part = PoseSet(poses.loads[few], [poses.samples[i] for i in few], poses.truth[few],
+                   poses.railing)
+    path = tmp_path / "poses.csv"
+    path.write_text("\n".join(pose_lines(part)) + "\n")
+    init_config(path, tmp_path / "cfg.yaml")
+    calib = load_calibration(path, load_config(tmp_path / "cfg.yaml"))
+    assert len(calib.points) == len(few)  # every pose kept
+    notes = [w for w in calib.warnings if f"output s{low} is within 5%" in w]
+    assert len(notes) == 1 and "too few to judge" in notes[0] and "kept" in notes[0]
 
 
 @pytest.mark.slow  # a whole fit or cv: over half a second of CPU
