@@ -145,7 +145,8 @@ def _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress):
         points, layout = projected(points, model.projection, layout)
     outliers = gross_errors(points, model.k, settings.full_scale, layout)
     model.report.outliers = [dataclasses.asdict(o) for o in outliers]
-    model.report.warnings += [o.message(settings.units.load_of(settings.layout.index(o.axis)))
+    # the residual is on the output's own component (a joint row's other outputs too)
+    model.report.warnings += [o.message(settings.units.load_of(layout.outputs.index(o.output)))
                               for o in outliers]
     if failed is not None:
         if method == "auto":

@@ -276,3 +276,23 @@ def test_a_blank_load_and_a_slip_in_one_rig_file(tmp_path, kind):
     assert "rig.csv, line 61: an applied load is blank" in r.stderr
     flagged = [int(m) for m in re.findall(r"row (\d+): possible gross error", r.stderr)]
     assert {17, 18} <= set(flagged) and len(flagged) <= 4, flagged
+
+
+@pytest.mark.slow  # a whole fit: over half a second of CPU
+def test_a_gross_error_is_told_in_its_outputs_unit(tmp_path):
+    """A slip of Fz loads on the quadratic rig flags mz_out too: its residual is a moment,
+    told in N·m (it was told in the loaded row's N)."""
+    from conftest import invoke
+
+    path, _, _ = rig(tmp_path, seed=4, kind="quadratic")
+
+    def edit(rows):
+        col = rows[0].index("known_Fz")
+        rows[23][col], rows[24][col] = rows[24][col], rows[23][col]
+
+    bad = _edit(path, tmp_path / "rig.csv", edit)
+    r = invoke(["fit", bad, "-c", tmp_path / "cfg.yaml", "-o", tmp_path / "m.json",
+                "--no-verdict"])
+    units = re.findall(r"possible gross error: (\w+) is [-+][^ ]+ ([^ ]+) ", r.stderr)
+    assert any(out.startswith("m") for out, _ in units), units
+    assert all(u == ("N·m" if out.startswith("m") else "N") for out, u in units), units
