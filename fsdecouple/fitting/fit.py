@@ -55,6 +55,19 @@ def _installed_versions() -> dict[str, str]:
     return out
 
 
+def provenance(calib: CalibrationSet) -> dict:
+    """The files a model was fitted on, the libraries, the lines left out, and how a set
+    loading several components a row was zeroed (``before``: each row by the nearest zero
+    row before it, data/zero.py), the one choice of the set that no config value names."""
+    out = {"files": [{"path": p, "sha256": h} for p, h in calib.files],
+           "libraries": _library_versions()}
+    if calib.excluded:
+        out["excluded"] = list(calib.excluded)
+    if getattr(calib, "zero", None) == "before":
+        out["zero"] = "before"
+    return out
+
+
 def chi_training_data(calib: CalibrationSet, name: str) -> tuple[np.ndarray, np.ndarray]:
     """(prime voltage, coupling error element) of chi_ab from the b sweeps, file order.
 
@@ -285,12 +298,7 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         repetitions=calib.repetitions,
         warnings=warnings,
     )
-    model.provenance = {
-        "files": [{"path": p, "sha256": h} for p, h in calib.files],
-        "libraries": _library_versions(),
-    }
-    if calib.excluded:
-        model.provenance["excluded"] = list(calib.excluded)
+    model.provenance = provenance(calib)
     model.zero = fitted_zero(calib)
     model.created = datetime.now(UTC).replace(microsecond=0).isoformat()
     return model
@@ -359,10 +367,7 @@ def _establish_gauges(calib: CalibrationSet, settings: Settings, workers: int | 
         surrogate_max_error={c.name: c.surrogate.max_error for c in chis} if with_tables else None,
         repetitions=calib.repetitions, warnings=warnings,
     )
-    model.provenance = {"files": [{"path": q, "sha256": h} for q, h in calib.files],
-                        "libraries": _library_versions()}
-    if calib.excluded:
-        model.provenance["excluded"] = list(calib.excluded)
+    model.provenance = provenance(calib)
     model.zero = fitted_zero(calib)
     model.created = datetime.now(UTC).replace(microsecond=0).isoformat()
     return model

@@ -96,6 +96,18 @@ def imported_tables(model) -> list:
     return out
 
 
+def zero_used(model) -> str:
+    """How the fit zeroed its outputs: ``intercept`` where the model holds fitted offsets,
+    the zero row before each row on rows loading several components (fitting/fit.py's
+    provenance), else the settings' (``fit`` on sweeps out and back, evaluation/calibrate.py);
+    a set makes the first two choices itself where the config leaves zero unsaid."""
+    if getattr(model, "zero", None) is not None:
+        return "intercept"
+    if (model.provenance or {}).get("zero") == "before":
+        return "each row's nearest zero row before it"
+    return model.settings.zero_method
+
+
 def fit_tables(model) -> list:
     if getattr(model, "imported", False):
         return imported_tables(model)
@@ -127,7 +139,7 @@ def fit_tables(model) -> list:
     c = Table(title=f"Corrected coupling functions chi (eq. 4): eps-SVR, gamma={s.gamma:g} "
                     f"C={s.C:g} eps={s.epsilon:g} tol={s.tolerance:g}",
               caption=f"beyond the input range: {model.settings.extrapolation} (extrapolation); "
-                      f"zero offsets: {model.settings.zero_method}; refinement steps K = "
+                      f"zero offsets: {zero_used(model)}; refinement steps K = "
                       f"{model.settings.refine}")
     gauges = getattr(model, "projection", None) is not None  # M > N: inputs v = P u (gauges.py)
     each = gauges and bool(units.loads) or not gauges and bool(units.outputs)  # a unit per row

@@ -73,6 +73,23 @@ def test_a_set_with_zero_rows_keeps_its_zero_correction(tmp_path):
     assert calib.zero != "intercept"
 
 
+@pytest.mark.slow  # a whole fit: over half a second of CPU
+def test_a_config_without_zero_shows_the_intercept_fit_chose(tmp_path):
+    """Without a zero row fit takes zero: intercept itself, and its table says so (it said
+    "zero offsets: fit", the six-axis default, not used)."""
+    from fsdecouple.core.modelfile import load_model
+    from fsdecouple.reporting.console import zero_used
+
+    path = tmp_path / "poses.csv"
+    linear_poses(path, OFFSETS, noise=0.3)
+    _, settings = read(tmp_path, path, keep_zero=False)
+    assert settings.zero is None
+    invoke(["fit", path, "-c", tmp_path / "cfg.yaml", "-o", tmp_path / "m.json", "--no-verdict",
+            "--method", "svr"])
+    model = load_model(tmp_path / "m.json")
+    assert model.zero is not None and zero_used(model) == "intercept"
+
+
 def test_the_config_key_forces_the_intercept(tmp_path):
     path = tmp_path / "poses.csv"
     linear_poses(path, np.full(8, 500.0), loads=np.vstack([np.zeros(6), pose_loads(0)]))

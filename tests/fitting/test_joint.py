@@ -296,3 +296,9 @@ def test_a_gross_error_is_told_in_its_outputs_unit(tmp_path):
     units = re.findall(r"possible gross error: (\w+) is [-+][^ ]+ ([^ ]+) ", r.stderr)
     assert any(out.startswith("m") for out, _ in units), units
     assert all(u == ("N·m" if out.startswith("m") else "N") for out, u in units), units
+    # the rows load several components: each zeroed by the zero row before it, which the
+    # fit's table says (it said "fit", the six-axis config's default, which was not used)
+    from fsdecouple.core.modelfile import load_model
+    from fsdecouple.reporting.console import zero_used
+
+    assert zero_used(load_model(tmp_path / "m.json")) == "each row's nearest zero row before it"
