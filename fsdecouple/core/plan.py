@@ -112,6 +112,7 @@ class TemperatureCorrection:
     g: np.ndarray  # (inputs,) [1 / temperature unit]
     zero: np.ndarray | None = None  # (inputs,) [output unit; temperature unit at channel]
     external: bool = False
+    span: tuple[float, float] | None = None  # calibrated temperatures: beyond, extrapolated
 
     @property
     def n_inputs(self) -> int:
@@ -141,7 +142,7 @@ def temperature_step(terms, zero=None) -> TemperatureCorrection:
         b, g = np.append(b, 0.0), np.append(g, 0.0)
     return TemperatureCorrection(terms.channel, float(terms.t0), b, g,
                                  None if zero is None else np.asarray(zero, dtype=float),
-                                 terms.external)
+                                 terms.external, terms.span)
 
 
 def temperature_inputs(terms, u: np.ndarray, temperature, zero) -> tuple[np.ndarray, tuple]:

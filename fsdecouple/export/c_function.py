@@ -31,6 +31,7 @@ from .plan import ExportPlan
 MAX_CHANNELS = 16
 BIT_OUTSIDE_TABLE, BIT_INPUT_NOT_FINITE, BIT_NOT_FINITE, BIT_SATURATED = 16, 17, 18, 19
 BIT_NOT_CONVERGED = 20
+BIT_TEMPERATURE = 21  # the temperature input beyond the calibrated span
 
 
 def c_string(text: str) -> str:
@@ -134,6 +135,10 @@ def _step(plan: ExportPlan, step, ctype: str, x: str, dim: int, i: int) -> tuple
         z = step.zero_at_t0()
         keep = [j for j in range(dim) if not (step.external and j == c)]
         lines = [f"    {ctype} c{i}[{len(keep)}];", f"    const {ctype} dt{i} = {x}[{c}] - {fmt(step.t0)};"]
+        if step.span is not None:  # apply's "extrapolated": beyond the calibrated temperatures
+            lo, hi = step.span if ctype == "double" else plan.temperature_span_f
+            lines.append(f"    if ({x}[{c}] < {fmt(lo)} || {x}[{c}] > {fmt(hi)}) "
+                         f"st |= (uint32_t)1 << {BIT_TEMPERATURE};")
         zero = f"({ctype}){plan.prefix}zero_t0" if ctype == "float" else f"{plan.prefix}zero_t0"
         for o, j in enumerate(keep):
             e = f"({x}[{j}] - {fmt(step.b[j])} * dt{i}) / ({fmt(1.0)} + {fmt(step.g[j])} * dt{i})"

@@ -28,6 +28,7 @@ from .c_function import (  # noqa: F401 (the status bits, also for header.py)
     BIT_NOT_FINITE,
     BIT_OUTSIDE_TABLE,
     BIT_SATURATED,
+    BIT_TEMPERATURE,
     MAX_CHANNELS,
     c_string,
     decouple_function,
@@ -79,9 +80,12 @@ def _preamble(plan: ExportPlan) -> str:
         for b, (lo, hi) in enumerate(plan.limits) if lo is not None
     ) or " *   (no limits were given: the bit is never set)"
     settable = plan.temperature is not None or plan.zero is not None  # set_zero
+    step = plan.temperature
     inputs = (f"raw outputs [{P}OUTPUT_UNIT] (see Zero above),\n"
               " *      as model.decoupler() takes them"
               if plan.zero is not None else
+              f"raw outputs [{P}OUTPUT_UNIT] and the temperature (see Temperature\n"
+              " *      above)" if step is not None else
               f"zero-corrected outputs [{P}OUTPUT_UNIT] (tare/zero already removed,\n"
               " *      as model.decouple takes them)")
     return f"""\
@@ -114,7 +118,7 @@ def _preamble(plan: ExportPlan) -> str:
  *     full-scale output (apply: "not_converged", no forces); do not use f;
  *   bit {BIT_SATURATED}: a raw channel is at or beyond its limit.  The limits are compared
  *      with the values passed in u, i.e. after any zero correction:
-{limits}
+{limits}{_temperature_bit(plan)}
  *
  * int {p}selftest(void): 0 when the embedded reference vectors (computed by the
  *   Python model) decouple within tolerance and with the expected status.
@@ -152,6 +156,7 @@ extern "C" {{
 #define {P}STATUS_NOT_FINITE ((uint32_t)1 << {BIT_NOT_FINITE})
 #define {P}STATUS_SATURATED ((uint32_t)1 << {BIT_SATURATED})
 #define {P}STATUS_NOT_CONVERGED ((uint32_t)1 << {BIT_NOT_CONVERGED})
+#define {P}STATUS_TEMPERATURE_EXTRAPOLATED ((uint32_t)1 << {BIT_TEMPERATURE})
 
 /* The model, for the record (the functions use inline constants): full-scale load
  * per component [{P}LOAD_UNIT]; omega slopes k_aa (eq. 2) [{P}OUTPUT_UNIT per {P}LOAD_UNIT];
@@ -258,9 +263,20 @@ def _temperature_note(plan: ExportPlan) -> str:
              else f"u[{step.channel}], one of the outputs (its matrix column is 0)")
     return (f" * Temperature: u holds the temperature at {where}.  Each output is first\n"
             f" * corrected to T0 = {step.t0!r}: u_i(T0) = (u_i - b_i (T - T0)) / (1 + g_i (T - T0))\n"
-            " * (the model's temperature terms): u are raw outputs.  set_zero(u_zero) keeps a\n"
-            " * zero reading (with its temperature) corrected alike and subtracts it from every\n"
-            " * row after (ATIDAQ's bias); none until then (the self-test runs without one).\n")
+            " * (the model's temperature terms): u are raw outputs, the temperature as read.\n"
+            " * set_zero(u_zero) keeps a zero reading (with its temperature) corrected alike and\n"
+            " * subtracts it from every row after (ATIDAQ's bias); none until then (the\n"
+            " * self-test runs without one).\n")
+
+
+def _temperature_bit(plan: ExportPlan) -> str:
+    """The status bit of a temperature beyond the calibrated span, if the model has one."""
+    step = plan.temperature
+    if step is None or step.span is None:
+        return ""
+    return (f"\n *   bit {BIT_TEMPERATURE}: the temperature u[{step.channel}] is beyond the calibrated "
+            f"span\n *      {num(step.span[0])} .. {num(step.span[1])}, exactly `fsdecouple apply`'s "
+            '"extrapolated".')
 
 
 def _zero_note(plan: ExportPlan) -> str:

@@ -134,6 +134,9 @@ def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",
     # for a float u: u < lo  <=>  u < (smallest float >= lo), u > hi  <=>  u > (largest float <= hi)
     plan.range_limits_f = np.column_stack([_f32_up(plan.range_limits[:, 0]),
                                            _f32_down(plan.range_limits[:, 1])])
+    if plan.temperature is not None and plan.temperature.span is not None:
+        lo, hi = plan.temperature.span  # apply's extrapolated: T < lo or T > hi, as above
+        plan.temperature_span_f = (float(_f32_up(lo)), float(_f32_down(hi)))
     # u <= lo  <=>  u <= (largest float <= lo); u >= hi  <=>  u >= (smallest float >= hi)
     plan.limits_f = [(None, None) if a is None else (float(_f32_down(a)), float(_f32_up(b)))
                      for a, b in plan.limits]
@@ -237,6 +240,7 @@ def expected_status(plan: ExportPlan, u: np.ndarray, f: np.ndarray) -> int:
         BIT_NOT_FINITE,
         BIT_OUTSIDE_TABLE,
         BIT_SATURATED,
+        BIT_TEMPERATURE,
     )
 
     st = 0
@@ -245,6 +249,10 @@ def expected_status(plan: ExportPlan, u: np.ndarray, f: np.ndarray) -> int:
             st |= 1 << BIT_SATURATED
     if not np.isfinite(u).all():
         st |= 1 << BIT_INPUT_NOT_FINITE
+    step = plan.temperature
+    if step is not None and step.span is not None and (
+            u[step.channel] < step.span[0] or u[step.channel] > step.span[1]):
+        st |= 1 << BIT_TEMPERATURE  # apply's "extrapolated" (core/temperature.py)
     row = np.asarray(u, dtype=float).reshape(1, -1)
     u = plan.prime(row)[0]  # the outputs eq. (11) acts on (M > N: v = P u)
     if len(u) == plan.n:

@@ -53,6 +53,7 @@ class ExportPlan:
     table_max_error: float = 0.0  # max |df| / full scale from the tables
     float_max_error: float = 0.0
     range_limits_f: np.ndarray | None = None
+    temperature_span_f: tuple[float, float] | None = None  # the span's, for a float input
     limits_f: list = field(default_factory=list)
     selftest_u: np.ndarray | None = None
     selftest_f: np.ndarray | None = None

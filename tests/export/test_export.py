@@ -763,7 +763,14 @@ def test_the_temperature_step_reaches_the_header(sample_model, tmp_path, precisi
     rng = np.random.default_rng(12)
     u = np.column_stack([lo + (hi - lo) * rng.random((5000, 3)), rng.uniform(10, 40, 5000)])
     u = u.astype(np.float32).astype(float)
-    f_c, _ = run(u)
+    f_c, status = run(u)
+    # a temperature beyond the calibrated 15-35 degC is apply's "extrapolated", and the
+    # header's bit 21 (it set no bit: the header claimed apply's status and fell short)
+    beyond = (u[:, 3] < 15.0) | (u[:, 3] > 35.0)
+    assert beyond.any() and (~beyond).any()
+    np.testing.assert_array_equal((status.astype(np.int64) >> 21) & 1, beyond)
+    assert "bit 21: the temperature u[3] is beyond the calibrated span" in text
+    assert "zero-corrected outputs" not in text  # u are raw outputs and the temperature
     dt = u[:, 3:] - t0
     doc = model_to_dict(sample_model)
     want = eq11_from_file(doc, (u[:, :3] - b * dt) / (1 + g * dt))
