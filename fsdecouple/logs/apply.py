@@ -104,6 +104,7 @@ class ApplySummary:
     force_unit: str = "N"
     output_unit: str = "V"
     outputs: tuple[str, ...] = VOLTAGE_COLUMNS  # the names of ``offsets``
+    temperature_unit: str | None = None  # a fitted model's: its input after the outputs
     force_columns: tuple[str, ...] = FORCE_COLUMNS  # the columns written (force_columns)
     dropped: list[Dropped] = field(default_factory=list)  # log columns not passed through
     untared: tuple[str, float, float, float] | None = None  # untared.py: (output, median, lo, hi)
@@ -373,6 +374,8 @@ def _apply(model, log: LogFile, out: Path, settings: Settings, tare, zero, unit,
     jobs = with_temperature(jobs)
     summary = ApplySummary(force_unit=unit, output_unit=model.settings.output_unit,
                            outputs=input_names(model), offsets=np.zeros(model.n_inputs),
+                           temperature_unit=(model.temperature.unit
+                                             if model.n_inputs > model.n_outputs else None),
                            force_columns=forces, dropped=dropped,
                            notes=unused_warning(settings, model.settings))
     to_unit = load_factor(model.settings.load_unit, unit)

@@ -168,8 +168,12 @@ def apply_lines(summary, out) -> list[str]:
     lines = [f"decoupled {summary.rows} rows into {printable(out)} (forces in {summary.force_unit}; "
              f"status: {counts})"]
     if np.any(summary.offsets):
+        pairs = list(zip(summary.outputs, summary.offsets, strict=True))
+        t_unit = getattr(summary, "temperature_unit", None)
+        outputs = pairs[:-1] if t_unit else pairs  # a fitted model's temperature comes last
         lines.append(f"zero removed [{summary.output_unit}]: " + ", ".join(
-            f"{c}={v:+.6f}" for c, v in zip(summary.outputs, summary.offsets, strict=True)))
+            f"{c}={v:+.6f}" for c, v in outputs)
+            + (f"; read at {pairs[-1][1]:.6g} {t_unit} ({pairs[-1][0]})" if t_unit else ""))
     return lines
 
 

@@ -215,6 +215,17 @@ def test_decouple_frame_reads_the_temperature_as_apply_does(drifting):
     assert (got["status"].to_numpy() == out["status"].to_numpy()).all()
 
 
+def test_apply_tells_the_zeros_temperature_in_its_own_unit(drifting, tmp_path):
+    """The tare's temperature is a reading in degC, not a zero removed in volts (it was
+    printed as 'zero removed [V]: ... temperature=+25.0')."""
+    r = invoke(["apply", drifting / "model.json", drifting / "task_voltages.csv", "-o",
+                tmp_path / "out.csv", "-c", drifting / "sensor.yaml", "--tare", TARE])
+    line = next(x for x in r.stdout.splitlines() if x.startswith("zero removed"))
+    mean = pd.read_csv(drifting / "task_voltages.csv")["temperature"][:TARE].mean()
+    assert line.startswith("zero removed [V]: ux=") and "temperature=" not in line
+    assert line.endswith(f"; read at {mean:.6g} degC (temperature)"), line
+
+
 def test_validate_needs_the_temperature_column(drifting, tmp_path):
     (tmp_path / "plain.yaml").write_text("sensor: plain\n")
     cal = tmp_path / "cal"
