@@ -74,6 +74,17 @@ def without(pattern: str) -> Callable[[str, Result], list[str]]:
     return show
 
 
+def between(start: str, stop: str) -> Callable[[str, Result], list[str]]:
+    """A cut, the lines from the first matching ``start`` up to the next matching ``stop``
+    (regular expressions), then a cut."""
+    def show(command: str, result: Result) -> list[str]:
+        lines = _lines(result.stdout)
+        first = next(i for i, line in enumerate(lines) if re.search(start, line))
+        last = next(i for i in range(first + 1, len(lines)) if re.search(stop, lines[i]))
+        return [CUT, *lines[first:last], CUT]
+    return show
+
+
 def nothing(command: str, result: Result) -> list[str]:
     """No line (a command that only makes the files the next one shows)."""
     return []
@@ -128,6 +139,13 @@ EXAMPLES: tuple[Example, ...] = (
              "fsdecouple apply model.json six/task_voltages.csv --tare 200 -o wrench.csv",
              "head -2 wrench.csv"),
             (nothing, nothing, nothing, whole), prompt=False),
+    Example("temperature-fit", "docs/temperature.md", "thermal",
+            ("fsdecouple simulate thermal --temperature",
+             "fsdecouple fit thermal/calibration -c thermal/sensor.yaml -o thermal/model.json"),
+            (whole, between(r"^ *Temperature terms", r"Assumption checks"))),
+    Example("temperature-apply", "docs/temperature.md", "thermal",
+            ("fsdecouple apply thermal/model.json thermal/task_voltages.csv -c thermal/sensor.yaml "
+             "--tare 200 -o thermal/forces.csv",)),
     Example("rig-file", "docs/rigs.md", "rig",
             ("fsdecouple simulate rig --rig lever-arm", "head -3 rig/calibration.csv"),
             (nothing, with_cut(whole)), prompt=False),
