@@ -223,6 +223,13 @@ def _chi_declarations(plan: ExportPlan) -> str:
 def _method_note(plan: ExportPlan) -> str:
     """The header's note on how it decouples: eq. (11), or a linear model's matrix."""
     if plan.matrix is not None:
+        if _imported(plan):  # data/ati_model.py: v = W u are the forces, C the identity
+            return (" * Decoupling by the factory calibration matrix W (imported from an ATI\n"
+                    f" * file): f_a = sum_b W[a][b] u_b, a = 0 .. {plan.n - 1}, W as "
+                    f"{plan.prefix}projection\n * ({plan.prefix}matrix is the identity).  No chi, "
+                    f"no tables ({plan.prefix.upper()}N_CHI 0).\n"
+                    " * The range bits b < N_COMPONENTS are on the forces f_b, the saturation\n"
+                    " * limits on the raw u.\n")
         return (" * Decoupling by the model's least-squares calibration matrix (fit --method\n"
                 " * linear, or auto choosing it): f_a = sum_b C[a][b] u_b, a = 0 .. "
                 f"{plan.n - 1},\n * C as {plan.prefix}matrix.  No chi, no tables "
@@ -245,9 +252,14 @@ def _extrapolation(plan: ExportPlan) -> str:
     return ""  # extrapolation: kernel, the kernel sum everywhere
 
 
+def _imported(plan: ExportPlan) -> bool:
+    """A factory matrix read from an ATI file (data/ati_model.py)."""
+    return bool(getattr(plan.model, "imported", False))
+
+
 def _projection_note(plan: ExportPlan) -> str:
     """The header's note on M > N outputs (fitting/gauges.py), if the model has them."""
-    if plan.projection is None:
+    if plan.projection is None or _imported(plan):  # a factory matrix: its own note
         return ""
     return (f" * The sensor has {plan.m} outputs for {plan.n} components: u holds all {plan.m}, and\n"
             f" * eq. (11) acts on their least-squares loads v = P u ({plan.prefix}projection), the\n"

@@ -93,7 +93,8 @@ def export_header(
     names = {f"{c.out}{c.inp}": (None if c.table is None else c.table.intervals) for c in plan.chis}
     return ExportResult(Path(out), precision, prefix, plan.n, names, plan.table_bytes,
                         plan.kernel_bytes, plan.table_max_error,
-                        plan.float_max_error if precision == "float" else None, plan.method)
+                        plan.float_max_error if precision == "float" else None, plan.method,
+                        bool(getattr(model, "imported", False)))
 
 
 def plan_export(model, *, precision: str = "double", prefix: str = "fsd_",

@@ -175,6 +175,7 @@ class ExportResult:
     table_max_error: float  # fraction of full-scale load
     float_max_error: float | None
     method: str = "svr"
+    imported: bool = False  # a factory matrix read from an ATI file (data/ati_model.py)
 
     def to_dict(self) -> dict[str, Any]:
         return {"path": str(self.path), "precision": self.precision, "prefix": self.prefix,
@@ -188,7 +189,8 @@ class ExportResult:
         tables = (f"{len(counts)} tables of {min(counts)}-{max(counts)} intervals"
                   if counts else "no tables (kernel sums only)")
         if self.method == "linear":
-            tables = "the least-squares calibration matrix f = C u (no chi, no tables)"
+            tables = (f"the {'factory' if self.imported else 'least-squares'} calibration "
+                      "matrix f = C u (no chi, no tables)")
         lines = [f"wrote {printable(self.path)}: {self.n_components} components, {self.precision}, {tables}",
                  f"table bytes {self.table_bytes}, support-vector bytes {self.kernel_bytes}",
                  f"table error <= {self.table_max_error:.3g} of full-scale load"]

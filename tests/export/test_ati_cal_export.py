@@ -163,7 +163,11 @@ def test_three_axis_model_refused(tmp_path, sample_model):
 def test_c_header_of_an_imported_matrix(tmp_path):
     """export to C: the header's forces are the imported model's (f = W u)."""
     model = import_cal(FIXTURES / "FT_nano_like.cal")
-    run, _ = build(model, tmp_path)
+    run, text = build(model, tmp_path)
+    # ATI's matrix, said so: it was called the model's least-squares matrix, and C (the
+    # identity here) named where W, the projection, holds it
+    assert "Decoupling by the factory calibration matrix W (imported from an ATI" in text
+    assert "least-squares" not in text
     u = random_outputs(model, np.random.default_rng(4), 2000)
     f_c, status = run(u)
     f_py = decouple(model, u)
@@ -171,6 +175,13 @@ def test_c_header_of_an_imported_matrix(tmp_path):
     ref = Atidaq(FIXTURES / "FT_nano_like.cal")
     assert np.abs(f_c[:5] - np.array([ref.convert([*row, 0.0]) for row in u[:5]])).max() \
         <= 1e-9 * 250
+
+
+@needs_cc
+def test_export_of_an_imported_matrix_calls_it_the_factorys(tmp_path):
+    invoke(["import", FIXTURES / "FT_nano_like.cal", "-o", tmp_path / "f.json"])
+    r = invoke(["export", tmp_path / "f.json", "-o", tmp_path / "f.h"])
+    assert "the factory calibration matrix f = C u" in r.stdout and "least-squares" not in r.stdout
 
 
 @needs_cc
