@@ -152,13 +152,9 @@ def certificate_blocks(doc: dict) -> list[Block]:
                        f"{ref_lim[c]:g}" if c in ref_lim else "—",
                        f"{res[c]:g} r" if c in res else "—"]
                       for c, v in lim["limits_percent"].items()]))
-    t = doc.get("temperature")
-    if t is not None:  # issue 31: the temperature terms the outputs were corrected by
-        span = f", calibrated {t['span'][0]:.4g} .. {t['span'][1]:.4g} {t['unit']}" if "span" in t else ""
-        out.append(Block("table", f"Temperature terms: u = (1 + g (T - T0)) u(T0) + b (T - T0), "
-                                  f"T0 = {t['t0']:g} {t['unit']}{span}", "temperature",
-                         ["output", f"b [{doc['units'].get('output', 'V')}/K]", "g [ppm/K]"],
-                         [[o, f"{t['b'][o]:+.4g}", f"{1e6 * t['g'][o]:+.1f}"] for o in t["b"]]))
+    temperature = _temperature_block(doc)
+    if temperature is not None:
+        out.append(temperature)
     sources = doc.get("budget_sources", {})
     out.append(Block("table", "Sources of the budget's contributions", "sources",
                      ["contribution", "source"],
@@ -213,8 +209,28 @@ def certificate_html(doc: dict) -> str:
             f"<style>{CSS}{PRINT_CSS}</style></head><body>\n{''.join(parts)}</body></html>\n")
 
 
+TEMPERATURE_FORM = "u = (1 + g (T - T0)) u(T0) + b (T - T0)"  # core/temperature.py
+
+
+def _temperature_where(t: dict) -> str:
+    span = f", calibrated {t['span'][0]:.4g} .. {t['span'][1]:.4g} {t['unit']}" if "span" in t else ""
+    return f"T0 = {t['t0']:g} {t['unit']}{span}"
+
+
+def _temperature_block(doc: dict) -> Block | None:
+    """The temperature terms the outputs were corrected by (issue 31), if the model has them."""
+    t = doc.get("temperature")
+    if t is None:
+        return None
+    return Block("table", f"Temperature terms: {TEMPERATURE_FORM}, {_temperature_where(t)}",
+                 "temperature",
+                 ["output", f"b [{doc['units'].get('output', 'V')}/K]", "g [ppm/K]"],
+                 [[o, f"{t['b'][o]:+.4g}", f"{1e6 * t['g'][o]:+.1f}"] for o in t["b"]])
+
+
 def certificate_tables(doc: dict) -> list[Table]:
-    """The terminal's view: classes and what limits them, and per component its figures and U."""
+    """The terminal's view: classes and what limits them, per component its figures and U, and
+    the temperature terms where the model has them."""
     out = []
     title = f"Certificate of {doc['sensor']}: class ({ISO})"
     t = Table(title=title, min_width=len(title))  # a title as wide as its table never wraps
@@ -233,6 +249,15 @@ def certificate_tables(doc: dict) -> list[Table]:
             t.add_column(col, justify="right")
         for load, s in steps.items():
             t.add_row(f"{load:g}", *[fmt(s.get(m)) for m in metrics], fmt(s.get("U")))
+        out.append(t)
+    temperature = _temperature_block(doc)
+    if temperature is not None:  # the certificate's own table, on the terminal too
+        title = f"Temperature terms ({_temperature_where(doc['temperature'])})"
+        t = Table(title=title, caption=TEMPERATURE_FORM, min_width=min(len(title), 78))
+        for i, col in enumerate(temperature.head):
+            t.add_column(col, justify="left" if i == 0 else "right")
+        for row in temperature.rows:
+            t.add_row(*row)
         out.append(t)
     return out
 

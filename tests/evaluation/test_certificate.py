@@ -558,3 +558,29 @@ def test_creep_times_are_read_from_the_files_row_by_row(tmp_path):
                      .replace(",1590.0\n", ",1520.0\n"))
     calib = load_calibration(folder, settings)
     assert np.isnan(component_steps(calib, 0, creep_times(calib, settings)).figures["c"]).all()
+
+
+@pytest.mark.slow  # a fit with the held-out verdict: seconds of CPU; the not-slow run stays under a minute
+def test_the_terminal_view_shows_the_temperature_terms(certified):
+    """The certificate's document holds a temperature model's terms (its HTML and PDF show
+    them); its terminal view left them out."""
+    import io
+
+    from rich.console import Console
+
+    from fsdecouple.core.temperature import TemperatureTerms
+    from fsdecouple.reporting.certificate_html import certificate_tables
+
+    def console_text(tables) -> str:
+        console = Console(record=True, width=100, file=io.StringIO(), markup=False)  # as the CLI
+        for t in tables:
+            console.print(t)
+        return console.export_text()
+
+    model, doc = certified
+    terms = TemperatureTerms(3, 25.0, np.array([-8.5e-4, 8.7e-4, -7.2e-4]),
+                             np.array([-1.26e-4, 1.27e-4, 1.43e-4]), "degC", (14.82, 35.1))
+    text = console_text(certificate_tables({**doc, "temperature": terms.to_dict(["ux", "uy", "uz"])}))
+    assert "Temperature terms (T0 = 25 degC, calibrated 14.82 .. 35.1 degC)" in text
+    assert "-0.00085" in text and "+127.0" in text and "g [ppm/K]" in text
+    assert "Temperature terms" not in console_text(certificate_tables(doc))
