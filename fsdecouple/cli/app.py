@@ -20,6 +20,7 @@ import warnings
 from pathlib import Path
 from typing import Annotated
 
+import click
 import typer
 from rich.console import Console
 from rich.progress import (
@@ -96,10 +97,17 @@ class _Group(TyperGroup):
     def parse_args(self, ctx, args):
         """Refuse a number typed with digits of another script (``--tare \u0663``) before any
         option reads it: int() and float() read '\u0663' (Arabic-Indic three) as 3."""
-        for token in args:
-            bad = _other_digit(token) if _NUMBER_LIKE.fullmatch(token) else None
+        for i, token in enumerate(args):
+            option, eq, value = token.partition("=") if token.startswith("-") else ("", "", token)
+            if not eq:
+                option, value = (args[i - 1] if i and args[i - 1].startswith("-") else ""), token
+            bad = _other_digit(value) if _NUMBER_LIKE.fullmatch(value) else None
             if bad is not None:
-                raise typer.BadParameter(_other_digit_message(token, bad))
+                # named as Click names a bad value: the option, and the command's help
+                command = self.get_command(ctx, args[0]) if args else None
+                where = click.Context(command, info_name=args[0], parent=ctx) if command else ctx
+                raise typer.BadParameter(_other_digit_message(value, bad), ctx=where,
+                                         param_hint=f"'{option}'" if option else None)
         return super().parse_args(ctx, args)
 
 
@@ -113,7 +121,8 @@ def _other_digit(text: str) -> str | None:
 
 
 def _other_digit_message(text: str, bad: str) -> str:
-    return f"{text!r}: {bad!r} (U+{ord(bad):04X}) is not an ASCII digit 0-9"
+    head = "" if text == bad else f"{text!r}: "
+    return f"{head}{bad!r} (U+{ord(bad):04X}) is not an ASCII digit 0-9"
 
 
 app = typer.Typer(

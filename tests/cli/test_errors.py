@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import subprocess
+import sys
 
 import pytest
 from conftest import FAST_CONFIG, ROOT, SAMPLE, invoke
@@ -179,6 +182,21 @@ def test_numbers_in_other_scripts_digits_are_refused(sample_model, tmp_path, arg
     # in-process the usage error is click's own text; the command prints it as one line
     assert "not an ASCII digit" in r.stderr or "valid integer" in r.stderr, r.stderr
     assert "Traceback" not in r.stderr and not out.exists()
+
+
+@pytest.mark.parametrize("tare", [["--tare", "\u0663"], ["--tare=\u0663"]])
+def test_another_scripts_digit_is_refused_naming_the_option(sample_model, tmp_path, tare):
+    """The refusal named neither the option nor the command ('fsdecouple: Invalid value:
+    ...'), and '--tare=\u0663' was read as 3 rows, in silence."""
+    out = tmp_path / "out.csv"
+    r = subprocess.run([sys.executable, "-m", "fsdecouple", "apply", str(sample_model),
+                        str(SAMPLE / "task_voltages.csv"), *tare, "-o", str(out)],
+                       capture_output=True, text=True, timeout=120,
+                       env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert r.returncode == 2 and not out.exists(), r.stderr
+    assert len(r.stderr.splitlines()) == 1 and r.stderr.rstrip().endswith(
+        "fsdecouple apply: Invalid value for '--tare': '\u0663' (U+0663) is not an ASCII digit "
+        "0-9 (see 'python -m fsdecouple apply --help')"), r.stderr
 
 
 def test_a_file_name_that_is_not_utf8_is_read_and_shown_with_its_byte(cal, tmp_path):
