@@ -100,3 +100,17 @@ def test_six_axis_units_are_each_rows_own(tmp_path):
     assert "N/N" in rows["fx [N]"] and "N·m/N·m" in rows["mz [N·m]"], rows
     chi = [ln for ln in r.stdout.splitlines() if ln.startswith("│ chi_")]
     assert all(ln.rstrip(" │").endswith((" N", " N·m")) for ln in chi), chi
+
+
+def test_fit_of_a_simulate_folder_points_to_its_calibration(tmp_path):
+    """`fit OUT` of simulate's output read task_forces.csv as a calibration and suggested
+    `init` on it; the calibration is OUT/calibration."""
+    out = tmp_path / "B"
+    (out / "calibration").mkdir(parents=True)
+    for name in ("rep1.csv", "rep2.csv"):
+        (out / "calibration" / name).write_bytes((SAMPLE / "calibration" / name).read_bytes())
+    (out / "task_forces.csv").write_bytes((SAMPLE / "task_forces.csv").read_bytes())
+    r = invoke(["fit", out, "-o", tmp_path / "m.json"], 2)
+    assert_one_line_error(r, "task_forces.csv", f"the calibration is in {out / 'calibration'}: "
+                          "fit that directory")
+    assert "fsdecouple init" not in r.stderr and not (tmp_path / "m.json").exists()
