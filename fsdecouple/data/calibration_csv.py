@@ -248,8 +248,9 @@ def read_calibration_table(path: str | Path, settings: Settings,
                 raise InputError(f"{where(f, int(rows[noload][0]), loads[0])}: the applied loads "
                                  f"are blank ({lines}); strict mode refuses rows without a load",
                                  argument="strict")
-            warnings.append(f"{f}, {lines}: applied loads blank; rows skipped "
-                            "(strict mode refuses them)")
+            warnings.append(f"{f}, {lines}: applied loads blank; "
+                            f"{'rows' if noload.sum() > 1 else 'row'} skipped (strict mode "
+                            f"refuses {'them' if noload.sum() > 1 else 'it'})")
             raw, text, blanks, rows = raw[~noload], text[~noload], blanks[~noload], rows[~noload]
         # some applied loads blank (a cell not typed in): the row cannot be placed, skipped
         # with a warning naming its lines, or refused in strict mode
@@ -262,12 +263,15 @@ def read_calibration_table(path: str | Path, settings: Settings,
                 raise InputError(f"{where(f, int(rows[i]), col)}: an applied load is blank "
                                  f"({lines}); strict mode refuses rows without every load",
                                  argument="strict")
+            several = partial.sum() > 1
             shown = "; ".join(
-                f"line {r}: {', '.join(repr(c) for c, b in zip(loads, bl, strict=True) if b)}"
+                (f"line {r}: " if several else "")
+                + ", ".join(repr(c) for c, b in zip(loads, bl, strict=True) if b)
                 for r, bl in zip(rows[partial][:5], blanks[partial][:5], strict=True))
             warnings.append(f"{f}, {lines}: an applied load is blank ({shown}"
-                            f"{'; ...' if partial.sum() > 5 else ''}); rows skipped "
-                            "(strict mode refuses them)")
+                            f"{'; ...' if partial.sum() > 5 else ''}); "
+                            f"{'rows' if several else 'row'} skipped (strict mode refuses "
+                            f"{'them' if several else 'it'})")
             raw, text, rows = raw[~partial], text[~partial], rows[~partial]
         if not len(raw):
             raise InputError(f"{f}: header only, no data rows")

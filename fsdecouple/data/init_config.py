@@ -236,8 +236,8 @@ def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: s
     f, u = table[:, :len(components)], table[:, len(components):]
     notes: list[str] = [f"read the first {len(rows):,} data rows only"] if truncated else []
     if (left := sum(any(c.strip() for c in row) for row in rows) - len(table)) > 0:
-        notes.append(f"{left} rows without a finite number in every load and output column "
-                     "were left out")
+        notes.append(f"{left} {'rows' if left > 1 else 'row'} without a finite number in every "
+                     f"load and output column {'were' if left > 1 else 'was'} left out")
     if gauges:
         notes.append(f"{len(channels)} output channels for {len(components)} components (M > N): "
                      "fit models every channel and decouples in the least-squares sense")
