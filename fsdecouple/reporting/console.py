@@ -120,9 +120,10 @@ def fit_tables(model) -> list:
     # forces and moments, or outputs in several units: each row says its own units, as
     # the report does (a header 'k [N / N·m/load]' said none)
     mixed = bool(units.loads or units.outputs)
+    projected = getattr(model, "projection", None) is not None  # v = P u, in the loads' units
     layout = model.layout
-    heads = ("k", "1/k (eq. 13)") if mixed else (f"k [{units.slope()}]",
-                                                  f"1/k [{units.inverse_slope()}] (eq. 13)")
+    heads = ("k", "1/k (eq. 13)") if mixed or projected else (
+        f"k [{units.slope()}]", f"1/k [{units.inverse_slope()}] (eq. 13)")
     for col in ("axis", *heads, "R^2", "points"):
         t.add_column(col, justify="right")
     for a, axis in enumerate(layout.labels):
@@ -130,7 +131,7 @@ def fit_tables(model) -> list:
         r2_text = Text(f"{r2:.6f}", style="" if r2 >= model.settings.min_r2 else "bold red")
         inverse = f"{1.0 / model.k[a]:.5f}" if volts else f"{1.0 / model.k[a]:.6g}"
         k = f"{model.k[a]:.6g}"
-        if mixed:  # k of eq. (2): component a's prime output per its load
+        if mixed and not projected:  # k of eq. (2): component a's prime output per its load
             out, load = units.output_of(a), units.load_of(a)
             k, inverse = f"{k} {out}/{load}", f"{inverse} {load}/{out}"
         t.add_row(f"{axis} [{units.load_of(a)}]" if mixed else axis, k, inverse,
@@ -153,6 +154,9 @@ def fit_tables(model) -> list:
         c.add_row(f"chi_{name}", f"{layout.labels[b]}_ls" if gauges else layout.outputs[b],
                   f"{chi.support_vectors.size} / {chi.n_points}",
                   span.format(*chi.input_range) + unit)
+    if gauges:  # each chi of a load sums the gauges' own (gauges.py): more vectors than points
+        c.caption = (f"support vectors / points: a chi of the loads merges the {model.n_outputs} "
+                     "gauges' SVRs, so it holds more vectors than the points each was fitted on")
     g = Table(title="Interference error gamma (eq. 12) on the calibration data, % F.S.")
     for col in ("loaded axis", "before (omega^-1 only)", "after (eq. 11)"):
         g.add_column(col, justify="right")

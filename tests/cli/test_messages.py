@@ -114,3 +114,15 @@ def test_fit_of_a_simulate_folder_points_to_its_calibration(tmp_path):
     assert_one_line_error(r, "task_forces.csv", f"the calibration is in {out / 'calibration'}: "
                           "fit that directory")
     assert "fsdecouple init" not in r.stderr and not (tmp_path / "m.json").exists()
+
+
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
+def test_the_tables_of_an_m_gt_n_fit_say_what_their_numbers_are(gauges_model):
+    """v = P u is in the loads' own units: its k is a pure number (it was shown as
+    '1 V/N'); a chi of the loads merges the gauges' SVRs, so it has more support vectors
+    than points ('442 / 60'), which the table now says."""
+    _, _, r = gauges_model
+    out = " ".join(r.stdout.split())
+    rows = [line for line in r.stdout.splitlines() if line.startswith("│") and "[N" in line][:6]
+    assert rows and all(line.split("│")[2].strip() == "1" for line in rows), rows
+    assert "merges the 8 gauges' SVRs" in out
