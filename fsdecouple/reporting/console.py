@@ -20,6 +20,7 @@ from ..data.guesses import Guess
 from ..data.guesses import shown as shown_name
 from ..errors import printable
 from ..evaluation.cv_results import gamma_index, test_name
+from ..fitting.joint import JOINT_C
 from ..units import Units, output_display
 from .narrow import KEY_COLUMNS
 from .temperature_tables import temperature_tables
@@ -137,8 +138,13 @@ def fit_tables(model) -> list:
         t.add_row(f"{axis} [{units.load_of(a)}]" if mixed else axis, k, inverse,
                   r2_text, str(rep.n_points[axis]))
     s = model.settings.svr
+    # rows loading several components or more gauges than loads: fitted jointly, with C
+    # and epsilon of their own (fitting/joint.py), which the table says rather than Table 2's
+    joint = bool(getattr(model, "own", None)) or projected
+    svr = (f"C={JOINT_C:g} eps=each output's noise sigma (at least {s.epsilon:g}), fitted "
+           "jointly" if joint else f"C={s.C:g} eps={s.epsilon:g}")
     c = Table(title=f"Corrected coupling functions chi (eq. 4): eps-SVR, gamma={s.gamma:g} "
-                    f"C={s.C:g} eps={s.epsilon:g} tol={s.tolerance:g}",
+                    f"{svr} tol={s.tolerance:g}",
               caption=f"beyond the input range: {model.settings.extrapolation} (extrapolation); "
                       f"zero offsets: {zero_used(model)}; refinement steps K = "
                       f"{model.settings.refine}")
@@ -148,7 +154,8 @@ def fit_tables(model) -> list:
     for col in ("chi", "input", "support vectors", f"input range{shown}"):
         c.add_column(col, justify="right")
     span = "{:+.4f} .. {:+.4f}" if volts else "{:+.6g} .. {:+.6g}"
-    for name, chi in model.chi.items():
+    # a joint fit's own-load chi_aa too (fitting/joint.py: chi_own in the model file)
+    for name, chi in {**model.chi, **(getattr(model, "own", None) or {})}.items():
         b = chi.input_axis
         unit = f" {units.load_of(b) if gauges else units.output_of(b)}" if each else ""
         c.add_row(f"chi_{name}", f"{layout.labels[b]}_ls" if gauges else layout.outputs[b],
