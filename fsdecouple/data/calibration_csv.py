@@ -194,8 +194,8 @@ def read_calibration_table(path: str | Path, settings: Settings,
         for c in layout.outputs:  # a reading mapped to a reference column: a swapped config
             if applied_load(cols[c]):
                 raise InputError(f"{where(f, HEADER_ROW, cols[c])}: output {c} is mapped to "
-                                 f"'{cols[c]}', named like an applied load; map the sensor's "
-                                 "own reading under columns:")
+                                 f"'{cols[c]}', named like an applied load; map {c} to the "
+                                 "sensor's own reading in the config's columns")
         # a single CSV without a repetition column is one repetition
         numbered = single and cols["repetition"] in header
         mapped = {name: name for name in numeric.values()}

@@ -25,7 +25,7 @@ from ..core.extrapolation import table_interval as tangent_interval
 from ..core.metrics import interference_errors
 from ..core.model import Chi, CouplingErrorModel, FitReport
 from ..core.surrogate import TOLERANCE, build_pair, table_interval
-from ..errors import InputError, printable
+from ..errors import InputError, printable, where
 from .joint import backfit, check_separable, joint_svr, multi_load
 from .linear import fit_omega
 from .noise import solver_tolerance
@@ -142,10 +142,15 @@ def _omega_failure(calib: CalibrationSet, a: int) -> str:
     with np.errstate(over="ignore", invalid="ignore"):
         sums = (float(f @ f), float(f @ u))
     if not np.isfinite(sums).all():
-        big = max(float(np.abs(f).max(initial=0.0)), float(np.abs(u).max(initial=0.0)))
-        return (f"{calib.source}: the {axis} sweeps' values are too large (up to {big:.3g}): "
-                f"the sums of eq. (2) overflow a double, so omega_{axis} cannot be fitted; "
-                "check the units and scale: of the data")
+        # the largest value, named by file, row and column
+        column, values = max(((layout.loads[a], f), (layout.outputs[a], u)),
+                             key=lambda cv: float(np.abs(cv[1]).max(initial=0.0)))
+        i = int(np.argmax(np.abs(values)))
+        at = (where(s["file"].iat[i], int(s["row"].iat[i]), column)
+              if {"file", "row"} <= set(s.columns) else calib.source)
+        return (f"{at}: {values[i]:.3g} is too large: the sums of eq. (2) over the {axis} "
+                f"sweeps overflow a double, so omega_{axis} cannot be fitted; check the data's "
+                "units and the config's scale key")
     return (f"{calib.source}: the {axis} sweeps' prime voltage {layout.outputs[a]} does not "
             f"change with {layout.loads[a]}; cannot fit omega_{axis} (eq. 2)")
 
