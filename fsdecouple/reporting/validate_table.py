@@ -67,7 +67,9 @@ def validation_renderables(doc: dict[str, Any], output=None, *, as_json: bool = 
                    if mixed else f"in {unit}: the same fraction of the largest full scale")
         out.append((False, Text(
             "model: the model file's method; linear: the least-squares matrix f = C u fitted on "
-            "the same calibration; initial: f = u / k. gamma: eq. (12) on each loaded axis's "
+            f"the same calibration; initial: {doc.get('initial', 'f = u / k')}"
+            f"{' (the least-squares loads of the gauges)' if doc.get('initial') == 'f = P u' else ''}"
+            ". gamma: eq. (12) on each loaded axis's "
             "points; max, RMS: |f_c - F_c| / F_c(FS) over those points and every component c; "
             f"{in_unit}. n: the points behind each figure ('{NO_FIGURE}': no loaded point, no "
             "figure). calibrated: every output within the calibrated range +/- 1 % of its span.")))

@@ -27,7 +27,7 @@ from fsdecouple.sim.simulate import SimulatedSensor, simulate_calibration
 
 FS = np.array(SimulatedSensor().full_scale)
 TOP_KEYS = {"format", "format_version", "fsdecouple_version", "model", "model_digest", "set",
-            "units", "records", "gate", "warnings"}
+            "units", "records", "initial", "gate", "warnings"}
 
 
 def validation_table(seed: int = 11, repetitions: int = 1) -> pd.DataFrame:

@@ -106,6 +106,10 @@ def test_fit_apply_validate_and_export_through_the_cli_and_the_rest_refuse_in_on
     worst = max(r["value"] for r in doc["records"] if r["method"] == "model"
                 and r["metric"] == "max_error")
     assert worst < 0.005 and {r["range"] for r in doc["records"]} == {"calibrated"}
+    # its "initial" rows are the gauges' least-squares loads, not u / k (the legend said so)
+    assert doc["initial"] == "f = P u"
+    shown = invoke(["validate", str(model), str(cal), "-c", str(cfg)]).stdout
+    assert "initial: f = P u" in " ".join(shown.split()) and "f = u / k" not in shown
     invoke(["export", str(model), "-o", str(tmp_path / "d.h")])  # tests/export: compiled
     for args, what in ((["cv", cal, "-c", cfg, "-o", tmp_path / "cv.json"], "cv"),
                        (["report", model, "-o", tmp_path / "r.html"], "report"),
