@@ -11,12 +11,11 @@ carry the same content and the same figures.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from html import escape
 
 from matplotlib.figure import Figure
 from rich.table import Table
 
-from .html import CSS, cell, figure_html, note, table, th, tr
+from .html import CSS, cell, escape, figure_html, note, table, th, tr
 from .plots import to_png
 
 METRIC_NAMES = {"b": "b [%]", "b_prime": "b′ [%]", "f_c": "f_c [%]", "f_0": "f_0 [%]",
@@ -179,7 +178,7 @@ def certificate_html(doc: dict) -> str:
     parts, open_section = [], False
     for b in certificate_blocks(doc):
         if b.kind == "title":
-            parts.append(f"<h1>{escape(b.text)}</h1>\n")
+            parts.append(f"<h1>{escape(b.text, keep='')}</h1>\n")
         elif b.kind == "heading":
             if open_section:
                 parts.append("</section>\n")
@@ -205,7 +204,7 @@ def certificate_html(doc: dict) -> str:
                  "starts each component on its own page), or write the PDF: "
                  "certificate -o certificate.pdf.</p>")
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
-            f"<title>Calibration certificate: {escape(doc['sensor'])}</title>"
+            f"<title>Calibration certificate: {escape(doc['sensor'], keep='')}</title>"
             f"<style>{CSS}{PRINT_CSS}</style></head><body>\n{''.join(parts)}</body></html>\n")
 
 

@@ -1,13 +1,23 @@
 """Small HTML building blocks of the calibration report: cells, tables, badges, figures.
 
-Every piece of text goes through :func:`html.escape`, so text from a user's files
-is shown literally.
+Every piece of text goes through :func:`escape`, so text from a user's files is shown
+literally: markup escaped, control characters (an ESC in a sensor's name) written as
+the terminal shows them.
 """
 
 from __future__ import annotations
 
 import base64
-from html import escape
+import html
+
+from ..errors import printable
+
+
+def escape(text: object, keep: str = "\n") -> str:
+    """``text`` for HTML: control characters escaped as repr does (but ``keep``'s: a
+    note's own line breaks, which HTML folds), then markup.  A user's name in a heading or
+    the title keeps none (``keep=""``): its newline is shown, not folded into a space."""
+    return html.escape(printable(text, keep=keep, spaces=True))
 
 
 def worse(value: float | None, initial: float | None) -> bool:

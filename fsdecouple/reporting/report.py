@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
-from html import escape
 
 import numpy as np
 import pandas as pd
@@ -25,7 +24,7 @@ from ..evaluation.checks import assumption_checks
 from ..evaluation.cv_results import gamma_index, test_name
 from ..units import output_display
 from .cv_tables import cv_test_name, gamma_tables, gross_tables, task_table
-from .html import CSS, badge, badge_span, cell, figure_html, note, table, th, tr, worse
+from .html import CSS, badge, badge_span, cell, escape, figure_html, note, table, th, tr, worse
 from .plots import chi_figure, omega_figure, residual_figure, to_png
 from .temperature_tables import temperature_html
 
@@ -297,7 +296,7 @@ def build_report(model, cv: dict | None = None, calib=None) -> Report:
     if cv is not None:
         check_cv_fits(model, cv)
     figs: dict[str, bytes] = {}
-    body = [f"<h1>Calibration report: {escape(model.settings.sensor)}</h1>\n",
+    body = [f"<h1>Calibration report: {escape(model.settings.sensor, keep='')}</h1>\n",
             _header(model, cv),
             '<p id="certificate-link">Calibration certificate (ISO&nbsp;376 figures, class, '
             "uncertainty budget): written by <code>fsdecouple certificate MODEL CALIB -o "
@@ -376,6 +375,6 @@ def build_report(model, cv: dict | None = None, calib=None) -> Report:
     body.append(_provenance(model, cv, calib))
 
     html = ("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
-            f"<title>fsdecouple calibration report: {escape(model.settings.sensor)}</title>\n"
+            f"<title>fsdecouple calibration report: {escape(model.settings.sensor, keep='')}</title>\n"
             f"<style>{CSS}</style>\n</head>\n<body>\n" + "".join(body) + "</body>\n</html>\n")
     return Report(html, figs)

@@ -108,6 +108,21 @@ def test_control_characters_are_shown_escaped_never_sent_raw(tmp_path, sample_mo
     assert "s\\x1b[2J\\x1b[31m1" in many.stdout + many.stderr
 
 
+@pytest.mark.slow  # over ~0.6 s: the not-slow run stays under a minute
+def test_the_report_shows_a_control_character_escaped(tmp_path, sample_model, unrendered):
+    """The HTML report put an ESC and a newline of the sensor's name raw into its <h1> and
+    <title>: an ESC is no character of HTML, and the newline folded into a space."""
+    cfg = tmp_path / "cfg.yaml"
+    cfg.write_text('sensor: "evil\\e[2Jname\\nsecond"\n' + FAST_SVR)
+    model = tmp_path / "m.json"
+    invoke(["fit", SAMPLE / "calibration", "-c", cfg, "-o", model, "--no-verdict"])
+    invoke(["report", model, "-o", tmp_path / "r.html"])
+    html = (tmp_path / "r.html").read_text(encoding="utf-8")
+    assert "\x1b" not in html and "evil\n" not in html
+    assert "<h1>Calibration report: evil\\x1b[2Jname\\nsecond</h1>" in html
+    assert "<title>fsdecouple calibration report: evil\\x1b[2Jname\\nsecond</title>" in html
+
+
 def test_the_console_keeps_unicode_spaces_and_escapes_controls(capsys):
     """A no-break space in a spreadsheet's header is text, shown as it is; an ESC is not."""
     from rich.table import Table
