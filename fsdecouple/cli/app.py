@@ -245,8 +245,12 @@ err_console = _Console(stderr=True, markup=False, emoji=False, highlight=False,
 
 ConfigOpt = Annotated[
     Path | None,
-    typer.Option("--config", "-c",
-                 help="YAML config (default: the paper's sensor; for a model, its own settings)."),
+    typer.Option("--config", "-c", help="YAML config (default: the paper's sensor)."),
+]
+# commands that take a model file: its own settings unless a config is given
+ModelConfigOpt = Annotated[
+    Path | None,
+    typer.Option("--config", "-c", help="YAML config (default: the model's own settings)."),
 ]
 ForceOpt = Annotated[bool, typer.Option("--force", help="Overwrite existing output files.")]
 

@@ -14,9 +14,9 @@ from ..errors import InputError
 from ..files.outputs import check_output, refuse_overwriting_input
 from ..reporting.console import apply_lines, apply_warnings
 from .app import (
-    ConfigOpt,
     ForceOpt,
     JsonOpt,
+    ModelConfigOpt,
     _given,
     _parse_zero,
     app,
@@ -43,7 +43,7 @@ def apply(
                           help="Forces file to write: CSV, or Parquet (.parquet); for several "
                                "logs, a directory (a trailing / makes it one).")
     ],
-    config: ConfigOpt = None,
+    config: ModelConfigOpt = None,
     tare: Annotated[
         int | None, typer.Option(help="Subtract the mean voltages of the first N rows.")
     ] = None,

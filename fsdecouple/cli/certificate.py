@@ -13,9 +13,9 @@ from ..core.modelfile import load_model
 from ..errors import printable
 from ..files.outputs import check_output, refuse_overwriting_input
 from .app import (
-    ConfigOpt,
     ForceOpt,
     JsonOpt,
+    ModelConfigOpt,
     _given,
     _read,
     app,
@@ -30,7 +30,7 @@ from .app import (
 def certificate(
     model_file: Annotated[Path, typer.Argument(help="Model file (JSON) fitted on CALIB.")],
     calib: Annotated[Path, typer.Argument(help="The calibration directory or CSV it was fitted on.")],
-    config: ConfigOpt = None,
+    config: ModelConfigOpt = None,
     output: Annotated[
         Path | None, output_file("Certificate to write: .html (prints on A4) or .pdf (A4).")
     ] = None,

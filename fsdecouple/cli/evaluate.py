@@ -17,6 +17,7 @@ from .app import (
     ConfigOpt,
     ForceOpt,
     JsonOpt,
+    ModelConfigOpt,
     _given,
     _read,
     app,
@@ -136,7 +137,7 @@ def cv(
 def validate(
     model_file: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file (JSON).")],
     set_path: Annotated[Path, typer.Argument(metavar="SET", help="Independent set, calibration format.")],
-    config: ConfigOpt = None,
+    config: ModelConfigOpt = None,
     output: Annotated[Path | None, output_file("Write validation.json.")] = None,
     max_gamma: Annotated[float | None, typer.Option(
         help="Exit 1 if the interference error (eq. 12) on calibrated points exceeds this fraction.")] = None,
