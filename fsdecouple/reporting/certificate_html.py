@@ -36,6 +36,8 @@ PRINT_CSS = """
 figure img{max-width:170mm}h2{page-break-after:avoid}section.component{page-break-before:always}
 section.component:first-of-type{page-break-before:auto}.noprint{display:none}}
 .ident td{text-align:left}.ident td:first-child{font-weight:600}.class{font-size:1.2em;font-weight:700}
+table[id^="budget-"]{font-size:.8em}table[id^="budget-"] th,table[id^="budget-"] td{padding:.2em .35em}
+table[id^="budget-"] th{white-space:normal}
 """
 
 # the standard's name never wraps inside (a no-break space): the printed titles and the
