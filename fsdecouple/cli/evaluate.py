@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -177,6 +178,10 @@ def report(
     png: Annotated[
         Path | None, typer.Option("--png", help="Also write each figure as a PNG into this directory.")
     ] = None,
+    certificate: Annotated[
+        Path | None, typer.Option("--certificate", help="The certificate (.html or .pdf) the "
+                                  "report links to, from `fsdecouple certificate`.")
+    ] = None,
     force: ForceOpt = False,
 ) -> None:
     """Write a self-contained HTML calibration report (figures, gamma tables, checks)."""
@@ -203,7 +208,17 @@ def report(
         inputs = [model_file, *_given(cv), *(_read(cs) if cs is not None else [])]
         check_output(output, force=force)
         refuse_overwriting_input(output, inputs)
-        result = build_report(model, cv_doc, cs)
+        link = None
+        if certificate is not None:
+            if certificate.suffix.lower() not in (".html", ".htm", ".pdf"):
+                raise InputError(f"--certificate {printable(certificate)}: expected the .html or "
+                                 "a .pdf certificate of `fsdecouple certificate`")
+            if not certificate.is_file():
+                err_console.print(f"warning: --certificate {printable(certificate)}: no such file "
+                                  "yet; the report links to it")
+            # relative to the report's directory, so the two files move together
+            link = os.path.relpath(certificate.resolve(), output.resolve().parent)
+        result = build_report(model, cv_doc, cs, certificate=link)
         if png is not None:
             targets += [png / f"{name}.png" for name in result.figures]
         for t in targets:

@@ -10,8 +10,10 @@ by a note that says what to pass.
 
 from __future__ import annotations
 
+import html
 import json
 from dataclasses import dataclass, field
+from urllib.parse import quote
 
 import numpy as np
 import pandas as pd
@@ -276,7 +278,18 @@ def check_cv_fits(model, cv: dict, source: str = "cv.json") -> None:
                          f"{_unit_words(own)}: give the cv.json of its calibration")
 
 
-def build_report(model, cv: dict | None = None, calib=None) -> Report:
+def _certificate_link(href: str | None) -> str:
+    """The report's pointer to the calibration certificate: a link where one was given."""
+    what = "Calibration certificate (ISO&nbsp;376 figures, class, uncertainty budget)"
+    if href is None:
+        return (f'<p id="certificate-link">{what}: written by <code>fsdecouple certificate MODEL '
+                "CALIB -o FILE.html</code>.</p>\n")
+    return (f'<p id="certificate-link">{what}: <a href="{html.escape(quote(href), quote=True)}">'
+            f"{escape(href, keep='')}</a>.</p>\n")
+
+
+def build_report(model, cv: dict | None = None, calib=None, certificate: str | None = None
+                 ) -> Report:
     """Render the calibration report of ``model``.
 
     Parameters
@@ -286,6 +299,9 @@ def build_report(model, cv: dict | None = None, calib=None) -> Report:
         A cv.json document (:func:`load_cv_results`).
     calib : CalibrationSet, optional
         The calibration set, to plot its points.
+    certificate : str, optional
+        Where the report links its certificate (a link relative to the report's
+        directory, ``report --certificate``); without it, the command that writes one.
     """
     model.layout.one_output_each("report")
     if getattr(model, "imported", False):
@@ -298,9 +314,7 @@ def build_report(model, cv: dict | None = None, calib=None) -> Report:
     figs: dict[str, bytes] = {}
     body = [f"<h1>Calibration report: {escape(model.settings.sensor, keep='')}</h1>\n",
             _header(model, cv),
-            '<p id="certificate-link">Calibration certificate (ISO&nbsp;376 figures, class, '
-            "uncertainty budget): written by <code>fsdecouple certificate MODEL CALIB -o "
-            "FILE.html</code>.</p>\n"]
+            _certificate_link(certificate)]
     if model.warnings:
         body.append("<ul>" + "".join(f"<li>warning: {escape(w)}</li>" for w in model.warnings) + "</ul>\n")
 

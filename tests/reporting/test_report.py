@@ -467,3 +467,20 @@ def test_the_report_speaks_the_datas_own_units(unrendered, tmp_path):
     units = set(re.findall(r"\[([^\]]{1,20})\]", text))
     assert units <= {"V", "mV", "N / N·m"}, units
     assert "V/N·m" in text and "N·m/V" in text
+
+
+def test_report_links_the_certificate_it_is_given(tmp_path, sample_model, unrendered):
+    """Issue 23: `report` links to the certificate. Its name is the user's: `--certificate`
+    links it relative to the report's directory (the two files move together); without it
+    the report names the command that writes one, and a file that is no certificate is
+    refused in one line."""
+    (tmp_path / "out").mkdir()
+    (tmp_path / "cert 1.html").write_text("<html></html>")
+    invoke(["report", sample_model, "-o", tmp_path / "out" / "r.html",
+            "--certificate", tmp_path / "cert 1.html"])
+    text = (tmp_path / "out" / "r.html").read_text(encoding="utf-8")
+    assert '<a href="../cert%201.html">../cert 1.html</a>' in text
+    assert "fsdecouple certificate MODEL CALIB -o" not in text
+    r = invoke(["report", sample_model, "-o", tmp_path / "r.html", "--certificate",
+                tmp_path / "cert.txt"], 2)
+    assert "--certificate" in r.stderr and not (tmp_path / "r.html").exists()
