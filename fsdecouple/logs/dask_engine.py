@@ -86,11 +86,41 @@ def _no_interrupt_in_children():
         signal.signal(signal.SIGINT, previous)
 
 
+def _handshake(scheduler: str) -> None:
+    """Reach ``scheduler`` and complete distributed's handshake within CONNECT_TIMEOUT, or
+    refuse it in one line.  distributed waits for a handshake without a deadline (a
+    listener that never answered hung ``apply``), and reads another service's reply as a
+    message length (an HTTP server's bytes asked for 3 EiB and ended in a traceback).
+    The probe runs on a thread of its own, so a caller's running event loop (a notebook)
+    is not in its way."""
+    import asyncio
+    from concurrent.futures import ThreadPoolExecutor
+    from concurrent.futures import TimeoutError as Late
+
+    from distributed.comm import connect
+
+    async def once() -> None:
+        comm = await connect(scheduler, timeout=CONNECT_TIMEOUT)
+        await comm.close()
+
+    pool = ThreadPoolExecutor(max_workers=1)
+    try:
+        pool.submit(asyncio.run, asyncio.wait_for(once(), 2 * CONNECT_TIMEOUT)).result(
+            timeout=2 * CONNECT_TIMEOUT + 1)
+    except (Exception, Late) as err:  # noqa: BLE001 - whatever answered, it is no scheduler
+        why = excerpt(err, 200) or type(err).__name__
+        raise InputError(f"--scheduler {printable(scheduler)}: cannot connect to a Dask scheduler "
+                         f"within {2 * CONNECT_TIMEOUT:g} s ({why})") from None
+    finally:
+        pool.shutdown(wait=False)
+
+
 @contextlib.contextmanager
 def dask_client(scheduler: str | None = None, workers: int | None = None):
     """A client of the cluster at ``scheduler``, or of a new LocalCluster of ``workers`` processes."""
     _, distributed = _dask()
     if scheduler is not None:
+        _handshake(scheduler)
         try:
             client = distributed.Client(scheduler, timeout=CONNECT_TIMEOUT, set_as_default=False)
         except (OSError, TimeoutError, ValueError) as err:

@@ -112,6 +112,45 @@ def test_our_local_cluster_keeps_glibcs_malloc_thresholds(monkeypatch):
     assert list(env.values()) == [{"MALLOC_TRIM_THRESHOLD_": None, "OMP_NUM_THREADS": "1"}]
 
 
+@pytest.mark.parametrize("answer", [b"HTTP/1.1 400 Bad Request\r\n\r\n", None],
+                         ids=["another-service", "silent-listener"])
+def test_an_address_where_no_scheduler_answers_is_one_line(sample_model, tmp_path, monkeypatch,
+                                                           answer):
+    """Another service (its reply read as a message length: 3 EiB, a MemoryError
+    traceback), or a listener that never answers (distributed waits for its handshake
+    without a deadline: apply hung): one line, exit 2, in bounded time."""
+
+    import fsdecouple.logs.dask_engine as engine
+
+    monkeypatch.setattr(engine, "CONNECT_TIMEOUT", 1.0)
+    logs = make_logs(tmp_path)
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen()
+    port, held = server.getsockname()[1], []
+
+    def serve():
+        with contextlib.suppress(OSError):
+            while True:
+                conn, _ = server.accept()
+                held.append(conn)
+                if answer is not None:
+                    conn.sendall(answer)
+
+    threading.Thread(target=serve, daemon=True).start()
+    try:
+        t0 = time.monotonic()
+        r = invoke(["apply", sample_model, logs, "-o", f"{tmp_path / 'out'}/", "--engine", "dask",
+                    "--scheduler", f"tcp://127.0.0.1:{port}"], code=2)
+        assert time.monotonic() - t0 < 30
+    finally:
+        server.close()
+        for conn in held:
+            conn.close()
+    assert_one_line_error(r, f"--scheduler tcp://127.0.0.1:{port}: cannot connect")
+    assert not (tmp_path / "out").exists()
+
+
 def test_unreachable_scheduler_is_one_line(sample_model, tmp_path, monkeypatch):
     import fsdecouple.logs.dask_engine as engine
 
