@@ -176,7 +176,8 @@ def fit_tables(model) -> list:
 
 def apply_lines(summary, out) -> list[str]:
     counts = ", ".join(f"{n} {name}" for name, n in summary.status_counts.items() if n)
-    lines = [f"decoupled {summary.rows} rows into {printable(out)} (forces in {summary.force_unit}; "
+    rows = f"{summary.rows} row{'' if summary.rows == 1 else 's'}"
+    lines = [f"decoupled {rows} into {printable(out)} (forces in {summary.force_unit}; "
              f"status: {counts})"]
     if np.any(summary.offsets):
         pairs = list(zip(summary.outputs, summary.offsets, strict=True))
@@ -188,35 +189,47 @@ def apply_lines(summary, out) -> list[str]:
     return lines
 
 
+SHOWN_COLUMNS = 20  # dropped log columns named in apply's warning; the rest counted
+
+
+def _rows(n: int) -> str:
+    """``1 row has`` / ``3 rows have``, a warning's start."""
+    return f"{n:,} row has" if n == 1 else f"{n:,} rows have"
+
+
 def apply_warnings(summary) -> list[str]:
     w, groups = list(getattr(summary, "notes", ())), {}
     for d in getattr(summary, "dropped", ()):
         groups.setdefault(d.reason, []).append(f"{d.column} '{d.name}'" if d.name else str(d.column))
-    if groups:
+    if groups:  # a few named: a log of 200,000 side columns made one 2 MB line
         w.append("log columns not passed through (fit ignores them too): " + "; ".join(
-            f"{', '.join(cols)} ({reason})" for reason, cols in groups.items()))
+            f"{', '.join(cols[:SHOWN_COLUMNS])}"
+            f"{f' and {len(cols) - SHOWN_COLUMNS:,} more' if len(cols) > SHOWN_COLUMNS else ''}"
+            f" ({reason})" for reason, cols in groups.items()))
     if summary.missing_rows:
         rows = ", ".join(map(str, summary.first_missing))
         more = ", ..." if summary.missing_rows > len(summary.first_missing) else ""
-        w.append(f"{summary.missing_rows} rows have a missing voltage; kept with empty "
-                 f"forces and status 'missing' (rows {rows}{more})")
+        w.append(f"{_rows(summary.missing_rows)} a missing voltage; kept with empty "
+                 f"forces and status 'missing' (row{'s' if summary.missing_rows > 1 else ''} "
+                 f"{rows}{more})")
     if summary.truncated_rows:
         w.append(f"row {summary.rows + 1}, the last, does not end with a newline (the writer was "
                  "cut off?); kept with empty forces and status 'truncated'")
     if summary.not_finite_rows:
-        w.append(f"{summary.not_finite_rows} rows have forces that overflow or pass 1e6 x "
+        w.append(f"{_rows(summary.not_finite_rows)} forces that overflow or pass 1e6 x "
                  "full scale (voltages far too large, or a broken model); kept with empty "
                  "forces and status 'not_finite'")
     if summary.saturated_rows:
-        w.append(f"{summary.saturated_rows} rows have an output at or beyond its limit "
+        w.append(f"{_rows(summary.saturated_rows)} an output at or beyond its limit "
                  "(limits:), so the channel may have clipped; their forces are written "
                  "but flagged (status 'saturated')")
     if summary.out_of_range_rows:
         temperature = "temperature" in summary.outputs  # a fitted model's (issue 31)
-        w.append(f"{summary.out_of_range_rows} rows have a voltage more than 1 % of the span "
+        w.append(f"{_rows(summary.out_of_range_rows)} a voltage more than 1 % of the span "
                  "outside the calibrated range" + (", or a temperature outside the calibrated "
                                                    "temperatures" if temperature else "")
-                 + "; their forces are extrapolated (status 'extrapolated')")
+                 + f"; {'its forces are' if summary.out_of_range_rows == 1 else 'their forces are'}"
+                 " extrapolated (status 'extrapolated')")
     if getattr(summary, "untared", None):
         out, median, lo, hi = summary.untared
         unit = summary.output_unit

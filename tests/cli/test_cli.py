@@ -144,7 +144,7 @@ def test_apply_keeps_rows_with_missing_values(tmp_path, sim_model_file):
     log.write_text("t,ux,uy,uz\n0,0.1,0.0,-0.1\n1,,0.0,-0.1\n2,0.2,0.1,-0.2\n")
     out = tmp_path / "f.csv"
     r = invoke(["apply", m, log, "-o", out])
-    assert "1 rows have a missing voltage" in r.stderr and "rows 3" in r.stderr
+    assert "1 row has a missing voltage" in r.stderr and "(row 3)" in r.stderr
     f = pd.read_csv(out)
     assert len(f) == 3 and f["fx"].isna().tolist() == [False, True, False]
     assert f["status"].tolist() == ["ok", "missing", "ok"]

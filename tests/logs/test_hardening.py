@@ -340,3 +340,13 @@ def test_scientific_notation_without_a_dot_is_a_number(tmp_path):
     assert (s.svr.epsilon, s.svr.C, s.svr.tolerance) == (1e-4, 1000.0, 1e-3)
     cfg.write_text("sensor: rig1e5\n")  # not a number: stays a name
     assert load_config(cfg).sensor == "rig1e5"
+
+
+def test_a_log_of_many_side_columns_gets_a_short_warning(sim_model_file, tmp_path):
+    """200,000 columns apply does not pass through (a repeated name) were named one by
+    one: a 2 MB warning line.  The first 20 are named, the rest counted."""
+    log = tmp_path / "wide.csv"
+    log.write_text("t,ux,uy,uz" + ",c" * 20_000 + "\n0,0.1,0.2,0.3" + ",1" * 20_000 + "\n")
+    r = invoke(["apply", sim_model_file, log, "-o", tmp_path / "o.csv"])
+    line = next(x for x in r.stderr.splitlines() if "not passed through" in x)
+    assert len(line) < 1000 and "5 'c', 6 'c'" in line and "24 'c' and 19,980 more" in line
