@@ -420,7 +420,7 @@ def parquet_blocks(path: Path, names: list[str], settings: Settings, *,
                 inf = np.flatnonzero(np.isinf(cols[-1]))
                 if inf.size:  # as in a CSV log: an infinite voltage is no reading
                     raise InputError(f"{where(path, row + int(inf[0]), n)}: is "
-                                     f"{cols[-1][inf[0]]!r}, expected a finite number")
+                                     f"{float(cols[-1][inf[0]])!r}, expected a finite number")
             else:
                 raise InputError(f"{where(path, None, n)}: type {col.type}, expected numbers")
         u = np.column_stack(cols) if cols else np.empty((0, len(names)))

@@ -54,3 +54,15 @@ def test_float_columns_are_written_plain_and_the_file_reads_back(sample_model, t
     np.testing.assert_allclose(back[["fx", "fy", "fz"]].to_numpy(), f, rtol=0, atol=1e-9)
     assert pq.read_table(out).column("status").type == pa.string()
 
+
+
+def test_an_infinite_reading_in_a_parquet_log_is_told_as_a_number(sim_model_file, tmp_path):
+    """A Parquet log's inf was quoted as numpy's repr, 'np.float64(inf)'."""
+    from conftest import assert_one_line_error, invoke
+
+    log = pd.read_csv(SAMPLE / "task_voltages.csv").head(10)
+    log.loc[4, "uy"] = np.inf
+    log.to_parquet(tmp_path / "i.parquet")
+    r = invoke(["apply", sim_model_file, tmp_path / "i.parquet", "-o", tmp_path / "o.csv"], 2)
+    assert_one_line_error(r, "i.parquet", "column 'uy'", "is inf, expected a finite number")
+    assert "np." not in r.stderr and not (tmp_path / "o.csv").exists()
