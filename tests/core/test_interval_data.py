@@ -99,6 +99,21 @@ def test_the_own_slope_must_be_omega_s_along_the_span():
     doc["shape"][0][0] = [beta[0], 0.0, -beta[0] / (3 * 0.3 ** 2)]
     doc["covariance"][0][0] = np.diag(np.full(3, 1e-12)).tolist()
     assert abs(slope / owner.k[0] - 1) < 0.01
-    with pytest.raises(InputError, match=re.escape("shape {load x, output 1} is '...', expected a "
-                                                   "slope within 0.5-2 times omega's k")):
+    with pytest.raises(InputError, match=re.escape("own-load slope of x is ")) as err:
         check_sweep_model(doc, DEFAULT.labels, owner)
+    # the slope found is said (at its root: near 0 x k), so an edited k or shape shows which
+    found = float(re.search(r"slope of x is (\S+) times", str(err.value)).group(1))
+    assert found < 0.5 and "expected 0.5-2 times" in str(err.value)
+
+
+def test_a_negated_slope_is_named_as_the_disagreement_it_is():
+    """omega's k_y negated (digest recomputed) was refused as a damaged 'shape ... is
+    \"...\"'; the refusal now names k_y and the slope the interval data have (-1 x k_y)."""
+    doc = _doc()
+    owner = _owner(doc["span"])
+    owner.k = owner.k * np.array([1.0, -1.0, 1.0])
+    with pytest.raises(InputError) as err:
+        check_sweep_model(doc, DEFAULT.labels, owner)
+    msg = str(err.value)
+    found = float(re.search(r"own-load slope of y is (\S+) times omega's k_y", msg).group(1))
+    assert found == pytest.approx(-1.0, abs=0.02) and "slopes disagree" in msg
