@@ -384,26 +384,32 @@ class GrossError:
             ge = cls(axis, int(rep), int(point), float(offset))
         except ValueError:
             raise InputError(
-                f"gross error {spec!r}: expected AXIS:REP:POINT:OFFSET, AXIS one of "
+                f"{spec!r}: expected AXIS:REP:POINT:OFFSET, AXIS one of "
                 f"{', '.join(layout.labels)}, e.g. {layout.labels[0]}:1:5:0.2", argument="gross_error"
             ) from None
-        if ge.repetition < 1 or ge.point < 1 or not np.isfinite(ge.offset):
-            raise InputError(f"gross error {spec!r}: REP and POINT count from 1",
+        if ge.repetition < 1 or ge.point < 1:
+            raise InputError(f"{spec!r}: REP and POINT count from 1", argument="gross_error")
+        if not np.isfinite(ge.offset):
+            raise InputError(f"{spec!r}: OFFSET {offset.strip()!r} is not a finite number",
                              argument="gross_error")
         return ge
 
     def apply(self, table: pd.DataFrame, layout: Layout = DEFAULT) -> pd.DataFrame:
         """A copy of ``table`` with this point's prime voltage moved by ``offset``."""
         if self.axis not in layout.labels:
-            raise InputError(f"gross error: no component '{self.axis}' (the sensor has "
+            raise InputError(f"no component '{self.axis}' (the sensor has "
                              f"{', '.join(layout.labels)})", argument="gross_error")
         idx = np.flatnonzero(
             (table["repetition"] == self.repetition).to_numpy()
             & (table["axis"] == self.axis).to_numpy()
         )
+        if not idx.size:
+            reps = sorted(set(table["repetition"]))
+            raise InputError(f"the {self.axis} sweep has no repetition {self.repetition} "
+                             f"(repetitions: {', '.join(map(str, reps))})", argument="gross_error")
         if self.point > idx.size:
             raise InputError(
-                f"gross error: the {self.axis} sweep of repetition {self.repetition} has "
+                f"the {self.axis} sweep of repetition {self.repetition} has "
                 f"{idx.size} points, no point {self.point}", argument="gross_error"
             )
         out = table.copy()

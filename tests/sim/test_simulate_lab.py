@@ -219,6 +219,9 @@ def _gross(spec):
     (["--layout", "spreadsheet"], "--layout 'spreadsheet': expected one of paper, lab"),
     (["--levels", "4"], "--levels: only with --layout lab"),
     (["--layout", "lab", "--gross-error", "x:1:9:100"], "has 5 points, no point 9"),
+    # the offset was blamed on REP and POINT, and a missing repetition read as 0 points
+    (["--gross-error", "x:1:5:nan"], "'x:1:5:nan': OFFSET 'nan' is not a finite number"),
+    (["--gross-error", "x:9:5:0.2"], "the x sweep has no repetition 9 (repetitions: 1, 2, 3"),
 ])
 def test_bad_options_exit_2_and_write_nothing(tmp_path, args, message):
     out = tmp_path / "out"
