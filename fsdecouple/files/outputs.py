@@ -50,6 +50,9 @@ _WRITE_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EAC
 
 def check_output(path: str | Path, *, force: bool) -> None:
     """Refuse, before any work is done, an output that cannot or may not be written."""
+    if str(path) == "-":  # an input's '-' is standard input: a file named '-' surprised
+        raise InputError("-: an output is written to a file, atomically, not to standard "
+                         "output; give a file name (--json prints a document on stdout)")
     path = Path(path)
     if path.is_dir():
         raise InputError(f"{path}: is a directory, expected a file name for the output")

@@ -219,3 +219,15 @@ def test_a_file_name_that_is_not_utf8_is_read_and_shown_with_its_byte(cal, tmp_p
     with open(latin, "wb") as fh:
         fh.write(b"\n".join(lines))
     fails(["fit", cal, "--no-verdict"], tmp_path, "rep3\\xff.csv, row 5, column 'uy'")
+
+
+@pytest.mark.parametrize("command", [["apply", "{m}", SAMPLE / "task_voltages.csv"],
+                                     ["fit", SAMPLE / "calibration", "--no-verdict"]])
+def test_an_output_named_dash_is_refused_not_written_as_a_file(sample_model, tmp_path,
+                                                               command):
+    """'-' reads standard input; as -o it wrote a file named '-' in silence."""
+    from conftest import working_directory
+
+    with working_directory(tmp_path):
+        r = invoke([str(a).format(m=sample_model) for a in command] + ["-o", "-"], code=2)
+    assert "not to standard output" in r.stderr and not (tmp_path / "-").exists()
