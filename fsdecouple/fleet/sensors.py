@@ -145,7 +145,11 @@ def fit_sensor(sensor_dir: str | Path, models_dir: str | Path, *, method: str | 
     verdict = model.report.verdict
     result.model = str(out)
     result.k = {name: float(k) for name, k in zip(model.layout.labels, model.k, strict=True)}
-    result.units = {"load": settings.units.load, "output": settings.units.output}
+    units = settings.units
+    # k's unit per component: one load unit for forces and another for moments (N, N·m)
+    result.units = {"load": units.load, "output": units.output,
+                    "k": {name: f"{units.output_of(a)}/{units.load_of(a)}"
+                          for a, name in enumerate(model.layout.labels)}}
     result.method = model.method
     result.warnings = model.warnings
     if verdict is not None:

@@ -265,6 +265,23 @@ def test_fit_many_fits_each_sensor_as_fit_does(fleet, fleet_fitted, tmp_path):
     verdict = load_model(models / "alpha.json").report.verdict
     assert alpha["worst_gamma"] == verdict["heldout"]["svr"]["worst_gamma"] and alpha["method"] == "svr"
     assert alpha["k"]["x"] == pytest.approx(1 / 75.065, rel=1e-3)  # the sample sensor's slope
+    assert alpha["units"]["k"] == {"x": "V/N", "y": "V/N", "z": "V/N"}
+
+
+def test_the_fleet_table_gives_each_slope_its_unit_where_they_differ():
+    """A six-axis sensor's k were all shown in 'V/N / N·m'; forces and moments each get
+    their own unit, and one unit is shown once where they agree."""
+    from fsdecouple.reporting.fleet_tables import fleet_table
+
+    base = {"sensor": "s", "error": None, "method": "svr", "worst_gamma": 0.001, "better": "svr",
+            "warnings": [], "drift": None, "gate": []}
+    six = {**base, "k": {"fx": 0.01, "mx": 0.5},
+           "units": {"load": "N / N·m", "output": "V", "k": {"fx": "V/N", "mx": "V/N·m"}}}
+    three = {**base, "k": {"x": 0.01, "y": 0.02},
+             "units": {"load": "N", "output": "V", "k": {"x": "V/N", "y": "V/N"}}}
+    doc = {"sensors_dir": "a", "models_dir": "b", "sensors": [six, three]}
+    ks = [row for row in fleet_table(doc).columns[1]._cells]
+    assert ks == ["0.01 V/N, 0.5 V/N·m", "0.01, 0.02 V/N"]
 
 
 @pytest.fixture
