@@ -20,7 +20,6 @@ import warnings
 from pathlib import Path
 from typing import Annotated
 
-import click
 import typer
 from rich.console import Console
 from rich.progress import (
@@ -105,7 +104,8 @@ class _Group(TyperGroup):
             if bad is not None:
                 # named as Click names a bad value: the option, and the command's help
                 command = self.get_command(ctx, args[0]) if args else None
-                where = click.Context(command, info_name=args[0], parent=ctx) if command else ctx
+                # typer bundles its own Click (no `click` package to import): its Context class
+                where = type(ctx)(command, info_name=args[0], parent=ctx) if command else ctx
                 raise typer.BadParameter(_other_digit_message(value, bad), ctx=where,
                                          param_hint=f"'{option}'" if option else None)
         return super().parse_args(ctx, args)
