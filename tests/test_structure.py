@@ -181,3 +181,35 @@ def test_library_messages_speak_of_the_data_not_of_flags():
                 found += [f"{module}:{line}: {flag} in {text!r}" for flag in FLAG.findall(text)
                           if (module, flag) not in FLAG_ALLOWED]
     assert not found, "\n".join(found)
+
+
+def test_every_third_party_import_is_a_declared_dependency():
+    """A module the package imports comes with its install: `import click` worked in the
+    test environment (dask brings click) and failed on a plain `pip install .`, where
+    typer bundles its own.  Each top-level import outside the standard library must be
+    provided by a distribution pyproject.toml names (dependencies or an extra)."""
+    import sys
+    import tomllib
+    from importlib.metadata import packages_distributions
+
+    root = Path(fsdecouple.__file__).resolve().parent
+    project = tomllib.loads((root.parent / "pyproject.toml").read_text(encoding="utf-8"))["project"]
+    specs = [*project["dependencies"], *(d for extra in project["optional-dependencies"].values()
+                                         for d in extra)]
+    declared = {re.split(r"[<>=\[ ;]", d)[0].lower().replace("_", "-") for d in specs}
+    declared.add("distributed")  # dask[distributed]
+    provided = packages_distributions()
+    undeclared = {}
+    for path in root.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names = [node.module]
+            else:
+                continue
+            for top in {n.split(".")[0] for n in names} - set(sys.stdlib_module_names) - {"fsdecouple"}:
+                dists = {d.lower().replace("_", "-") for d in provided.get(top, [])}
+                if not dists & declared:
+                    undeclared.setdefault(top, path.name)
+    assert not undeclared, undeclared
