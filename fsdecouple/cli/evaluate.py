@@ -213,11 +213,14 @@ def report(
             if certificate.suffix.lower() not in (".html", ".htm", ".pdf"):
                 raise InputError(f"--certificate {printable(certificate)}: expected the .html or "
                                  "a .pdf certificate of `fsdecouple certificate`")
+            if certificate.resolve() == output.resolve():
+                raise InputError(f"--certificate {printable(certificate)}: is the report's own "
+                                 "file (-o); give the certificate's")
             if not certificate.is_file():
                 err_console.print(f"warning: --certificate {printable(certificate)}: no such file "
                                   "yet; the report links to it")
             # relative to the report's directory, so the two files move together
-            link = os.path.relpath(certificate.resolve(), output.resolve().parent)
+            link = Path(os.path.relpath(certificate.resolve(), output.resolve().parent)).as_posix()
         result = build_report(model, cv_doc, cs, certificate=link)
         if png is not None:
             targets += [png / f"{name}.png" for name in result.figures]

@@ -338,7 +338,7 @@ def require_columns(header: list[str], wanted: dict[str, str], path: Path,
                     if calibration else "")
             inner = path.parent / "calibration"  # simulate's layout: OUT/calibration/rep*.csv
             if calibration and inner.is_dir() and any(inner.glob("*.csv")):
-                init = f"; the calibration is in {printable(inner)}: fit that directory"
+                init = f"; the calibration is in {printable(inner)}: give that directory"
             raise InputError(
                 f"{where(path, HEADER_ROW)}: missing column '{name}'{hint}{mean}; "
                 f"found {', '.join(h or '(no name)' for h in header) or 'no columns'}{blank}{init}"

@@ -109,9 +109,11 @@ def at_rail(frame, outputs, known: dict, strict: bool, loads=()) -> tuple[np.nda
         head = f"{path}: output {c} is within {RAIL:.0%} of an end of its range {lo:g} .. {hi:g} ({whence})"
         if kept is None:  # too few points to tell: near is not at, and leaving them out
             # can leave a small set (a prior's ten poses) with too few to fit
-            notes.append(f"{head} on {_points(near, files, rows, single)}; {int((~near).sum())} "
-                         "other points are too few to judge whether it still follows the load "
-                         "there, so they are kept (strict mode refuses them)")
+            others = int((~near).sum())
+            notes.append(f"{head} on {_points(near, files, rows, single)}; {others} other "
+                         f"point{'s are' if others != 1 else ' is'} too few to judge whether it "
+                         "still follows the load there, so they are kept (strict mode refuses "
+                         "them)")
             continue
         out = near & ~kept
         if out.any():

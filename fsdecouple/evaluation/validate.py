@@ -207,8 +207,10 @@ def validate(
         "units": {"load": getattr(settings, "load_unit", "N"),
                   "output": getattr(settings, "output_unit", "V")},
         "records": records,
-        # what the "initial" rows decouple by: omega^-1 alone, or M > N gauges' P u
-        "initial": "f = P u" if model.layout.overdetermined else "f = u / k",
+        # what the "initial" rows decouple by: omega^-1 alone, or M > N gauges' P u; an
+        # imported factory matrix (its thermistor an extra output) has no initial rows
+        "initial": (None if getattr(model, "imported", False) else
+                    "f = P u" if model.layout.overdetermined else "f = u / k"),
         "gate": _gate(records, max_gamma),
         "warnings": warnings,
     }

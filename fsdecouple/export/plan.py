@@ -189,8 +189,8 @@ class ExportResult:
         tables = (f"{len(counts)} tables of {min(counts)}-{max(counts)} intervals"
                   if counts else "no tables (kernel sums only)")
         if self.method == "linear":
-            tables = (f"the {'factory' if self.imported else 'least-squares'} calibration "
-                      "matrix f = C u (no chi, no tables)")
+            tables = ("the factory calibration matrix f = W u (no chi, no tables)" if self.imported
+                      else "the least-squares calibration matrix f = C u (no chi, no tables)")
         lines = [f"wrote {printable(self.path)}: {self.n_components} components, {self.precision}, {tables}",
                  f"table bytes {self.table_bytes}, support-vector bytes {self.kernel_bytes}",
                  f"table error <= {self.table_max_error:.3g} of full-scale load"]

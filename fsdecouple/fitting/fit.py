@@ -25,7 +25,7 @@ from ..core.extrapolation import table_interval as tangent_interval
 from ..core.metrics import interference_errors
 from ..core.model import Chi, CouplingErrorModel, FitReport
 from ..core.surrogate import TOLERANCE, build_pair, table_interval
-from ..errors import InputError, printable, where
+from ..errors import InputError, where
 from .joint import backfit, check_separable, joint_svr, multi_load
 from .linear import fit_omega
 from .noise import solver_tolerance
@@ -128,7 +128,7 @@ def _svr_chi(s) -> Chi:
     return Chi("", s.gamma, s.support_vectors, s.dual_coef, s.rho, pair=(0, 1))
 
 
-def _omega_failure(calib: CalibrationSet, a: int) -> str:
+def _omega_failure(calib: CalibrationSet, a: int, settings: Settings) -> str:
     """Why omega_a has no finite non-zero slope: values too large, or a flat sweep.
 
     k = sum(f u) / sum(f^2) (eq. 2): sums that overflow a double give an infinite,
@@ -142,17 +142,24 @@ def _omega_failure(calib: CalibrationSet, a: int) -> str:
     with np.errstate(over="ignore", invalid="ignore"):
         sums = (float(f @ f), float(f @ u))
     if not np.isfinite(sums).all():
-        # the largest value, named by file, row and column
-        column, values = max(((layout.loads[a], f), (layout.outputs[a], u)),
-                             key=lambda cv: float(np.abs(cv[1]).max(initial=0.0)))
-        i = int(np.argmax(np.abs(values)))
-        at = (where(s["file"].iat[i], int(s["row"].iat[i]), column)
-              if {"file", "row"} <= set(s.columns) else calib.source)
-        return (f"{at}: {values[i]:.3g} is too large: the sums of eq. (2) over the {axis} "
-                f"sweeps overflow a double, so omega_{axis} cannot be fitted; check the data's "
-                "units and the config's scale key")
+        return (f"{_largest_cell(s, [layout.loads[a], layout.outputs[a]], settings)} is too "
+                f"large: the sums of eq. (2) over the {axis} sweeps overflow a double, so "
+                f"omega_{axis} cannot be fitted; check the data's units and the config's scale key")
     return (f"{calib.source}: the {axis} sweeps' prime voltage {layout.outputs[a]} does not "
             f"change with {layout.loads[a]}; cannot fit omega_{axis} (eq. 2)")
+
+
+def _largest_cell(points, columns: list[str], settings: Settings | None) -> str:
+    """``FILE, row N, column 'HEADER': VALUE``: the cell of largest magnitude among
+    ``columns`` of ``points``, named as the user's file names it (the config's columns:)
+    and as it reads there (an output before its zero correction)."""
+    raw = [f"{c}_raw" if f"{c}_raw" in points.columns else c for c in columns]
+    values = points[raw].abs().to_numpy(dtype=float)
+    i, j = np.unravel_index(int(np.argmax(values)), values.shape)
+    at = points.iloc[i]
+    header = (settings.columns.get(columns[j], columns[j]) if settings is not None
+              else columns[j])
+    return (f"{where(at['file'], int(at['row']), header)}: {float(at[raw[j]]):.6g}")
 
 
 def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
@@ -174,7 +181,7 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
     warnings = list(calib.warnings)
     for a, axis in enumerate(labels):
         if not np.isfinite(omega.k[a]) or omega.k[a] == 0.0:
-            raise InputError(_omega_failure(calib, a))
+            raise InputError(_omega_failure(calib, a, settings))
         if not omega.r2[a] >= settings.min_r2:
             warnings.append(
                 f"omega_{axis}: R^2 = {omega.r2[a]:.5f} is below {settings.min_r2} "
@@ -212,7 +219,7 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
         name, x, y, in_scale, out_scale = job
         s = fit_svr(x / in_scale, y / out_scale, settings.svr)
         if not all(np.isfinite(v).all() for v in (s.dual_coef, s.rho, s.support_vectors)):
-            raise _overflow(calib, f"the fit of chi_{name}")
+            raise _overflow(calib, f"the fit of chi_{name}", settings)
         return Chi(
             name, s.gamma, s.support_vectors, s.dual_coef, s.rho, in_scale, out_scale,
             (float(x.min()), float(x.max())), int(x.size), extrapolation=settings.extrapolation,
@@ -290,7 +297,7 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
     after = interference_errors(calib.points, model.decouple(u, rotate=False, exact=True),
                                 settings.full_scale, layout, units)
     if not all(np.isfinite(v) for g in (before, after) for v in g.values()):
-        raise _overflow(calib, "gamma (eq. 12) on the calibration points")
+        raise _overflow(calib, "gamma (eq. 12) on the calibration points", settings)
     model.report = FitReport(
         r2=dict(zip(labels, map(float, omega.r2), strict=True)),
         n_points=dict(zip(labels, map(int, omega.n), strict=True)),
@@ -347,7 +354,7 @@ def _establish_gauges(calib: CalibrationSet, settings: Settings, workers: int | 
             for (a, b), (gamma, sv, coef, rho) in merged.items()]
     for c in chis:
         if not all(np.isfinite(x).all() for x in (c.dual_coef, c.rho, c.support_vectors)):
-            raise _overflow(calib, f"the fit of chi_{c.name}")
+            raise _overflow(calib, f"the fit of chi_{c.name}", settings)
     warnings = list(calib.warnings)
     if with_tables:
         chis = _tables_for(chis, settings, fs, n_workers)
@@ -386,12 +393,7 @@ def fitted_zero(calib: CalibrationSet) -> np.ndarray | None:
     return calib.offsets[list(calib.layout.outputs)].to_numpy(dtype=float).mean(axis=0)
 
 
-def _overflow(calib: CalibrationSet, what: str) -> InputError:
+def _overflow(calib: CalibrationSet, what: str, settings: Settings | None = None) -> InputError:
     """``what`` came out infinite: name the calibration cell of largest magnitude."""
-    outputs = list(calib.layout.outputs)
-    values = calib.points[outputs].abs().to_numpy(dtype=float)
-    i, c = np.unravel_index(int(np.argmax(values)), values.shape)
-    at = calib.points.iloc[i]
-    return InputError(f"{printable(at['file'])}, row {int(at['row'])}, column '{outputs[c]}': "
-                      f"{at[outputs[c]]:.6g} makes {what} overflow (not finite); check that cell "
-                      "and the units")
+    cell = _largest_cell(calib.points, list(calib.layout.outputs), settings)
+    return InputError(f"{cell} makes {what} overflow (not finite); check that cell and the units")

@@ -321,7 +321,7 @@ def choose_prior(calib, settings, old, source: str, *, folds: int = FOLDS,
 
 def corrected_model(calib, settings, old, choice: PriorChoice) -> CouplingErrorModel:
     """The old model with the correction of ``choice.lambdas`` fitted to all of ``calib``."""
-    from .fit import _library_versions, fitted_zero
+    from .fit import fitted_zero, provenance
     from .linear import fit_calibration_matrix
 
     layout = settings.layout
@@ -352,12 +352,8 @@ def corrected_model(calib, settings, old, choice: PriorChoice) -> CouplingErrorM
         surrogate_max_error=before.surrogate_max_error if before else None,
         repetitions=calib.repetitions, warnings=[*calib.warnings, choice.line()])
     model.matrix = fit_calibration_matrix(u, f).C
-    model.provenance = {"files": [{"path": q, "sha256": h} for q, h in calib.files],
-                        "prior": {"path": choice.source,
-                                  "created": getattr(old, "created", "")},
-                        "libraries": _library_versions()}
-    if calib.excluded:
-        model.provenance["excluded"] = list(calib.excluded)
+    model.provenance = {**provenance(calib),
+                        "prior": {"path": choice.source, "created": getattr(old, "created", "")}}
     model.created = datetime.now(UTC).replace(microsecond=0).isoformat()
     return model
 

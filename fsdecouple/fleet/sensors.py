@@ -146,9 +146,11 @@ def fit_sensor(sensor_dir: str | Path, models_dir: str | Path, *, method: str | 
     result.model = str(out)
     result.k = {name: float(k) for name, k in zip(model.layout.labels, model.k, strict=True)}
     units = settings.units
-    # k's unit per component: one load unit for forces and another for moments (N, N·m)
+    # k's unit per component: one load unit for forces and another for moments (N, N·m);
+    # more gauges than loads: k of the least-squares loads v = P u is a pure number
+    projected = getattr(model, "projection", None) is not None
     result.units = {"load": units.load, "output": units.output,
-                    "k": {name: f"{units.output_of(a)}/{units.load_of(a)}"
+                    "k": {name: "" if projected else f"{units.output_of(a)}/{units.load_of(a)}"
                           for a, name in enumerate(model.layout.labels)}}
     result.method = model.method
     result.warnings = model.warnings

@@ -12,12 +12,20 @@ from __future__ import annotations
 
 import io
 from pathlib import Path
-from xml.sax.saxutils import escape
+from xml.sax import saxutils
 
 import matplotlib
 
+from ..errors import printable
 from .certificate_html import Block, certificate_blocks, u_figure
 from .plots import to_png
+
+
+def escape(text: object) -> str:
+    """A user's text for reportlab's paragraph markup: control characters escaped as the
+    terminal and the HTML show them (an ESC in a sensor's name), then the markup."""
+    return saxutils.escape(printable(text, spaces=True))
+
 
 FONT, BOLD = "DejaVuSans", "DejaVuSans-Bold"
 MARGIN_MM = 12.0
@@ -89,7 +97,7 @@ def certificate_pdf(doc: dict) -> bytes:
     buf = io.BytesIO()
     page = SimpleDocTemplate(buf, pagesize=A4, leftMargin=MARGIN_MM * mm, rightMargin=MARGIN_MM * mm,
                              topMargin=MARGIN_MM * mm, bottomMargin=MARGIN_MM * mm,
-                             title=f"Calibration certificate: {doc['sensor']}",
+                             title=f"Calibration certificate: {printable(doc['sensor'])}",
                              author="fsdecouple", subject="ISO 376 figures, class and budget",
                              creator=f"fsdecouple {doc.get('fsdecouple_version', '')}",
                              invariant=1,

@@ -162,8 +162,9 @@ def fit_tables(model) -> list:
                   f"{chi.support_vectors.size} / {chi.n_points}",
                   span.format(*chi.input_range) + unit)
     if gauges:  # each chi of a load sums the gauges' own (gauges.py): more vectors than points
-        c.caption = (f"support vectors / points: a chi of the loads merges the {model.n_outputs} "
-                     "gauges' SVRs, so it holds more vectors than the points each was fitted on")
+        c.caption += (f"; support vectors / points: a chi of the loads merges the "
+                      f"{model.n_outputs} gauges' SVRs, so it holds more vectors than the points "
+                      "each was fitted on")
     g = Table(title="Interference error gamma (eq. 12) on the calibration data, % F.S.")
     for col in ("loaded axis", "before (omega^-1 only)", "after (eq. 11)"):
         g.add_column(col, justify="right")

@@ -75,11 +75,13 @@ def fleet_table(doc: dict[str, Any]) -> Table:
             t.add_row(s["sensor"], "", "", "", "", "", Text("error (see below)", FAILED))
             continue
         per = s["units"].get("k") or {}  # fleet documents before it: one unit for all
+        values = ", ".join(f"{v:.6g}" for v in s["k"].values())
         if len(set(per.values())) > 1:  # forces and moments: each k with its own unit
             k = ", ".join(f"{v:.6g} {per[name]}" for name, v in s["k"].items())
+        elif per and not any(per.values()):  # more gauges than loads: pure numbers
+            k = values
         else:
-            k = (", ".join(f"{v:.6g}" for v in s["k"].values())
-                 + f" {s['units']['output']}/{s['units']['load']}")
+            k = f"{values} {s['units']['output']}/{s['units']['load']}"
         drift = "" if s["drift"] is None else f"{_largest(s['drift']):.3f} %"
         result = Text("gate failed", FAILED) if s["gate"] else Text("ok")
         t.add_row(s["sensor"], k, f"{pct(s['worst_gamma'], 3)} ({s['method']})", s["better"] or "–",

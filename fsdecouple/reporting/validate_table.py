@@ -25,6 +25,14 @@ def _abs(value: float | None) -> str:
     return NO_FIGURE if value is None else f"{value:.4g}"
 
 
+def _initial(how: str | None) -> str:
+    """The legend's words on the initial rows: none for an imported factory matrix."""
+    if how is None:
+        return ""
+    gauges = " (the least-squares loads of the gauges)" if how == "f = P u" else ""
+    return f"; initial: {how}{gauges}"
+
+
 def validation_renderables(doc: dict[str, Any], output=None, *, as_json: bool = False) -> list:
     """Everything ``fsdecouple validate`` prints, as (to_stderr, renderable) pairs.
 
@@ -67,9 +75,8 @@ def validation_renderables(doc: dict[str, Any], output=None, *, as_json: bool = 
                    if mixed else f"in {unit}: the same fraction of the largest full scale")
         out.append((False, Text(
             "model: the model file's method; linear: the least-squares matrix f = C u fitted on "
-            f"the same calibration; initial: {doc.get('initial', 'f = u / k')}"
-            f"{' (the least-squares loads of the gauges)' if doc.get('initial') == 'f = P u' else ''}"
-            ". gamma: eq. (12) on each loaded axis's "
+            f"the same calibration{_initial(doc.get('initial', 'f = u / k'))}. gamma: eq. (12) "
+            "on each loaded axis's "
             "points; max, RMS: |f_c - F_c| / F_c(FS) over those points and every component c; "
             f"{in_unit}. n: the points behind each figure ('{NO_FIGURE}': no loaded point, no "
             "figure). calibrated: every output within the calibrated range +/- 1 % of its span.")))

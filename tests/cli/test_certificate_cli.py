@@ -261,3 +261,21 @@ def test_certificate_drift_from_compare_json(fitted, sim_dir, tmp_path):
     bad.write_text("{}")
     r = invoke(["certificate", fitted, sim_dir / "calibration", "--drift", bad], 2)
     assert_one_line_error(r, "bad.json", "compare --json")
+
+
+@pytest.mark.slow  # over ~0.8 s of CPU: the not-slow run stays under a minute
+def test_a_control_character_of_the_sensor_is_escaped_in_the_pdf_and_html(fitted, sim_dir):
+    """The HTML's <h1> and <title> and the PDF's paragraphs took a sensor's ESC raw."""
+    import io
+
+    from pypdf import PdfReader
+
+    from fsdecouple.reporting.certificate_file import certificate_bytes
+
+    doc = json.loads(invoke(["certificate", fitted, sim_dir / "calibration", "--json"]).stdout)
+    doc["sensor"] = "rig\x1b[2J"
+    html = certificate_bytes(doc, "c.html").decode("utf-8")
+    assert "\x1b" not in html and "<title>Calibration certificate: rig\\x1b[2J</title>" in html
+    reader = PdfReader(io.BytesIO(certificate_bytes(doc, "c.pdf")))
+    text = " ".join(page.extract_text() for page in reader.pages)
+    assert "\x1b" not in text and "rig\\x1b[2J" in text

@@ -112,7 +112,7 @@ def test_fit_of_a_simulate_folder_points_to_its_calibration(tmp_path):
     (out / "task_forces.csv").write_bytes((SAMPLE / "task_forces.csv").read_bytes())
     r = invoke(["fit", out, "-o", tmp_path / "m.json"], 2)
     assert_one_line_error(r, "task_forces.csv", f"the calibration is in {out / 'calibration'}: "
-                          "fit that directory")
+                          "give that directory")
     assert "fsdecouple init" not in r.stderr and not (tmp_path / "m.json").exists()
 
 
@@ -125,4 +125,4 @@ def test_the_tables_of_an_m_gt_n_fit_say_what_their_numbers_are(gauges_model):
     out = " ".join(r.stdout.split())
     rows = [line for line in r.stdout.splitlines() if line.startswith("│") and "[N" in line][:6]
     assert rows and all(line.split("│")[2].strip() == "1" for line in rows), rows
-    assert "merges the 8 gauges' SVRs" in out
+    assert "merges the 8 gauges' SVRs" in out and "zero offsets:" in out  # caption kept

@@ -181,7 +181,7 @@ def test_c_header_of_an_imported_matrix(tmp_path):
 def test_export_of_an_imported_matrix_calls_it_the_factorys(tmp_path):
     invoke(["import", FIXTURES / "FT_nano_like.cal", "-o", tmp_path / "f.json"])
     r = invoke(["export", tmp_path / "f.json", "-o", tmp_path / "f.h"])
-    assert "the factory calibration matrix f = C u" in r.stdout and "least-squares" not in r.stdout
+    assert "the factory calibration matrix f = W u" in r.stdout and "least-squares" not in r.stdout
 
 
 @needs_cc

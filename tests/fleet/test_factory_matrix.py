@@ -59,6 +59,10 @@ def test_validate_scores_the_factory_matrix_on_the_users_set(lab, tmp_path):
     r = invoke(["validate", d / "factory.json", d / "set", "--json"])
     doc = json.loads(r.stdout)
     assert {rec["method"] for rec in doc["records"]} == {"model"}  # nothing fitted beside it
+    # its thermistor-less 6 x 6 W has no initial rows, and the legend says none (the
+    # key said "f = P u" for a thermistor's seventh output, read as M > N gauges)
+    assert doc["initial"] is None
+    assert "initial:" not in invoke(["validate", d / "factory.json", d / "set"]).stdout
     for a, axis in enumerate(factory.layout.labels):
         f = np.zeros((11, 6))
         f[:, a] = np.linspace(-1, 1, 11) * fs[a]

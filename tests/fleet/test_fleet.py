@@ -279,9 +279,11 @@ def test_the_fleet_table_gives_each_slope_its_unit_where_they_differ():
            "units": {"load": "N / N·m", "output": "V", "k": {"fx": "V/N", "mx": "V/N·m"}}}
     three = {**base, "k": {"x": 0.01, "y": 0.02},
              "units": {"load": "N", "output": "V", "k": {"x": "V/N", "y": "V/N"}}}
-    doc = {"sensors_dir": "a", "models_dir": "b", "sensors": [six, three]}
+    gauges = {**base, "k": {"fx": 1.0, "mx": 1.0},  # M > N: k of v = P u, a pure number
+              "units": {"load": "N / N·m", "output": "count", "k": {"fx": "", "mx": ""}}}
+    doc = {"sensors_dir": "a", "models_dir": "b", "sensors": [six, three, gauges]}
     ks = [row for row in fleet_table(doc).columns[1]._cells]
-    assert ks == ["0.01 V/N, 0.5 V/N·m", "0.01, 0.02 V/N"]
+    assert ks == ["0.01 V/N, 0.5 V/N·m", "0.01, 0.02 V/N", "1, 1"]
 
 
 @pytest.fixture

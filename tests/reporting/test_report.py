@@ -484,3 +484,6 @@ def test_report_links_the_certificate_it_is_given(tmp_path, sample_model, unrend
     r = invoke(["report", sample_model, "-o", tmp_path / "r.html", "--certificate",
                 tmp_path / "cert.txt"], 2)
     assert "--certificate" in r.stderr and not (tmp_path / "r.html").exists()
+    r = invoke(["report", sample_model, "-o", tmp_path / "r.html", "--certificate",
+                tmp_path / "r.html"], 2)  # the report linking itself
+    assert "is the report's own file" in r.stderr and not (tmp_path / "r.html").exists()
