@@ -415,8 +415,12 @@ def show(doc: dict, table, json_out: bool) -> None:
         console.print(table(doc))
 
 
+_stopped_by: list[int] = []  # the signal that stopped the command, once one has
+
+
 def _terminate(signum, frame) -> None:
     # SIGTERM (kill, CI timeouts) unwinds like Ctrl-C, so temporary files are removed
+    _stopped_by.append(signum)
     raise SystemExit(128 + signum)
 
 
@@ -444,7 +448,14 @@ def main() -> None:
     except SystemExit as stop:
         code = stop.code
     except OSError as err:  # a usage error's or a gate's line on a full or closed stderr
-        code = _cannot_write(err)
+        code = _cannot_write(err) if not _stopped_by else 128 + _stopped_by[0]
+    except BaseException:
+        # the SystemExit the handler raised can come back as another exception, when it
+        # was raised inside a library's callback into Python: a stop is still a stop (once
+        # exit 1 with a traceback); the unwinding ran every finally block all the same
+        if not _stopped_by:
+            raise
+        code = 128 + _stopped_by[0]
     if code in (128 + signal.SIGINT, 128 + signal.SIGTERM):
         # stopped: every finally block has run (temporary files removed); threads still
         # inside libsvm or a thread pool's job are not waited for

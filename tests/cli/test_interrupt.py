@@ -220,3 +220,33 @@ def test_ctrl_c_stops_pytest_while_a_command_runs_in_process(tmp_path):
     assert proc.returncode == 2, out[-3000:]  # pytest's ExitCode.INTERRUPTED
     assert "KeyboardInterrupt" in out and mark.read_text() == "0", out[-3000:]
     assert "failed" not in out and "passed" not in out, out[-3000:]
+
+
+def test_a_stop_that_a_library_turned_into_another_exception_is_still_143(monkeypatch):
+    """SIGTERM's handler raises SystemExit(143) wherever Python runs; raised inside a
+    library's callback into Python it can come back as another exception, and the command
+    once ended with exit 1 and a traceback (a CI run's test above).  A stop is a stop."""
+    import importlib
+
+    app = importlib.import_module("fsdecouple.cli.app")  # the module: the package's 'app' is typer's
+
+    def stopped_then_wrapped():
+        try:
+            app._terminate(signal.SIGTERM, None)
+        except SystemExit as stop:
+            raise RuntimeError("a library's wrapping of the exit") from stop
+
+    exits = []
+    monkeypatch.setattr(app, "_stopped_by", [])
+    monkeypatch.setattr(app, "_run", stopped_then_wrapped)
+    monkeypatch.setattr(app.os, "_exit", exits.append)
+    monkeypatch.setattr(app.signal, "signal", lambda *a: None)  # the suite's own handlers stay
+    monkeypatch.setattr(app.gc, "freeze", lambda: None)  # the suite's objects stay collectable
+    with pytest.raises(SystemExit):  # os._exit patched: main goes on to its own exit
+        app.main()
+    assert exits == [143]
+    # without a stop, such an exception is not hidden
+    monkeypatch.setattr(app, "_stopped_by", [])
+    monkeypatch.setattr(app, "_run", lambda: (_ for _ in ()).throw(RuntimeError("a bug")))
+    with pytest.raises(RuntimeError, match="a bug"):
+        app.main()
