@@ -47,7 +47,7 @@ def test_interrupted_apply_keeps_previous_output(tmp_path, big_log, sig):
         time.sleep(0.02)
     proc.send_signal(sig)
     _, err = proc.communicate(timeout=60)
-    assert proc.returncode == {signal.SIGINT: 130, signal.SIGTERM: 143, signal.SIGKILL: -9}[sig]
+    assert proc.returncode == {signal.SIGINT: 130, signal.SIGTERM: 143, signal.SIGKILL: -9}[sig], err
     assert out.read_bytes() == b"the previous result\n"
     assert b"Traceback" not in err, err.decode()
     left = sorted(p.name for p in tmp_path.iterdir())
