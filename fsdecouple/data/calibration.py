@@ -62,6 +62,9 @@ class CalibrationSet:
     temperature_fit: Any = None
     # soak files (every load zero, temperature varying): rows for the offset drift b_i only
     soak: pd.DataFrame | None = None
+    # the settings the set was read with (load_calibration): what fit and run_cv use when
+    # given none, so a lab's gram-force set is not fitted as the paper's sensor in newtons
+    settings: Any = None
 
     @property
     def source(self) -> str:
@@ -311,7 +314,7 @@ def load_calibration(path: str | Path, settings: Settings, exclude=(),
     cs = from_table(table, settings, read.files, [*read.skipped, *dropped], combined)
     hidden = tuple(f"{f}: hidden file, not read as a repetition" for f in read.hidden)
     hidden += read.warnings
-    cs = replace(cs, excluded=tuple(dropped), noise=read.noise)
+    cs = replace(cs, excluded=tuple(dropped), noise=read.noise, settings=settings)
     return replace(cs, warnings=hidden + cs.warnings) if hidden else cs
 
 

@@ -40,7 +40,8 @@ def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
     calib : CalibrationSet or path
         The calibration (:func:`fsdecouple.load_calibration`), or a path to read it from.
     settings : Settings, optional
-        The configuration (:func:`fsdecouple.load_config`); default: the built-in one.
+        The configuration (:func:`fsdecouple.load_config`); default: the one ``calib``
+        was read with (:func:`fsdecouple.load_calibration`), else the built-in one.
     method : {'svr', 'linear', 'auto'}, optional
         What the model decouples by (``--method``): the coupling error model (eq. 11,
         the paper's), the least-squares calibration matrix, or whichever has the lower
@@ -72,7 +73,7 @@ def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
     from ..data.calibration import CalibrationSet, load_calibration
     from ..errors import InputError
 
-    settings = settings or Settings()
+    settings = settings or getattr(calib, "settings", None) or Settings()
     note = None
     if method is None and settings.method == "auto" and not verdict:
         # the config's auto (init writes it for poses) with the verdict turned off here:

@@ -215,7 +215,7 @@ def _refuse_beyond(values: np.ndarray, scale: float, path, columns) -> None:
 
 def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, workers, repeats,
             progress, protocol, tune=False, tune_grid=None) -> dict[str, Any]:
-    settings = settings or Settings()
+    settings = settings or getattr(calib, "settings", None) or Settings()  # as fit's
     settings.layout.one_output_each("cv")
     if not isinstance(calib, CalibrationSet):
         calib = load_calibration(calib, settings)

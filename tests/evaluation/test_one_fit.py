@@ -149,3 +149,20 @@ def test_a_stated_solver_tolerance_is_obeyed_in_the_verdict_too(monkeypatch, api
     _, rule, own = api_fit
     assert len(rule) == 24 and rule.count(own) >= 6 and 2e-3 not in rule
     assert all(0 < t <= TABLE2_TOLERANCE for t in rule)
+
+
+def test_a_set_is_fitted_with_the_settings_it_was_read_with():
+    """`fsdecouple.fit(calib)` of a lab set read with its config fitted it as the paper's
+    sensor (N and V, full scale 100/100/150, no scaling): forces about 2 % F.S. off, in
+    silence. The set keeps the settings it was read with, and fit and run_cv default to
+    them; a settings argument still overrides."""
+    settings = fsdecouple.load_config(ROOT / "configs" / "loadcell.yaml")
+    calib = fsdecouple.load_calibration(SAMPLE / "loadcell" / "calibration.csv", settings)
+    assert calib.settings == settings
+    implicit = fsdecouple.fit(calib, verdict=False, workers=1)
+    explicit = fsdecouple.fit(calib, settings, verdict=False, workers=1)
+    assert implicit.settings == explicit.settings and implicit.settings.units.load == "gf"
+    u = calib.voltages[:5]
+    np.testing.assert_array_equal(implicit.decouple(u), explicit.decouple(u))
+    paper = fsdecouple.fit(calib, fsdecouple.load_config(), verdict=False, workers=1)
+    assert paper.settings.units.load == "N"  # what the caller writes is obeyed
