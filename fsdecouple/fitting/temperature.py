@@ -223,6 +223,8 @@ def compensate(calib: CalibrationSet, settings) -> tuple[CalibrationSet, Tempera
         note = (f"the calibration's temperatures span {np.ptp(t):.3g} K (from {t.min():.4g} to "
                 f"{t.max():.4g} degC), less than {MIN_SPAN:g} K between two temperatures: no "
                 "temperature terms fitted")
+        if note in calib.warnings:  # judged already (fit compensates, then establish)
+            return calib, None
         return replace(calib, warnings=(*calib.warnings, note)), None
     found = replace(found, heldout=heldout(calib, settings, found))
     points = corrected_points(calib, found.terms, found.offset_t0)
