@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -222,6 +223,25 @@ def _model_from_dict(doc: Any, source: str, computed: str | None = None) -> Coup
     _check_tables(model, source)
     _check_intervals(model, source)
     return model
+
+
+def unloadable_certificate(model: CouplingErrorModel) -> str | None:
+    """Why this model's certificate data would be refused when its file loads, or None:
+    ``fit`` asks before it writes, so it never writes a file its reader refuses."""
+    cert = model.report.certificate if model.report is not None else None
+    if not cert:
+        return None
+    problem = _certificate_problem(cert, model.layout.labels, model.settings.full_scale)
+    if problem:
+        return problem
+    try:
+        _check_intervals(model, "")
+    except ModelFileError as err:
+        text = str(err).removeprefix(": ")
+        # the check's detail, without the reader's "damaged ...; refit" frame
+        inner = re.search(r"damaged \((.*)\); refit", text)
+        return inner.group(1) if inner else text
+    return None
 
 
 def _check_intervals(model: CouplingErrorModel, source: str) -> None:

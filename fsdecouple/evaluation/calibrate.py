@@ -111,6 +111,7 @@ def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
 
 def _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress):
     from ..core.metrics import interference_errors
+    from ..core.modelfile import unloadable_certificate
     from ..errors import InputError
     from ..fitting.fit import fit as establish
     from ..fitting.linear import fit_calibration_matrix
@@ -169,6 +170,13 @@ def _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress):
             model.report.certificate = certificate_data(calib, model,
                                                         *found["predictions"][chosen], found["trained"],
                                                         found["centred"][chosen])
+            problem = unloadable_certificate(model)
+            if problem:  # e.g. a calibration without reading noise: no file its reader refuses
+                model.report.certificate = None
+                model.report.warnings.append(
+                    f"no certificate data and no intervals (certificate, compare's E_n, apply "
+                    f"--interval): what they would hold cannot be calibrated here ({problem}); "
+                    "a calibration without reading noise?")
         warning = verdict_warning(found, chosen)
         if warning:
             model.report.warnings.append(warning)
