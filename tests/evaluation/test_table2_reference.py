@@ -93,3 +93,16 @@ def test_cv_with_the_papers_config_is_the_papers_algorithm(tmp_path):
         for rec in (r for r in records if r["round"] == rnd):
             want = ref[(int(rec["test_set"]), rec["axis"])]
             assert rec["value"] == pytest.approx(want, abs=AGREE), (rnd, rec, want)
+
+
+def test_the_papers_config_writes_the_papers_eq_11():
+    """configs/paper-sensor.yaml says that with it fsdecouple runs the paper's algorithm;
+    it left extrapolation to the default, tangent, so a chi beyond its calibrated inputs
+    was not eq. (10)'s kernel sum (0.26 N apart on a log 1.3 times the sample's loads)."""
+    from conftest import ROOT
+
+    from fsdecouple.config import load_config
+
+    s = load_config(ROOT / "configs" / "paper-sensor.yaml")
+    assert (s.extrapolation, s.refine, s.zero) == ("kernel", 0, "rows")
+    assert (s.svr.C, s.svr.epsilon, s.svr.gamma, s.svr.tolerance) == (1000, 1e-4, 0.5, 1e-3)
