@@ -140,7 +140,11 @@ def fit(
             console.print(tune_table(model.report.tune, model.settings.load_unit))
         for t in [*fit_tables(model), fit_checks_table(checks)]:
             console.print(t)
-        console.print(_refine_line(advice, settings.refine))
+        if model.method == "linear":  # the matrix decouples: eq. (11)'s refinement is moot
+            console.print("second-order coupling error (eq. 6): not used; the model decouples "
+                          "by the least-squares calibration matrix")
+        else:
+            console.print(_refine_line(advice, settings.refine))
         if model.report.verdict is not None:
             console.print(verdict_line(model.report.verdict))
         console.print(f"model written to {printable(output)} (decouples by {model.method})")

@@ -165,8 +165,11 @@ def fit_tables(model) -> list:
         c.caption += (f"; support vectors / points: a chi of the loads merges the "
                       f"{model.n_outputs} gauges' SVRs, so it holds more vectors than the points "
                       "each was fitted on")
-    g = Table(title="Interference error gamma (eq. 12) on the calibration data, % F.S.")
-    for col in ("loaded axis", "before (omega^-1 only)", "after (eq. 11)"):
+    linear = getattr(model, "method", "svr") == "linear"  # decouples by the matrix f = C u
+    g = Table(title="Interference error gamma (eq. 12) on the calibration data, % F.S."
+              + ("; the model decouples by the least-squares calibration matrix" if linear else ""))
+    for col in ("loaded axis", "before (omega^-1 only)",
+                "after (the matrix f = C u)" if linear else "after (eq. 11)"):
         g.add_column(col, justify="right")
     for axis in layout.labels:
         before, after = rep.gamma_before.get(axis), rep.gamma_after.get(axis)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from conftest import FAST_SVR, SAMPLE, assert_one_line_error, invoke
+from conftest import FAST_CONFIG, FAST_SVR, SAMPLE, assert_one_line_error, invoke
 
 
 @pytest.fixture(scope="module")
@@ -126,3 +126,16 @@ def test_the_tables_of_an_m_gt_n_fit_say_what_their_numbers_are(gauges_model):
     rows = [line for line in r.stdout.splitlines() if line.startswith("│") and "[N" in line][:6]
     assert rows and all(line.split("│")[2].strip() == "1" for line in rows), rows
     assert "merges the 8 gauges' SVRs" in out and "zero offsets:" in out  # caption kept
+
+
+def test_a_linear_model_says_it_decouples_by_the_matrix(tmp_path):
+    """`fit --method linear`: the gamma column was headed 'after (eq. 11)' over the matrix's
+    figures, `show` never said the model decouples by the matrix, and fit recommended
+    '--tune --refine', which a matrix does not use."""
+    r = invoke(["fit", SAMPLE / "calibration", "-o", tmp_path / "m.json", "--method", "linear",
+                "--no-verdict", "-c", FAST_CONFIG])
+    for out in (r.stdout, invoke(["show", tmp_path / "m.json"]).stdout):
+        text = " ".join(out.split())
+        assert "after (the matrix f = C u)" in text and "after (eq. 11)" not in text
+        assert "the model decouples by the least-squares calibration matrix" in text
+    assert "--refine" not in r.stdout and "--tune" not in r.stdout
