@@ -280,6 +280,10 @@ def gamma_table(doc: dict[str, Any], records=None, title=None, clean=None) -> Ta
     setattr(t, KEY_COLUMNS, 2)  # a narrow terminal's parts repeat round and test (narrow.py)
     cell_width = 5 if ref is not None else 4
     axes = labels_in(doc["records"] if records is None else records)
+    # in the sensor's order: under the levels protocol the first round may hold out only
+    # the sweep with the most levels (z), which put its column first
+    order = list((doc.get("settings") or {}).get("full_scale") or {})
+    axes.sort(key=lambda a: order.index(a) if a in order else len(order))
     for m in doc["methods"]:
         for a in axes:
             # the method names its column group once, over its first gamma column

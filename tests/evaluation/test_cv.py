@@ -356,3 +356,16 @@ def test_a_stated_tolerance_is_obeyed_by_cv_as_by_the_verdict(doc, calib, settin
     _agree(got, heldout_verdict(calib, stated, workers=2))
     # and the rule's tolerance (doc's) is not the stated one: the figures differ
     assert _svr_gamma_by_axis(got["records"]) != _svr_gamma_by_axis(doc["records"])
+
+
+def test_the_gamma_table_keeps_the_sensors_axis_order():
+    """Under the levels protocol the first round may hold out only the sweep with the most
+    levels (z): its column came first (gamma_z, gamma_x, gamma_y)."""
+    from fsdecouple.reporting.console import gamma_table
+
+    records = [{"axis": a, "method": "svr", "metric": "gamma", "round": r, "test_set": r,
+                "value": 0.001} for r, axes in ((1, "z"), (2, "zxy")) for a in axes]
+    doc = {"records": records, "methods": ["svr"], "protocol": "levels", "folds": [[], []],
+           "settings": {"full_scale": {"x": 100.0, "y": 100.0, "z": 150.0}}}
+    heads = [c.header.split("\n")[-1] for c in gamma_table(doc).columns[2:]]
+    assert heads == ["γx", "γy", "γz"]
