@@ -174,9 +174,9 @@ def _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress):
             if problem:  # e.g. a calibration without reading noise: no file its reader refuses
                 model.report.certificate = None
                 model.report.warnings.append(
-                    f"no certificate data and no intervals (certificate, compare's E_n, apply "
-                    f"--interval): what they would hold cannot be calibrated here ({problem}); "
-                    "a calibration without reading noise?")
+                    f"no certificate data and no intervals (the certificate, compare's E_n, "
+                    f"apply's intervals): what they would hold cannot be calibrated here "
+                    f"({problem}); a calibration without reading noise?")
         warning = verdict_warning(found, chosen)
         if warning:
             model.report.warnings.append(warning)
