@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import csv
 import errno
 import os
 import re
@@ -30,9 +31,50 @@ def reading(path: str | Path, what: str = "a CSV file", *, noun: str = "",
         raise error(f"{name}: is a directory, expected {what}") from None
     except UnicodeDecodeError:
         why = "not a UTF-8 text file"
+        where_ = _first_non_utf8(path)
+        if where_ and not noun:  # a spreadsheet's Latin-1 export of 'Temp [°C]': say where
+            raise error(f"{name}, {where_} is not UTF-8 text; save the file as UTF-8 (a "
+                        "spreadsheet's 'CSV UTF-8')") from None
         raise error(f"{name}: cannot read {noun} ({why})" if noun else f"{name}: {why}") from None
     except OSError as err:
         raise error(f"{name}: cannot read {kind}({err.strerror})") from None
+
+
+def _first_non_utf8(path: str | Path, limit: int = 64 << 20) -> str | None:
+    """``row R, column 'C': 'cell'`` of the first byte of a regular file (up to ``limit``
+    bytes) that is not UTF-8, the column by the header's names (',' or ';' separated);
+    None when it cannot be said."""
+    try:
+        p = Path(path)
+        if not p.is_file():
+            return None
+        with p.open("rb") as fh:
+            body = fh.read(limit)
+        body.decode("utf-8")
+        return None
+    except UnicodeDecodeError as err:
+        pos = err.start
+    except OSError:
+        return None
+    if body[:2] in (b"\xff\xfe", b"\xfe\xff") or b"\x00" in body[:4096]:
+        return None  # UTF-16 or binary: no cell to name, the file is the matter
+    start, end = body.rfind(b"\n", 0, pos) + 1, body.find(b"\n", pos)
+    line = body[start:len(body) if end < 0 else end].removesuffix(b"\r")
+    head = body.split(b"\n", 1)[0].removesuffix(b"\r").decode("utf-8", "backslashreplace")
+    sep = ";" if head.count(";") > head.count(",") else ","
+    names = next(csv.reader([head], delimiter=sep), [])
+    cells = next(csv.reader([line.decode("latin-1")], delimiter=sep), [])
+    offset, column, cell = start, None, line.decode("utf-8", "backslashreplace")
+    for j, c in enumerate(cells):  # the cell holding the byte, by its position
+        width = len(c.encode("latin-1")) + 1
+        if offset <= pos < offset + width:
+            column = names[j] if j < len(names) else None
+            cell = c.encode("latin-1").decode("utf-8", "backslashreplace")
+            break
+        offset += width
+    row = body.count(b"\n", 0, pos) + 1
+    shown = printable(cell)[:60]
+    return f"row {row}" + (f", column '{printable(column)}'" if column else "") + f": '{shown}'"
 
 
 # A FIFO (named pipe) given as an input waits this long for its first bytes, then is

@@ -135,7 +135,26 @@ def test_a_non_utf8_header_is_refused(tmp_path, sample_model):
     log = tmp_path / "log.csv"
     log.write_bytes(b"t,ux,uy,uz,temp \xb0C\n" + b"0,0.01,0.01,0.01,20\n")
     r = invoke(["apply", sample_model, log, "-o", tmp_path / "f.csv"], code=2)
-    assert_one_line_error(r, "log.csv", "not a UTF-8 text file")
+    # the row, the column and the cell are named (it said the file alone)
+    assert_one_line_error(r, "log.csv, row 1, column 'temp \\xb0C': 'temp \\xb0C' is not UTF-8 text")
+
+
+def test_a_non_utf8_calibration_cell_is_named_by_row_and_column(tmp_path):
+    """A spreadsheet's Latin-1 export (a date column's 'été'): the whole file was refused
+    as 'not a UTF-8 text file', naming no row or column."""
+    from conftest import SAMPLE
+
+    cal = tmp_path / "cal"
+    cal.mkdir()
+    for r in range(1, 7):
+        (cal / f"rep{r}.csv").write_bytes((SAMPLE / "calibration" / f"rep{r}.csv").read_bytes())
+    lines = (cal / "rep3.csv").read_bytes().split(b"\n")
+    lines[0] += b",note"
+    lines[4] += b",\xe9t\xe9"
+    (cal / "rep3.csv").write_bytes(b"\n".join(lines))
+    r = invoke(["fit", cal, "-o", tmp_path / "m.json"], code=2)
+    assert_one_line_error(r, "rep3.csv, row 5, column 'note': '\\xe9t\\xe9' is not UTF-8 text")
+    assert not (tmp_path / "m.json").exists()
 
 
 def test_a_non_utf8_voltage_is_a_bad_number_not_a_crash(tmp_path, sample_model):
