@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import csv
 import errno
 import os
 import re
@@ -42,39 +41,70 @@ def reading(path: str | Path, what: str = "a CSV file", *, noun: str = "",
 
 def _first_non_utf8(path: str | Path, limit: int = 64 << 20) -> str | None:
     """``row R, column 'C': 'cell'`` of the first byte of a regular file (up to ``limit``
-    bytes) that is not UTF-8, the column by the header's names (',' or ';' separated);
-    None when it cannot be said."""
+    bytes) that is not UTF-8; None when it cannot be said (UTF-16, binary, unreadable)."""
     try:
         p = Path(path)
         if not p.is_file():
             return None
         with p.open("rb") as fh:
             body = fh.read(limit)
+    except OSError:
+        return None
+    return non_utf8_cell(body, truncated=len(body) == limit)
+
+
+def non_utf8_cell(body: bytes, sep: str | None = None, truncated: bool = False) -> str | None:
+    """Where in ``body`` (a CSV file's bytes from its header) the first byte that is not
+    UTF-8 lies: ``row R, column 'C': 'cell'``, or None (valid, UTF-16 or binary).
+
+    The line is split on ``sep`` (else the header's most frequent of , ; and tab) outside
+    double quotes, byte by byte, so a quoted field's separators and doubled quotes do not
+    shift the cell named.  ``truncated``: ``body`` is a file's first bytes only."""
+    try:
         body.decode("utf-8")
         return None
     except UnicodeDecodeError as err:
+        if truncated and err.reason == "unexpected end of data":
+            return None  # the read was cut inside a character
         pos = err.start
-    except OSError:
-        return None
     if body[:2] in (b"\xff\xfe", b"\xfe\xff") or b"\x00" in body[:4096]:
         return None  # UTF-16 or binary: no cell to name, the file is the matter
-    start, end = body.rfind(b"\n", 0, pos) + 1, body.find(b"\n", pos)
+
+    def fields(line: bytes, at: int = -1) -> tuple[list[bytes], int, int]:
+        """The line's cells, the index of the one holding byte ``at`` and that byte's
+        offset in it."""
+        out, cell, quoted, index, offset = [], bytearray(), False, -1, 0
+        for i, c in enumerate(line):
+            if i == at:
+                index, offset = len(out), len(cell)
+            if c == 0x22:
+                quoted = not quoted
+            elif c == ord(delim) and not quoted:
+                out.append(bytes(cell))
+                cell = bytearray()
+                continue
+            cell.append(c)
+        out.append(bytes(cell))
+        return out, index, offset
+
+    head = body.split(b"\n", 1)[0].removesuffix(b"\r")
+    delim = sep or max((",", ";", "\t"), key=lambda d: head.count(d.encode()))
+    start = body.rfind(b"\n", 0, pos) + 1
+    end = body.find(b"\n", pos)
     line = body[start:len(body) if end < 0 else end].removesuffix(b"\r")
-    head = body.split(b"\n", 1)[0].removesuffix(b"\r").decode("utf-8", "backslashreplace")
-    sep = ";" if head.count(";") > head.count(",") else ","
-    names = next(csv.reader([head], delimiter=sep), [])
-    cells = next(csv.reader([line.decode("latin-1")], delimiter=sep), [])
-    offset, column, cell = start, None, line.decode("utf-8", "backslashreplace")
-    for j, c in enumerate(cells):  # the cell holding the byte, by its position
-        width = len(c.encode("latin-1")) + 1
-        if offset <= pos < offset + width:
-            column = names[j] if j < len(names) else None
-            cell = c.encode("latin-1").decode("utf-8", "backslashreplace")
-            break
-        offset += width
+    names, _, _ = fields(head)
+    cells, j, offset = fields(line, pos - start)
+
+    def text(b: bytes, at: int = 0) -> str:
+        """At most 60 characters of ``b``, around its byte ``at`` (the one not UTF-8)."""
+        lo = max(0, min(at - 30, len(b) - 60))
+        part = printable(b[lo:lo + 60].decode("utf-8", "backslashreplace").strip('"'))
+        return ("..." if lo else "") + part + ("..." if lo + 60 < len(b) else "")
+
+    column = text(names[j]) if 0 <= j < len(names) else None
+    cell = text(cells[j], offset) if 0 <= j < len(cells) else text(line, pos - start)
     row = body.count(b"\n", 0, pos) + 1
-    shown = printable(cell)[:60]
-    return f"row {row}" + (f", column '{printable(column)}'" if column else "") + f": '{shown}'"
+    return f"row {row}" + (f", column '{column}'" if column else "") + f": '{cell}'"
 
 
 # A FIFO (named pipe) given as an input waits this long for its first bytes, then is

@@ -228,3 +228,35 @@ def sample_model_obj(sample_model):
     from fsdecouple import load_model
 
     return load_model(sample_model)  # the suite's sample fit
+
+
+@pytest.mark.parametrize(("body", "said"), [
+    (b'note,b,c\n"x,y",\xe9,z', "row 2, column 'b': '\\xe9'"),  # a quoted separator
+    (b'a,note,c\n"he said ""hi""",\xe9t\xe9,z', "row 2, column 'note': '\\xe9t\\xe9'"),
+    (b"a\tb\tc\n1\t2\t\xe9", "row 2, column 'c': '\\xe9'"),  # tab-separated, at the end
+    (b"t,ux,temp \xb0C," + b"x" * 200_000 + b"\n1,2", "row 1, column 'temp \\xb0C'"),  # a huge field
+])
+def test_the_cell_of_a_byte_that_is_not_utf8_is_found_by_its_bytes(body, said):
+    """A quoted field's separators shifted the cell named; a tab file named the whole line;
+    a field beyond csv's size limit raised a traceback instead of the message."""
+    from fsdecouple.files.inputs import non_utf8_cell
+
+    assert non_utf8_cell(body).startswith(said)
+
+
+def test_a_non_utf8_byte_deep_in_a_calibration_file_is_named_too(tmp_path):
+    """Bytes past the header's first chunk were refused by pandas as 'not a UTF-8 text
+    file', naming no row or column."""
+    from conftest import SAMPLE
+
+    cal = tmp_path / "cal"
+    cal.mkdir()
+    for r in range(1, 7):
+        (cal / f"rep{r}.csv").write_bytes((SAMPLE / "calibration" / f"rep{r}.csv").read_bytes())
+    lines = (cal / "rep3.csv").read_bytes().split(b"\n")
+    lines[0] += b",note"
+    lines[1:] = [line + b"," + b"y" * 300 if line else line for line in lines[1:]]
+    lines[70] = lines[70][:-3] + b"\xe9t\xe9"
+    (cal / "rep3.csv").write_bytes(b"\n".join(lines))
+    r = invoke(["fit", cal, "-o", tmp_path / "m.json"], code=2)
+    assert_one_line_error(r, "rep3.csv, row 71, column 'note': '...", "y\\xe9t\\xe9' is not UTF-8")
