@@ -437,6 +437,7 @@ def _cannot_write(err: OSError) -> int:
 
 
 def main() -> None:
+    _stopped_by.clear()  # a process may run the command more than once (tests, embedding)
     signal.signal(signal.SIGTERM, _terminate)
     # for the whole process, not only inside user_errors(): a pool's threads still running
     # after an error (cv --workers 2) warned on stderr once the error had restored the filters
@@ -455,6 +456,8 @@ def main() -> None:
         # exit 1 with a traceback); the unwinding ran every finally block all the same
         if not _stopped_by:
             raise
+        code = 128 + _stopped_by[0]
+    if _stopped_by:  # a stop handled as an error on its way out (exit 2, or 1) is a stop
         code = 128 + _stopped_by[0]
     if code in (128 + signal.SIGINT, 128 + signal.SIGTERM):
         # stopped: every finally block has run (temporary files removed); threads still

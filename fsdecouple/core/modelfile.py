@@ -225,6 +225,21 @@ def _model_from_dict(doc: Any, source: str, computed: str | None = None) -> Coup
     return model
 
 
+# the start of the warning fit leaves when it leaves the certificate data out
+LEFT_OUT = "no certificate data and no intervals"
+
+
+def why_no_certificate(model) -> str:
+    """Why a model has no certificate data, for the commands that need them: its fit left
+    them out (its warning says why: refitting the same data would not help), or it was
+    fitted by an older fsdecouple or without the held-out verdict."""
+    said = next((w for w in getattr(model, "warnings", None) or [] if w.startswith(LEFT_OUT)),
+                None)
+    if said:
+        return f"its fit left them out: {said.removeprefix(LEFT_OUT).lstrip(' (')}"
+    return "fitted by an older fsdecouple, or without the held-out verdict; refit it"
+
+
 def unloadable_certificate(model: CouplingErrorModel) -> str | None:
     """Why this model's certificate data would be refused when its file loads, or None:
     ``fit`` asks before it writes, so it never writes a file its reader refuses."""

@@ -111,7 +111,7 @@ def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
 
 def _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress):
     from ..core.metrics import interference_errors
-    from ..core.modelfile import unloadable_certificate
+    from ..core.modelfile import LEFT_OUT, unloadable_certificate
     from ..errors import InputError
     from ..fitting.fit import fit as establish
     from ..fitting.linear import fit_calibration_matrix
@@ -174,9 +174,9 @@ def _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress):
             if problem:  # e.g. a calibration without reading noise: no file its reader refuses
                 model.report.certificate = None
                 model.report.warnings.append(
-                    f"no certificate data and no intervals (the certificate, compare's E_n, "
-                    f"apply's intervals): what they would hold cannot be calibrated here "
-                    f"({problem}); a calibration without reading noise?")
+                    f"{LEFT_OUT} (the certificate, compare's E_n, apply's intervals): what they "
+                    f"would hold cannot be calibrated here ({problem}); a calibration without "
+                    "reading noise?")
         warning = verdict_warning(found, chosen)
         if warning:
             model.report.warnings.append(warning)

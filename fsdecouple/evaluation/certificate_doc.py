@@ -103,8 +103,10 @@ def _model_errors(model: CouplingErrorModel, axis: str, loads: np.ndarray, sourc
     data = (model.report.certificate or {}) if model.report is not None else {}
     steps = data.get("steps", {}).get(axis)
     if steps is None:
-        raise InputError(f"{source}: the model file has no certificate data (fitted by an older "
-                         "fsdecouple, or without the held-out verdict): refit it")
+        from ..core.modelfile import why_no_certificate
+
+        raise InputError(f"{source}: the model file has no certificate data "
+                         f"({why_no_certificate(model)})")
     known = dict(zip(steps["load"], steps["model_error"], strict=True))
     missing = [f for f in loads.tolist() if f not in known]
     if missing:

@@ -221,9 +221,10 @@ def half_widths(model, p: float, f: np.ndarray | None = None) -> np.ndarray:
                          "held-out residuals for it; decouple without intervals",
                          argument="interval")
     if not cal:
+        from ..core.modelfile import why_no_certificate
+
         raise InputError("intervals: the model file has no held-out residuals to calibrate "
-                         "intervals on (fitted by an older fsdecouple, or without the held-out "
-                         "verdict); refit it", argument="interval")
+                         f"intervals on ({why_no_certificate(model)})", argument="interval")
     labels = model.layout.labels
     check_interval_data(cal, labels)
     at_rows = f is not None

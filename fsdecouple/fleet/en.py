@@ -49,9 +49,11 @@ def en_figures(a: CouplingErrorModel, b: CouplingErrorModel, names=("old", "new"
     elif all(factory):
         return None, "both models are factory matrices with no stated uncertainty: no E_n"
     elif missing:
-        return None, (f"the {' and '.join(missing)} model file has no certificate data (fitted "
-                      "by an older fsdecouple, or with --no-verdict): no E_n; refit it, or gate "
-                      "by --max-drift")
+        from ..core.modelfile import why_no_certificate
+
+        model = a if sa is None else b
+        return None, (f"the {' and '.join(missing)} model file has no certificate data "
+                      f"({why_no_certificate(model)}): no E_n; gate by --max-drift")
     out, steps = {}, []
     for i, axis in enumerate(a.layout.labels):
         worst = 0.0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -245,8 +246,18 @@ def test_a_stop_that_a_library_turned_into_another_exception_is_still_143(monkey
     with pytest.raises(SystemExit):  # os._exit patched: main goes on to its own exit
         app.main()
     assert exits == [143]
-    # without a stop, such an exception is not hidden
-    monkeypatch.setattr(app, "_stopped_by", [])
+    # a stop that a command's error handling turned into exit 2 is a stop too
+    def stopped_then_handled():
+        with contextlib.suppress(SystemExit):
+            app._terminate(signal.SIGTERM, None)
+        return 2
+
+    exits.clear()
+    monkeypatch.setattr(app, "_run", stopped_then_handled)
+    with pytest.raises(SystemExit):
+        app.main()
+    assert exits == [143]
+    # without a stop, such an exception is not hidden (main starts with none recorded)
     monkeypatch.setattr(app, "_run", lambda: (_ for _ in ()).throw(RuntimeError("a bug")))
     with pytest.raises(RuntimeError, match="a bug"):
         app.main()

@@ -188,3 +188,9 @@ def test_a_noise_free_sensor_fits_into_a_file_every_command_loads(tmp_path):
     f = model.decouple(np.array([[0.5, 0.2, -0.4]]))
     np.testing.assert_allclose(f[0], np.array([0.5, 0.2, -0.4]) / k, rtol=1e-3)
     invoke(["apply", tmp_path / "m.json", SAMPLE / "task_voltages.csv", "-o", tmp_path / "f.csv"])
+    # what needs the data says the fit left them out, and why (not "refit it")
+    r = invoke(["apply", tmp_path / "m.json", SAMPLE / "task_voltages.csv", "-o",
+                tmp_path / "g.csv", "--interval", "0.95"], 2)
+    assert "its fit left them out" in r.stderr and "refit" not in r.stderr
+    r = invoke(["certificate", tmp_path / "m.json", cal], 2)
+    assert "its fit left them out" in r.stderr and "refit" not in r.stderr
