@@ -25,6 +25,17 @@ def test_name(i: int) -> str:
     return TEST_NAMES[i] if i < len(TEST_NAMES) else str(i + 1)
 
 
+def scored_axes(doc: dict[str, Any], records=None) -> list[str]:
+    """The components a cv document's records score, in the sensor's order (its settings'
+    full_scale): under the levels protocol the first round may hold out only the sweep with
+    the most levels (z), whose column then came first."""
+    from ..axes import labels_in
+
+    axes = labels_in(doc.get("records") if records is None else records)
+    order = list((doc.get("settings") or {}).get("full_scale") or {})
+    return sorted(axes, key=lambda a: order.index(a) if a in order else len(order))
+
+
 def gamma_index(records) -> dict[tuple, float]:
     """(round, test_set, method, axis) -> gamma of eq. (12), from cv.json records."""
     return {(r["round"], r["test_set"], r["method"], r["axis"]): r["value"]

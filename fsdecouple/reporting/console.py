@@ -19,7 +19,7 @@ from ..core.metrics import pct
 from ..data.guesses import Guess
 from ..data.guesses import shown as shown_name
 from ..errors import printable
-from ..evaluation.cv_results import gamma_index, test_name
+from ..evaluation.cv_results import gamma_index, scored_axes, test_name
 from ..fitting.joint import JOINT_C
 from ..units import Units, output_display
 from .narrow import KEY_COLUMNS
@@ -279,11 +279,7 @@ def gamma_table(doc: dict[str, Any], records=None, title=None, clean=None) -> Ta
                  no_wrap=True)
     setattr(t, KEY_COLUMNS, 2)  # a narrow terminal's parts repeat round and test (narrow.py)
     cell_width = 5 if ref is not None else 4
-    axes = labels_in(doc["records"] if records is None else records)
-    # in the sensor's order: under the levels protocol the first round may hold out only
-    # the sweep with the most levels (z), which put its column first
-    order = list((doc.get("settings") or {}).get("full_scale") or {})
-    axes.sort(key=lambda a: order.index(a) if a in order else len(order))
+    axes = scored_axes(doc, records)
     for m in doc["methods"]:
         for a in axes:
             # the method names its column group once, over its first gamma column
@@ -394,7 +390,7 @@ def gross_tables(doc: dict[str, Any]) -> list[Table]:
                  box=box.SIMPLE_HEAD, pad_edge=False)
     side.add_column("round")
     side.add_column("test (rep)")
-    axes = labels_in(doc["records"])
+    axes = scored_axes(doc)
     for label in ("clean", "moved"):
         for a in axes:
             side.add_column(f"{label if a == axes[0] else ''}\nγ{a}", justify="right")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from ..axes import labels_in, load_name
 from ..core.metrics import pct
-from ..evaluation.cv_results import gamma_index, test_name
+from ..evaluation.cv_results import gamma_index, scored_axes, test_name
 from .html import cell, note, table, th, tr, worse
 
 METHOD_NAMES = {"initial": "initial (ω⁻¹ only)", "linear": "linear matrix",
@@ -24,7 +24,7 @@ def cv_test_name(cv, rnd: int, test_set: int) -> str:
 
 def gamma_tables(cv) -> str:
     g = gamma_index(cv.get("records"))
-    labels = labels_in(cv.get("records"))  # the components scored
+    labels = scored_axes(cv)  # the components scored, in the sensor's order
     keys = sorted({(r, t) for r, t, _, _ in g})
     methods = [m for m in cv.get("methods", []) if any(k[2] == m for k in g)]
 
@@ -65,7 +65,7 @@ def gross_tables(cv) -> str:
                     "adds Table 5).")
     spec = ge.get("spec", {})
     clean, gross = gamma_index(cv.get("records")), gamma_index(ge.get("records"))
-    labels = labels_in(cv.get("records"))  # the components scored
+    labels = scored_axes(cv)  # the components scored, in the sensor's order
     keys = sorted({(r, t) for r, t, m, _ in gross if m == "svr"})
     rows = []
     for r, t in keys:

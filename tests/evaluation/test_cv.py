@@ -369,3 +369,7 @@ def test_the_gamma_table_keeps_the_sensors_axis_order():
            "settings": {"full_scale": {"x": 100.0, "y": 100.0, "z": 150.0}}}
     heads = [c.header.split("\n")[-1] for c in gamma_table(doc).columns[2:]]
     assert heads == ["γx", "γy", "γz"]
+    # the report's tables take the same order (evaluation.cv_results.scored_axes)
+    from fsdecouple.evaluation.cv_results import scored_axes
+
+    assert scored_axes(doc) == ["x", "y", "z"]
