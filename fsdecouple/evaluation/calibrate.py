@@ -73,7 +73,10 @@ def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
     from ..data.calibration import CalibrationSet, load_calibration
     from ..errors import InputError
 
-    settings = settings or getattr(calib, "settings", None) or Settings()
+    read_with = getattr(calib, "settings", None)
+    if settings is not None and read_with is not None:
+        _same_reading(read_with, settings)
+    settings = settings or read_with or Settings()
     note = None
     if method is None and settings.method == "auto" and not verdict:
         # the config's auto (init writes it for poses) with the verdict turned off here:
@@ -107,6 +110,24 @@ def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
     if note:
         model.report.warnings.append(note)
     return model
+
+
+# settings that decide what a calibration's numbers mean (evaluation.certificate_doc's too)
+READING = ("full_scale", "columns", "scale", "csv", "units", "components", "outputs")
+
+
+def _same_reading(read_with, settings) -> None:
+    """Refuse fitting a set with settings that read its numbers otherwise than it was read
+    (a gram-force set fitted in newtons): a ``fit(calib, other)`` that would be wrong in
+    silence."""
+    from ..errors import InputError
+
+    mine, theirs = read_with.to_dict(), settings.to_dict()
+    differ = [k for k in READING if mine.get(k) != theirs.get(k)]
+    if differ:
+        raise InputError(f"the calibration was read with other settings ({', '.join(differ)} "
+                         "differ from these): fit it with the settings it was read with, or "
+                         "read it again with these")
 
 
 def _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress):

@@ -164,8 +164,10 @@ def test_a_set_is_fitted_with_the_settings_it_was_read_with():
     assert implicit.settings == explicit.settings and implicit.settings.units.load == "gf"
     u = calib.voltages[:5]
     np.testing.assert_array_equal(implicit.decouple(u), explicit.decouple(u))
-    paper = fsdecouple.fit(calib, fsdecouple.load_config(), verdict=False, workers=1)
-    assert paper.settings.units.load == "N"  # what the caller writes is obeyed
+    # settings that read the numbers otherwise (newtons for gram-force) are refused, not
+    # obeyed into a wrong model
+    with pytest.raises(fsdecouple.FsdecoupleError, match="read with other settings"):
+        fsdecouple.fit(calib, fsdecouple.load_config(), verdict=False, workers=1)
 
 
 @pytest.mark.slow  # a fit with the held-out verdict: seconds of CPU
