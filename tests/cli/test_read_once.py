@@ -139,9 +139,9 @@ def test_a_non_utf8_header_is_refused(tmp_path, sample_model):
     assert_one_line_error(r, "log.csv, row 1, column 'temp \\xb0C': 'temp \\xb0C' is not UTF-8 text")
 
 
-def test_a_non_utf8_calibration_cell_is_named_by_row_and_column(tmp_path):
-    """A spreadsheet's Latin-1 export (a date column's 'été'): the whole file was refused
-    as 'not a UTF-8 text file', naming no row or column."""
+def _sample_with_a_note(tmp_path, edit):
+    """The sample set with a 'note' column added to rep3.csv, its lines then ``edit``ed
+    (bytes, header first); returns the set's directory."""
     from conftest import SAMPLE
 
     cal = tmp_path / "cal"
@@ -150,8 +150,18 @@ def test_a_non_utf8_calibration_cell_is_named_by_row_and_column(tmp_path):
         (cal / f"rep{r}.csv").write_bytes((SAMPLE / "calibration" / f"rep{r}.csv").read_bytes())
     lines = (cal / "rep3.csv").read_bytes().split(b"\n")
     lines[0] += b",note"
-    lines[4] += b",\xe9t\xe9"
+    edit(lines)
     (cal / "rep3.csv").write_bytes(b"\n".join(lines))
+    return cal
+
+
+def test_a_non_utf8_calibration_cell_is_named_by_row_and_column(tmp_path):
+    """A spreadsheet's Latin-1 export (a date column's 'été'): the whole file was refused
+    as 'not a UTF-8 text file', naming no row or column."""
+    def edit(lines):
+        lines[4] += b",\xe9t\xe9"
+
+    cal = _sample_with_a_note(tmp_path, edit)
     r = invoke(["fit", cal, "-o", tmp_path / "m.json"], code=2)
     assert_one_line_error(r, "rep3.csv, row 5, column 'note': '\\xe9t\\xe9' is not UTF-8 text")
     assert not (tmp_path / "m.json").exists()
@@ -247,16 +257,10 @@ def test_the_cell_of_a_byte_that_is_not_utf8_is_found_by_its_bytes(body, said):
 def test_a_non_utf8_byte_deep_in_a_calibration_file_is_named_too(tmp_path):
     """Bytes past the header's first chunk were refused by pandas as 'not a UTF-8 text
     file', naming no row or column."""
-    from conftest import SAMPLE
+    def edit(lines):
+        lines[1:] = [line + b"," + b"y" * 300 if line else line for line in lines[1:]]
+        lines[70] = lines[70][:-3] + b"\xe9t\xe9"
 
-    cal = tmp_path / "cal"
-    cal.mkdir()
-    for r in range(1, 7):
-        (cal / f"rep{r}.csv").write_bytes((SAMPLE / "calibration" / f"rep{r}.csv").read_bytes())
-    lines = (cal / "rep3.csv").read_bytes().split(b"\n")
-    lines[0] += b",note"
-    lines[1:] = [line + b"," + b"y" * 300 if line else line for line in lines[1:]]
-    lines[70] = lines[70][:-3] + b"\xe9t\xe9"
-    (cal / "rep3.csv").write_bytes(b"\n".join(lines))
+    cal = _sample_with_a_note(tmp_path, edit)
     r = invoke(["fit", cal, "-o", tmp_path / "m.json"], code=2)
     assert_one_line_error(r, "rep3.csv, row 71, column 'note': '...", "y\\xe9t\\xe9' is not UTF-8")
