@@ -21,7 +21,7 @@ import numpy as np
 
 from ..config import Settings
 from ..errors import InputError, excerpt, printable, where
-from ..files.inputs import CALIBRATION_LIMIT, read_bounded, reading
+from ..files.inputs import CALIBRATION_LIMIT, non_utf8_message, read_bounded, reading
 
 if TYPE_CHECKING:  # pandas loads on first use: apply and show never need it
     import pandas as pd
@@ -121,27 +121,10 @@ def csv_chunks(source, path: Path, settings: Settings, **kw):
     except pd.errors.ParserError as err:
         raise InputError(f"{path}: {parser_message(err)}") from None
     except UnicodeDecodeError:
-        where_ = _non_utf8_at(source, settings.sep)
-        if where_:  # a spreadsheet's Latin-1 export: which cell
-            raise InputError(f"{path}, {where_} is not UTF-8 text; save the file as UTF-8 (a "
-                             "spreadsheet's 'CSV UTF-8')") from None
+        said = non_utf8_message(str(path), source, settings.sep)
+        if said:  # a spreadsheet's Latin-1 export: which cell
+            raise InputError(said) from None
         raise InputError(f"{path}: not a UTF-8 text file") from None
-
-
-def _non_utf8_at(source, sep: str) -> str | None:
-    """Row, column and cell of the first byte of ``source`` (a path or a bytes buffer) that
-    is not UTF-8 (:func:`fsdecouple.files.inputs.non_utf8_cell`), or None."""
-    from ..files.inputs import MB, non_utf8_cell
-
-    try:
-        if isinstance(source, str | Path):
-            with open(source, "rb") as fh:
-                body = fh.read(64 * MB)
-            return non_utf8_cell(body, sep, truncated=len(body) == 64 * MB)
-        body = source.getvalue() if hasattr(source, "getvalue") else None
-        return non_utf8_cell(body, sep) if isinstance(body, bytes) else None
-    except OSError:
-        return None
 
 
 def read_csv_text(source, settings: Settings, *, path: Path | None = None, **kw) -> pd.DataFrame:

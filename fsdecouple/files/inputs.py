@@ -30,27 +30,35 @@ def reading(path: str | Path, what: str = "a CSV file", *, noun: str = "",
         raise error(f"{name}: is a directory, expected {what}") from None
     except UnicodeDecodeError:
         why = "not a UTF-8 text file"
-        where_ = _first_non_utf8(path)
-        if where_ and not noun:  # a spreadsheet's Latin-1 export of 'Temp [°C]': say where
-            raise error(f"{name}, {where_} is not UTF-8 text; save the file as UTF-8 (a "
-                        "spreadsheet's 'CSV UTF-8')") from None
+        said = None if noun else non_utf8_message(name, path)
+        if said:  # a spreadsheet's Latin-1 export of 'Temp [°C]': say where
+            raise error(said) from None
         raise error(f"{name}: cannot read {noun} ({why})" if noun else f"{name}: {why}") from None
     except OSError as err:
         raise error(f"{name}: cannot read {kind}({err.strerror})") from None
 
 
-def _first_non_utf8(path: str | Path, limit: int = 64 << 20) -> str | None:
-    """``row R, column 'C': 'cell'`` of the first byte of a regular file (up to ``limit``
-    bytes) that is not UTF-8; None when it cannot be said (UTF-16, binary, unreadable)."""
+def non_utf8_message(name: str, source, sep: str | None = None,
+                     limit: int = 64 << 20) -> str | None:
+    """The one-line refusal of a CSV that is not UTF-8, naming the row, column and cell of
+    its first such byte (:func:`non_utf8_cell`): ``source`` a regular file's path or a
+    bytes buffer, of which the first ``limit`` bytes are read.  None when the place cannot
+    be said (UTF-16, binary, unreadable): the caller's file-only message then stands."""
     try:
-        p = Path(path)
-        if not p.is_file():
-            return None
-        with p.open("rb") as fh:
-            body = fh.read(limit)
+        if isinstance(source, str | Path):
+            if not Path(source).is_file():
+                return None
+            with open(source, "rb") as fh:
+                body = fh.read(limit)
+        else:
+            body = source.getvalue() if hasattr(source, "getvalue") else None
+            if not isinstance(body, bytes):
+                return None
     except OSError:
         return None
-    return non_utf8_cell(body, truncated=len(body) == limit)
+    where_ = non_utf8_cell(body, sep, truncated=len(body) == limit)
+    return (None if where_ is None else f"{name}, {where_} is not UTF-8 text; save the file as "
+            "UTF-8 (a spreadsheet's 'CSV UTF-8')")
 
 
 def non_utf8_cell(body: bytes, sep: str | None = None, truncated: bool = False) -> str | None:
