@@ -112,18 +112,17 @@ def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
     return model
 
 
-# settings that decide what a calibration's numbers mean (evaluation.certificate_doc's too)
-READING = ("full_scale", "columns", "scale", "csv", "units", "components", "outputs")
-
-
 def _same_reading(read_with, settings) -> None:
     """Refuse fitting a set with settings that read its numbers otherwise than it was read
     (a gram-force set fitted in newtons): a ``fit(calib, other)`` that would be wrong in
-    silence."""
+    silence.  The keys are the certificate's (READING_KEYS) but the sensor's name and
+    ``zero``, which fit may choose itself."""
     from ..errors import InputError
+    from .certificate_doc import READING_KEYS
 
     mine, theirs = read_with.to_dict(), settings.to_dict()
-    differ = [k for k in READING if mine.get(k) != theirs.get(k)]
+    differ = [k for k in READING_KEYS if k not in ("sensor", "zero")
+              and mine.get(k) != theirs.get(k)]
     if differ:
         raise InputError(f"the calibration was read with other settings ({', '.join(differ)} "
                          "differ from these): fit it with the settings it was read with, or "

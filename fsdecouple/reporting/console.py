@@ -148,7 +148,7 @@ def fit_tables(model) -> list:
               caption=f"beyond the input range: {model.settings.extrapolation} (extrapolation); "
                       f"zero offsets: {zero_used(model)}; refinement steps K = "
                       f"{model.settings.refine}")
-    gauges = getattr(model, "projection", None) is not None  # M > N: inputs v = P u (gauges.py)
+    gauges = projected  # M > N: inputs v = P u (gauges.py)
     each = gauges and bool(units.loads) or not gauges and bool(units.outputs)  # a unit per row
     shown = "" if each else f" [{'load' if gauges else units.output}]"
     for col in ("chi", "input", "support vectors", f"input range{shown}"):
