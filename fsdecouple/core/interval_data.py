@@ -260,9 +260,12 @@ def check_sweep_model(doc: Any, labels, model: CouplingErrorModel | None = None)
 
 
 def _damaged(detail: str) -> InputError:
-    """The one refusal of interval data a fit cannot have written (issue 33)."""
-    return InputError(f"intervals: the model file's interval data are damaged ({detail}); "
-                      "refit the model", argument="interval")
+    """The one refusal of interval data a fit cannot have written (issue 33); ``detail``
+    kept apart for fit, which asks the same checks before it writes (modelfile)."""
+    err = InputError(f"intervals: the model file's interval data are damaged ({detail}); "
+                     "refit the model", argument="interval")
+    err.detail = detail
+    return err
 
 
 def _number(x) -> bool:

@@ -10,7 +10,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import re
 from pathlib import Path
 from typing import Any
 
@@ -250,12 +249,9 @@ def unloadable_certificate(model: CouplingErrorModel) -> str | None:
     if problem:
         return problem
     try:
-        _check_intervals(model, "")
-    except ModelFileError as err:
-        text = str(err).removeprefix(": ")
-        # the check's detail, without the reader's "damaged ...; refit" frame
-        inner = re.search(r"damaged \((.*)\); refit", text)
-        return inner.group(1) if inner else text
+        check_interval_data(cert["interval"], model.layout.labels, model)
+    except InputError as err:
+        return getattr(err, "detail", str(err))  # without the reader's "damaged; refit"
     return None
 
 
