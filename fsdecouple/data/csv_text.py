@@ -21,7 +21,7 @@ import numpy as np
 
 from ..config import Settings
 from ..errors import InputError, excerpt, printable, where
-from ..files.inputs import CALIBRATION_LIMIT, non_utf8_message, read_bounded, reading
+from ..files.inputs import CALIBRATION_LIMIT, non_utf8_cell, non_utf8_message, read_bounded, reading
 
 if TYPE_CHECKING:  # pandas loads on first use: apply and show never need it
     import pandas as pd
@@ -293,33 +293,17 @@ def to_numbers(
 def require_utf8(body: bytes, path: Path, first_row: int, header: list[str], sep: str,
                  why: str) -> None:
     """Refuse ``body`` (whole lines, the first at spreadsheet row ``first_row``) unless it
-    is UTF-8, naming the row and column of the first byte that is not.
+    is UTF-8, naming the row, column and cell of the first byte that is not
+    (:func:`~fsdecouple.files.inputs.non_utf8_cell`, the calibration reader's rule too).
 
     The rule for a log's bytes (README, "Errors and exit codes"): the header must be
     UTF-8; data lines are bytes, passed through to CSV unchanged and never decoded,
     and must be UTF-8 only where they become text (Parquet output: ``why``).  Every
     block is checked the same way, whatever its row.
     """
-    try:
-        body.decode("utf-8")
-    except UnicodeDecodeError as err:
-        start = body.rfind(b"\n", 0, err.start) + 1
-        end = body.find(b"\n", err.start)
-        line = body[start:len(body) if end < 0 else end].removesuffix(b"\r")
-        text = line.decode("utf-8", "surrogateescape")
-        try:
-            fields = next(csv.reader([text], delimiter=sep)) if text else []
-        except csv.Error:
-            fields = []
-        bad = [j for j, f in enumerate(fields) if any("\udc80" <= c <= "\udcff" for c in f)]
-        column = header[bad[0]] if bad and bad[0] < len(header) else None
-        cell = fields[bad[0]] if bad else text
-        shown = cell.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
-        row = first_row + body.count(b"\n", 0, err.start)
-        raise InputError(
-            f"{where(path, row, column)}: "
-            f"'{excerpt(shown)}' is not UTF-8 text; {why}"
-        ) from None
+    said = non_utf8_cell(body, sep, header=header, first_row=first_row)
+    if said is not None:
+        raise InputError(f"{where(path)}, {said} is not UTF-8 text; {why}")
 
 
 def require_columns(header: list[str], wanted: dict[str, str], path: Path,

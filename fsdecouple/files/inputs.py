@@ -61,13 +61,17 @@ def non_utf8_message(name: str, source, sep: str | None = None,
             "UTF-8 (a spreadsheet's 'CSV UTF-8')")
 
 
-def non_utf8_cell(body: bytes, sep: str | None = None, truncated: bool = False) -> str | None:
-    """Where in ``body`` (a CSV file's bytes from its header) the first byte that is not
-    UTF-8 lies: ``row R, column 'C': 'cell'``, or None (valid, UTF-16 or binary).
+def non_utf8_cell(body: bytes, sep: str | None = None, truncated: bool = False, *,
+                  header: list[str] | None = None, first_row: int = 1) -> str | None:
+    """Where in ``body`` the first byte that is not UTF-8 lies: ``row R, column 'C':
+    'cell'``, or None (valid; a whole file in UTF-16 or binary).
 
-    The line is split on ``sep`` (else the header's most frequent of , ; and tab) outside
-    double quotes, byte by byte, so a quoted field's separators and doubled quotes do not
-    shift the cell named.  ``truncated``: ``body`` is a file's first bytes only."""
+    ``body`` is a CSV file's bytes from its header (row 1), or with ``header`` (the
+    file's column names) a block of its whole lines from spreadsheet row ``first_row``
+    (a log's). The line is split on ``sep`` (else the header's most frequent of , ; and
+    tab) outside double quotes, byte by byte, so a quoted field's separators and doubled
+    quotes do not shift the cell named.  ``truncated``: ``body`` is a file's first bytes
+    only."""
     try:
         body.decode("utf-8")
         return None
@@ -75,7 +79,7 @@ def non_utf8_cell(body: bytes, sep: str | None = None, truncated: bool = False) 
         if truncated and err.reason == "unexpected end of data":
             return None  # the read was cut inside a character
         pos = err.start
-    if body[:2] in (b"\xff\xfe", b"\xfe\xff") or b"\x00" in body[:4096]:
+    if header is None and (body[:2] in (b"\xff\xfe", b"\xfe\xff") or b"\x00" in body[:4096]):
         return None  # UTF-16 or binary: no cell to name, the file is the matter
 
     def fields(line: bytes, at: int = -1) -> tuple[list[bytes], int, int]:
@@ -95,12 +99,12 @@ def non_utf8_cell(body: bytes, sep: str | None = None, truncated: bool = False) 
         out.append(bytes(cell))
         return out, index, offset
 
-    head = body.split(b"\n", 1)[0].removesuffix(b"\r")
+    head = body.split(b"\n", 1)[0].removesuffix(b"\r") if header is None else b""
     delim = sep or max((",", ";", "\t"), key=lambda d: head.count(d.encode()))
     start = body.rfind(b"\n", 0, pos) + 1
     end = body.find(b"\n", pos)
     line = body[start:len(body) if end < 0 else end].removesuffix(b"\r")
-    names, _, _ = fields(head)
+    names = fields(head)[0] if header is None else [h.encode("utf-8", "surrogateescape") for h in header]
     cells, j, offset = fields(line, pos - start)
 
     def text(b: bytes, at: int = 0) -> str:
@@ -111,7 +115,7 @@ def non_utf8_cell(body: bytes, sep: str | None = None, truncated: bool = False) 
 
     column = text(names[j]) if 0 <= j < len(names) else None
     cell = text(cells[j], offset) if 0 <= j < len(cells) else text(line, pos - start)
-    row = body.count(b"\n", 0, pos) + 1
+    row = first_row + body.count(b"\n", 0, pos)
     return f"row {row}" + (f", column '{column}'" if column else "") + f": '{cell}'"
 
 

@@ -18,6 +18,7 @@ import pyarrow.parquet as pq
 import pytest
 from conftest import SAMPLE, assert_one_line_error, invoke
 
+from fsdecouple.errors import InputError
 from fsdecouple.files import inputs
 
 LOG = SAMPLE / "task_voltages.csv"
@@ -252,6 +253,19 @@ def test_the_cell_of_a_byte_that_is_not_utf8_is_found_by_its_bytes(body, said):
     from fsdecouple.files.inputs import non_utf8_cell
 
     assert non_utf8_cell(body).startswith(said)
+
+
+def test_a_log_block_names_its_cell_by_the_same_rule(tmp_path):
+    """A log's blocks (Parquet output) found the cell with csv.reader, a twin of the
+    calibration reader's rule: a field beyond csv's 128 KiB limit named no column and
+    quoted the whole line."""
+    from fsdecouple.data.csv_text import require_utf8
+
+    body = b"1," + b"y" * 200_000 + b",\xe9t\xe9\n2,3,4\n"
+    with pytest.raises(InputError) as err:
+        require_utf8(body, tmp_path / "log.csv", 40, ["t", "long", "note"], ",", "why")
+    assert str(err.value).startswith(f"{tmp_path / 'log.csv'}, row 40, column 'note': "
+                                     "'\\xe9t\\xe9' is not UTF-8 text; why")
 
 
 def test_a_non_utf8_byte_deep_in_a_calibration_file_is_named_too(tmp_path):
