@@ -184,9 +184,14 @@ def find_jobs(inputs) -> tuple[list[Job], list[Path]]:
             dirs += [m for m in matched if m.is_dir()]
         else:
             raise InputError(f"{printable(given)}: file not found")
-    if loose:
-        base = Path(os.path.commonpath([_real(p).parent for p in loose]))
-        for p in loose:
+    # /dev/stdin and <(...) resolve to no file ("pipe:[...]"): named as given, outside the base
+    piped = [p for p in loose if not _real(p).exists()]
+    named = [_real(p).parent for p in loose if p not in piped]
+    base = Path(os.path.commonpath(named)) if named else None
+    for p in loose:
+        if p in piped:
+            jobs.append(Job(p, Path(p.name if p.suffix.lower() in LOG_SUFFIXES else f"{p.name}.csv")))
+        else:
             found = _walk(p, base) if p.is_dir() else [Job(p, _real(p).relative_to(base))]
             if p.is_dir() and not found:
                 raise InputError(f"{printable(p)}: a directory with no .csv or .parquet log")

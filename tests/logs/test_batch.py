@@ -90,6 +90,24 @@ def test_files_and_globs_go_under_their_common_parent(sample_model, tmp_path):
     assert (out / "a" / "one.csv").read_bytes() == ref.read_bytes()
 
 
+@pytest.mark.skipif(not Path("/dev/fd").is_dir(), reason="needs /dev/fd")
+def test_a_piped_log_is_named_as_given_and_leaves_the_files_where_they_were(tmp_path):
+    """/dev/stdin or <(...) beside a file resolved to /proc/PID/fd/pipe:[N]: the file went to
+    OUT/tmp/.../one.csv and the pipe to OUT/proc/PID/fd/pipe:[N]."""
+    import os
+
+    from fsdecouple.logs.many import find_jobs
+
+    logs = make_logs(tmp_path)
+    r, w = os.pipe()
+    try:
+        jobs, _ = find_jobs([logs / "a" / "one.csv", f"/dev/fd/{r}"])
+    finally:
+        os.close(r)
+        os.close(w)
+    assert [str(j.rel) for j in jobs] == ["one.csv", f"{r}.csv"]
+
+
 def test_a_bad_log_is_reported_and_does_not_stop_the_others(sample_model, tmp_path):
     logs = spoil(make_logs(tmp_path))
     out = tmp_path / "out"
