@@ -188,7 +188,7 @@ def report(
     from ..data.calibration import load_calibration
     from ..evaluation.cv_results import load_cv_results
     from ..evaluation.validate import refuse_meaningless
-    from ..reporting.report import build_report, check_cv_fits
+    from ..reporting.report import build_report, check_cv_fits, plots_other_files
 
     with user_errors():
         model = load_model(model_file)
@@ -217,11 +217,14 @@ def report(
                 raise InputError(f"--certificate {printable(certificate)}: is the report's own "
                                  "file (-o); give the certificate's")
             if not certificate.is_file():
-                err_console.print(f"warning: --certificate {printable(certificate)}: no such file "
-                                  "yet; the report links to it")
+                warn([f"--certificate {printable(certificate)}: no such file yet; the report "
+                      "links to it"])
             # relative to the report's directory, so the two files move together
             link = Path(os.path.relpath(certificate.resolve(), output.resolve().parent)).as_posix()
         result = build_report(model, cv_doc, cs, certificate=link)
+        if cs is not None and plots_other_files(model, cs):
+            warn([f"--calib {printable(calib)}: not exactly the files the model was fitted on "
+                  "(digests differ): the points may not match the curves"])
         if png is not None:
             targets += [png / f"{name}.png" for name in result.figures]
         for t in targets:

@@ -135,6 +135,11 @@ def _header(model, cv) -> str:
     return table("table-summary", "Sensor and report", [], rows)
 
 
+def plots_other_files(model, calib) -> bool:
+    """The calibration set given to plot is not, by content, the set the model was fitted on."""
+    return {h for _, h in calib.files} != {f["sha256"] for f in model.provenance.get("files", [])}
+
+
 def _provenance(model, cv, calib) -> str:
     out = ""
     files = [("model", f["path"], f["sha256"]) for f in model.provenance.get("files", [])]
@@ -145,8 +150,7 @@ def _provenance(model, cv, calib) -> str:
     out += table("table-provenance", "Data provenance: files and their SHA-256",
                  [tr(th("used by"), th("file"), th("sha256"))],
                  [tr(cell(u), cell(p), f'<td class="mono">{escape(h)}</td>') for u, p, h in files])
-    model_digests = {f["sha256"] for f in model.provenance.get("files", [])}
-    if calib is not None and {h for _, h in calib.files} != model_digests:
+    if calib is not None and plots_other_files(model, calib):
         out += note("The calibration files plotted here are not exactly the files the model "
                     "was fitted on (digests differ): the points may not match the curves.")
     libs = model.provenance.get("libraries", {})

@@ -338,10 +338,25 @@ def test_report_from_the_model_alone(unrendered, tmp_path, sample_model):
 
 def test_report_with_calib_only_has_in_sample_residuals(unrendered, tmp_path, sample_model):
     html = tmp_path / "r.html"
-    invoke(["report", sample_model, "--calib", SAMPLE / "calibration", "-o", html])
+    r = invoke(["report", sample_model, "--calib", SAMPLE / "calibration", "-o", html])
     tree = parse(html.read_text(encoding="utf-8"))
     assert "fig-residuals" in tree.ids
     assert "in-sample" in html.read_text(encoding="utf-8")
+    assert "warning" not in r.stderr
+
+
+def test_report_of_another_set_says_so_on_the_terminal_too(unrendered, tmp_path, sample_model):
+    """Plotting a set the model was not fitted on was said only inside the HTML."""
+    import shutil
+
+    other = tmp_path / "other"
+    shutil.copytree(SAMPLE / "calibration", other)
+    lines = (other / "rep1.csv").read_text().splitlines()
+    lines[3] = lines[3][:-1] + ("1" if lines[3][-1] != "1" else "2")  # one digit of one reading
+    (other / "rep1.csv").write_text("\n".join(lines) + "\n")
+    r = invoke(["report", sample_model, "--calib", other, "-o", tmp_path / "r.html"])
+    assert "not exactly the files the model was fitted on" in r.stderr
+    assert "digests differ" in (tmp_path / "r.html").read_text(encoding="utf-8")
 
 
 def test_report_refuses_to_overwrite_without_force(unrendered, tmp_path, sample_model):
