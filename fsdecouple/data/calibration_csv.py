@@ -30,7 +30,7 @@ from .csv_text import (
 )
 from .guesses import applied_load
 from .magnitudes import adc_bits
-from .poses import average_poses, pose_note, timestamp_column
+from .poses import average_poses, is_pose_log, pose_note, timestamp_column
 from .rails import at_rail, ranges
 
 if TYPE_CHECKING:
@@ -226,7 +226,8 @@ def read_calibration_table(path: str | Path, settings: Settings,
                 load_cells = raw[:, [at[cols[c]] for c in layout.loads]]
                 key = np.array(["\x1f".join(r) for r in load_cells.tolist()], dtype=object)
                 run = np.cumsum(np.r_[True, key[1:] != key[:-1]])
-                gone = np.isin(run, run[gone])
+                if is_pose_log(np.bincount(run)):
+                    gone = np.isin(run, run[gone])
             raw, rows = raw[~gone], rows[~gone]
         # one strip of every mapped cell: the blank checks and the numbers read it
         text = np.frompyfunc(str.strip, 1, 1)(raw) if spaced else raw

@@ -4,8 +4,9 @@ A rig that holds each load while a logger samples the sensor writes a *pose log*
 timestamp column and runs of consecutive rows with the same applied loads.  The paper's
 fit wants one reading per load (Section 3: a calibration point is a load and its
 outputs), and an SVR fitted to hundreds of samples of each load would follow their
-noise.  So, in a file with a timestamp column, each run of two or more consecutive rows
-with equal applied loads (and equal repetition and axis cells, where mapped) becomes one
+noise.  So, in a file with a timestamp column whose rows mostly come in runs of equal
+loads (:func:`is_pose_log`), each run of two or more consecutive rows with equal applied
+loads (and equal repetition and axis cells, where mapped) becomes one
 calibration point: the mean of its outputs, named by the run's first line.  The scatter
 of the samples about their pose's mean is the noise: pooled over every pose,
 
@@ -33,6 +34,14 @@ def timestamp_column(header) -> str | None:
     return next((h for h in header if parse_name(str(h))[0] in TIMESTAMP_NAMES), None)
 
 
+def is_pose_log(counts: np.ndarray) -> bool:
+    """Runs of equal loads of these lengths (``counts``, file order) make a pose log: at
+    least half the rows lie in runs of two or more.  A sweep whose zero row ends one
+    component's sweep and starts the next, or that turns at its peak, repeats a load
+    once in a while; those rows are calibration points of their own, not samples."""
+    return 2 * int(counts[counts > 1].sum()) >= int(counts.sum())
+
+
 def average_poses(frame: dict, keys: list[str], outputs: list[str]):
     """``(frame, ss, dof, runs)``: runs of equal ``keys`` in consecutive rows averaged.
 
@@ -51,7 +60,7 @@ def average_poses(frame: dict, keys: list[str], outputs: list[str]):
     start = np.concatenate([[True], ~same])
     run = np.cumsum(start) - 1
     counts = np.bincount(run)
-    if counts.max() < 2:
+    if counts.max() < 2 or not is_pose_log(counts):
         return frame, np.zeros(len(outputs)), 0, [], 0.0
     # column-major, as a DataFrame's: a sum's rounding depends on the order it runs in
     u = np.vstack([frame[c] for c in outputs]).astype(float).T
