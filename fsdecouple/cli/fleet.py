@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from .app import ForceOpt, JsonOpt, app, console, print_json, progress_bar, say, show, user_errors
+from .app import ForceOpt, JsonOpt, app, console, print_json, progress_bar, say, show, user_errors, warn
 
 MaxDriftOpt = Annotated[
     float | None, typer.Option("--max-drift", help="Exit 1 if any change exceeds P [%], e.g. 0.5.")
@@ -63,13 +63,14 @@ def fit_many(
     from rich.progress import MofNCompleteColumn
 
     from ..fleet.sensors import fit_many as fit_all
-    from ..reporting.fleet_tables import fleet_errors, fleet_gate_lines, fleet_table
+    from ..reporting.fleet_tables import fleet_errors, fleet_gate_lines, fleet_table, fleet_warnings
 
     with user_errors(), progress_bar("fitting", MofNCompleteColumn()) as progress:
         result = fit_all(sensors_dir, output, method=method, max_gamma=max_gamma, baseline=baseline,
                          max_drift=max_drift, force=force, workers=workers, progress=progress)
     doc = result.to_dict()
     show(doc, fleet_table, json_out)
+    warn(fleet_warnings(doc))
     say(fleet_errors(doc))
     say(fleet_gate_lines(doc), "gate failed")
     if doc["failed"]:

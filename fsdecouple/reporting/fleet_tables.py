@@ -94,6 +94,13 @@ def fleet_errors(doc: dict[str, Any]) -> list[str]:
     return [f"{s['sensor']}: {s['error']}" for s in doc["sensors"] if s["error"] is not None]
 
 
+def fleet_warnings(doc: dict[str, Any]) -> list[str]:
+    """Each fitted sensor's warnings, one line each, named by the sensor (the table counts
+    them)."""
+    return [f"{s['sensor']}: {w}" for s in doc["sensors"] if s["error"] is None
+            for w in s["warnings"]]
+
+
 def fleet_gate_lines(doc: dict[str, Any]) -> list[str]:
     """One line per sensor that fails --max-gamma or --max-drift, naming it."""
     return [f"{s['sensor']}: {'; '.join(s['gate'])}" for s in doc["sensors"]
