@@ -50,6 +50,12 @@ def c_string(text: str) -> str:
     return '"' + "".join(out) + '"'
 
 
+def _fabs(ctype: str) -> str:
+    """|x| in the header's own precision: fabsf on floats (no promotion to double, which
+    a single-precision FPU does in software)."""
+    return "fabsf" if ctype == "float" else "fabs"
+
+
 def num(x: float) -> str:
     """A double literal that reads back as exactly ``x`` (shortest round-trip repr)."""
     x = float(x)
@@ -121,7 +127,7 @@ def _couple(plan: ExportPlan, step: Couple, ctype: str, x: str, out: str) -> lis
         lines.append(f"    {out}[{a}] = kf[{a}] / {fmt(step.k[a])};  /* eq. (11) */")
     if step.refine > 0:  # settled, as decouple.settled decides: |k_a f_a - p_a| <= tol
         for a in range(n):
-            lines.append(f"    if (!(fabs(kf[{a}] - p[{a}]) <= {fmt(step.step_tol[a])})) "
+            lines.append(f"    if (!({_fabs(ctype)}(kf[{a}] - p[{a}]) <= {fmt(step.step_tol[a])})) "
                          f"st |= (uint32_t)1 << {BIT_NOT_CONVERGED};")
     return lines
 
@@ -188,7 +194,7 @@ def decouple_function(plan: ExportPlan, ctype: str) -> str:
     lines += [f"    f[{a}] = {x}[{a}];" for a in range(n)]
     # apply's not_finite: NaN, infinite, or beyond FORCE_LIMIT x the largest full scale
     bound = fmt(FORCE_LIMIT * max(abs(v) for v in plan.full_scale))
-    ffinite = " || ".join(f"!(fabs(f[{a}]) <= {bound})" for a in range(n))
+    ffinite = " || ".join(f"!({_fabs(ctype)}(f[{a}]) <= {bound})" for a in range(n))
     lines += [f"    if ({ffinite}) st |= (uint32_t)1 << {BIT_NOT_FINITE};", "    return st;", "}", ""]
     return "\n".join(lines)
 

@@ -355,7 +355,7 @@ def _table(plan: ExportPlan, j: int, term: Term, ctype: str) -> str:
     lo_s, inv_s = (numf(lo), numf(inv)) if ctype == "float" else (num(lo), num(inv))
     return (
         f"/* chi_{term.out}{term.inp} on {n} uniform intervals of [{num(tab.lo)}, {num(tab.hi)}] "
-        "[V]: power-basis Hermite coefficients c0..c3 per interval */\n"
+        f"[{plan.output_unit}]: power-basis Hermite coefficients c0..c3 per interval */\n"
         + _array(f"{p}tab{f}{j}", tab.coefficients().T, fmt, ctype=ctype)
         + f"""static {ctype} {p}chi{f}{j}({ctype} u, uint32_t *st)
 {{

@@ -321,6 +321,17 @@ def test_float_bound_holds_with_fused_multiply_add(sample_model, sample_float_he
 
 
 @needs_cc
+def test_the_float_header_computes_in_float(sample_float_header, tmp_path):
+    """fabs on a float promoted it to double (-Wdouble-promotion), which an MCU with a
+    single-precision FPU runs in software."""
+    (tmp_path / "f.h").write_text(sample_float_header[0])
+    src = tmp_path / "f.c"
+    src.write_text('#define FSD_IMPLEMENTATION\n#include "f.h"\nint main(void) { return 0; }\n')
+    subprocess.run([CC, *FLAGS, "-Wdouble-promotion", "-c", str(src), "-o", str(tmp_path / "f.o")],
+                   check=True)
+
+
+@needs_cc
 @pytest.mark.parametrize("precision", ["double", "float"])
 def test_selftest_catches_a_damaged_header(sample_model, kernel_model, precision, tmp_path,
                                           request):
@@ -529,6 +540,9 @@ def test_sensor_name_and_units_are_escaped_literally(sample_model, tmp_path):
     subprocess.run([CC, *FLAGS, str(src), "-o", str(tmp_path / "evil"), "-lm"], check=True)
     out = subprocess.run([str(tmp_path / "evil")], capture_output=True, check=True).stdout
     assert out == (evil + "|kNmV").encode("utf-8")
+    # each table's comment names the output unit, mV here (it said [V] for every model)
+    tables = re.findall(r"uniform intervals of \[[^]]*\] \[([^]]*)\]", header.read_text())
+    assert tables and set(tables) == {"mV"}
 
 
 @needs_cc
