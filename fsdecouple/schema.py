@@ -431,6 +431,8 @@ def unused_keys(settings: Settings, model_settings: Settings, command: str = "ap
             mine, theirs = settings.svr, model_settings.svr
             fields = ["C", "epsilon", "gamma"] + ([] if mine.tolerance is None else ["tolerance"])
             same = all(getattr(mine, f) == getattr(theirs, f) for f in fields)
+        elif name == "zero":  # a model leaves unsaid the zero rows it used by default
+            same = settings.zero_method == model_settings.zero_method
         else:
             attr = "min_r2" if name == "checks" else "lab" if name in LAB_KEYS else name
             same = getattr(settings, attr) == getattr(model_settings, attr)

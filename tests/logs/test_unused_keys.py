@@ -41,7 +41,15 @@ def test_a_fit_only_key_stated_otherwise_is_warned_about_and_a_log_layout_is_rea
 
 def test_the_calibrations_own_keys_are_no_news(sample_model, tmp_path):
     cfg = tmp_path / "cfg.yaml"
+    # zero: rows is what the sample's model used, by default (its file leaves zero unsaid)
     cfg.write_text("sensor: paper-3axis\nfull_scale: {x: 100, y: 100, z: 150}\nrotation: null\n"
-                   "svr: {C: 1000, epsilon: 0.0001, delta2: 1.0}\n")
+                   "svr: {C: 1000, epsilon: 0.0001, delta2: 1.0}\nzero: rows\n")
     r = invoke(["apply", sample_model, LOG, "-c", cfg, "--tare", "200", "-o", tmp_path / "f.csv"])
     assert "differs" not in r.stderr, r.stderr
+
+
+def test_a_zero_other_than_the_models_is_news(sample_model, tmp_path):
+    cfg = tmp_path / "cfg.yaml"
+    cfg.write_text("zero: fit\n")
+    r = invoke(["apply", sample_model, LOG, "-c", cfg, "--tare", "200", "-o", tmp_path / "f.csv"])
+    assert "config's zero differs from the model's" in r.stderr
