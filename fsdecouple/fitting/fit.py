@@ -294,8 +294,14 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
     units = settings.units.loads or None
     before = interference_errors(calib.points, model.initial_forces(u), settings.full_scale,
                                  layout, units)
-    after = interference_errors(calib.points, model.decouple(u, rotate=False, exact=True),
-                                settings.full_scale, layout, units)
+    settled = np.ones(len(u), dtype=bool)
+    forces = model.decouple(u, rotate=False, exact=True, converged=settled)
+    if not settled.all():  # eqs. (5)-(6)'s fixed point does not hold at these couplings
+        raise InputError(
+            f"refine {settings.refine}: the second-order refinement does not settle on "
+            f"{int((~settled).sum())} of the {len(u)} calibration points (the coupling is too "
+            "strong for its fixed-point steps); fit with refine 0, eq. (11) as the paper writes it")
+    after = interference_errors(calib.points, forces, settings.full_scale, layout, units)
     if not all(np.isfinite(v) for g in (before, after) for v in g.values()):
         raise _overflow(calib, "gamma (eq. 12) on the calibration points", settings)
     model.report = FitReport(

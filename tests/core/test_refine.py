@@ -16,7 +16,7 @@ from fsdecouple.config import Settings, settings_from_dict
 from fsdecouple.core import plan as plan_module
 from fsdecouple.core.decouple import PROMISE, decouple_exact
 from fsdecouple.data.calibration import from_table
-from fsdecouple.errors import ConfigError
+from fsdecouple.errors import ConfigError, InputError
 from fsdecouple.evaluation.checks import assumption_checks
 from fsdecouple.fitting.fit import fit
 from fsdecouple.logs.apply import STATUSES, apply_file
@@ -364,3 +364,14 @@ def test_fit_prints_and_records_the_tune_advice(tmp_path, sample_fit):
     assert doc["refine_advice"]["tune"] == {"recommended": True, "basis": "coupling", "gain": None}
     text = sample_fit[1].stdout  # `fsdecouple fit sample_data/calibration`, once a session
     assert "recommended: --tune --refine" in " ".join(text.split())
+
+
+def test_a_refinement_that_does_not_settle_on_the_calibration_is_named(settings):
+    """At 30 % coupling, fit --refine 1 said a valid cell 'makes gamma (eq. 12) ...
+    overflow', naming that cell: the unsettled points' NaN forces made gamma NaN."""
+    sensor = strong_sensor(12.0)
+    settings = replace(settings, min_repetitions=2)
+    table = from_table(simulate_calibration(sensor, repetitions=2, seed=5), settings)
+    with pytest.raises(InputError, match=r"^refine 1: the second-order refinement does not "
+                       r"settle on \d+ of the \d+ calibration points .*fit with refine 0"):
+        fit(table, replace(settings, refine=1, svr=replace(settings.svr, tolerance=1e-3)))
