@@ -85,6 +85,7 @@ class Grid:
     gamma: tuple[float, ...] = GAMMAS
     C: tuple[float, ...] = CS
     epsilon: tuple[float, ...] = EPSILON_NOISE
+    epsilon_given: bool = False  # the user's epsilon, which needs a measured sigma
 
     def to_dict(self) -> dict[str, list[float]]:
         return {"gamma": list(self.gamma), "C": list(self.C), "epsilon": list(self.epsilon)}
@@ -126,7 +127,7 @@ def parse_grid(text: str) -> Grid:
             raise InputError(f"tuning grid: {key}: expected 1 to {MAX_VALUES} different values",
                              argument="tune_grid")
         values[key] = vals
-    return Grid(**values)
+    return Grid(**values, epsilon_given="epsilon" in values)
 
 
 @dataclass(frozen=True)
@@ -150,6 +151,12 @@ def candidates(settings: Settings, grid: Grid, sigma: float | None) -> tuple[lis
     """Table 2 as configured first, then the grid; and how epsilon was set."""
     if sigma is not None and sigma > 0:
         epsilons, basis = [m * sigma for m in grid.epsilon], "noise"
+    elif grid.epsilon_given:
+        raise InputError(
+            "tuning grid: epsilon is in multiples of the calibration's noise sigma, which this "
+            "set cannot measure (no load is repeated); leave epsilon out, and the fixed "
+            f"fractions {', '.join(f'{e:g}' for e in EPSILON_FIXED)} of full scale are tried",
+            argument="tune_grid")
     else:
         epsilons, basis = list(EPSILON_FIXED), "fixed"
     out = [Candidate(settings.svr.gamma, settings.svr.C, settings.svr.epsilon, settings.scaling,
@@ -292,7 +299,7 @@ def tune_settings(
         "units": "gamma per (full-scale output)^2; C and epsilon in full-scale outputs "
                  "(Table 2: as configured)",
         "figure": "worst axis's held-out RMS force error / full scale",
-        "grid": grid.to_dict(),
+        "grid": {**grid.to_dict(), **({"epsilon": list(EPSILON_FIXED)} if basis == "fixed" else {})},
         "epsilon_basis": basis,
         "noise": sigma,
         "refine": settings.refine,

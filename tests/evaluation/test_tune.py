@@ -292,6 +292,20 @@ def test_tune_on_a_set_too_small_for_the_held_out_protocol(tmp_path):
     assert not out.exists()
 
 
+def test_an_epsilon_grid_needs_a_measured_sigma():
+    """With one repetition epsilon=0.5,2 (multiples of sigma) was replaced in silence by
+    the fixed fractions of full scale, while the model's record still said 0.5, 2."""
+    from fsdecouple.evaluation.tune import EPSILON_FIXED, candidates
+
+    settings = load_config()
+    with pytest.raises(InputError, match="epsilon is in multiples of the calibration's noise sigma"):
+        candidates(settings, parse_grid("epsilon=0.5,2"), None)
+    cands, basis = candidates(settings, parse_grid("C=3"), None)  # epsilon left out: fixed
+    assert basis == "fixed" and sorted({c.epsilon for c in cands[1:]}) == list(EPSILON_FIXED)
+    cands, basis = candidates(settings, parse_grid("epsilon=0.5,2"), 0.01)
+    assert basis == "noise" and sorted({c.epsilon for c in cands[1:]}) == [0.005, 0.02]
+
+
 def test_parse_grid_keeps_defaults_for_keys_left_out():
     g = parse_grid("C=3")
     assert g.C == (3.0,) and g.gamma == Grid().gamma and g.epsilon == Grid().epsilon
