@@ -139,6 +139,9 @@ RANGE_MARGIN = 0.01  # of the calibrated span: see CouplingErrorModel.extrapolat
 # voltage of 1e300, a slope of 1e300 in a model file): apply gives it the status
 # not_finite, as it does an overflow, and the C export its NOT_FINITE bit.
 FORCE_LIMIT = 1e6
+# a linear model decouples by its matrix: no chi for refinement's steps (eqs. 5-6)
+LINEAR_NOT_REFINED = ("a linear model decouples by its calibration matrix, which has no "
+                      "coupling functions to refine (eqs. 5-6): leave refine at 0")
 
 
 @dataclass
@@ -360,6 +363,8 @@ class CouplingErrorModel:
             k = check_refine(refine, "K")
         except ConfigError as err:
             raise ConfigError(str(err), argument="refine") from None
+        if k and self.method == "linear":
+            raise ConfigError(f"refine {k}: {LINEAR_NOT_REFINED}", argument="refine")
         settings = replace(self.settings, refine=k)
         model = replace(self, settings=settings)
         model._tables = self._tables

@@ -90,6 +90,12 @@ def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
     if method == "auto" and not verdict:
         raise InputError("method auto chooses by the held-out verdict, which is off: turn it on",
                          argument="method")
+    if method == "linear" and settings.refine:
+        from ..core.model import LINEAR_NOT_REFINED
+        raise InputError(f"refine {settings.refine}: {LINEAR_NOT_REFINED}", argument="refine")
+    if method == "linear" and tune:  # the grid would be fitted, scored and thrown away
+        raise InputError("tuning chooses the SVRs' gamma, C and epsilon, and a linear model has "
+                         "none: leave tuning off, or fit the method svr or auto", argument="tune")
     if isinstance(tune_grid, str):
         from .tune import grid_option
         tune_grid = grid_option(tune, tune_grid)

@@ -375,3 +375,16 @@ def test_a_refinement_that_does_not_settle_on_the_calibration_is_named(settings)
     with pytest.raises(InputError, match=r"^refine 1: the second-order refinement does not "
                        r"settle on \d+ of the \d+ calibration points .*fit with refine 0"):
         fit(table, replace(settings, refine=1, svr=replace(settings.svr, tolerance=1e-3)))
+
+
+def test_a_linear_model_is_not_refined(sample_model, settings):
+    """apply --refine 3 on a linear model was accepted and did nothing; fit --method linear
+    --refine 2 stored a K the model never uses."""
+    from fsdecouple.evaluation.calibrate import fit as calibrate
+
+    linear = replace(load_model(sample_model), method="linear")
+    with pytest.raises(ConfigError, match="refine 3: a linear model decouples by its calibration matrix"):
+        linear.refined(3)
+    assert linear.refined(0).settings.refine == 0
+    with pytest.raises(InputError, match="refine 2: a linear model"):
+        calibrate(None, replace(settings, refine=2), method="linear")

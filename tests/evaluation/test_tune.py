@@ -272,6 +272,15 @@ def test_tune_grid_needs_tune(tmp_path):
     assert not (tmp_path / "m.json").exists()
 
 
+def test_tune_of_a_linear_model_is_refused(tmp_path):
+    """fit --method linear --tune fitted and scored the whole grid for a model with no SVR."""
+    out = tmp_path / "m.json"
+    r = runner.invoke(app, ["fit", SAMPLE, "-o", str(out), "--method", "linear", "--tune"])
+    assert r.exit_code == 2 and len(r.output.strip().splitlines()) == 1
+    assert "--tune: tuning chooses the SVRs' gamma, C and epsilon" in r.output
+    assert not out.exists()
+
+
 def test_tune_on_a_set_too_small_for_the_held_out_protocol(tmp_path):
     # one repetition (levels protocol) with one loaded point per sweep: nothing to hold out
     rows = ["axis,fx,fy,fz,ux,uy,uz"]
