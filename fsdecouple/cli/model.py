@@ -102,7 +102,7 @@ def fit(
     from ..evaluation.calibrate import fit as fit_model
     from ..evaluation.calibrate import fit_document
     from ..evaluation.checks import assumption_checks
-    from ..evaluation.tune import grid_option
+    from ..evaluation.tune import grid_option, tunable
     from ..evaluation.verdict import verdict_line
     from ..reporting.advice import refine_advice, tune_advice
     from ..reporting.tune_table import tune_table
@@ -131,7 +131,8 @@ def fit(
                 model = refit(cs)
         checks = assumption_checks(model)
         advice = refine_advice(checks, model.n_components)
-        advice["tune"] = tune_advice(advice, model.report.tune)
+        advice["tune"] = tune_advice(advice, model.report.tune, can_tune=tunable(cs),
+                                     linear=model.method == "linear")
         save_model(model, output, force=force)
     if json_out:
         print_json(fit_document(model, output, checks, advice))
@@ -171,6 +172,8 @@ def _refine_line(advice: dict, refine: int) -> str:
         return (f"{line}; max |dchi/du| = {advice['slope']:.3f}: refinement is not known to "
                 "converge, check the sensor's coupling")
     within = f"brings it within {100 * advice['target']:.2f} % F.S."
+    if tune.get("basis") == "linear":  # a matrix has no chi to refine or tune
+        return line
     if tune.get("basis") == "coupling":  # untuned: tune_advice
         why = "--tune chooses the SVR settings by held-out error"
         if refine < k:

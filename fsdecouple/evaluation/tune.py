@@ -179,6 +179,16 @@ def _rounds(calib: CalibrationSet):
     return protocol, rounds
 
 
+def tunable(calib: CalibrationSet) -> bool:
+    """Whether ``tune`` can run on ``calib``: it has a held-out protocol with points to
+    test (what :func:`tune_settings` refuses otherwise)."""
+    try:
+        _rounds(calib)
+    except InputError:
+        return False
+    return True
+
+
 def edge_round(calib: CalibrationSet) -> HeldOutRound | None:
     """Train without each sweep's end points (loads beyond all its others); test on them.
 

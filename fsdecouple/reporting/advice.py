@@ -51,7 +51,8 @@ def refine_advice(checks: Iterable, n: int) -> dict:
             "target": REFINE_TARGET, "recommended": recommend_refine(worst.value, slope, n)}
 
 
-def tune_advice(advice: dict, tune: dict | None) -> dict:
+def tune_advice(advice: dict, tune: dict | None, *, can_tune: bool = True,
+                linear: bool = False) -> dict:
     """Whether ``fit`` recommends ``--tune`` with refinement, and on what evidence.
 
     On the simulated sensors of benchmarks/accuracy.py, ``--tune --refine 3`` was
@@ -62,11 +63,17 @@ def tune_advice(advice: dict, tune: dict | None) -> dict:
 
     ``recommended``: ``--tune`` is advised (untuned fits whose K >= 1; tuned fits
     whose held-out figures chose a grid setting over Table 2); ``basis``:
-    ``coupling`` (eq. 6 only: run ``--tune`` to see its held-out figures) or
-    ``heldout``; ``gain``: 1 - chosen / Table 2's held-out figure (tuned fits).
+    ``coupling`` (eq. 6 only: run ``--tune`` to see its held-out figures),
+    ``heldout``, ``untunable`` (``can_tune`` False: the set has no held-out protocol
+    for tuning, only refinement can be advised) or ``linear`` (a linear model: neither
+    applies); ``gain``: 1 - chosen / Table 2's held-out figure (tuned fits).
     """
     k = advice["recommended"]
+    if linear:
+        return {"recommended": False, "basis": "linear", "gain": None}
     if tune is None:
+        if not can_tune:
+            return {"recommended": False, "basis": "untunable", "gain": None}
         return {"recommended": bool(k), "basis": "coupling", "gain": None}
     cands = tune["candidates"]
     t2, pick = cands[0]["figure"], cands[tune["chosen"]]["figure"]

@@ -351,6 +351,13 @@ def test_fit_line_recommends_tune_with_refinement():
     weak = {**base, "recommended": 0}
     weak["tune"] = tune_advice(weak, None)
     assert "--tune" not in _refine_line(weak, 0)  # eq. (11) as written is enough: no advice
+    # a set tuning cannot run on (one loaded point per sweep) was told to --tune, which then
+    # failed; a linear model was told to refine and tune, both refused for it
+    few = {**base, "tune": tune_advice(base, None, can_tune=False)}
+    assert few["tune"]["recommended"] is False
+    assert _refine_line(few, 0).endswith("recommended: --refine 2 (brings it within 0.05 % F.S.)")
+    linear = {**base, "tune": tune_advice(base, None, linear=True)}
+    assert "recommended" not in _refine_line(linear, 0)
 
 
 @pytest.mark.slow  # a fit of the sample: ~1 s

@@ -299,6 +299,12 @@ def test_tune_on_a_set_too_small_for_the_held_out_protocol(tmp_path):
     assert r.exit_code == 2, r.output
     assert "--tune" in r.output and len(r.output.strip().splitlines()) == 1
     assert not out.exists()
+    # what fit's advice asks before it recommends --tune (it recommended it here)
+    from fsdecouple.evaluation.tune import tunable
+
+    settings = load_config(tmp_path / "c.yaml")
+    assert not tunable(load_calibration(tmp_path / "cal.csv", settings))
+    assert tunable(load_calibration(SAMPLE, load_config()))
 
 
 def test_an_epsilon_grid_needs_a_measured_sigma():
