@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..axes import FORCE_COLUMNS
 from ..config import load_config
 from ..errors import ConfigError, InputError, printable
 from ..files.outputs import atomic_write, check_output, refuse_overwriting_input
@@ -134,37 +135,64 @@ def guess_layout(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
     """:func:`guess_components` when the header names a moment or a rig's applied loads beside
     the readings, else the 3-axis guess."""
     path = Path(path)
+    sizes: list[int] = []
     if path.is_dir():
-        names, rows, sep, truncated = _directory_rows(path, max_rows)
+        names, rows, sep, truncated = _directory_rows(path, max_rows, sizes)
     else:
         names, rows, sep, truncated = read_rows(path, max_rows)
     # a moment, or applied loads named as such beside readings named like the components
     # (Fx_ref and Fx: a rig's reference and the sensor's own reading) take the component path
     rig = any(_applied(n) for n in names) and any(_component(n) and not _applied(n) for n in names)
     if not rig and not any((_component(n) or _applied(n) or " ")[0] == "m" for n in names):
-        return with_temperature(guess_rows(path, names, rows, sep, truncated), names)
-    try:
-        return with_temperature(guess_components(path, names, rows, sep, truncated), names)
-    except InputError as err:  # a 3-axis file with moment columns beside it reads as before
+        guess = guess_rows(path, names, rows, sep, truncated)
+    else:
         try:
-            return with_temperature(guess_rows(path, names, rows, sep, truncated), names)
-        except InputError:
-            raise err from None
+            guess = guess_components(path, names, rows, sep, truncated)
+        except InputError as err:  # a 3-axis file with moment columns beside it reads as before
+            try:
+                guess = guess_rows(path, names, rows, sep, truncated)
+            except InputError:
+                raise err from None
+    return with_temperature(_files_as_repetitions(guess, names, rows, sizes), names)
 
 
-def _directory_rows(path: Path, max_rows: int) -> tuple[list[str], list[list[str]], str, bool]:
+def _files_as_repetitions(guess: Guess, names: list[str], rows: list[list[str]],
+                          sizes: list[int]) -> Guess:
+    """A directory of files without a repetition column is read one repetition a file (as
+    ``fit`` reads it), unless each file holds one pose (one load: a pose directory, all
+    one calibration)."""
+    if len(sizes) < 2 or "repetition" in guess.columns:
+        return guess
+    loads = [names.index(guess.columns[c]) for c in (guess.components or FORCE_COLUMNS)
+             if c in guess.columns]
+    starts = np.cumsum([0, *sizes])
+    if all(len({tuple(r[i] for i in loads) for r in rows[a:b]}) <= 1
+           for a, b in zip(starts[:-1], starts[1:], strict=True)):
+        return guess
+    guess.min_repetitions = len(sizes)
+    guess.reasons["repetition"] = "no repetition column: one repetition a file"
+    guess.reasons["min_repetitions"] = (f"no repetition column: each of the {len(sizes)} files "
+                                        "is one repetition")
+    return guess
+
+
+def _directory_rows(path: Path, max_rows: int, sizes: list[int]
+                    ) -> tuple[list[str], list[list[str]], str, bool]:
     """The rows of a directory's CSV files (a pose directory: one pose a file), joined under
     their one header: every file's rows count for the loads, the zero rule and full scale.
-    Files in another layout are refused by name, as fit refuses them."""
+    Files in another layout are refused by name, as fit refuses them.  ``sizes`` gets
+    each file's number of rows read, in order."""
     from .calibration_csv import list_calibration
 
     files, _ = list_calibration(path)
     names, rows, sep, truncated = read_rows(files[0], max_rows)
+    sizes.append(len(rows))
     for f in files[1:]:
         if len(rows) >= max_rows:
             truncated = True
             break
         other, more, _, cut = read_rows(f, max_rows - len(rows))
+        sizes.append(len(more))
         if other != names:
             j, found, want = first_difference(other, names)
             raise InputError(f"{one_line(str(f))}, row 1: column {j + 1} is {one_line(found)}, "

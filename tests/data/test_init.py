@@ -98,6 +98,28 @@ def test_repetition_column_gives_min_repetitions(tmp_path):
     assert g.min_repetitions == 3
 
 
+def test_a_directory_of_repetition_files_counts_each_file(tmp_path):
+    """init of sample_data/calibration said 'one repetition in this file' and wrote
+    min_repetitions: 1 for six files that fit reads as six repetitions: a missing file
+    then went unnoticed.  (A directory of one pose a file stays one set:
+    tests/sim/test_pose_sets.py.)"""
+    from fsdecouple import load_calibration, load_config
+    from fsdecouple.data.init_config import guess_layout
+
+    for n in (2, 6):
+        cal = tmp_path / f"cal{n}"
+        cal.mkdir()
+        for r in range(1, n + 1):
+            shutil.copy(SAMPLE / "calibration" / f"rep{r}.csv", cal)
+        g = guess_layout(cal)
+        assert g.min_repetitions == n
+        assert g.reasons["min_repetitions"] == (f"no repetition column: each of the {n} files "
+                                                "is one repetition")
+        invoke(["init", cal, "-o", tmp_path / f"c{n}.yaml"])
+        calib = load_calibration(cal, load_config(tmp_path / f"c{n}.yaml"))
+        assert calib.repetitions == list(range(1, n + 1))
+
+
 def test_semicolon_decimal_comma(tmp_path):
     data = tmp_path / "eu.csv"
     data.write_text("Fx (N);Fy (N);Fz (N);u_x;u_y;u_z\n"
