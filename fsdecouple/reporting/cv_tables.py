@@ -48,6 +48,15 @@ def gamma_tables(cv) -> str:
     absent = [METHOD_NAMES[m] for m in METHOD_NAMES if m not in methods]
     if absent:
         out += note("Not in cv.json (not run): " + ", ".join(absent) + ".")
+    end = gamma_index(cv.get("end_records")) if levels else {}
+    if end:  # the levels protocol's end points, scored apart: loads beyond the rest of a sweep
+        ends = sorted({(r, t) for r, t, _, _ in end})
+        rows = [tr(cell(str(r)), cell("end points"),
+                   *(cell(pct(end.get((r, t, m, a))), m != "initial" and worse(
+                       end.get((r, t, m, a)), end.get((r, t, "initial", a))))
+                     for a in labels for m in methods)) for r, t in ends]
+        out += table("table-gamma-end", "Held-out end points (each sweep's loads beyond its "
+                     "others: the model extrapolates there), every method, % F.S.", head, rows)
     if "svr" in methods:
         rows = [tr(cell(str(r)), cell(held(r, t)), *(val(r, t, "svr", a) for a in labels)) for r, t in keys]
         worst = [max((g.get((r, t, "svr", a)) or 0.0) for r, t in keys) for a in labels]
@@ -77,8 +86,11 @@ def gross_tables(cv) -> str:
     head = [tr(th("round", rowspan=2), th("held out", rowspan=2),
                *(th(f"γ{a} (ε-SVR)", span=2) for a in labels)),
             tr(*(th(x) for _ in labels for x in ("without", "with gross error")))]
-    out = note(f"Gross error: prime voltage of point {spec.get('point')} of the {spec.get('axis')} sweep "
-               f"of repetition {spec.get('repetition')} moved by {spec.get('offset')} V (Section 4.4).")
+    unit = ((cv.get("settings") or {}).get("units") or {}).get("output", "V")  # the data's own
+    unit = "/".join(sorted({str(v) for v in unit.values()})) if isinstance(unit, dict) else str(unit)
+    out = note(f"Gross error: prime output of point {spec.get('point')} of the {spec.get('axis')} "
+               f"sweep of repetition {spec.get('repetition')} moved by {spec.get('offset')} {unit} "
+               "(Section 4.4).")
     out += table("table-gross-error", "Table 5 analogue: γ with and without the gross error, % F.S.",
                  head, rows)
     rows = []

@@ -132,6 +132,10 @@ def _header(model, cv) -> str:
     svr = [v for (_, _, m, _), v in g.items() if m == "svr"]
     if svr:
         rows.append(tr(th("worst held-out γ, ε-SVR"), cell(pct(max(svr)))))
+    end = [v for (_, _, m, _), v in gamma_index((cv or {}).get("end_records")).items() if m == "svr"]
+    if end and _levels(cv):
+        rows.append(tr(th("worst held-out γ on end points (extrapolation), ε-SVR"),
+                       cell(pct(max(end)))))
     return table("table-summary", "Sensor and report", [], rows)
 
 
