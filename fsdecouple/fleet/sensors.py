@@ -138,12 +138,20 @@ def fit_sensor(sensor_dir: str | Path, models_dir: str | Path, *, method: str | 
         if old is not None:
             result.drift = compare(old, model, max_drift=max_drift, en_gate=False)
             result.drift["old"]["model"], result.drift["new"]["model"] = str(old_path), str(out)
-        save_model(model, out, force=force)
+        _gates(result, model, max_gamma)
+        # a model that fails its gate does not replace the baseline it is judged against:
+        # the job's next run would compare with it and pass
+        keep = (bool(result.gate) and old is not None
+                and os.path.realpath(out) == os.path.realpath(old_path))
+        if keep:
+            result.gate.append(f"{out} is the baseline and is kept (a sensor that fails a gate does "
+                               "not replace it; fit again without the gate to accept the change)")
+        else:
+            save_model(model, out, force=force)
     except FsdecoupleError as err:
         result.error = str(err)
         return result
-    verdict = model.report.verdict
-    result.model = str(out)
+    result.model = None if keep else str(out)
     result.k = {name: float(k) for name, k in zip(model.layout.labels, model.k, strict=True)}
     units = settings.units
     # k's unit per component: one load unit for forces and another for moments (N, N·m);
@@ -154,6 +162,13 @@ def fit_sensor(sensor_dir: str | Path, models_dir: str | Path, *, method: str | 
                           for a, name in enumerate(model.layout.labels)}}
     result.method = model.method
     result.warnings = model.warnings
+    return result
+
+
+def _gates(result: SensorResult, model, max_gamma: float | None) -> None:
+    """The held-out verdict's figures into ``result``, and why it fails --max-gamma or
+    --max-drift (its drift already compared)."""
+    verdict = model.report.verdict
     if verdict is not None:
         result.worst_gamma = verdict["heldout"][model.method]["worst_gamma"]
         result.better = verdict["better"]
@@ -165,7 +180,6 @@ def fit_sensor(sensor_dir: str | Path, models_dir: str | Path, *, method: str | 
                                f"--max-gamma {100 * max_gamma:.3f} %")
     if result.drift is not None and result.drift["passed"] is False:
         result.gate.append("drift exceeds --max-drift: " + "; ".join(result.drift["exceeded"]))
-    return result
 
 
 def fit_many(sensors_dir: str | Path, models_dir: str | Path, *, method: str | None = None,

@@ -341,6 +341,12 @@ def test_fit_many_baseline_reports_drift(fleet, drift_models, tmp_path, in_threa
     assert largest(alpha["drift"]) == 0.0 and alpha["gate"] == []
     assert gamma["drift"]["components"]["x"]["slope_change_pct"] == pytest.approx(1.0, abs=0.15)
     assert doc["gate_failed"] == ["gamma"] and "drift exceeds --max-drift" in r.stderr
+    # gamma's drifted model did not replace its baseline: the job's next run (a CI retry)
+    # compares with the same old model and fails again; alpha's passed and was replaced
+    assert (base / "gamma.json").read_bytes() == drift_models["before"].read_bytes()
+    assert gamma["model"] is None and "is the baseline and is kept" in r.stderr
+    assert alpha["model"] == str(base / "alpha.json")
+    assert (base / "alpha.json").read_bytes() != drift_models["first"].read_bytes()
 
 
 @pytest.mark.parametrize("args, message", [
