@@ -12,7 +12,7 @@ from rich.text import Text
 from ..config import load_config
 from ..core.metrics import check_max_gamma
 from ..core.modelfile import load_model, save_model
-from ..errors import ConfigError, printable
+from ..errors import ConfigError, InputError, printable
 from ..files.outputs import check_output, refuse_overwriting_input
 from ..reporting.console import fit_checks_table, fit_tables
 from .app import (
@@ -227,6 +227,10 @@ def export(
     from ..export.header import export_header
 
     with user_errors():
+        if output.suffix.lower() not in HEADER_SUFFIXES:  # the suffix chooses the format
+            raise InputError(f"{printable(output)}: expected a C header "
+                             f"({', '.join(HEADER_SUFFIXES)}) or an ATI calibration file (.cal); "
+                             "the suffix chooses the format")
         if linear_part:
             raise ConfigError("--linear-part: for a .cal output only; the C header exports the "
                               "model whole")
@@ -247,6 +251,9 @@ def export(
         console.print(f"note: the header decouples zero-corrected outputs; subtract this model's "
                       f"fitted offsets first ({zero} {model.settings.output_unit})",
                       highlight=False, soft_wrap=True)
+
+
+HEADER_SUFFIXES = (".h", ".hh", ".hpp", ".hxx", ".inc")
 
 
 def _exporting(model_file: Path, output: Path, force: bool):

@@ -598,6 +598,16 @@ def test_cli_export_bad_options(tmp_path, args, message):
     assert not out.exists()
 
 
+@pytest.mark.parametrize("name", ["decoupler.txt", "decoupler", "model.json"])
+def test_cli_export_refuses_a_suffix_that_names_no_format(tmp_path, name):
+    """-o dec.txt wrote a C header: the suffix chooses the format (.cal an ATI file), so a
+    suffix that names neither is refused."""
+    out = tmp_path / name
+    r = invoke(["export", GOLDEN / "model-v1.json", "-o", out], code=2)
+    assert "expected a C header (.h, " in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert not out.exists()
+
+
 def test_cli_export_refuses_a_corrupt_model(tmp_path):
     out = tmp_path / "decoupler.h"
     r = invoke(["export", ROOT / "tests/fixtures/bad/model-bit-flip/model.json", "-o", out], code=2)
