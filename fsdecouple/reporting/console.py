@@ -42,7 +42,8 @@ def _units(settings_or_doc) -> Units:
 def ingest_tables(summary: dict[str, Any]) -> list:
     units = _units(summary)
     t = Table(title=f"Calibration set: {summary['sensor']}, "
-                    f"{len(summary['repetitions'])} repetitions")
+                    f"{len(summary['repetitions'])} repetition"
+                    f"{'s' if len(summary['repetitions']) != 1 else ''}")
     t.add_column("axis")
     t.add_column("points", justify="right")
     t.add_column("per repetition", justify="right")

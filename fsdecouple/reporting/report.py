@@ -55,17 +55,19 @@ def _point_roles(model, calib, cv) -> tuple[pd.DataFrame, str]:
         role = {r: "training" for r in train}
         role.update({r: f"test {test_name(i)}" if i < 2 else "not used" for i, r in enumerate(test)})
         where = (f"marked as in cross-validation round {curves['round']}: trained on "
-                 f"repetitions {_reps(train)}, held out {_reps(test)}")
+                 f"{_reps(train, 'repetition')}, held out {_reps(test)}")
     else:
         used = set((model.report.repetitions if model.report else None) or calib.repetitions)
         role = {r: "training" for r in used}
-        where = f"the model was fitted on repetitions {_reps(used)}"
+        where = f"the model was fitted on {_reps(used, 'repetition')}"
     pts["role"] = [role.get(int(r), "not used") for r in pts["repetition"]]
     return pts, where
 
 
-def _reps(reps) -> str:
-    return ", ".join(str(r) for r in sorted(reps))
+def _reps(reps, noun: str = "") -> str:
+    """``1, 2, 3``; with ``noun``: ``repetitions 1, 2, 3`` or ``repetition 1``."""
+    listed = ", ".join(str(r) for r in sorted(reps))
+    return f"{noun}{'s' if len(reps) != 1 else ''} {listed}" if noun else listed
 
 
 def _shown(units) -> dict[str, str]:

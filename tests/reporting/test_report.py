@@ -502,3 +502,14 @@ def test_report_links_the_certificate_it_is_given(tmp_path, sample_model, unrend
     r = invoke(["report", sample_model, "-o", tmp_path / "r.html", "--certificate",
                 tmp_path / "r.html"], 2)  # the report linking itself
     assert "is the report's own file" in r.stderr and not (tmp_path / "r.html").exists()
+
+
+def test_one_repetition_is_said_in_the_singular(tmp_path):
+    """'fitted on repetitions 1' in the report, '1 repetitions' in ingest's title."""
+    from fsdecouple.reporting.report import _reps
+
+    assert _reps([1], "repetition") == "repetition 1"
+    assert _reps([3, 1], "repetition") == "repetitions 1, 3" and _reps([2, 1]) == "1, 2"
+    r = invoke(["ingest", SAMPLE / "loadcell" / "calibration.csv", "-c",
+                SAMPLE.parent / "configs" / "loadcell.yaml"])
+    assert "1 repetition" in r.stdout and "1 repetitions" not in r.stdout
