@@ -79,6 +79,10 @@ def cv(
     tune_grid: Annotated[
         str | None, typer.Option(help="The --tune grid (as for fit).", callback=ascii_digits)
     ] = None,
+    refine: Annotated[
+        int | None, typer.Option(help="Add a row: the svr models refined by K second-order "
+                                      "steps (eqs. 5-6), beside the config's K.")
+    ] = None,
     force: ForceOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
@@ -111,7 +115,7 @@ def cv(
                 task=(task, task_forces) if task is not None else None, task_tare=task_tare,
                 gross_error=GrossError.parse(gross_error, settings.layout) if gross_error else None,
                 max_gamma=max_gamma, workers=workers, repeats=repeats, protocol=protocol,
-                tune=tune, tune_grid=grid,
+                tune=tune, tune_grid=grid, refine=refine,
                 progress=progress,
             )
         if output is not None:

@@ -29,13 +29,14 @@ from ..core.model import FORCE_LIMIT
 from ..data.calibration import CalibrationSet, GrossError, load_calibration
 from ..data.calibration_csv import read_task_log
 from ..data.zero import tare_offsets
-from ..errors import InputError, where
+from ..errors import ConfigError, InputError, where
 from ..fitting import svr as _svr
 from ..fitting.baselines import METHODS, establish, train_all
 from ..fitting.linear import fit_omega
 from ..fitting.noise import VERDICT_NOISE_FRACTION
 from ..fitting.rbf import B_FACTOR, MSE_GOAL, OUTPUT_LAYER, SPREAD, basic_solution
 from ..fitting.threads import single_threaded_libraries
+from ..schema import check_refine
 from .checks import assumption_checks
 from .cv_results import FORMAT, FORMAT_VERSION
 from .heldout import (
@@ -60,10 +61,21 @@ def _held_out(rounds: list[HeldOutRound]) -> dict[tuple, tuple]:
             for rnd in rounds for label, test in rnd.tests}
 
 
-def _decouple_held_out(tests, models) -> dict[tuple, np.ndarray]:
+def _decouple_held_out(tests, models, methods=METHODS) -> dict[tuple, np.ndarray]:
     """(round, test_set, method) -> decoupled forces of that held-out set."""
     return {(r, label, m): models[(r, m)].decouple(tests[(r, label)][0], rotate=False)
-            for (r, label) in tests for m in METHODS}
+            for (r, label) in tests for m in methods}
+
+
+# cv --refine K: the round's svr models decoupled with K refinement steps (eqs. 5-6), a row
+# of their own beside the svr row (whose K is the config's); nothing is trained for it
+REFINED = "svr-refined"
+
+
+def _with_refined(models: dict, refine: int) -> dict:
+    """``models`` and, for each svr model, the same model refined by ``refine`` steps."""
+    return {**models, **{(*key[:-1], REFINED): m.refined(refine)
+                         for key, m in models.items() if key[-1] == "svr"}}
 
 
 def _score(tests, forces, settings, points=None) -> list[dict]:
@@ -88,11 +100,11 @@ def _score(tests, forces, settings, points=None) -> list[dict]:
     return records
 
 
-def _task_records(u, f_true, rounds, models, settings) -> list[dict]:
+def _task_records(u, f_true, rounds, models, settings, methods=METHODS) -> list[dict]:
     records = []
     fs = np.asarray(settings.full_scale)
     for r in (rnd.index for rnd in rounds):
-        for method in METHODS:
+        for method in methods:
             err = np.abs(models[(r, method)].decouple(u, rotate=False) - f_true) / fs
             for a, name in enumerate(settings.layout.labels):
                 base = {"round": r, "method": method, "axis": name}
@@ -149,6 +161,7 @@ def run_cv(
     protocol: str | None = None,
     tune: bool = False,
     tune_grid=None,
+    refine: int | None = None,
 ) -> dict[str, Any]:
     """Run the validation protocol of Section 4 and return the ``cv.json`` document.
 
@@ -180,13 +193,17 @@ def run_cv(
         Choose the SVR settings first, as ``fit --tune`` does on the whole set
         (:mod:`fsdecouple.evaluation.tune`, over ``tune_grid``), and cross-validate with them;
         the record goes to ``doc["tune"]``.
+    refine : int, optional
+        K >= 1: one more method, ``svr-refined``, the svr models of every round
+        decoupled with K steps of the second-order refinement (eqs. 5-6) where the
+        ``svr`` row keeps the config's K; ``doc["refine"]`` records K.
     """
     _scipy_before_the_limit()
     with single_threaded_libraries():
         return _run_cv(calib, settings, folds=folds, task=task, task_tare=task_tare,
                        gross_error=gross_error, max_gamma=max_gamma, workers=workers,
                        repeats=repeats, progress=progress, protocol=protocol, tune=tune,
-                       tune_grid=tune_grid)
+                       tune_grid=tune_grid, refine=refine)
 
 
 def _scipy_before_the_limit() -> None:
@@ -214,9 +231,18 @@ def _refuse_beyond(values: np.ndarray, scale: float, path, columns) -> None:
 
 
 def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, workers, repeats,
-            progress, protocol, tune=False, tune_grid=None) -> dict[str, Any]:
+            progress, protocol, tune=False, tune_grid=None, refine=None) -> dict[str, Any]:
     settings = settings or getattr(calib, "settings", None) or Settings()  # as fit's
     settings.layout.one_output_each("cv")
+    if refine is not None:
+        try:
+            refine = check_refine(refine, "refine")
+        except ConfigError as err:
+            raise ConfigError(str(err), argument="refine") from None
+        if refine == 0:
+            raise InputError("refine 0: a refined row needs K >= 1 (the svr row keeps the "
+                             "config's K)", argument="refine")
+    methods = METHODS if not refine else (*METHODS, REFINED)
     if not isinstance(calib, CalibrationSet):
         calib = load_calibration(calib, settings)
     tune_record = None
@@ -289,16 +315,18 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
     all_models, wall = train_all(jobs + gross_jobs, settings, workers, progress, seconds=alone,
                                  noise_fraction=VERDICT_NOISE_FRACTION)
     warm.join()
+    if refine:
+        all_models = _with_refined(all_models, refine)
     models = {k: v for k, v in all_models.items() if k[0] != "gross"}
 
     tests = _held_out(rounds)
-    forces = _decouple_held_out(tests, models)
+    forces = _decouple_held_out(tests, models, methods)
     points: list[dict] = []
     records = _score(tests, forces, settings, points)
     # the levels protocol's end points, scored apart (the interior ones are scored above)
     ends = [replace(rnd, tests=()) for rnd in rounds if rnd.end is not None]
     end_records = [{k: v for k, v in r.items() if k != "points"}
-                   for r in gamma_records(ends, models, settings, METHODS)]
+                   for r in gamma_records(ends, models, settings, methods)]
 
     # Table 4: each method's time to establish round 1's model alone: first the
     # training run's own (not fitted twice), then `repeats - 1` more sequential fits.
@@ -316,7 +344,8 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
     first_test = rounds[0].tests[0][1].voltages if rounds[0].tests else rounds[0].train.voltages
     vectors = [first_test[i:i + 1] for i in range(min(TIMING_VECTORS, len(first_test)))]
     timing_records = []
-    for m in METHODS:
+    establish_times[REFINED] = establish_times["svr"]  # the same models: nothing more trained
+    for m in methods:
         timing_records.append({"method": m, "metric": "establish_seconds",
                                "value": float(np.median(establish_times[m]))})
         timing_records.append({"method": m, "metric": "decouple_seconds_per_vector",
@@ -343,7 +372,8 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
         "folds": [list(f) for f in folds] if protocol == "repetitions"
         else [[label for label, _ in rnd.tests] for rnd in rounds],
         "train": [trains[r].repetitions for r in trains],
-        "methods": list(METHODS),
+        "methods": list(methods),
+        "refine": refine or None,
         "rbf": {"spread": SPREAD, "b": B_FACTOR / SPREAD, "mse_goal": MSE_GOAL,
                 "output_layer": OUTPUT_LAYER,
                 "input_units": "full-scale outputs" if settings.scaling == "full_scale" else "V",
@@ -382,7 +412,7 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
     if task_data is not None:
         doc["task"] = {"voltages": str(task[0]), "forces": str(task[1]),
                        "rows": int(len(task_data[0])), "tare": task_tare,
-                       "records": _task_records(*task_data, rounds, models, settings)}
+                       "records": _task_records(*task_data, rounds, models, settings, methods)}
     if gross_calib is not None:
         gmodels = _models_for(all_models, gross=True)
         omega = []
@@ -399,7 +429,7 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
             "placement": "added to the prime voltage of the point in the zero-corrected data; "
                          "training data only, the held-out test data stay clean",
             "rounds_affected": gross_rounds,
-            "records": _score(tests, _decouple_held_out(tests, gmodels), settings),
+            "records": _score(tests, _decouple_held_out(tests, gmodels, methods), settings),
             "omega": omega,
         }
     if max_gamma is not None:

@@ -318,16 +318,21 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
                                                    rec["axis"])]:
             worse[m] += 1
     n = len([r for r in doc["records"] if r["method"] == "initial"])
-    lines = [f"{m:9s} worst gamma {_num(worst[m]):>6s} % F.S."
+    w = max(9, *map(len, doc["methods"]))
+    lines = [f"{m:{w}s} worst gamma {_num(worst[m]):>6s} % F.S."
              + ("" if m == "initial" else f", {worse[m]} of {n} cells worse than initial")
              for m in doc["methods"]]
+    if doc.get("refine"):
+        k = (doc.get("settings") or {}).get("refine") or 0
+        lines.append(f"svr-refined: the svr models with K = {doc['refine']} second-order "
+                     f"refinement steps (eqs. 5-6); svr: K = {k}, the config's")
     if doc.get("protocol") == "levels":
         lines.insert(0, "protocol: levels (round k holds out the k-th loaded point of every sweep; "
                         "points beyond the loads left in their sweep are end points, scored apart)")
         end = defaultdict(float)
         for rec in doc.get("end_records", []):
             end[rec["method"]] = max(end[rec["method"]], rec["value"])
-        lines += [f"{m:9s} worst gamma {_num(end[m]):>6s} % F.S. on end points (extrapolation)"
+        lines += [f"{m:{w}s} worst gamma {_num(end[m]):>6s} % F.S. on end points (extrapolation)"
                   for m in doc["methods"] if m in end]
     elif doc.get("protocol") == "poses":
         lines.insert(0, "protocol: poses (round k of 5 holds out every fifth pose in file order, "

@@ -8,7 +8,8 @@ from ..evaluation.cv_results import gamma_index, scored_axes, test_name
 from .html import cell, note, table, th, tr, worse
 
 METHOD_NAMES = {"initial": "initial (ω⁻¹ only)", "linear": "linear matrix",
-                "rbf-mimo": "MIMO RBF NN", "rbf-siso": "SISO RBF NN", "svr": "ε-SVR"}
+                "rbf-mimo": "MIMO RBF NN", "rbf-siso": "SISO RBF NN", "svr": "ε-SVR",
+                "svr-refined": "ε-SVR, refined (cv --refine)"}
 
 
 def cv_test_name(cv, rnd: int, test_set: int) -> str:
@@ -45,7 +46,7 @@ def gamma_tables(cv) -> str:
     out = table("table-gamma-methods", "Table 1 analogue: interference error γ (eq. 12) of the "
                 f"held-out {'load levels' if levels else 'repetitions'} ({cv.get('protocol', 'repetitions')} "
                 "protocol), every method, % F.S.", head, rows)
-    absent = [METHOD_NAMES[m] for m in METHOD_NAMES if m not in methods]
+    absent = [METHOD_NAMES[m] for m in METHOD_NAMES if m not in methods and m != "svr-refined"]
     if absent:
         out += note("Not in cv.json (not run): " + ", ".join(absent) + ".")
     end = gamma_index(cv.get("end_records")) if levels else {}

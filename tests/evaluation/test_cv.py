@@ -373,3 +373,31 @@ def test_the_gamma_table_keeps_the_sensors_axis_order():
     from fsdecouple.evaluation.cv_results import scored_axes
 
     assert scored_axes(doc) == ["x", "y", "z"]
+
+
+@pytest.mark.slow  # two cv runs of one round
+def test_cv_refine_adds_a_refined_row_equal_to_a_config_that_refines(calib, settings):
+    """Issue 12: cv supports refinement as an extra method row when asked (it had no
+    --refine; only a config's refine made the svr row itself refined)."""
+    from dataclasses import replace
+
+    fast = _table2_tolerance(settings)
+    asked = run_cv(calib, fast, folds=[[1, 2]], refine=2, gross_error=GrossError.parse("x:3:5:0.2"))
+    config = run_cv(calib, replace(fast, refine=2), folds=[[1, 2]],
+                    gross_error=GrossError.parse("x:3:5:0.2"))
+    assert asked["methods"] == [*METHODS, "svr-refined"] and asked["refine"] == 2
+    assert config["methods"] == list(METHODS) and config["refine"] is None
+
+    def values(doc, method, key="records"):
+        recs = doc[key] if key == "records" else doc[key]["records"]
+        return {(r["round"], r["test_set"], r["axis"]): r["value"] for r in recs
+                if r["method"] == method}
+
+    for key in ("records", "gross_error"):
+        # the refined row is the config-refined svr row: the same models, K = 2
+        assert values(asked, "svr-refined", key) == values(config, "svr", key)
+        assert values(asked, "svr", key) != values(asked, "svr-refined", key)
+    for m in METHODS[:-1]:  # the baselines do not change
+        assert values(asked, m) == values(config, m)
+    with pytest.raises(InputError, match="refine 0: a refined row needs K >= 1"):
+        run_cv(calib, fast, folds=[[1, 2]], refine=0)
