@@ -55,6 +55,12 @@ class SVRSettings:
         return 1.0 / (2.0 * self.gamma)
 
     @property
+    def table2(self) -> bool:
+        """C, epsilon and gamma as Table 2 gives them (the defaults), whatever the tolerance."""
+        return (self.C, self.epsilon, self.gamma) == (SVRSettings.C, SVRSettings.epsilon,
+                                                      SVRSettings.gamma)
+
+    @property
     def stopping_tolerance(self) -> float:
         """The tolerance libsvm is given: the one written, else Table 2's."""
         return TABLE2_TOLERANCE if self.tolerance is None else self.tolerance

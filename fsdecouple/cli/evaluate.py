@@ -124,7 +124,7 @@ def cv(
         sys.stdout.write(cv_text(doc))
     else:
         if "tune" in doc:
-            console.print(tune_table(doc["tune"], settings.load_unit))
+            console.print(tune_table(doc["tune"], settings.load_unit, settings.output_unit))
         for r in cv_renderables(doc):
             console.print(r)
         if output is not None:

@@ -138,7 +138,8 @@ def fit(
         print_json(fit_document(model, output, checks, advice))
     else:
         if model.report.tune is not None:
-            console.print(tune_table(model.report.tune, model.settings.load_unit))
+            console.print(tune_table(model.report.tune, model.settings.load_unit,
+                                     model.settings.output_unit))
         for t in [*fit_tables(model), fit_checks_table(checks)]:
             console.print(t)
         if model.method == "linear":  # the matrix decouples: eq. (11)'s refinement is moot

@@ -147,6 +147,7 @@ def _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress):
     from .verdict import choose, heldout_verdict, summary, verdict_warning
 
     record = None
+    configured = settings.svr
     if tune:
         from .tune import tune_settings
         settings, record = tune_settings(calib, settings, grid=tune_grid, workers=workers,
@@ -167,6 +168,14 @@ def _fit(calib, settings, method, verdict, tune, tune_grid, workers, progress):
         except InputError as err:
             failed = err
     model.report.tune = record
+    if record is not None and record["chosen"] != 0 and not configured.table2:
+        # the settings the user wrote were candidate 0, and tuning chose another: say so
+        pick = record["candidates"][record["chosen"]]
+        model.report.warnings.append(
+            f"tuning replaced the configured SVR settings (C={configured.C:g}, epsilon="
+            f"{configured.epsilon:g}, gamma={configured.gamma:g}: candidate 0) by gamma="
+            f"{pick['gamma']:g} C={pick['C']:g} epsilon={pick['epsilon']:.3g} (full scale), "
+            "clearly better on held-out points; fit without tuning keeps them")
     points, layout = calib.points, settings.layout
     if layout.overdetermined:  # M > N: each component's least-squares load v = P u (gauges.py)
         from ..fitting.gauges import projected

@@ -142,10 +142,13 @@ def fit_tables(model) -> list:
     # rows loading several components or more gauges than loads: fitted jointly, with C
     # and epsilon of their own (fitting/joint.py), which the table says rather than Table 2's
     joint = bool(getattr(model, "own", None)) or projected
-    svr = (f"C={JOINT_C:g} eps=each output's noise sigma (at least {s.epsilon:g}), fitted "
-           "jointly" if joint else f"C={s.C:g} eps={s.epsilon:g}")
-    c = Table(title=f"Corrected coupling functions chi (eq. 4): eps-SVR, gamma={s.gamma:g} "
-                    f"{svr} tol={s.tolerance:g}",
+    # libsvm's gamma, epsilon and tolerance are in the chi's own units: full-scale outputs
+    # (scaling: full_scale) or the outputs' unit
+    u = "F.S." if model.settings.scaling == "full_scale" else units.output
+    svr = (f"C={JOINT_C:g} eps=each output's noise sigma (at least {s.epsilon:g} {u}), fitted "
+           "jointly" if joint else f"C={s.C:g} eps={s.epsilon:g} {u}")
+    c = Table(title=f"Corrected coupling functions chi (eq. 4): eps-SVR, gamma={s.gamma:g} per "
+                    f"{u}², {svr}, tol={s.tolerance:g} {u}",
               caption=f"beyond the input range: {model.settings.extrapolation} (extrapolation); "
                       f"zero offsets: {zero_used(model)}; refinement steps K = "
                       f"{model.settings.refine}")

@@ -11,11 +11,14 @@ from typing import Any
 from rich.table import Table
 from rich.text import Text
 
+from ..config import SVRSettings
 from ..core.metrics import pct
 
 
-def tune_table(record: dict[str, Any], load_unit: str) -> Table:
-    """One row per candidate: gamma, C, epsilon, held-out RMS per axis, figure, choice."""
+def tune_table(record: dict[str, Any], load_unit: str, output_unit: str = "V") -> Table:
+    """One row per candidate: gamma, C, epsilon (and the units they are in: full-scale
+    outputs, or with ``scaling: none`` the outputs' own, ``output_unit``), held-out RMS per
+    axis, figure, choice."""
     cands = record["candidates"]
     axes = list(cands[0]["rms"])
     sigma = record["noise"]
@@ -29,7 +32,13 @@ def tune_table(record: dict[str, Any], load_unit: str) -> Table:
         t.add_column(col, justify="left" if col in ("units", "") else "right")
     for i, c in enumerate(cands):
         rms = [f"{c['rms'][a]:.4g}" if c["rms"][a] is not None else "–" for a in axes]
-        units = "Table 2, as configured" if c["table2"] else "full scale"
+        own = "full scale" if c.get("scaling", "full_scale") == "full_scale" else output_unit
+        if c["table2"]:  # candidate 0: the settings a plain fit uses
+            t2 = (c["gamma"], c["C"], c["epsilon"]) == (SVRSettings.gamma, SVRSettings.C,
+                                                        SVRSettings.epsilon)
+            units = f"{'Table 2' if t2 else 'as configured'}, {own}"
+        else:
+            units = own
         if c.get("tolerance") is not None:  # before the tuned tolerance: none; None: fit's rule
             units += f", tol {c['tolerance']:g}"
         note = Text("chosen", "bold green") if i == record["chosen"] else Text(
