@@ -102,10 +102,11 @@ def certificate_blocks(doc: dict) -> list[Block]:
     unit, out_unit = doc["units"]["load"], doc["units"]["output"]
     ref = doc["reference"]
     ident = [("Sensor", doc["sensor"]), ("Serial number", doc["serial"] or "not stated"),
-             ("Date", doc["date"]), ("Model file", f"{doc['model']['file']} (fitted "
+             ("Date of issue", doc["date"]), ("Model file", f"{doc['model']['file']} (fitted "
                                                    f"{doc['model']['created'] or '?'})"),
              ("Calibration data", f"{doc['calibration']['source']}, "
-                                  f"{len(doc['calibration']['repetitions'])} repetition(s)"),
+                                  f"{len(doc['calibration']['repetitions'])} repetition"
+                                  f"{'s' if len(doc['calibration']['repetitions']) != 1 else ''}"),
              ("Reference", ref["description"] or "not stated"),
              ("Reference uncertainty", f"{ref['uncertainty_percent_k2']:g} % (k = 2)"),
              ("Units", f"loads in {unit}, outputs in {out_unit}")]
@@ -117,7 +118,8 @@ def certificate_blocks(doc: dict) -> list[Block]:
     out.append(Block("table", f"Class per component and load sign ({ISO}:2011)", "classes",
                      ["component", "loads", "class", "limited by", f"class range from [{unit}]"],
                      [[c["axis"], "positive" if c["sign"] == "+" else "negative", c["class"],
-                       _limited(c), f"{c['from']:.4g}" if "from" in c else "—"]
+                       _limited(c), f"{c['from']:.4g}" if "from" in c and c["class"] != "none"
+                       else "—"]
                       for c in doc["classes"]], emphasis=2))
     out += [Block("note", n) for n in doc["notes"]]
     for axis in doc["full_scale"]:

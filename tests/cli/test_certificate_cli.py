@@ -279,3 +279,19 @@ def test_a_control_character_of_the_sensor_is_escaped_in_the_pdf_and_html(fitted
     reader = PdfReader(io.BytesIO(certificate_bytes(doc, "c.pdf")))
     text = " ".join(page.extract_text() for page in reader.pages)
     assert "\x1b" not in text and "rig\\x1b[2J" in text
+
+
+def test_a_class_none_has_no_class_range_and_one_repetition_is_singular(fitted, sim_dir):
+    """A component of class 'none' was given a 'class range from' value, the repetitions
+    were 'repetition(s)', and 'Date' was the date the certificate was printed."""
+    from fsdecouple.reporting.certificate_html import certificate_blocks
+
+    doc = json.loads(invoke(["certificate", fitted, sim_dir / "calibration", "--json"]).stdout)
+    doc["classes"][0].update({"class": "none", "from": 0.6098})
+    doc["classes"][1].update({"class": "1", "from": 12.5})
+    doc["calibration"]["repetitions"] = [1]
+    blocks = certificate_blocks(doc)
+    classes = next(b for b in blocks if b.ident == "classes")
+    assert classes.rows[0][4] == "—" and classes.rows[1][4] == "12.5"
+    ident = dict(next(b for b in blocks if b.ident == "identity").rows)
+    assert ident["Calibration data"].endswith(", 1 repetition") and "Date of issue" in ident
