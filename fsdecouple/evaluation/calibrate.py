@@ -224,6 +224,19 @@ def fit_document(model: CouplingErrorModel, output: str | Path, checks: list,
     ``fsdecouple certificate``'s), the checks of Section 2.1 and the advice."""
     report = {k: v for k, v in model.report.to_dict().items() if k != "certificate"}
     return {"model": str(output), "method": model.method, **report,
+            "k": {name: float(k) for name, k in zip(model.layout.labels, model.k, strict=True)},
+            "units": {**model_units(model), "surrogate_max_error": model.settings.units.output},
             "checks": [c.to_dict() for c in checks], "refine": model.settings.refine,
             "extrapolation": model.settings.extrapolation,
             "refine_advice": advice, "tune": model.report.tune}
+
+
+def model_units(model: CouplingErrorModel) -> dict[str, Any]:
+    """The units of a model's figures: ``load``, ``output``, and ``k``: each slope's (eq. 2)
+    output per load (one load unit for forces, another for moments); with more gauges
+    than loads k of the least-squares loads v = P u, a pure number."""
+    units = model.settings.units
+    projected = getattr(model, "projection", None) is not None
+    return {"load": units.load, "output": units.output,
+            "k": {name: "" if projected else f"{units.output_of(a)}/{units.load_of(a)}"
+                  for a, name in enumerate(model.layout.labels)}}

@@ -118,6 +118,7 @@ def fit_sensor(sensor_dir: str | Path, models_dir: str | Path, *, method: str | 
     from ..core.modelfile import load_model, save_model
     from ..data.calibration import load_calibration
     from ..evaluation.calibrate import fit as calibrate
+    from ..evaluation.calibrate import model_units
     from ..files.outputs import check_output
     from .drift import compare
 
@@ -153,13 +154,7 @@ def fit_sensor(sensor_dir: str | Path, models_dir: str | Path, *, method: str | 
         return result
     result.model = None if keep else str(out)
     result.k = {name: float(k) for name, k in zip(model.layout.labels, model.k, strict=True)}
-    units = settings.units
-    # k's unit per component: one load unit for forces and another for moments (N, N·m);
-    # more gauges than loads: k of the least-squares loads v = P u is a pure number
-    projected = getattr(model, "projection", None) is not None
-    result.units = {"load": units.load, "output": units.output,
-                    "k": {name: "" if projected else f"{units.output_of(a)}/{units.load_of(a)}"
-                          for a, name in enumerate(model.layout.labels)}}
+    result.units = model_units(model)
     result.method = model.method
     result.warnings = model.warnings
     return result

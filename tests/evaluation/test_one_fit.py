@@ -196,3 +196,14 @@ def test_a_noise_free_sensor_fits_into_a_file_every_command_loads(tmp_path):
     assert "its fit left them out" in r.stderr and "refit" not in r.stderr
     r = invoke(["certificate", tmp_path / "m.json", cal], 2)
     assert "its fit left them out" in r.stderr and "refit" not in r.stderr
+
+
+def test_fit_json_gives_the_slopes_and_their_units(sample_model, tmp_path):
+    """fit --json had no slope k and no unit for any figure; fit-many --json had both."""
+    from fsdecouple.evaluation.calibrate import fit_document
+
+    model = fsdecouple.load_model(sample_model)
+    doc = fit_document(model, tmp_path / "m.json", [], {})
+    assert doc["k"] == dict(zip("xyz", map(float, model.k), strict=True))
+    assert doc["units"] == {"load": "N", "output": "V", "k": {"x": "V/N", "y": "V/N", "z": "V/N"},
+                            "surrogate_max_error": "V"}
