@@ -63,9 +63,10 @@ def ingest_tables(summary: dict[str, Any]) -> list:
                                                                         "n_zero")]
     for col in ("repetition", "axis", "zero rows", *outputs):
         o.add_column(col, justify="right")
+    digits = 1 if shown == "count" else 3  # a mean of a few readings of whole counts
     for r in summary["offsets"]:
         o.add_row(str(r["repetition"]), r["axis"], str(r["n_zero"]),
-                  *(f"{factor * r[c]:+.3f}" for c in outputs))
+                  *(f"{factor * r[c]:+.{digits}f}" for c in outputs))
     out = [t, o]
     skipped = summary["skipped"]
     out.append(Text(f"rows skipped: {len(skipped)}" + "".join(f"\n  {s}" for s in skipped)))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import base64
 import io
 import json
+import re
 from html.parser import HTMLParser
 
 import numpy as np
@@ -513,3 +514,5 @@ def test_one_repetition_is_said_in_the_singular(tmp_path):
     r = invoke(["ingest", SAMPLE / "loadcell" / "calibration.csv", "-c",
                 SAMPLE.parent / "configs" / "loadcell.yaml"])
     assert "1 repetition" in r.stdout and "1 repetitions" not in r.stdout
+    # the load cell's offsets are whole counts: shown to a tenth, not to 0.001 count
+    assert re.search(r"\+\d{5,}\.\d \u2502", r.stdout) and not re.search(r"\+\d{5,}\.\d{3}", r.stdout)
