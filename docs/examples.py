@@ -121,7 +121,7 @@ EXAMPLES: tuple[Example, ...] = (
             ("fsdecouple apply model.json sample_data/task_voltages.csv --tare 200 -o forces.csv",
              "head -3 forces.csv")),
     Example("readme-cv", "README.md", "sample", (SAMPLE_CV,),
-            (matching(r"^\S+ +worst gamma "),)),
+            (matching(r"^\S+ +worst gamma |^gate: "),)),
     Example("cv-sample-output", "docs/cv.md", "sample", (SAMPLE_CV,),
             (without(r"^cv document written to"),),
             volatile=r"^│ +(initial|linear|rbf-mimo|rbf-siso|svr) │ +[\d.]+ │ +[\d.]+ │$|^training: "),
