@@ -32,6 +32,7 @@ from ..data.zero import tare_offsets
 from ..errors import ConfigError, InputError, where
 from ..fitting import svr as _svr
 from ..fitting.baselines import METHODS, establish, train_all
+from ..fitting.fit import settled_forces
 from ..fitting.linear import fit_omega
 from ..fitting.noise import VERDICT_NOISE_FRACTION
 from ..fitting.rbf import B_FACTOR, MSE_GOAL, OUTPUT_LAYER, SPREAD, basic_solution
@@ -72,10 +73,14 @@ def _decouple_held_out(tests, models, methods=METHODS) -> dict[tuple, np.ndarray
 REFINED = "svr-refined"
 
 
-def _with_refined(models: dict, refine: int) -> dict:
-    """``models`` and, for each svr model, the same model refined by ``refine`` steps."""
-    return {**models, **{(*key[:-1], REFINED): m.refined(refine)
-                         for key, m in models.items() if key[-1] == "svr"}}
+def _with_refined(models: dict, refine: int, u: np.ndarray) -> dict:
+    """``models`` and, for each svr model, the same model refined by ``refine`` steps;
+    refused where a refined model does not settle on the calibration outputs ``u``."""
+    refined = {(*key[:-1], REFINED): m.refined(refine)
+               for key, m in models.items() if key[-1] == "svr"}
+    for m in refined.values():
+        settled_forces(m, u)
+    return {**models, **refined}
 
 
 def _score(tests, forces, settings, points=None) -> list[dict]:
@@ -316,7 +321,7 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
                                  noise_fraction=VERDICT_NOISE_FRACTION)
     warm.join()
     if refine:
-        all_models = _with_refined(all_models, refine)
+        all_models = _with_refined(all_models, refine, calib.voltages)
     models = {k: v for k, v in all_models.items() if k[0] != "gross"}
 
     tests = _held_out(rounds)

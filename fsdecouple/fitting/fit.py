@@ -294,13 +294,7 @@ def _establish(calib: CalibrationSet, settings: Settings, workers: int | None,
     units = settings.units.loads or None
     before = interference_errors(calib.points, model.initial_forces(u), settings.full_scale,
                                  layout, units)
-    settled = np.ones(len(u), dtype=bool)
-    forces = model.decouple(u, rotate=False, exact=True, converged=settled)
-    if not settled.all():  # eqs. (5)-(6)'s fixed point does not hold at these couplings
-        raise InputError(
-            f"refine {settings.refine}: the second-order refinement does not settle on "
-            f"{int((~settled).sum())} of the {len(u)} calibration points (the coupling is too "
-            "strong for its fixed-point steps); fit with refine 0, eq. (11) as the paper writes it")
+    forces = settled_forces(model, u)
     after = interference_errors(calib.points, forces, settings.full_scale, layout, units)
     if not all(np.isfinite(v) for g in (before, after) for v in g.values()):
         raise _overflow(calib, "gamma (eq. 12) on the calibration points", settings)
@@ -389,6 +383,20 @@ def _establish_gauges(calib: CalibrationSet, settings: Settings, workers: int | 
     model.zero = fitted_zero(calib)
     model.created = datetime.now(UTC).replace(microsecond=0).isoformat()
     return model
+
+
+def settled_forces(model: CouplingErrorModel, u: np.ndarray) -> np.ndarray:
+    """``model``'s forces of the calibration outputs ``u`` (exact), refused in one line
+    where its refinement does not settle on every point: eqs. (5)-(6)'s fixed point does
+    not hold at such couplings, and their forces would be NaN."""
+    settled = np.ones(len(u), dtype=bool)
+    forces = model.decouple(u, rotate=False, exact=True, converged=settled)
+    if not settled.all():
+        raise InputError(
+            f"refine {model.settings.refine}: the second-order refinement does not settle on "
+            f"{int((~settled).sum())} of the {len(u)} calibration points (the coupling is too "
+            "strong for its fixed-point steps); use refine 0, eq. (11) as the paper writes it")
+    return forces
 
 
 def fitted_zero(calib: CalibrationSet) -> np.ndarray | None:

@@ -380,7 +380,7 @@ def test_a_refinement_that_does_not_settle_on_the_calibration_is_named(settings)
     settings = replace(settings, min_repetitions=2)
     table = from_table(simulate_calibration(sensor, repetitions=2, seed=5), settings)
     with pytest.raises(InputError, match=r"^refine 1: the second-order refinement does not "
-                       r"settle on \d+ of the \d+ calibration points .*fit with refine 0"):
+                       r"settle on \d+ of the \d+ calibration points .*use refine 0"):
         fit(table, replace(settings, refine=1, svr=replace(settings.svr, tolerance=1e-3)))
 
 
@@ -395,3 +395,14 @@ def test_a_linear_model_is_not_refined(sample_model, settings):
     assert linear.refined(0).settings.refine == 0
     with pytest.raises(InputError, match="refine 2: a linear model"):
         calibrate(None, replace(settings, refine=2), method="linear")
+
+
+def test_cv_refuses_a_refined_row_that_does_not_settle(settings):
+    """cv --refine 3 at 30 % coupling printed 'svr-refined worst gamma 0.00 %' (NaN gamma
+    records compare as never worse) and then wrote cv.json with NaN: a traceback."""
+    from fsdecouple.evaluation.cv import run_cv
+
+    settings = replace(settings, min_repetitions=3, svr=replace(settings.svr, tolerance=1e-3))
+    table = from_table(simulate_calibration(strong_sensor(12.0), repetitions=3, seed=5), settings)
+    with pytest.raises(InputError, match=r"^refine 3: the second-order refinement does not settle"):
+        run_cv(table, settings, folds=[[1, 2]], refine=3)
