@@ -4,8 +4,8 @@ A rig that holds each load while a logger samples the sensor writes a *pose log*
 timestamp column and runs of consecutive rows with the same applied loads.  The paper's
 fit wants one reading per load (Section 3: a calibration point is a load and its
 outputs), and an SVR fitted to hundreds of samples of each load would follow their
-noise.  So, in a file with a timestamp column whose rows mostly come in runs of equal
-loads (:func:`is_pose_log`), each run of two or more consecutive rows with equal applied
+noise.  So, in a file with a timestamp column whose runs of equal loads mostly hold
+several rows (:func:`is_pose_log`), each run of two or more consecutive rows with equal applied
 loads (and equal repetition and axis cells, where mapped) becomes one
 calibration point: the mean of its outputs, named by the run's first line.  The scatter
 of the samples about their pose's mean is the noise: pooled over every pose,
@@ -36,10 +36,11 @@ def timestamp_column(header) -> str | None:
 
 def is_pose_log(counts: np.ndarray) -> bool:
     """Runs of equal loads of these lengths (``counts``, file order) make a pose log: at
-    least half the rows lie in runs of two or more.  A sweep whose zero row ends one
-    component's sweep and starts the next, or that turns at its peak, repeats a load
-    once in a while; those rows are calibration points of their own, not samples."""
-    return 2 * int(counts[counts > 1].sum()) >= int(counts.sum())
+    least half the runs hold two rows or more.  A sweep whose zero row ends one
+    component's sweep and starts the next, or that holds its peak twice at a turn,
+    repeats a load once in a while, between runs of one row; those rows are calibration
+    points of their own, not samples."""
+    return 2 * int((counts > 1).sum()) >= len(counts)
 
 
 def average_poses(frame: dict, keys: list[str], outputs: list[str]):

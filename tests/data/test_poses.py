@@ -94,7 +94,7 @@ def test_a_sweep_file_with_a_date_column_is_not_a_pose_log(tmp_path):
     one starting the next were averaged into one point as a 'pose' of two samples, which
     changed the fit (held-out gamma 0.15 % against 0.31 % without the column)."""
     rng = np.random.default_rng(3)
-    levels = [0, 50, 100, 50, 0]
+    levels = [0, 50, 100, 100, 50, 0]  # the peak held twice at the turn, too
     path = tmp_path / "cal.csv"
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)
