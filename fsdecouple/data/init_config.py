@@ -153,26 +153,31 @@ def guess_layout(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
                 guess = guess_rows(path, names, rows, sep, truncated)
             except InputError:
                 raise err from None
-    return with_temperature(_files_as_repetitions(guess, names, rows, sizes), names)
+    return with_temperature(_files_as_repetitions(guess, names, rows, sizes, path), names)
 
 
 def _files_as_repetitions(guess: Guess, names: list[str], rows: list[list[str]],
-                          sizes: list[int]) -> Guess:
-    """A directory of files without a repetition column is read one repetition a file (as
-    ``fit`` reads it), unless each file holds one pose (one load: a pose directory, all
-    one calibration)."""
-    if len(sizes) < 2 or "repetition" in guess.columns:
+                          sizes: list[int], path: Path) -> Guess:
+    """A directory's files are read one repetition a file, as ``fit`` reads them (a
+    repetition column counts in a single file only), unless each file read holds one
+    pose (one load: a pose directory, all one calibration).  ``sizes``: the rows read
+    of each file, in order (the first files only, where the read was cut)."""
+    if not sizes:
         return guess
+    from .calibration_csv import list_calibration
+
+    files = len(list_calibration(path)[0])
     loads = [names.index(guess.columns[c]) for c in (guess.components or FORCE_COLUMNS)
              if c in guess.columns]
     starts = np.cumsum([0, *sizes])
-    if all(len({tuple(r[i] for i in loads) for r in rows[a:b]}) <= 1
-           for a, b in zip(starts[:-1], starts[1:], strict=True)):
+    if files < 2 or all(len({tuple(r[i] for i in loads) for r in rows[a:b]}) <= 1
+                        for a, b in zip(starts[:-1], starts[1:], strict=True)):
         return guess
-    guess.min_repetitions = len(sizes)
-    guess.reasons["repetition"] = "no repetition column: one repetition a file"
-    guess.reasons["min_repetitions"] = (f"no repetition column: each of the {len(sizes)} files "
-                                        "is one repetition")
+    guess.min_repetitions = files
+    why = ("a repetition column counts in a single file only" if "repetition" in guess.columns
+           else "no repetition column")
+    guess.reasons["repetition"] = f"{why}: one repetition a file"
+    guess.reasons["min_repetitions"] = f"{why}: each of the {files} files is one repetition"
     return guess
 
 

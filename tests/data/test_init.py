@@ -118,6 +118,16 @@ def test_a_directory_of_repetition_files_counts_each_file(tmp_path):
         invoke(["init", cal, "-o", tmp_path / f"c{n}.yaml"])
         calib = load_calibration(cal, load_config(tmp_path / f"c{n}.yaml"))
         assert calib.repetitions == list(range(1, n + 1))
+    # a read cut short counted the files read (80 rows: 2 of the 6)
+    assert guess_layout(cal, max_rows=80).min_repetitions == 6
+    # a repetition column counts in one file; in a directory fit reads a repetition a file
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    for r in (1, 2, 3):
+        lines = (SAMPLE / "calibration" / f"rep{r}.csv").read_text().splitlines()
+        (runs / f"rep{r}.csv").write_text("\n".join([f"run,{lines[0]}", *(f"1,{x}" for x in lines[1:])]))
+    g = guess_layout(runs)
+    assert g.columns["repetition"] == "run" and g.min_repetitions == 3
 
 
 def test_semicolon_decimal_comma(tmp_path):
