@@ -92,7 +92,7 @@ def fit(calib: CalibrationSet | str | Path, settings: Settings | None = None, *,
                          argument="method")
     if method == "linear" and settings.refine:
         from ..core.model import LINEAR_NOT_REFINED
-        raise InputError(f"refine {settings.refine}: {LINEAR_NOT_REFINED}", argument="refine")
+        raise InputError(f"refine {settings.refine}: {LINEAR_NOT_REFINED}")  # config or flag
     if method == "linear" and tune:  # the grid would be fitted, scored and thrown away
         raise InputError("tuning chooses the SVRs' gamma, C and epsilon, and a linear model has "
                          "none: leave tuning off, or fit the method svr or auto", argument="tune")
@@ -224,19 +224,27 @@ def fit_document(model: CouplingErrorModel, output: str | Path, checks: list,
     ``fsdecouple certificate``'s), the checks of Section 2.1 and the advice."""
     report = {k: v for k, v in model.report.to_dict().items() if k != "certificate"}
     return {"model": str(output), "method": model.method, **report,
-            "k": {name: float(k) for name, k in zip(model.layout.labels, model.k, strict=True)},
-            "units": {**model_units(model), "surrogate_max_error": model.settings.units.output},
+            "k": model_slopes(model), "units": model_units(model, surrogate=True),
             "checks": [c.to_dict() for c in checks], "refine": model.settings.refine,
             "extrapolation": model.settings.extrapolation,
             "refine_advice": advice, "tune": model.report.tune}
 
 
-def model_units(model: CouplingErrorModel) -> dict[str, Any]:
+def model_slopes(model: CouplingErrorModel) -> dict[str, float]:
+    """Each component's slope k of eq. (2), by its name."""
+    return {name: float(k) for name, k in zip(model.layout.labels, model.k, strict=True)}
+
+
+def model_units(model: CouplingErrorModel, surrogate: bool = False) -> dict[str, Any]:
     """The units of a model's figures: ``load``, ``output``, and ``k``: each slope's (eq. 2)
     output per load (one load unit for forces, another for moments); with more gauges
-    than loads k of the least-squares loads v = P u, a pure number."""
+    than loads k of the least-squares loads v = P u, a pure number.  ``surrogate``: and
+    ``surrogate_max_error``'s, the chi's own (loads v where there are more gauges)."""
     units = model.settings.units
     projected = getattr(model, "projection", None) is not None
-    return {"load": units.load, "output": units.output,
-            "k": {name: "" if projected else f"{units.output_of(a)}/{units.load_of(a)}"
-                  for a, name in enumerate(model.layout.labels)}}
+    out = {"load": units.load, "output": units.output,
+           "k": {name: "" if projected else f"{units.output_of(a)}/{units.load_of(a)}"
+                 for a, name in enumerate(model.layout.labels)}}
+    if surrogate:
+        out["surrogate_max_error"] = units.load if projected else units.output
+    return out

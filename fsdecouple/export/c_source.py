@@ -346,6 +346,15 @@ def _kernel(plan: ExportPlan, j: int, term: Term) -> str:
 """)
 
 
+def _input_unit(plan: ExportPlan, term: Term) -> str:
+    """The unit of a chi's input: an output's, or with more gauges than loads its input
+    component's load (v = P u)."""
+    settings = getattr(plan.model, "settings", None)
+    if plan.m > plan.n and settings is not None:
+        return settings.units.load_of(term.inp)
+    return plan.load_unit if plan.m > plan.n else plan.output_unit
+
+
 def _table(plan: ExportPlan, j: int, term: Term, ctype: str) -> str:
     p, tab = plan.prefix, term.table
     f = "f" if ctype == "float" else ""
@@ -355,7 +364,7 @@ def _table(plan: ExportPlan, j: int, term: Term, ctype: str) -> str:
     lo_s, inv_s = (numf(lo), numf(inv)) if ctype == "float" else (num(lo), num(inv))
     return (
         f"/* chi_{term.out}{term.inp} on {n} uniform intervals of [{num(tab.lo)}, {num(tab.hi)}] "
-        f"[{plan.output_unit}]: power-basis Hermite coefficients c0..c3 per interval */\n"
+        f"[{_input_unit(plan, term)}]: power-basis Hermite coefficients c0..c3 per interval */\n"
         + _array(f"{p}tab{f}{j}", tab.coefficients().T, fmt, ctype=ctype)
         + f"""static {ctype} {p}chi{f}{j}({ctype} u, uint32_t *st)
 {{

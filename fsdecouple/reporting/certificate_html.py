@@ -17,6 +17,7 @@ from rich.table import Table
 
 from .html import CSS, cell, escape, figure_html, note, table, th, tr
 from .plots import to_png
+from .words import counted
 
 METRIC_NAMES = {"b": "b [%]", "b_prime": "b′ [%]", "f_c": "f_c [%]", "f_0": "f_0 [%]",
                 "v": "v [%]", "c": "c [%]"}
@@ -105,8 +106,7 @@ def certificate_blocks(doc: dict) -> list[Block]:
              ("Date of issue", doc["date"]), ("Model file", f"{doc['model']['file']} (fitted "
                                                    f"{doc['model']['created'] or '?'})"),
              ("Calibration data", f"{doc['calibration']['source']}, "
-                                  f"{len(doc['calibration']['repetitions'])} repetition"
-                                  f"{'s' if len(doc['calibration']['repetitions']) != 1 else ''}"),
+                                  f"{counted(len(doc['calibration']['repetitions']), 'repetition')}"),
              ("Reference", ref["description"] or "not stated"),
              ("Reference uncertainty", f"{ref['uncertainty_percent_k2']:g} % (k = 2)"),
              ("Units", f"loads in {unit}, outputs in {out_unit}")]

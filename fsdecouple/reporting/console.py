@@ -24,6 +24,7 @@ from ..fitting.joint import JOINT_C
 from ..units import Units, output_display
 from .narrow import KEY_COLUMNS
 from .temperature_tables import temperature_tables
+from .words import counted, output_unit_of, svr_unit
 
 # --- ingest, fit, show, apply ------------------------------------------------------
 
@@ -42,8 +43,7 @@ def _units(settings_or_doc) -> Units:
 def ingest_tables(summary: dict[str, Any]) -> list:
     units = _units(summary)
     t = Table(title=f"Calibration set: {summary['sensor']}, "
-                    f"{len(summary['repetitions'])} repetition"
-                    f"{'s' if len(summary['repetitions']) != 1 else ''}")
+                    f"{counted(len(summary['repetitions']), 'repetition')}")
     t.add_column("axis")
     t.add_column("points", justify="right")
     t.add_column("per repetition", justify="right")
@@ -145,7 +145,7 @@ def fit_tables(model) -> list:
     joint = bool(getattr(model, "own", None)) or projected
     # libsvm's gamma, epsilon and tolerance are in the chi's own units: full-scale outputs
     # (scaling: full_scale) or the outputs' unit
-    u = "F.S." if model.settings.scaling == "full_scale" else units.output
+    u = svr_unit(model.settings.scaling, units.output, full_scale=joint)
     svr = (f"C={JOINT_C:g} eps=each output's noise sigma (at least {s.epsilon:g} {u}), fitted "
            "jointly" if joint else f"C={s.C:g} eps={s.epsilon:g} {u}")
     c = Table(title=f"Corrected coupling functions chi (eq. 4): eps-SVR, gamma={s.gamma:g} per "
@@ -394,7 +394,8 @@ def gross_tables(doc: dict[str, Any]) -> list[Table]:
     t = gamma_table(
         doc, g["records"], clean=doc["records"],
         title=f"Table 5: gamma % F.S. with point {s['point']} of the {s['axis']} sweep of "
-              f"repetition {s['repetition']} moved by {s['offset']:+g} V in the training data "
+              f"repetition {s['repetition']} moved by {s['offset']:+g} {output_unit_of(doc)} in "
+              "the training data "
               "(*: changed from the clean run)")
     side = Table(title="svr: Table 3 (clean) beside Table 5 (moved point), % F.S.",
                  box=box.SIMPLE_HEAD, pad_edge=False)

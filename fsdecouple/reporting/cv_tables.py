@@ -6,6 +6,7 @@ from ..axes import labels_in, load_name
 from ..core.metrics import pct
 from ..evaluation.cv_results import gamma_index, scored_axes, test_name
 from .html import cell, note, table, th, tr, worse
+from .words import output_unit_of
 
 METHOD_NAMES = {"initial": "initial (ω⁻¹ only)", "linear": "linear matrix",
                 "rbf-mimo": "MIMO RBF NN", "rbf-siso": "SISO RBF NN", "svr": "ε-SVR",
@@ -87,8 +88,7 @@ def gross_tables(cv) -> str:
     head = [tr(th("round", rowspan=2), th("held out", rowspan=2),
                *(th(f"γ{a} (ε-SVR)", span=2) for a in labels)),
             tr(*(th(x) for _ in labels for x in ("without", "with gross error")))]
-    unit = ((cv.get("settings") or {}).get("units") or {}).get("output", "V")  # the data's own
-    unit = "/".join(sorted({str(v) for v in unit.values()})) if isinstance(unit, dict) else str(unit)
+    unit = output_unit_of(cv)
     out = note(f"Gross error: prime output of point {spec.get('point')} of the {spec.get('axis')} "
                f"sweep of repetition {spec.get('repetition')} moved by {spec.get('offset')} {unit} "
                "(Section 4.4).")

@@ -29,6 +29,7 @@ from .cv_tables import cv_test_name, gamma_tables, gross_tables, task_table
 from .html import CSS, badge, badge_span, cell, escape, figure_html, note, table, th, tr, worse
 from .plots import chi_figure, omega_figure, residual_figure, to_png
 from .temperature_tables import temperature_html
+from .words import plural
 
 
 @dataclass
@@ -67,7 +68,7 @@ def _point_roles(model, calib, cv) -> tuple[pd.DataFrame, str]:
 def _reps(reps, noun: str = "") -> str:
     """``1, 2, 3``; with ``noun``: ``repetitions 1, 2, 3`` or ``repetition 1``."""
     listed = ", ".join(str(r) for r in sorted(reps))
-    return f"{noun}{'s' if len(reps) != 1 else ''} {listed}" if noun else listed
+    return f"{plural(len(reps), noun)} {listed}" if noun else listed
 
 
 def _shown(units) -> dict[str, str]:

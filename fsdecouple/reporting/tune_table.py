@@ -13,6 +13,7 @@ from rich.text import Text
 
 from ..config import SVRSettings
 from ..core.metrics import pct
+from .words import svr_unit
 
 
 def tune_table(record: dict[str, Any], load_unit: str, output_unit: str = "V") -> Table:
@@ -32,10 +33,9 @@ def tune_table(record: dict[str, Any], load_unit: str, output_unit: str = "V") -
         t.add_column(col, justify="left" if col in ("units", "") else "right")
     for i, c in enumerate(cands):
         rms = [f"{c['rms'][a]:.4g}" if c["rms"][a] is not None else "–" for a in axes]
-        own = "full scale" if c.get("scaling", "full_scale") == "full_scale" else output_unit
+        own = svr_unit(c.get("scaling", "full_scale"), output_unit)
         if c["table2"]:  # candidate 0: the settings a plain fit uses
-            t2 = (c["gamma"], c["C"], c["epsilon"]) == (SVRSettings.gamma, SVRSettings.C,
-                                                        SVRSettings.epsilon)
+            t2 = SVRSettings(C=c["C"], epsilon=c["epsilon"], gamma=c["gamma"]).table2
             units = f"{'Table 2' if t2 else 'as configured'}, {own}"
         else:
             units = own

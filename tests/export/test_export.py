@@ -706,6 +706,11 @@ def test_eight_gauges_export_the_projection_and_match_the_model(gauge_model, tmp
     run, text = build(model, tmp_path)
     assert "#define FSD_N_OUTPUTS 8" in text and "#define FSD_N_COMPONENTS 6" in text
     assert "fsd_projection[6][8]" in text
+    # each table's input is a least-squares load v_b, in its component's unit (it said [V])
+    units = model.settings.units
+    tables = re.findall(r"chi_(\d)(\d) on \d+ uniform intervals of \[[^]]*\] \[([^]]*)\]", text)
+    assert tables and all(u == units.load_of(int(b)) for _, b, u in tables), tables
+    assert {u for *_, u in tables} >= {units.load_of(0), units.load_of(5)}
     lo, hi = np.asarray(model.calibrated_range).T
     rng = np.random.default_rng(13)
     v = lo - 0.4 * (hi - lo) + 1.8 * (hi - lo) * rng.random((20_000, 6))

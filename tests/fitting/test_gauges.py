@@ -88,9 +88,15 @@ def test_fit_apply_validate_and_export_through_the_cli_and_the_rest_refuse_in_on
     invoke(["simulate", str(tmp_path), "--rig", "lever-arm", "--gauges", "8"])
     cal, cfg, model = tmp_path / "calibration.csv", tmp_path / "cfg.yaml", tmp_path / "m.json"
     invoke(["init", str(cal), "-o", str(cfg)])
-    invoke(["fit", str(cal), "-c", str(cfg), "-o", str(model), "--no-verdict"])
+    fitted = json.loads(invoke(["fit", str(cal), "-c", str(cfg), "-o", str(model), "--no-verdict",
+                                "--json"]).stdout)
     doc = json.loads(model.read_text())
     assert doc["format_version"] == 5 and np.shape(doc["projection"]) == (6, GAUGES)
+    # the chi map loads v = P u, fitted in full-scale units whatever the config's scaling:
+    # their surrogate error is in the loads' unit, libsvm's settings in F.S. (both said V)
+    assert fitted["units"]["surrogate_max_error"] == fitted["units"]["load"]
+    shown = " ".join(invoke(["show", str(model)]).stdout.split())
+    assert "per F.S.²" in shown and " V," not in shown.split("Corrected coupling")[1][:200]
     log, f = gauge_log(tmp_path)
     out = tmp_path / "forces.csv"
     invoke(["apply", str(model), str(log), "-o", str(out)])

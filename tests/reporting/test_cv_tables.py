@@ -40,3 +40,18 @@ def test_the_gross_errors_offset_is_in_the_datas_output_unit():
           "gross_error": {"spec": {"axis": "x", "repetition": 1, "point": 3, "offset": 5000},
                           "records": [], "omega": []}}
     assert "moved by 5000 count (Section 4.4)" in _text(gross_tables(cv))
+
+
+def test_the_terminals_table_5_gives_the_offset_in_the_datas_output_unit_too():
+    from fsdecouple.reporting.console import gross_tables as terminal_tables
+
+    recs = [{"round": 1, "test_set": t, "method": m, "axis": "x", "metric": "gamma", "value": 0.001}
+            for t in (1, 2) for m in ("initial", "svr")]
+    cv = {"protocol": "repetitions", "methods": ["initial", "svr"], "folds": [[1, 2]],
+          "records": recs,
+          "settings": {"units": {"load": "gf", "output": "count"}},
+          "gross_error": {"spec": {"axis": "x", "repetition": 1, "point": 3, "offset": 5000},
+                          "records": recs, "omega": [],
+                          "rounds_affected": [1]}}
+    title = terminal_tables(cv)[0].title
+    assert "moved by +5000 count in the training data" in title
