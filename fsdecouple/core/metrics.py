@@ -78,12 +78,12 @@ def pct(fraction: float | None, digits: int = 2) -> str:
 
 def check_max_gamma(max_gamma: float | None) -> None:
     """A ``--max-gamma`` gate must be a finite fraction of full scale above 0 (NaN never fails)
-    and below 1: a gate of 100 % F.S. or more can never fail, so it is a percentage
-    written for a fraction (1 meant as 1 %)."""
+    and below 1: a gate of 100 % F.S. or more is a percentage written for a fraction (1
+    meant as 1 %), which held-out errors of a working model never reach."""
     if max_gamma is not None and not (math.isfinite(max_gamma) and max_gamma > 0):
         raise InputError(f"gate on gamma {max_gamma}: expected a fraction greater than 0, e.g. 0.016",
                          argument="max_gamma")
     if max_gamma is not None and max_gamma >= 1:
         raise InputError(f"gate on gamma {max_gamma:g}: a fraction of full scale, so {max_gamma:g} "
-                         f"is {100 * max_gamma:g} % and never fails; for {max_gamma:g} % write "
-                         f"{max_gamma / 100:g}", argument="max_gamma")
+                         f"is {100 * max_gamma:g} %, a gate no working model comes near; for "
+                         f"{max_gamma:g} % write {max_gamma / 100:g}", argument="max_gamma")

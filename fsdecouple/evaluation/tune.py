@@ -85,7 +85,11 @@ class Grid:
     gamma: tuple[float, ...] = GAMMAS
     C: tuple[float, ...] = CS
     epsilon: tuple[float, ...] = EPSILON_NOISE
-    epsilon_given: bool = False  # the user's epsilon, which needs a measured sigma
+
+    @property
+    def epsilon_given(self) -> bool:
+        """epsilon other than the default: the user's, which needs a measured sigma."""
+        return self.epsilon != EPSILON_NOISE
 
     def to_dict(self) -> dict[str, list[float]]:
         return {"gamma": list(self.gamma), "C": list(self.C), "epsilon": list(self.epsilon)}
@@ -127,7 +131,7 @@ def parse_grid(text: str) -> Grid:
             raise InputError(f"tuning grid: {key}: expected 1 to {MAX_VALUES} different values",
                              argument="tune_grid")
         values[key] = vals
-    return Grid(**values, epsilon_given="epsilon" in values)
+    return Grid(**values)
 
 
 @dataclass(frozen=True)
@@ -154,7 +158,7 @@ def candidates(settings: Settings, grid: Grid, sigma: float | None) -> tuple[lis
     elif grid.epsilon_given:
         raise InputError(
             "tuning grid: epsilon is in multiples of the calibration's noise sigma, which this "
-            "set cannot measure (no load is repeated); leave epsilon out, and the fixed "
+            "set cannot measure (no load repeated with scatter); leave epsilon out, and the fixed "
             f"fractions {', '.join(f'{e:g}' for e in EPSILON_FIXED)} of full scale are tried",
             argument="tune_grid")
     else:

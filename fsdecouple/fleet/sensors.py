@@ -118,7 +118,7 @@ def fit_sensor(sensor_dir: str | Path, models_dir: str | Path, *, method: str | 
     from ..core.modelfile import load_model, save_model
     from ..data.calibration import load_calibration
     from ..evaluation.calibrate import fit as calibrate
-    from ..evaluation.calibrate import model_units
+    from ..evaluation.calibrate import model_slopes, model_units
     from ..files.outputs import check_output
     from .drift import compare
 
@@ -145,18 +145,20 @@ def fit_sensor(sensor_dir: str | Path, models_dir: str | Path, *, method: str | 
         keep = (bool(result.gate) and old is not None
                 and os.path.realpath(out) == os.path.realpath(old_path))
         if keep:
-            result.gate.append(f"{out} is the baseline and is kept (a sensor that fails a gate does "
-                               "not replace it; fit again without the gate to accept the change)")
+            result.drift["new"]["model"] = None  # not written: the file holds the baseline
+            result.warnings.append(f"{out} is the baseline and is kept: a sensor that fails a "
+                                   "gate does not replace it (fit again without the gate to "
+                                   "accept the change)")
         else:
             save_model(model, out, force=force)
     except FsdecoupleError as err:
         result.error = str(err)
         return result
     result.model = None if keep else str(out)
-    result.k = {name: float(k) for name, k in zip(model.layout.labels, model.k, strict=True)}
+    result.k = model_slopes(model)
     result.units = model_units(model)
     result.method = model.method
-    result.warnings = model.warnings
+    result.warnings = [*model.warnings, *result.warnings]
     return result
 
 

@@ -315,6 +315,8 @@ def test_an_epsilon_grid_needs_a_measured_sigma():
     settings = load_config()
     with pytest.raises(InputError, match="epsilon is in multiples of the calibration's noise sigma"):
         candidates(settings, parse_grid("epsilon=0.5,2"), None)
+    with pytest.raises(InputError, match="epsilon is in multiples"):  # the Python API's too
+        candidates(settings, Grid(epsilon=(0.5, 2.0)), None)
     cands, basis = candidates(settings, parse_grid("C=3"), None)  # epsilon left out: fixed
     assert basis == "fixed" and sorted({c.epsilon for c in cands[1:]}) == list(EPSILON_FIXED)
     cands, basis = candidates(settings, parse_grid("epsilon=0.5,2"), 0.01)

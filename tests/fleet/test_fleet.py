@@ -345,6 +345,7 @@ def test_fit_many_baseline_reports_drift(fleet, drift_models, tmp_path, in_threa
     # compares with the same old model and fails again; alpha's passed and was replaced
     assert (base / "gamma.json").read_bytes() == drift_models["before"].read_bytes()
     assert gamma["model"] is None and "is the baseline and is kept" in r.stderr
+    assert gamma["drift"]["new"]["model"] is None and not any("kept" in g for g in gamma["gate"])
     assert alpha["model"] == str(base / "alpha.json")
     assert (base / "alpha.json").read_bytes() != drift_models["first"].read_bytes()
 
