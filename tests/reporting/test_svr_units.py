@@ -44,9 +44,9 @@ def test_the_tune_tables_candidate_0_is_named_as_what_it_is():
     and its units (volts with scaling: none) were not said."""
     table2 = {"gamma": 0.5, "C": 1000.0, "epsilon": 1e-4, "scaling": "none"}
     assert _units_column(tune_table(_record(table2), "gf", "mV")) == [
-        "Table 2, mV", "full scale, tol 1e-05"]
+        "Table 2, mV", "F.S., tol 1e-05"]
     mine = {**table2, "C": 5.0, "scaling": "full_scale"}
-    assert _units_column(tune_table(_record(mine), "N"))[0] == "as configured, full scale"
+    assert _units_column(tune_table(_record(mine), "N"))[0] == "as configured, F.S."
 
 
 def test_tuning_that_replaces_configured_settings_says_so(monkeypatch):
