@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import pytest
 from conftest import SAMPLE
 
 from fsdecouple import load_calibration, load_config, load_model
@@ -49,6 +50,7 @@ def test_the_tune_tables_candidate_0_is_named_as_what_it_is():
     assert _units_column(tune_table(_record(mine), "N"))[0] == "as configured, F.S."
 
 
+@pytest.mark.slow  # two fits of the sample: over ~0.8 s of CPU
 def test_tuning_that_replaces_configured_settings_says_so(monkeypatch):
     import fsdecouple.evaluation.tune as tune
     from fsdecouple.evaluation.calibrate import fit
