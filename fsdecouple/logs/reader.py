@@ -228,9 +228,13 @@ class CsvParser:
             column_types={pos[i]: pa.float64() for i in self.index},
             null_values=list(MISSING_CELLS), decimal_point=settings.decimal, check_utf8=False,
         )
+        # Parquet output: the columns the model reads are the numbers read (doubles, a
+        # missing cell null), every other column its text
+        self.float_of = {j: k for k, j in enumerate(self.index)}
+        text = [i for i in self.keep if i not in self.float_of]
         self.text_opts = pcsv.ConvertOptions(
-            include_columns=[pos[i] for i in self.keep],
-            column_types={pos[i]: pa.string() for i in self.keep}, strings_can_be_null=False,
+            include_columns=[pos[i] for i in text],
+            column_types={pos[i]: pa.string() for i in text}, strings_can_be_null=False,
         ) if want_table else None
         # one block is parsed per thread; the blocks themselves run in parallel
         self.read_opts = pcsv.ReadOptions(column_names=pos, use_threads=False)
@@ -268,11 +272,23 @@ class CsvParser:
                 lines = kept_lines(lines, self.keep, self.settings.sep)
         table = None
         if self.text_opts is not None:
-            table = pcsv.read_csv(buffer, read_options=self.read_opts,
-                                  parse_options=self.parse_opts, convert_options=self.text_opts)
-            table = table.rename_columns([self.header[i] for i in self.keep])
+            text = pcsv.read_csv(buffer, read_options=self.read_opts, parse_options=self.parse_opts,
+                                 convert_options=self.text_opts).columns \
+                if self.text_opts.include_columns else []
+            table = self._table(u, text)
         return Block(row, u, lines=lines, table=table, done=chunk.done, total=chunk.total,
                      joined=joined)
+
+    def _table(self, u: np.ndarray, text) -> pa.Table:
+        """The block's columns for Parquet output, in the log's order: the read numbers of
+        the columns the model reads (``u``; NaN, a missing cell, as null), the text of
+        the others (``text``, in order)."""
+        cols, rest = [], iter(text)
+        for j in self.keep:
+            k = self.float_of.get(j)
+            cols.append(next(rest) if k is None
+                        else pa.array(u[:, k], pa.float64(), mask=np.isnan(u[:, k])))
+        return pa.table(cols, names=[self.header[j] for j in self.keep])
 
     def exact(self, chunk: CsvBody) -> Block:
         """Parse a block line by line: slower, but every line is a row, as it is in the file."""
@@ -319,10 +335,23 @@ class CsvParser:
             ])
         table = None
         if self.want_table:
-            table = pa.table([pa.array(list(cols[j]), pa.string()) for j in self.keep],
-                             names=[self.header[j] for j in self.keep])
+            # a block cut short has no forces, but its numbers are kept where they read
+            read = u if not chunk.truncated else np.column_stack([
+                _lenient(cols[j], self.settings.decimal) for j in self.index])
+            table = self._table(read, [pa.array(list(cols[j]), pa.string()) for j in self.keep
+                                       if j not in self.float_of])
         return Block(row, u, lines=pa.array(lines, pa.binary()), table=table, done=chunk.done,
                      total=chunk.total, truncated=chunk.truncated)
+
+
+def _lenient(cells, decimal: str) -> np.ndarray:
+    """Each cell as a number, NaN where it reads as none (a cell cut short)."""
+    def one(c: str) -> float:
+        try:
+            return float(c.strip().replace(decimal, ".") if decimal != "." else c)
+        except ValueError:
+            return np.nan
+    return np.array([one(c) for c in cells], dtype=float)
 
 
 def _lines(body: bytes, buffer: pa.Buffer, rows: int) -> pa.Array:

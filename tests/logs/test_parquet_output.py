@@ -12,6 +12,7 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
+import pytest
 from conftest import SAMPLE
 
 from fsdecouple import load_model
@@ -54,6 +55,44 @@ def test_float_columns_are_written_plain_and_the_file_reads_back(sample_model, t
     np.testing.assert_allclose(back[["fx", "fy", "fz"]].to_numpy(), f, rtol=0, atol=1e-9)
     assert pq.read_table(out).column("status").type == pa.string()
 
+
+
+@pytest.mark.parametrize("chunk_rows, end", [(64, "\n"), (1 << 20, "\n"), (64, "")])
+@pytest.mark.parametrize("sep, decimal", [(",", "."), (";", ",")])
+def test_a_csv_logs_outputs_are_doubles_in_parquet_output(sample_model, tmp_path, chunk_rows,
+                                                           end, sep, decimal):
+    """A CSV log's ux, uy, uz became strings in Parquet output ('0,0143' with a decimal
+    comma): the columns the model reads are written as the numbers read, a missing cell
+    null; the other columns keep their text."""
+    model = load_model(sample_model)
+    text = (SAMPLE / "task_voltages.csv").read_text().splitlines()
+    rows = [f"{line}{sep if sep != ',' else ','}{'x' if i % 2 else 'y'}" for i, line in
+            enumerate(text[1:])]
+    rows = [r.replace(",", sep) if sep != "," else r for r in rows]
+    if decimal == ",":
+        rows = [r.replace(".", ",") for r in rows]
+    rows[5] = sep.join(["" if j == 2 else c for j, c in enumerate(rows[5].split(sep))])  # uy
+    log = tmp_path / "log.csv"
+    # end "": the last line has no line end (a log still being written): no forces, its
+    # numbers kept in the same double column
+    log.write_text("\n".join([sep.join([*text[0].split(","), "note"]), *rows]) + end)
+    settings = None
+    if sep != ",":
+        cfg = tmp_path / "c.yaml"
+        cfg.write_text(f'csv: {{sep: "{sep}", decimal: "{decimal}"}}\n')
+        from fsdecouple import load_config
+        settings = load_config(cfg)
+    out = tmp_path / "f.parquet"
+    apply_file(model, log, out, settings=settings, chunk_rows=chunk_rows)
+    back = pq.read_table(out)
+    want = pd.read_csv(SAMPLE / "task_voltages.csv")
+    for c in ("ux", "uy", "uz"):
+        assert back.column(c).type == pa.float64(), c
+    got = back.column("uy").to_numpy(zero_copy_only=False)
+    assert np.isnan(got[5]) and back.column("uy").null_count == 1
+    np.testing.assert_array_equal(np.delete(got, 5), np.delete(want["uy"].to_numpy(), 5))
+    np.testing.assert_array_equal(back.column("ux").to_numpy(), want["ux"].to_numpy())
+    assert back.column("note").type == pa.string() and back.column("note")[1].as_py() == "x"
 
 
 def test_an_infinite_reading_in_a_parquet_log_is_told_as_a_number(sim_model_file, tmp_path):
