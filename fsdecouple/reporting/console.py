@@ -146,10 +146,10 @@ def fit_tables(model) -> list:
     # libsvm's gamma, epsilon and tolerance are in the chi's own units: full-scale outputs
     # (scaling: full_scale) or the outputs' unit
     u = svr_unit(model.settings.scaling, units.output, full_scale=joint)
-    svr = (f"C={JOINT_C:g} eps=each output's noise sigma (at least {s.epsilon:g} {u}), fitted "
-           "jointly" if joint else f"C={s.C:g} eps={s.epsilon:g} {u}")
-    c = Table(title=f"Corrected coupling functions chi (eq. 4): eps-SVR, gamma={s.gamma:g} per "
-                    f"{u}², {svr}, tol={s.tolerance:g} {u}",
+    svr = (f"C={JOINT_C:g} eps=each output's noise sigma (at least {s.epsilon:g}), fitted "
+           "jointly" if joint else f"C={s.C:g} eps={s.epsilon:g}")
+    c = Table(title=f"Corrected coupling functions chi (eq. 4): eps-SVR in {u}, "
+                    f"gamma={s.gamma:g} {svr} tol={s.tolerance:g}",
               caption=f"beyond the input range: {model.settings.extrapolation} (extrapolation); "
                       f"zero offsets: {zero_used(model)}; refinement steps K = "
                       f"{model.settings.refine}")

@@ -306,5 +306,6 @@ def test_a_gross_error_is_told_in_its_outputs_unit(tmp_path):
     # its SVRs were fitted jointly, with C and epsilon of their own: the table said Table 2's
     # C = 1000 and eps = 1e-4, and left the own-load chi_aa out
     shown = " ".join(invoke(["show", tmp_path / "m.json"]).stdout.split())
-    assert "C=1 eps=each output's noise sigma (at least 0.0001 F.S.), fitted jointly" in shown
+    assert "eps-SVR in F.S., gamma=0.5 C=1 eps=each output's noise sigma (at least 0.0001), " \
+           "fitted jointly" in shown
     assert "C=1000" not in shown and "chi_fx:fx" in shown and "chi_mz:mz" in shown
