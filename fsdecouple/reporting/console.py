@@ -326,10 +326,6 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
     lines = [f"{m:{w}s} worst gamma {_num(worst[m]):>6s} % F.S."
              + ("" if m == "initial" else f", {worse[m]} of {n} cells worse than initial")
              for m in doc["methods"]]
-    if doc.get("refine"):
-        k = (doc.get("settings") or {}).get("refine") or 0
-        lines.append(f"svr-refined: the svr models with K = {doc['refine']} second-order "
-                     f"refinement steps (eqs. 5-6); svr: K = {k}, the config's")
     if doc.get("protocol") == "levels":
         lines.insert(0, "protocol: levels (round k holds out the k-th loaded point of every sweep; "
                         "points beyond the loads left in their sweep are end points, scored apart)")
@@ -343,6 +339,10 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
                         "from the k-th)")
     else:
         lines.insert(0, "protocol: repetitions (each round holds out whole repetitions, Section 4.1)")
+    if doc.get("refine"):
+        k = (doc.get("settings") or {}).get("refine") or 0
+        lines.append(f"svr-refined: the svr models with K = {doc['refine']} second-order "
+                     f"refinement steps (eqs. 5-6); svr: K = {k}, the config's")
     return lines
 
 
