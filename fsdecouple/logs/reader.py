@@ -32,7 +32,7 @@ from ..config import Settings
 from ..data.csv_text import HEADER_ROW, MAX_HEADER_CHARS, MISSING_CELLS, read_header, require_utf8, to_numbers
 from ..errors import InputError, excerpt, printable, where
 from ..files.inputs import open_input, reading
-from .arrow import column_floats
+from .arrow import column_floats, numbers
 from .passthrough import kept_fields, kept_lines
 
 BLOCK_BYTES = 4 << 20  # ~100 K rows of a 4-column log; a block in flight costs ~15x this
@@ -286,8 +286,8 @@ class CsvParser:
         cols, rest = [], iter(text)
         for j in self.keep:
             k = self.float_of.get(j)
-            cols.append(next(rest) if k is None
-                        else pa.array(u[:, k], pa.float64(), mask=np.isnan(u[:, k])))
+            cols.append(next(rest) if k is None else numbers(u[:, k].astype(np.float64),
+                                                             np.isnan(u[:, k])))
         return pa.table(cols, names=[self.header[j] for j in self.keep])
 
     def exact(self, chunk: CsvBody) -> Block:
