@@ -104,6 +104,15 @@ def check_refine(value: Any, where: str = "refine") -> int:
     return Whole(0, MAX_REFINE, "a whole number of refinement steps")(value, where)
 
 
+def refine_argument(value: Any, where: str = "refine") -> int:
+    """:func:`check_refine` of a ``refine`` argument (``apply --refine``, ``cv --refine``),
+    its error naming the argument for the command line to spell as a flag."""
+    try:
+        return check_refine(value, where)
+    except ConfigError as err:
+        raise ConfigError(str(err), argument="refine") from None
+
+
 def check_choice(value: Any, where: str = "extrapolation", modes=EXTRAPOLATIONS) -> str:
     """One of ``modes``: by default the extrapolation mode (core/extrapolation.py)."""
     return Choice(tuple(modes))(value, where)

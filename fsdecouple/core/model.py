@@ -17,7 +17,7 @@ import numpy as np
 from ..axes import Layout, NamedChi, chi_labels
 from ..config import Settings
 from ..errors import ConfigError
-from ..schema import check_refine
+from ..schema import check_refine, refine_argument
 from .decouple import coupling_errors as _coupling_errors
 from .decouple import exact as _exact_plan
 from .decouple import initial_forces
@@ -359,10 +359,7 @@ class CouplingErrorModel:
 
     def refined(self, refine: int) -> CouplingErrorModel:
         """This model with ``settings.refine = refine`` (``apply --refine K``); tables shared."""
-        try:
-            k = check_refine(refine, "K")
-        except ConfigError as err:
-            raise ConfigError(str(err), argument="refine") from None
+        k = refine_argument(refine, "K")
         if k and self.method == "linear":
             raise ConfigError(f"refine {k}: {LINEAR_NOT_REFINED}", argument="refine")
         settings = replace(self.settings, refine=k)

@@ -29,7 +29,7 @@ from ..core.model import FORCE_LIMIT
 from ..data.calibration import CalibrationSet, GrossError, load_calibration
 from ..data.calibration_csv import read_task_log
 from ..data.zero import tare_offsets
-from ..errors import ConfigError, InputError, where
+from ..errors import InputError, where
 from ..fitting import svr as _svr
 from ..fitting.baselines import METHODS, establish, train_all
 from ..fitting.fit import settled_forces
@@ -37,9 +37,9 @@ from ..fitting.linear import fit_omega
 from ..fitting.noise import VERDICT_NOISE_FRACTION
 from ..fitting.rbf import B_FACTOR, MSE_GOAL, OUTPUT_LAYER, SPREAD, basic_solution
 from ..fitting.threads import single_threaded_libraries
-from ..schema import check_refine
+from ..schema import refine_argument
 from .checks import assumption_checks
-from .cv_results import FORMAT, FORMAT_VERSION
+from .cv_results import FORMAT, FORMAT_VERSION, REFINED
 from .heldout import (
     HeldOutRound,
     check_folds,
@@ -66,11 +66,6 @@ def _decouple_held_out(tests, models, methods=METHODS) -> dict[tuple, np.ndarray
     """(round, test_set, method) -> decoupled forces of that held-out set."""
     return {(r, label, m): models[(r, m)].decouple(tests[(r, label)][0], rotate=False)
             for (r, label) in tests for m in methods}
-
-
-# cv --refine K: the round's svr models decoupled with K refinement steps (eqs. 5-6), a row
-# of their own beside the svr row (whose K is the config's); nothing is trained for it
-REFINED = "svr-refined"
 
 
 def _with_refined(models: dict, refine: int, u: np.ndarray) -> dict:
@@ -240,10 +235,7 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
     settings = settings or getattr(calib, "settings", None) or Settings()  # as fit's
     settings.layout.one_output_each("cv")
     if refine is not None:
-        try:
-            refine = check_refine(refine, "refine")
-        except ConfigError as err:
-            raise ConfigError(str(err), argument="refine") from None
+        refine = refine_argument(refine)
         if refine == 0:
             raise InputError("refine 0: a refined row needs K >= 1 (the svr row keeps the "
                              "config's K)", argument="refine")
@@ -349,7 +341,8 @@ def _run_cv(calib, settings, *, folds, task, task_tare, gross_error, max_gamma, 
     first_test = rounds[0].tests[0][1].voltages if rounds[0].tests else rounds[0].train.voltages
     vectors = [first_test[i:i + 1] for i in range(min(TIMING_VECTORS, len(first_test)))]
     timing_records = []
-    establish_times[REFINED] = establish_times["svr"]  # the same models: nothing more trained
+    if refine:
+        establish_times[REFINED] = establish_times["svr"]  # the same models: nothing trained
     for m in methods:
         timing_records.append({"method": m, "metric": "establish_seconds",
                                "value": float(np.median(establish_times[m]))})

@@ -16,6 +16,9 @@ from ..files.inputs import CV_LIMIT, read_bounded
 from ..files.outputs import atomic_write
 
 FORMAT = "fsdecouple.cv"
+# cv --refine K: the rounds' svr models decoupled with K refinement steps (eqs. 5-6), a
+# method row of its own beside the svr row (whose K is the config's); nothing is trained
+REFINED = "svr-refined"
 FORMAT_VERSION = 1
 TEST_NAMES = ("I", "II", "III", "IV")  # Section 4.1: "test data I" and "test data II"
 

@@ -19,7 +19,7 @@ from ..core.metrics import pct
 from ..data.guesses import Guess
 from ..data.guesses import shown as shown_name
 from ..errors import printable
-from ..evaluation.cv_results import gamma_index, scored_axes, test_name
+from ..evaluation.cv_results import REFINED, gamma_index, scored_axes, test_name
 from ..fitting.joint import JOINT_C
 from ..units import Units, output_display
 from .narrow import KEY_COLUMNS
@@ -341,7 +341,7 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
         lines.insert(0, "protocol: repetitions (each round holds out whole repetitions, Section 4.1)")
     if doc.get("refine"):
         k = (doc.get("settings") or {}).get("refine") or 0
-        lines.append(f"svr-refined: the svr models with K = {doc['refine']} second-order "
+        lines.append(f"{REFINED}: the svr models with K = {doc['refine']} second-order "
                      f"refinement steps (eqs. 5-6); svr: K = {k}, the config's")
     return lines
 

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from ..axes import labels_in, load_name
 from ..core.metrics import pct
-from ..evaluation.cv_results import gamma_index, scored_axes, test_name
+from ..evaluation.cv_results import REFINED, gamma_index, scored_axes, test_name
 from .html import cell, note, table, th, tr, worse
 from .words import output_unit_of
 
 METHOD_NAMES = {"initial": "initial (ω⁻¹ only)", "linear": "linear matrix",
                 "rbf-mimo": "MIMO RBF NN", "rbf-siso": "SISO RBF NN", "svr": "ε-SVR",
-                "svr-refined": "ε-SVR, refined (cv --refine)"}
+                REFINED: "ε-SVR, refined (cv --refine)"}
 
 
 def cv_test_name(cv, rnd: int, test_set: int) -> str:
@@ -47,7 +47,7 @@ def gamma_tables(cv) -> str:
     out = table("table-gamma-methods", "Table 1 analogue: interference error γ (eq. 12) of the "
                 f"held-out {'load levels' if levels else 'repetitions'} ({cv.get('protocol', 'repetitions')} "
                 "protocol), every method, % F.S.", head, rows)
-    absent = [METHOD_NAMES[m] for m in METHOD_NAMES if m not in methods and m != "svr-refined"]
+    absent = [METHOD_NAMES[m] for m in METHOD_NAMES if m not in methods and m != REFINED]
     if absent:
         out += note("Not in cv.json (not run): " + ", ".join(absent) + ".")
     end = gamma_index(cv.get("end_records")) if levels else {}
