@@ -29,7 +29,7 @@ from .cv_tables import cv_test_name, gamma_tables, gross_tables, task_table
 from .html import CSS, badge, badge_span, cell, escape, figure_html, note, table, th, tr, worse
 from .plots import chi_figure, omega_figure, residual_figure, to_png
 from .temperature_tables import temperature_html
-from .words import plural
+from .words import plural, unit_words
 
 
 @dataclass
@@ -269,9 +269,8 @@ def _checks(model, cv) -> str:
 def _unit_words(units) -> str:
     """``{load: gf, output: count}`` (a settings document's units; None: the paper's) as words."""
     units = units if isinstance(units, dict) else {"load": "N", "output": "V"}
-    def words(u):
-        return "/".join(sorted({str(v) for v in u.values()})) if isinstance(u, dict) else str(u)
-    return f"{printable(words(units.get('load')))} and {printable(words(units.get('output')))}"
+    return (f"{printable(unit_words(units.get('load')))} and "
+            f"{printable(unit_words(units.get('output')))}")
 
 
 def check_cv_fits(model, cv: dict, source: str = "cv.json") -> None:

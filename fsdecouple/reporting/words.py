@@ -23,7 +23,12 @@ def svr_unit(scaling: str, output_unit: str, full_scale: bool = False) -> str:
     return "F.S." if full_scale or scaling == "full_scale" else output_unit
 
 
+def unit_words(unit: str | dict) -> str:
+    """A settings document's unit as words: one unit, or per channel ``{ux: V, uy: mV}``
+    as ``mV/V``."""
+    return "/".join(sorted({str(v) for v in unit.values()})) if isinstance(unit, dict) else str(unit)
+
+
 def output_unit_of(doc: dict[str, Any]) -> str:
     """The output unit a cv document's settings were read in (``V`` before they said)."""
-    unit = ((doc.get("settings") or {}).get("units") or {}).get("output", "V")
-    return "/".join(sorted({str(v) for v in unit.values()})) if isinstance(unit, dict) else str(unit)
+    return unit_words(((doc.get("settings") or {}).get("units") or {}).get("output", "V"))
