@@ -135,9 +135,10 @@ def guess_layout(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
     """:func:`guess_components` when the header names a moment or a rig's applied loads beside
     the readings, else the 3-axis guess."""
     path = Path(path)
-    sizes: list[int] = []
+    sizes: list[int] = []  # a directory's: the rows read of each file
+    files = 1
     if path.is_dir():
-        names, rows, sep, truncated = _directory_rows(path, max_rows, sizes)
+        names, rows, sep, truncated, files = _directory_rows(path, max_rows, sizes)
     else:
         names, rows, sep, truncated = read_rows(path, max_rows)
     # a moment, or applied loads named as such beside readings named like the components
@@ -153,20 +154,15 @@ def guess_layout(path: str | Path, *, max_rows: int = MAX_ROWS) -> Guess:
                 guess = guess_rows(path, names, rows, sep, truncated)
             except InputError:
                 raise err from None
-    return with_temperature(_files_as_repetitions(guess, names, rows, sizes, path), names)
+    return with_temperature(_files_as_repetitions(guess, names, rows, sizes, files), names)
 
 
 def _files_as_repetitions(guess: Guess, names: list[str], rows: list[list[str]],
-                          sizes: list[int], path: Path) -> Guess:
-    """A directory's files are read one repetition a file, as ``fit`` reads them (a
+                          sizes: list[int], files: int) -> Guess:
+    """A directory's ``files`` are read one repetition a file, as ``fit`` reads them (a
     repetition column counts in a single file only), unless each file read holds one
     pose (one load: a pose directory, all one calibration).  ``sizes``: the rows read
     of each file, in order (the first files only, where the read was cut)."""
-    if not sizes:
-        return guess
-    from .calibration_csv import list_calibration
-
-    files = len(list_calibration(path)[0])
     loads = [names.index(guess.columns[c]) for c in (guess.components or FORCE_COLUMNS)
              if c in guess.columns]
     starts = np.cumsum([0, *sizes])
@@ -182,11 +178,11 @@ def _files_as_repetitions(guess: Guess, names: list[str], rows: list[list[str]],
 
 
 def _directory_rows(path: Path, max_rows: int, sizes: list[int]
-                    ) -> tuple[list[str], list[list[str]], str, bool]:
+                    ) -> tuple[list[str], list[list[str]], str, bool, int]:
     """The rows of a directory's CSV files (a pose directory: one pose a file), joined under
-    their one header: every file's rows count for the loads, the zero rule and full scale.
-    Files in another layout are refused by name, as fit refuses them.  ``sizes`` gets
-    each file's number of rows read, in order."""
+    their one header, and how many files it has: every file's rows count for the loads,
+    the zero rule and full scale.  Files in another layout are refused by name, as fit
+    refuses them.  ``sizes`` gets each file's number of rows read, in order."""
     from .calibration_csv import list_calibration
 
     files, _ = list_calibration(path)
@@ -205,7 +201,7 @@ def _directory_rows(path: Path, max_rows: int, sizes: list[int]
                              "of a calibration directory share one layout")
         rows += more
         truncated |= cut
-    return names, rows, sep, truncated
+    return names, rows, sep, truncated, len(files)
 
 
 def guess_components(path: Path, names: list[str], rows: list[list[str]], sep: str,
