@@ -286,8 +286,7 @@ class CsvParser:
         cols, rest = [], iter(text)
         for j in self.keep:
             k = self.float_of.get(j)
-            cols.append(next(rest) if k is None else numbers(u[:, k].astype(np.float64),
-                                                             np.isnan(u[:, k])))
+            cols.append(next(rest) if k is None else numbers(u[:, k], np.isnan(u[:, k])))
         return pa.table(cols, names=[self.header[j] for j in self.keep])
 
     def exact(self, chunk: CsvBody) -> Block:
