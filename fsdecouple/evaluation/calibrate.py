@@ -124,11 +124,9 @@ def _same_reading(read_with, settings) -> None:
     silence.  The keys are the certificate's (READING_KEYS) but the sensor's name and
     ``zero``, which fit may choose itself."""
     from ..errors import InputError
-    from .certificate_doc import READING_KEYS
+    from .certificate_doc import reading_differences
 
-    mine, theirs = read_with.to_dict(), settings.to_dict()
-    differ = [k for k in READING_KEYS if k not in ("sensor", "zero")
-              and mine.get(k) != theirs.get(k)]
+    differ = reading_differences(read_with, settings, skip=("sensor", "zero"))
     if differ:
         raise InputError(f"the calibration was read with other settings ({', '.join(differ)} "
                          "differ from these): fit it with the settings it was read with, or "

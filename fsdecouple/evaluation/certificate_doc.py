@@ -45,6 +45,13 @@ READING_KEYS = ("sensor", "full_scale", "columns", "scale", "csv", "units", "com
                 "outputs", "zero")
 
 
+def reading_differences(mine: Settings, theirs: Settings, skip=()) -> list[str]:
+    """The keys of :data:`READING_KEYS` (but ``skip``) on which two settings would read a
+    calibration set's numbers otherwise."""
+    a, b = mine.to_dict(), theirs.to_dict()
+    return [k for k in READING_KEYS if k not in skip and a.get(k) != b.get(k)]
+
+
 def check_matches(model: CouplingErrorModel, calib: CalibrationSet, source: str,
                   settings: Settings | None = None) -> None:
     """Refuse a calibration set, or a config, that is not the one the model was fitted on.
@@ -69,14 +76,13 @@ def check_matches(model: CouplingErrorModel, calib: CalibrationSet, source: str,
         raise InputError(f"{calib.source}: does not match the model file {source}: {what}")
     if settings is not None:
         refuse_unused(settings, model.settings, "certificate")
-        mine, theirs = settings.to_dict(), model.settings.to_dict()
-        for key in READING_KEYS:
-            if key == "zero" and settings.zero is None:
-                continue  # unsaid: fit's own choice (rows, or fit on sweeps out and back)
-            if mine.get(key) != theirs.get(key):
-                raise InputError(f"the config's {key} is not the model's ({source}): the set would "
-                                 "be read otherwise than it was fitted; use the model's own "
-                                 "settings (no -c) or the config it was fitted with")
+        # zero unsaid: fit's own choice (rows, or fit on sweeps out and back)
+        differ = reading_differences(settings, model.settings,
+                                     skip=("zero",) if settings.zero is None else ())
+        if differ:
+            raise InputError(f"the config's {differ[0]} is not the model's ({source}): the set "
+                             "would be read otherwise than it was fitted; use the model's own "
+                             "settings (no -c) or the config it was fitted with")
 
 
 def _first_difference(fitted: list[tuple[str, str]], given: list[tuple[str, str]]) -> str:
