@@ -5,7 +5,7 @@ from __future__ import annotations
 from ..axes import labels_in, load_name
 from ..core.metrics import pct
 from ..evaluation.cv_results import REFINED, gamma_index, scored_axes, test_name
-from .html import cell, note, table, th, tr, worse
+from .html import cell, note, scrolled, table, th, tr, worse
 from .words import output_unit_of
 
 METHOD_NAMES = {"initial": "initial (ω⁻¹ only)", "linear": "linear matrix",
@@ -35,8 +35,8 @@ def gamma_tables(cv) -> str:
     def held(r, t):
         return f"level {t} (interior points)" if levels else f"{cv_test_name(cv, r, t)} (rep {t})"
 
-    def val(r, t, m, a, base="initial"):
-        v, b = g.get((r, t, m, a)), g.get((r, t, base, a))
+    def val(r, t, m, a, index=g, base="initial"):
+        v, b = index.get((r, t, m, a)), index.get((r, t, base, a))
         return cell(pct(v), m != base and worse(v, b))
 
     head = [tr(th("round", rowspan=2), th("held out", rowspan=2),
@@ -44,9 +44,11 @@ def gamma_tables(cv) -> str:
             tr(*(th(METHOD_NAMES.get(m, m)) for _ in labels for m in methods))]
     rows = [tr(cell(str(r)), cell(held(r, t)), *(val(r, t, m, a) for a in labels for m in methods))
             for r, t in keys]
-    out = table("table-gamma-methods", "Table 1 analogue: interference error γ (eq. 12) of the "
-                f"held-out {'load levels' if levels else 'repetitions'} ({cv.get('protocol', 'repetitions')} "
-                "protocol), every method, % F.S.", head, rows)
+    # every method for every axis: wider than a page, so it scrolls rather than wrap its cells
+    out = scrolled(table("table-gamma-methods", "Table 1 analogue: interference error γ (eq. 12) "
+                         f"of the held-out {'load levels' if levels else 'repetitions'} "
+                         f"({cv.get('protocol', 'repetitions')} protocol), every method, % F.S.",
+                         head, rows))
     absent = [METHOD_NAMES[m] for m in METHOD_NAMES if m not in methods and m != REFINED]
     if absent:
         out += note("Not in cv.json (not run): " + ", ".join(absent) + ".")
@@ -54,11 +56,10 @@ def gamma_tables(cv) -> str:
     if end:  # the levels protocol's end points, scored apart: loads beyond the rest of a sweep
         ends = sorted({(r, t) for r, t, _, _ in end})
         rows = [tr(cell(str(r)), cell("end points"),
-                   *(cell(pct(end.get((r, t, m, a))), m != "initial" and worse(
-                       end.get((r, t, m, a)), end.get((r, t, "initial", a))))
-                     for a in labels for m in methods)) for r, t in ends]
-        out += table("table-gamma-end", "Held-out end points (each sweep's loads beyond its "
-                     "others: the model extrapolates there), every method, % F.S.", head, rows)
+                   *(val(r, t, m, a, end) for a in labels for m in methods)) for r, t in ends]
+        out += scrolled(table("table-gamma-end", "Held-out end points (each sweep's loads beyond "
+                              "its others: the model extrapolates there), every method, % F.S.",
+                              head, rows))
     if "svr" in methods:
         rows = [tr(cell(str(r)), cell(held(r, t)), *(val(r, t, "svr", a) for a in labels)) for r, t in keys]
         worst = [max((g.get((r, t, "svr", a)) or 0.0) for r, t in keys) for a in labels]

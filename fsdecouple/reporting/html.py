@@ -37,6 +37,11 @@ def table(tid: str, caption: str, head: list[str], rows: list[str]) -> str:
             f'</thead>\n<tbody>{"".join(rows)}</tbody></table>\n')
 
 
+def scrolled(html_table: str) -> str:
+    """A table wider than the page, in a box that scrolls sideways (its cells unwrapped)."""
+    return f'<div class="scroll">{html_table}</div>\n'
+
+
 def tr(*cells: str) -> str:
     return "<tr>" + "".join(cells) + "</tr>\n"
 
@@ -80,5 +85,7 @@ td.worse{font-weight:700;background:#fdd;border:2px solid #000}
 .badge.pass{color:#064;border-color:#064}.badge.warn{color:#930;border-color:#930;background:#fec}
 figure{margin:1em 0}figure img{max-width:100%;height:auto;border:1px solid #ccc}
 figcaption{font-size:.9em;color:#333}.note{color:#333;font-style:italic}
-@media print{body{max-width:none}h2{page-break-before:auto}figure,table{page-break-inside:avoid}}
+.scroll{overflow-x:auto}.scroll td{white-space:nowrap}
+@media print{body{max-width:none}h2{page-break-before:auto}figure,table{page-break-inside:avoid}
+.scroll{overflow:visible}}
 """
