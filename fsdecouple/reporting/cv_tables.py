@@ -131,5 +131,6 @@ def task_table(cv) -> str:
             tr(*(th(x) for _ in labels for x in ("max error", "rms error")))]
     out = note(f"Combined loads: {task.get('voltages')} against {task.get('forces')}, "
                f"{task.get('rows')} rows, tare {task.get('tare')}.")
-    return out + table("table-task", "Combined-load comparison: error as % of each axis's full scale",
-                       head, rows)
+    # two columns a component, six methods a round: wider than a page for six axes
+    return out + scrolled(table("table-task", "Combined-load comparison: error as % of each "
+                                "axis's full scale", head, rows))

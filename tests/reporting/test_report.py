@@ -267,6 +267,15 @@ def test_gross_error_and_task_tables_show_the_cv_records(shown_tables, cv_json):
             shown(text, task[(rnd, method, axis, metric)], 3)
 
 
+def test_tables_of_every_method_scroll_sideways_instead_of_wrapping(full_report):
+    """The tables with a row for every method and columns for every component are wider
+    than a page for six axes: each sits in the scroll box whose cells do not wrap."""
+    text = full_report[0].read_text(encoding="utf-8")
+    assert re.search(r"\.scroll\{overflow-x:auto\}\.scroll td\{white-space:nowrap\}", text)
+    for tid in ("table-gamma-methods", "table-task"):
+        assert f'<div class="scroll"><table id="{tid}">' in text, tid
+
+
 def test_report_is_self_contained_html_with_every_figure_and_table(full_report):
     html, _ = full_report
     text = html.read_text(encoding="utf-8")
