@@ -12,6 +12,7 @@ chi, a row per output; the 3-axis figures keep the paper's layout.
 from __future__ import annotations
 
 import io
+import json
 
 import numpy as np
 import pandas as pd
@@ -37,11 +38,32 @@ REP_LINES = ("-", "--", ":", "-.")
 PANEL = "abcdefghi"
 
 
+SAMPLES = 9  # points of each line that a figure's contents keep
+
+
 def to_png(fig: Figure, dpi: int = 110) -> bytes:
-    """The figure as PNG bytes (no software tag, so the bytes depend on the figure only)."""
+    """The figure as PNG bytes (no software tag, so the bytes depend on the figure only),
+    its :func:`contents` as the PNG's ``Description`` text: what a committed figure
+    shows can be checked against a new one by numbers, not by pixels."""
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi, metadata={"Software": None})
+    fig.savefig(buf, format="png", dpi=dpi,
+                metadata={"Software": None, "Description": json.dumps(contents(fig))})
     return buf.getvalue()
+
+
+def contents(fig: Figure) -> dict:
+    """What ``fig`` says: its title, each panel's title and axis labels, and each line's
+    label with ``SAMPLES`` of its points, evenly spaced along it (``%.6g``)."""
+    def sample(values) -> list[float]:
+        v = np.asarray(values, dtype=float)
+        at = np.unique(np.linspace(0, v.size - 1, SAMPLES).round().astype(int)) if v.size else []
+        return [float(f"{x:.6g}") for x in v[at]]
+
+    return {"title": fig.get_suptitle(), "panels": [
+        {"title": ax.get_title(), "xlabel": ax.get_xlabel(), "ylabel": ax.get_ylabel(),
+         "lines": [{"label": ln.get_label(), "x": sample(ln.get_xdata()), "y": sample(ln.get_ydata())}
+                   for ln in ax.get_lines()]}
+        for ax in fig.axes]}
 
 
 def _label(ax, title: str, xlabel: str, ylabel: str, *, small: bool = False,

@@ -395,6 +395,39 @@ def test_fit_mentions_the_report_command(sample_fit):
     assert "calibration report: fsdecouple report model.json -o report.html" in r.stdout
 
 
+def png_description(png: bytes) -> dict:
+    """The ``Description`` text chunk of a PNG, read by the format's own layout."""
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    at = 8
+    while at < len(png):
+        size, kind = int.from_bytes(png[at:at + 4], "big"), png[at + 4:at + 8]
+        data = png[at + 8:at + 8 + size]
+        if kind == b"tEXt" and data.startswith(b"Description\x00"):
+            return json.loads(data.split(b"\x00", 1)[1].decode("latin-1"))
+        at += 12 + size
+    raise AssertionError("no Description chunk")
+
+
+def test_docs_figure_is_the_figure_report_draws_now(tmp_path, sample_model):
+    """docs/figure7.png (docs/make_figures.py) shows what `report --calib` draws today:
+    the same titles and labels, and every line's points within 1e-3 of its panel's range
+    (the fits agree far closer than that; a stale figure moved visibly)."""
+    invoke(["report", sample_model, "--calib", SAMPLE / "calibration", "-o", tmp_path / "r.html",
+            "--png", tmp_path / "png"])
+    new = png_description((tmp_path / "png" / "figure7_chi.png").read_bytes())
+    old = png_description((ROOT / "docs" / "figure7.png").read_bytes())
+    stale = "docs/figure7.png is stale: run python docs/make_figures.py"
+    assert old["title"] == new["title"], stale
+    assert len(old["panels"]) == len(new["panels"]) == 6, stale
+    for p, q in zip(old["panels"], new["panels"], strict=True):
+        assert (p["title"], p["xlabel"], p["ylabel"]) == (q["title"], q["xlabel"], q["ylabel"]), stale
+        assert [ln["label"] for ln in p["lines"]] == [ln["label"] for ln in q["lines"]], stale
+        for axis in ("x", "y"):
+            span = np.ptp(np.concatenate([ln[axis] for ln in q["lines"]]))
+            for a, b in zip(p["lines"], q["lines"], strict=True):
+                np.testing.assert_allclose(a[axis], b[axis], rtol=0, atol=1e-3 * span, err_msg=stale)
+
+
 def test_readme_ends_its_main_command_with_a_report_and_shows_a_figure():
     readme = (SAMPLE.parent / "README.md").read_text(encoding="utf-8")
     main = next(ln for ln in readme.splitlines() if ln.startswith("python3 -m venv") and " fit " in ln)
