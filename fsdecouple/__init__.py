@@ -36,6 +36,16 @@ _PUBLIC = {
     "import_cal": "data.ati_model",
     "export_cal": "export.ati_cal",
     "fit": "evaluation.calibrate",
+    "frame_tare": "logs.frame",
+    "frame_forces": "logs.frame",
+    "apply_many": "logs.many",
+    "parse_folds": "evaluation.heldout",
+    "export_header": "export.header",
+    "compare": "fleet.drift",
+    "fit_many": "fleet.sensors",
+    "certificate": "evaluation.certificate_doc",
+    "write_certificate": "reporting.certificate_file",
+    "init_config": "data.init_config",
 }
 __all__ = sorted(_PUBLIC)  # noqa: F822
 
