@@ -15,7 +15,7 @@ A joint fit may add an own-load chi_aa(u_a) (:mod:`fsdecouple.fitting.joint`): i
 subtracted like the others, always at the measured u_a (it models the outputs as
 measured), on every path.
 
-Second-order refinement (``refine = K``; README, "Second-order refinement"):
+Second-order refinement (``refine = K``; docs/apply.md, "Second-order refinement"):
 eq. (11) evaluated at estimates p of the prime outputs instead of u (eq. 5-6),
 
     p^0 = u,   p_b^(j+1) = u_b - chi_bb(u_b) - sum_{c != b} chi_bc(p_c^j)   (j = 0 .. K - 1)

@@ -296,7 +296,7 @@ def require_utf8(body: bytes, path: Path, first_row: int, header: list[str], sep
     is UTF-8, naming the row, column and cell of the first byte that is not
     (:func:`~fsdecouple.files.inputs.non_utf8_cell`, the calibration reader's rule too).
 
-    The rule for a log's bytes (README, "Errors and exit codes"): the header must be
+    The rule for a log's bytes (docs/errors.md, "Inputs"): the header must be
     UTF-8; data lines are bytes, passed through to CSV unchanged and never decoded,
     and must be UTF-8 only where they become text (Parquet output: ``why``).  Every
     block is checked the same way, whatever its row.

@@ -5,7 +5,7 @@ the others train every method of :mod:`fsdecouple.fitting.baselines` (initial, l
 rbf-mimo, rbf-siso, svr).  Each is scored by the interference error gamma of eq. (12) on each held-out
 repetition's sweeps; optionally also on a combined-load task log with true forces,
 with one calibration point moved (Section 4.4, Table 5), and timed (Table 4).
-:func:`run_cv` returns the ``cv.json`` document (layout in the README).
+:func:`run_cv` returns the ``cv.json`` document (layout in docs/cv.md).
 """
 
 from __future__ import annotations

@@ -39,7 +39,7 @@ with fewer than three) and fits the model with the best.
   the noise (~4e-4 F.S.), so the solver stopped up to 6e-4 F.S. short of the optimum
   and the held-out figure ranked unconverged solutions: with 1e-3 the held-out
   choice made the combined-load error worse, with 1e-5 better
-  (benchmarks/accuracy.py; README "Data-chosen SVR settings").
+  (benchmarks/accuracy.py; docs/tuning.md).
 * One choice for all chi (not one per chi): a model's outputs sum N - 1 chi, and
   the held-out figure scores them together.  A per-chi choice by each chi's own
   held-out residual was measured and picked worse than the global choice.

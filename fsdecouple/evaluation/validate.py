@@ -87,7 +87,9 @@ def validate(
     set_path : path
         The validation set, a directory or CSV in calibration format.  It may hold
         fewer repetitions than ``min_repetitions`` and use other loads than the
-        calibration; a row loading two components at once is refused.
+        calibration.  A row loading two components at once (a combined load) is
+        scored by ``max_error`` and ``rms_error`` of its labelled sweep and left
+        out of ``gamma`` (eq. 12 needs single loads).
     settings : Settings, optional
         Columns, scales, full scale and units of the set; default: the model's.
     max_gamma : float, optional
@@ -105,7 +107,7 @@ def validate(
     Returns
     -------
     dict
-        The validation document (README: "Validation on an independent set").
+        The validation document (docs/validate.md: its keys and records).
     """
     from ..data.calibration import load_calibration
 

@@ -154,7 +154,7 @@ def open_input(path: str | Path):
 
 
 MB = 1 << 20
-# Size limits per input kind, checked before reading (README, "Errors and exit codes").
+# Size limits per input kind, checked before reading (docs/errors.md, "Inputs").
 CONFIG_LIMIT = 1 * MB
 MODEL_LIMIT = 64 * MB
 CV_LIMIT = 64 * MB

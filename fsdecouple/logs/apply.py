@@ -195,7 +195,9 @@ def apply_file(
 
     The input and output formats follow the file suffixes: ``.parquet`` (or
     ``.pq``) is Parquet, anything else CSV.  CSV lines pass through byte for
-    byte; Parquet columns keep their types (CSV columns become strings).
+    byte; Parquet columns keep their types, and a CSV's columns become strings
+    there except the outputs the model reads, written as the doubles read (a
+    missing cell null).
     """
     path, out = Path(voltages), Path(out)
     settings, unit = check_options(model, settings, tare, zero, unit)

@@ -50,8 +50,8 @@ CONNECT_TIMEOUT = 5.0  # seconds to reach a --scheduler before giving up
 # goes back to the OS at once.  Setting it (to any value) also turns off glibc's dynamic
 # mmap threshold: every array over 128 KiB (a 50,000-row column is 400 KB) is then a
 # fresh mmap, page-faulted in and unmapped when freed; about 5,000 page faults a
-# dataset part against 20, and 1.4x the time of the whole run (README, "Fleet
-# benchmarks").  The workers of our own LocalCluster keep glibc's defaults.
+# dataset part against 20, and 1.4x the time of the whole run (docs/benchmarks.md,
+# "Fleets and scaling").  The workers of our own LocalCluster keep glibc's defaults.
 WORKER_CONFIG = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
 INSTALL = "pip install 'fsdecouple[dask]'"
 

@@ -16,7 +16,7 @@ METHOD_NAMES = {"initial": "initial (ω⁻¹ only)", "linear": "linear matrix",
 def cv_test_name(cv, rnd: int, test_set: int) -> str:
     """'test I' / 'test II': the held-out repetition's place in its round's fold.
 
-    ``test_set`` is the held-out repetition's number (README, cv.json).
+    ``test_set`` is the held-out repetition's number (docs/cv.md, cv.json).
     """
     try:
         return f"test {test_name(cv['folds'][rnd - 1].index(test_set))}"
