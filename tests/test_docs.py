@@ -279,3 +279,46 @@ def test_the_architecture_page_is_generated_and_names_every_module():
     floors = dict(re.findall(r"^## `fsdecouple\.(\w+)` \(floor (\d+)\)$", page, re.M))
     assert floors and int(floors["core"]) == min(int(f) for f in floors.values())
     assert int(floors["cli"]) == max(int(f) for f in floors.values())
+
+
+def _first_table(text: str, heading: str) -> str:
+    after = text[text.index(f"\n## {heading}\n"):]
+    return re.search(r"(^\|[^\n]*\n)+", after, re.M).group(0)
+
+
+def test_the_sites_home_page_has_the_readmes_tables():
+    """docs/index.md repeats the README's command and page tables, links made local to
+    docs/: one drifted from the other (four pages and every new option missing)."""
+    readme = README.read_text(encoding="utf-8")
+    index = (ROOT / "docs" / "index.md").read_text(encoding="utf-8")
+    for mine, theirs in (("Commands", "Commands"), ("Documentation", "Where to read on")):
+        assert _first_table(index, theirs) == _first_table(readme, mine).replace("](docs/", "]("), theirs
+
+
+COMMANDS = ("simulate", "init", "ingest", "fit", "show", "apply", "certificate", "report",
+            "validate", "export", "import", "compare", "fit-many", "cv")
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_the_readmes_synopsis_names_every_option_of_the_command(command):
+    """Each option `fsdecouple COMMAND --help` lists is in the README's synopses of that
+    command (-o and -c for --output and --config; --force and --help said once for all)."""
+    from typer.testing import CliRunner
+
+    from fsdecouple.cli.app import app
+
+    text = CliRunner().invoke(app, [command, "--help"], env={"COLUMNS": "200", "NO_COLOR": "1"}).stdout
+    assert "Usage" in text, text
+    options = set(re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)", text)) - {"--help", "--force"}
+    table = _first_table(README.read_text(encoding="utf-8"), "Commands")
+    synopses = " ".join(s for row in table.splitlines() if f"fsdecouple {command}" in row
+                        for s in re.findall(r"`fsdecouple [^`]*`", row) if f"fsdecouple {command}" in s)
+    short = {"--output": "-o ", "--config": "-c "}
+    missing = sorted(o for o in options if o not in synopses and short.get(o, o) not in synopses)
+    assert not missing, f"README's {command} synopsis lacks {missing}"
+
+
+def test_the_synopsis_check_covers_every_command():
+    from fsdecouple.cli.app import app
+
+    assert sorted(c.name or c.callback.__name__ for c in app.registered_commands) == sorted(COMMANDS)
