@@ -322,3 +322,18 @@ def test_the_synopsis_check_covers_every_command():
     from fsdecouple.cli.app import app
 
     assert sorted(c.name or c.callback.__name__ for c in app.registered_commands) == sorted(COMMANDS)
+
+
+def test_the_unit_lists_name_every_unit_the_code_takes():
+    """data.md's and apply.md's lists of load and output units hold every unit of
+    fsdecouple.units (klbf was taken and never named)."""
+    from fsdecouple.units import LOAD_UNITS, OUTPUT_UNITS
+
+    data = (ROOT / "docs" / "data.md").read_text(encoding="utf-8")
+    lines = data.splitlines()
+    at = next(i for i, ln in enumerate(lines) if ln.startswith("`load` is one of"))
+    listed = set(re.findall(r"`([^`]+)`", " ".join(lines[at:at + 2])))
+    assert set(LOAD_UNITS) | set(OUTPUT_UNITS) <= listed, listed
+    apply = (ROOT / "docs" / "apply.md").read_text(encoding="utf-8")
+    options = set(re.findall(r"`([^`]+)`", re.search(r"`--unit gf` \(or [^)]*\)", apply).group(0)))
+    assert {f"--unit {u}" if u == "gf" else u for u in LOAD_UNITS} <= options, options

@@ -45,7 +45,8 @@ def simulate(
         int | None, typer.Option(help="Repetitions (default: 6 for paper, 1 for lab).")
     ] = None,
     levels: Annotated[
-        int | None, typer.Option(help="Loads per sweep after its zero row (lab only; default 4).")
+        int | None, typer.Option(help="Loads per sweep after its zero row: --layout lab (default 4) or "
+                                 "--rig lever-arm|quadratic.")
     ] = None,
     coupling: Annotated[
         float | None, typer.Option(help="Peak of every coupling function, as a fraction of "

@@ -1,4 +1,4 @@
-"""The certificate as an A4 PDF: the blocks of :func:`.certificate.certificate_blocks`,
+"""The certificate as an A4 PDF: the blocks of :func:`.certificate_html.certificate_blocks`,
 laid out by reportlab (pure Python, installs with pip alone).
 
 Text is set in DejaVu Sans, the TrueType font matplotlib ships, embedded (as a
