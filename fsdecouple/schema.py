@@ -429,13 +429,19 @@ READS = {
     "validate": (*APPLY_KEYS, "full_scale", "zero"),
     "certificate": (*APPLY_KEYS, "sensor", "full_scale", "zero", *sorted(LAB_KEYS)),
 }
+# keys fit's own options state over its config (--C .. --tolerance, --scaling, --refine,
+# --method, --extrapolation, --tune): the config fit was given may say otherwise than the
+# model it made.  The certificate decouples nothing, so for it they are the model's own
+# choice, neither compared nor noted (issue 33: the config fit used is the one it takes).
+FIT_OPTIONS = ("svr", "scaling", "refine", "method", "extrapolation")
 
 
 def unused_keys(settings: Settings, model_settings: Settings, command: str = "apply") -> list[str]:
     """The keys a config wrote that ``command`` does not read from a config (:data:`READS`;
     the model's own) and whose values differ from the model's."""
     out = []
-    for name in sorted(settings.given - set(READS[command])):
+    own = set(FIT_OPTIONS) if command == "certificate" else set()
+    for name in sorted(settings.given - set(READS[command]) - own):
         if name == "svr":
             mine, theirs = settings.svr, model_settings.svr
             fields = ["C", "epsilon", "gamma"] + ([] if mine.tolerance is None else ["tolerance"])

@@ -42,9 +42,9 @@ def certificate(
     json_out: JsonOpt = False,
 ) -> None:
     """ISO 376 figures (b, b', f_c, f_0, v, c), class and uncertainty budget (U, k = 2) per step."""
-    from ..data.calibration import load_calibration
+    from ..data.calibration import excluded_lines, load_calibration
     from ..evaluation.certificate_doc import certificate as build
-    from ..evaluation.certificate_doc import read_drift
+    from ..evaluation.certificate_doc import check_drift_matches, read_drift
     from ..reporting.certificate_file import check_certificate_path, write_certificate
     from ..reporting.certificate_html import certificate_tables
 
@@ -55,12 +55,15 @@ def certificate(
             check_certificate_path(output)
             check_output(output, force=force)
         changes = read_drift(drift) if drift is not None else None
+        if changes is not None:
+            check_drift_matches(changes, model, str(drift))
         read_as = settings or model.settings
         if model.provenance.get("files"):
             # the set is matched file by file with the model's (check_matches): a missing
             # repetition is named there, not counted against min_repetitions first
             read_as = replace(read_as, min_repetitions=1)
-        cs = load_calibration(calib, read_as)
+        cs = load_calibration(calib, read_as,  # the lines fit --exclude left out
+                              exclude=excluded_lines(model.provenance.get("excluded")))
         doc = build(model, cs, source=str(model_file), settings=settings, drift=changes)
         if output is not None:
             refuse_overwriting_input(output, [model_file, *_read(cs), *_given(config),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -318,6 +319,22 @@ def load_calibration(path: str | Path, settings: Settings, exclude=(),
     return replace(cs, warnings=hidden + cs.warnings) if hidden else cs
 
 
+EXCLUDED = ", row {row}: excluded as asked"  # how a dropped line is recorded (provenance)
+
+
+def excluded_lines(records) -> list[str]:
+    """The ``FILE:LINE`` of each line a model's fit left out (its provenance's
+    ``excluded``, as :func:`_exclude` records them), FILE by name: the same lines of
+    the same set, wherever it lies now.  Records of another form are ignored."""
+    tail = re.compile(re.escape(EXCLUDED).replace(r"\{row\}", r"(\d+)") + "$")
+    out = []
+    for record in records or ():
+        m = tail.search(str(record))
+        if m:
+            out.append(f"{Path(str(record)[:m.start()]).name}:{m.group(1)}")
+    return out
+
+
 def parse_exclude(spec) -> tuple[str, int]:
     """``FILE:LINE`` of ``--exclude`` as (FILE, LINE); LINE as an editor numbers it, header 1."""
     name, sep, row = str(spec).rpartition(":")
@@ -351,14 +368,14 @@ def _exclude(table: pd.DataFrame, specs, unread=()) -> tuple[pd.DataFrame, list[
         hit = np.flatnonzero(in_file & (table["row"].to_numpy() == row))
         key = (name if "/" in name else Path(name).name, row)
         if hit.size == 0 and key in gone:
-            dropped.append(f"{gone[key]}, row {row}: excluded as asked")
+            dropped.append(f"{gone[key]}{EXCLUDED.format(row=row)}")
             continue
         if hit.size == 0:
             known = "a file of the set" if not in_file.any() else f"a data line of {name}"
             raise InputError(f"excluded point {spec!r}: line {row} of {name} is not {known}",
                              argument="exclude")
         drop[hit] = True
-        dropped.append(f"{files[hit[0]]}, row {row}: excluded as asked")
+        dropped.append(f"{files[hit[0]]}{EXCLUDED.format(row=row)}")
     return table[~drop].reset_index(drop=True), dropped
 
 

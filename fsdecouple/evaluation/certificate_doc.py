@@ -21,7 +21,7 @@ import numpy as np
 from .. import __version__
 from ..config import Settings
 from ..core.model import CouplingErrorModel
-from ..data.calibration import CalibrationSet
+from ..data.calibration import CalibrationSet, excluded_lines
 from ..errors import InputError
 from ..schema import refuse_unused, unused_warning
 from .budget import CONTRIBUTIONS, SOURCES, budget, temperature_term
@@ -67,6 +67,12 @@ def check_matches(model: CouplingErrorModel, calib: CalibrationSet, source: str,
     if fitted and sorted(fitted) != sorted(given):
         raise InputError(f"{calib.source}: does not match the model file {source}: "
                          f"{_first_difference(fitted, given)}")
+    left_out = sorted(excluded_lines(model.provenance.get("excluded")))
+    if left_out != sorted(excluded_lines(calib.excluded)):
+        raise InputError(f"{calib.source}: does not match the model file {source}: its fit left "
+                         f"out {', '.join(left_out) or 'no line'}, the set as read "
+                         f"{', '.join(excluded_lines(calib.excluded)) or 'none'} (read it with "
+                         "the model's exclusions: excluded_lines of its provenance)")
     reps = model.report.repetitions if model.report is not None else []
     if reps and sorted(reps) != sorted(calib.repetitions):
         extra = sorted(set(calib.repetitions) - set(reps))
@@ -154,20 +160,66 @@ def drift_fractions(drift: dict | None, percent: float | None, axis: str, loads:
     return np.zeros(loads.size), None
 
 
+def _drift_stated(source: str | None, drift: dict | None, percent: float | None) -> dict:
+    """What the budget's drift term rests on, for the certificate to state: the source,
+    the config's percentage, or the two model files a compare document compared."""
+    out: dict[str, Any] = {"source": source}
+    if source == "config drift":
+        out["percent"] = percent
+    elif source is not None and drift is not None:
+        out["models"] = [str(m.get("model")) for m in (drift.get("old"), drift.get("new"))
+                         if isinstance(m, dict) and m.get("model") is not None]
+    return out
+
+
 def check_drift_document(doc, source: str) -> dict:
     """A ``compare --json`` document, or one line naming ``source``."""
     if not isinstance(doc, dict) or doc.get("format") != "fsdecouple.drift":
         raise InputError(f"{source}: not the output of 'fsdecouple compare --json' (expected "
                          "\"format\": \"fsdecouple.drift\")")
-    for s in doc.get("en_steps") or []:
+    steps = doc.get("en_steps") or []
+    if not isinstance(steps, list):
+        raise InputError(f"{source}: en_steps: expected a list of steps")
+    for s in steps:
         try:
-            ok = all(np.isfinite(float(s[k])) for k in ("load", "F_old", "F_new")) and s["load"] != 0
-        except (KeyError, TypeError, ValueError):
+            ok = all(np.isfinite(float(s[k])) for k in ("load", "F_old", "F_new")) \
+                and s["load"] != 0 and np.isfinite(float(s["F_old"]) - float(s["F_new"])) \
+                and isinstance(s.get("axis"), str)
+        except (KeyError, TypeError, ValueError, AttributeError):
             ok = False
         if not ok:
-            raise InputError(f"{source}: en_steps: each step needs a non-zero load and finite "
-                             "F_old and F_new")
+            raise InputError(f"{source}: en_steps: each step needs an axis, a non-zero load and "
+                             "finite F_old and F_new")
+    components = doc.get("components") or {}
+    if not isinstance(components, dict) or not all(isinstance(c, dict) for c in components.values()):
+        raise InputError(f"{source}: components: expected an object per component")
+    for axis, comp in components.items():
+        pct = comp.get("force_max_pct")
+        if pct is not None and not (isinstance(pct, int | float) and not isinstance(pct, bool)
+                                    and np.isfinite(pct) and pct >= 0):
+            raise InputError(f"{source}: components.{axis}.force_max_pct: expected a finite "
+                             f"number >= 0, not {pct!r}")
     return doc
+
+
+def check_drift_matches(doc: dict, model: CouplingErrorModel, source: str) -> None:
+    """Refuse a ``compare --json`` document of another sensor, other components or
+    another load unit than ``model``'s: its drift would be dropped, or misread."""
+    labels = set(model.layout.labels)
+    named = set(doc.get("components") or {}) | {s["axis"] for s in doc.get("en_steps") or []}
+    if not named & labels:
+        raise InputError(f"{source}: its components ({', '.join(sorted(named)) or 'none'}) are "
+                         f"not the model's ({', '.join(model.layout.labels)}): the drift of "
+                         "another sensor")
+    sensors = {str(m.get("sensor")) for m in (doc.get("old"), doc.get("new"))
+               if isinstance(m, dict) and m.get("sensor") is not None}
+    if sensors and model.settings.sensor not in sensors:
+        raise InputError(f"{source}: compares sensor {' and '.join(sorted(sensors))}, not "
+                         f"{model.settings.sensor}, the model's")
+    unit = (doc.get("units") or {}).get("load") if isinstance(doc.get("units"), dict) else None
+    if unit is not None and unit != model.settings.units.load:
+        raise InputError(f"{source}: its forces are in {unit}, the model's in "
+                         f"{model.settings.units.load}")
 
 
 def read_drift(path: str | Path) -> dict:
@@ -199,18 +251,23 @@ def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str
     """
     model.layout.one_output_each("certificate")
     check_matches(model, calib, source, settings)
+    if drift is not None:
+        check_drift_matches(drift, model, "the drift document")
     s = settings or model.settings
     lab, layout = s.lab, calib.layout
     times = creep_times(calib, s)
     records, budgets, classes, notes = [], [], [], []
     if settings is not None:
         notes += unused_warning(settings, model.settings, "certificate")
+    if calib.excluded:
+        notes.append(f"left out of every figure, as the model's fit left them out: "
+                     f"{', '.join(excluded_lines(calib.excluded))}")
     n_reps = len(calib.repetitions)
     if n_reps < 2:
         notes.append(f"one repetition: b (reproducibility) and b' (repeatability) compare "
                      f"repetitions and need at least two; the set has {n_reps}, so no class "
                      "(ISO 376 classes need both) and no reproducibility in the budget")
-    resolutions, drift_source, temperature = {}, None, False
+    resolutions, sources, temperature = {}, {}, False
     for a, axis in enumerate(layout.labels):
         st = component_steps(calib, a, times)
         r = resolution(calib, a)
@@ -218,7 +275,7 @@ def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str
         u_model = _model_errors(model, axis, st.loads, source)
         w_t = temperature_term(calib, st)
         temperature |= w_t is not None
-        d, drift_source = drift_fractions(drift, lab.drift, axis, st.loads, s.full_scale[a])
+        d, sources[axis] = drift_fractions(drift, lab.drift, axis, st.loads, s.full_scale[a])
         b = budget(st, u_model, lab.reference_uncertainty, r, w_t or 0.0, d)
         for j, load in enumerate(st.loads.tolist()):
             for metric in METRICS:
@@ -239,9 +296,15 @@ def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str
             notes.append(f"{metric}: absent, {why}; not classed")
     if not temperature:
         notes.append("temperature: the calibration has no temperature column; its budget term is 0")
+    stated = sorted({v for v in sources.values() if v is not None})
+    drift_source = "; ".join(stated) or None
     if drift_source is None:
         notes.append("drift: no compare document and no config drift; the "
                      "budget's drift between calibrations is 0")
+    elif None in sources.values():
+        bare = [axis for axis, v in sources.items() if v is None]
+        notes.append(f"drift: the compare document has nothing of {', '.join(bare)}; "
+                     "there the budget's drift between calibrations is 0")
     return {
         "format": FORMAT, "format_version": FORMAT_VERSION, "fsdecouple_version": __version__,
         "date": datetime.now(UTC).date().isoformat(),
@@ -266,6 +329,7 @@ def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str
         "budget": budgets,
         "budget_sources": dict(SOURCES),
         "drift_source": drift_source,
+        "drift": _drift_stated(drift_source, drift, lab.drift),
         "coverage_factor": 2,
         "notes": notes,
         # the model's temperature terms (issue 31): the outputs were corrected to T0 by them

@@ -30,7 +30,7 @@ CRITERIA = {"b": "b (reproducibility)", "b_prime": "b′ (repeatability)",
             "f_c": "f_c (interpolation)", "f_0": "f_0 (zero)", "v": "v (reversibility)",
             "c": "c (creep)", "reference": "reference uncertainty (Table 3)",
             "resolution": "resolution (no step in the class range)",
-            "repetitions": "one repetition (no b, b′)"}
+            "repetitions": "no b or b′ at a step (too few repetitions reach it)"}
 PRINT_CSS = """
 @page{size:A4;margin:14mm 12mm}
 @media print{body{font-size:9pt;margin:0;padding:0}table{font-size:8pt}
@@ -97,6 +97,17 @@ def _limited(c: dict) -> str:
     return ", ".join(CRITERIA.get(w, w) for w in why) if why else "— (the best class)"
 
 
+def _drift_row(doc: dict) -> str:
+    """The budget's drift term's basis, as the certificate states it."""
+    d = doc.get("drift") or {"source": doc.get("drift_source")}
+    if d.get("source") is None:
+        return "not stated (no compare document, no config drift): 0"
+    if d.get("percent") is not None:
+        return f"{d['percent']:g} % of each step (config drift)"
+    models = d.get("models") or []
+    return d["source"] + (f": {' against '.join(models)}" if models else "")
+
+
 def certificate_blocks(doc: dict) -> list[Block]:
     """The certificate's content in order: identity, classes, notes, per component its
     figures, budget and plot, then the method (class limits and budget sources)."""
@@ -109,7 +120,8 @@ def certificate_blocks(doc: dict) -> list[Block]:
                                   f"{counted(len(doc['calibration']['repetitions']), 'repetition')}"),
              ("Reference", ref["description"] or "not stated"),
              ("Reference uncertainty", f"{ref['uncertainty_percent_k2']:g} % (k = 2)"),
-             ("Units", f"loads in {unit}, outputs in {out_unit}")]
+             ("Units", f"loads in {unit}, outputs in {out_unit}"),
+             ("Drift between calibrations", _drift_row(doc))]
     ident += [(f"Environment: {k}", str(v)) for k, v in doc["environment"].items()]
     if not doc["environment"]:
         ident.append(("Environment", "not stated (config: environment)"))

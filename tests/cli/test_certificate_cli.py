@@ -295,3 +295,81 @@ def test_a_class_none_has_no_class_range_and_one_repetition_is_singular(fitted, 
     assert classes.rows[0][4] == "—" and classes.rows[1][4] == "12.5"
     ident = dict(next(b for b in blocks if b.ident == "identity").rows)
     assert ident["Calibration data"].endswith(", 1 repetition") and "Date of issue" in ident
+
+
+@pytest.mark.slow  # a verdict fit
+def test_the_certificate_leaves_out_what_fit_left_out_and_takes_fits_config(tmp_path):
+    """A gross error fit --exclude'd went on into b, b' and the class (b 26 % at its step),
+    and the config fit was given was refused after fit --refine 1 (refine: 0 in it) or
+    noted as 'not used' after --tune: both are the model's own choices."""
+    from fsdecouple.data.calibration import GrossError
+
+    simulate(tmp_path / "s", seed=4, repetitions=3, gross_error=GrossError.parse("x:1:5:0.2"))
+    calib = tmp_path / "s" / "calibration"
+    config = tmp_path / "lab.yaml"
+    config.write_text("refine: 0\nextrapolation: kernel\n" + THREE + FAST_SVR)
+    model = tmp_path / "m.json"
+    invoke(["fit", calib, "-c", config, "-o", model, "--refine", "1", "--extrapolation",
+            "tangent", "--exclude", "rep1.csv:6"])
+    doc = json.loads(invoke(["certificate", model, calib, "-c", config, "--json"]).stdout)
+    load = float(pd.read_csv(calib / "rep1.csv").iloc[4]["fx"])  # line 6: the 5th data row
+    at = {r["metric"]: r["value"] for r in doc["records"] if r["axis"] == "x" and r["load"] == load}
+    assert "b_prime" not in at and at["b"] < 1.0  # rep1 lacks the step now; b of reps 2, 3
+    assert any("rep1.csv:6" in n for n in doc["notes"])
+    assert not any("not used" in n or "differ" in n for n in doc["notes"])
+    negative = next(c for c in doc["classes"] if c["axis"] == "x" and c["sign"] == ("-" if load < 0 else "+"))
+    assert negative["class"] == "none" and negative["limited_by"] == ["repetitions"]
+    from fsdecouple import load_calibration
+    from fsdecouple.errors import InputError
+    from fsdecouple.evaluation.certificate_doc import certificate
+
+    m = load_model(model)
+    with pytest.raises(InputError, match="left out rep1.csv:6"):
+        certificate(m, load_calibration(calib, m.settings))  # read without the exclusion
+
+
+def test_a_drift_document_of_another_sensor_or_with_bad_numbers_is_one_line(fitted, sim_dir, tmp_path):
+    """A six-axis compare document was ignored with 'no compare document'; a list of
+    components, a text or infinite force_max_pct, or F_old - F_new overflowing gave a
+    traceback or U = inf."""
+    out = tmp_path / "c.html"
+    cases = {
+        '{"format":"fsdecouple.drift","components":{"fx":{"force_max_pct":0.1}}}': "not the model's",
+        '{"format":"fsdecouple.drift","components":[1]}': "components",
+        '{"format":"fsdecouple.drift","components":{"x":{"force_max_pct":"abc"}}}': "force_max_pct",
+        '{"format":"fsdecouple.drift","components":{"x":{"force_max_pct":1e400}}}': "force_max_pct",
+        '{"format":"fsdecouple.drift","en_steps":[{"axis":"x","load":10,"F_old":1e308,'
+        '"F_new":-1e308}]}': "en_steps",
+        '{"format":"fsdecouple.drift","components":{"x":{"force_max_pct":0.1}},'
+        '"new":{"sensor":"another"}}': "sensor another",
+        '{"format":"fsdecouple.drift","components":{"x":{"force_max_pct":0.1}},'
+        '"units":{"load":"lbf"}}': "in lbf",
+    }
+    for i, (text, needle) in enumerate(cases.items()):
+        drift = tmp_path / f"d{i}.json"
+        drift.write_text(text)
+        r = invoke(["certificate", fitted, sim_dir / "calibration", "--drift", drift, "-o", out], 2)
+        assert_one_line_error(r, f"d{i}.json", needle)
+        assert not out.exists()
+
+
+def test_the_certificate_states_the_drift_it_budgets(fitted, sim_dir, tmp_path):
+    """--json said drift_source; the HTML and PDF showed a drift column and not what it
+    rested on (the config's 0.3 %, or which two models compare compared)."""
+    from fsdecouple.reporting.certificate_html import certificate_blocks
+
+    config = tmp_path / "d.yaml"
+    config.write_text("drift: 0.3\n")
+    doc = json.loads(invoke(["certificate", fitted, sim_dir / "calibration", "-c", config,
+                             "--json"]).stdout)
+    assert doc["drift"] == {"source": "config drift", "percent": 0.3}
+    ident = dict(next(b for b in certificate_blocks(doc) if b.ident == "identity").rows)
+    assert ident["Drift between calibrations"] == "0.3 % of each step (config drift)"
+    drift = tmp_path / "cmp.json"
+    drift.write_text(json.dumps({"format": "fsdecouple.drift", "components": {"x": {"force_max_pct": 0.1}},
+                                 "old": {"model": "a.json"}, "new": {"model": "b.json"}}))
+    doc = json.loads(invoke(["certificate", fitted, sim_dir / "calibration", "--drift", drift,
+                             "--json"]).stdout)
+    ident = dict(next(b for b in certificate_blocks(doc) if b.ident == "identity").rows)
+    assert ident["Drift between calibrations"].endswith(": a.json against b.json")
+    assert any("nothing of y, z" in n for n in doc["notes"])
