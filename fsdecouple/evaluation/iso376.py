@@ -308,10 +308,19 @@ def resolution(calib: CalibrationSet, a: int) -> float:
     Readings printed to k decimals (or whole ADC counts, k = 0) are multiples of
     10^-k: r is the largest such step all readings are multiples of, for k up to 12.
     Readings with more digits than that give the smallest difference between two
-    distinct readings instead; 0 when every reading is the same.
+    distinct readings instead; 0 when every reading is the same.  The step is the
+    file's: readings a config's ``scale:`` multiplies (counts to volts) are divided by
+    it first, and r multiplied by it after (whole counts x 2.5e-7 V: r = 2.5e-7 V).
     """
-    col = f"{calib.layout.outputs[a]}_raw"
-    values = np.unique(calib.points[col].to_numpy(dtype=float))
+    name = calib.layout.outputs[a]
+    factor = abs(float(calib.settings.scale.get(name, 1.0))) if calib.settings is not None else 1.0
+    factor = factor if factor > 0 else 1.0
+    values = np.unique(calib.points[f"{name}_raw"].to_numpy(dtype=float)) / factor
+    return _step(values) * factor
+
+
+def _step(values: np.ndarray) -> float:
+    """The step of :func:`resolution` of sorted distinct ``values``."""
     for k in range(0, 13):
         scaled = values * 10.0 ** k
         # a double holds ~16 digits: allow its rounding, never a fraction of the step

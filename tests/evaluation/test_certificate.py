@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -584,3 +585,19 @@ def test_the_terminal_view_shows_the_temperature_terms(certified):
     assert "Temperature terms (T0 = 25 degC, calibrated 14.82 .. 35.1 degC)" in text
     assert "-0.00085" in text and "+127.0" in text and "g [ppm/K]" in text
     assert "Temperature terms" not in console_text(certificate_tables(doc))
+
+
+def test_resolution_is_the_files_step_through_a_scale():
+    """Whole ADC counts read with scale: 2.5e-7 (counts to volts) gave r = 1e-8 V, the
+    power of ten the scaled numbers happen to be multiples of: 25 times too fine a
+    resolution term and class range.  It is one count, 2.5e-7 V."""
+    from fsdecouple.data.calibration import load_calibration
+
+    root = Path(__file__).resolve().parents[2]
+    counts = load_config(root / "configs" / "loadcell.yaml")
+    volts = replace(counts, scale={**counts.scale, **dict.fromkeys(counts.layout.outputs, 2.5e-7)})
+    data = root / "sample_data" / "loadcell" / "calibration.csv"
+    a, b = load_calibration(data, counts), load_calibration(data, volts)
+    for i in range(3):
+        assert resolution(a, i) == 1.0
+        assert resolution(b, i) == pytest.approx(2.5e-7, rel=1e-12)
