@@ -84,6 +84,23 @@ class ComponentSteps:
         return np.nanmean(self.X, axis=1)
 
 
+def _series_zeros(loads: np.ndarray, raw: np.ndarray) -> np.ndarray:
+    """Each row's zero reading (ISO 376: a deflection starts from the zero read before
+    its series): the zero row read last before the row, else the first after it (a sweep
+    from -100 N reads steps before any zero); a step's reading on its way back (X')
+    takes its X's, so that X' - X is the readings' own difference.  Rows of zero load:
+    the mean of the zero rows (only their differences are used)."""
+    zeros = np.flatnonzero(loads == 0.0)
+    out = np.repeat(raw[zeros].mean(axis=0, keepdims=True), len(loads), axis=0)
+    loaded = np.flatnonzero(loads != 0.0)
+    before = np.searchsorted(zeros, loaded) - 1  # the last zero row before each loaded row
+    out[loaded] = raw[zeros[np.where(before >= 0, before, 0)]]
+    first, again = _out_and_back(loads)
+    for load, i in again.items():
+        out[i] = out[first[load]]
+    return out
+
+
 def _out_and_back(loads: np.ndarray) -> tuple[dict[float, int], dict[float, int]]:
     """Row of each load on its way out (X) and on its way back (X'), if it has one.
 
@@ -150,18 +167,16 @@ def component_steps(calib: CalibrationSet, a: int, times=None) -> ComponentSteps
     rep_of = s["repetition"].to_numpy()
     f_all = s[load_col].to_numpy(dtype=float)
     u_all = s[list(layout.outputs)].to_numpy(dtype=float)
-    refit = getattr(calib, "zero", "rows") == "fit"
-    raw_all = None
+    raw_cols = [f"{c}_raw" for c in layout.outputs]
+    raw_all = s[raw_cols].to_numpy(dtype=float) if set(raw_cols) <= set(s.columns) else None
     for r, rep in enumerate(reps):
         mine = rep_of == rep
         f, u = f_all[mine], u_all[mine]
-        if refit and (f == 0.0).any():
-            # zeroed by offsets fitted from all points: ISO 376's deflections still
-            # start from the sweep's own zero rows
-            if raw_all is None:
-                raw_all = s[[f"{c}_raw" for c in layout.outputs]].to_numpy(dtype=float)
-            raw = raw_all[mine]
-            u = raw - raw[f == 0.0].mean(axis=0)
+        if raw_all is not None and (f == 0.0).any():
+            # ISO 376's deflections start from the zero read before their series, whatever
+            # zeroed the set for the fit (offsets fitted from all points, or the mean of
+            # the sweep's zero rows: out and back, half a lag's return zero)
+            u = raw_all[mine] - _series_zeros(f, raw_all[mine])
         first, again = _out_and_back(f)
         for load, i in first.items():
             X[where[load], r] = u[i, a]
