@@ -12,6 +12,7 @@ limited_by, from}]`` (:func:`fsdecouple.evaluation.iso376.classing`), and the
 
 from __future__ import annotations
 
+from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -24,7 +25,7 @@ from ..core.model import CouplingErrorModel
 from ..data.calibration import CalibrationSet, excluded_lines
 from ..errors import InputError
 from ..schema import refuse_unused, unused_warning
-from .budget import CONTRIBUTIONS, SOURCES, budget, temperature_term
+from .budget import CONTRIBUTIONS, SOURCES, TEMPERATURE, budget, temperature_term
 from .creep import creep_times
 from .iso376 import (
     CLASS_FROM,
@@ -239,6 +240,25 @@ def read_drift(path: str | Path) -> dict:
     return check_drift_document(doc, str(path))
 
 
+def _at_reference_temperature(calib: CalibrationSet, model: CouplingErrorModel
+                              ) -> tuple[CalibrationSet, str | None]:
+    """``calib`` with outputs at T0 by the model's own temperature terms, as fit corrected
+    it before every figure (issue 31), and the note that says so; else as it is.  The
+    instrument is the sensor with its correction: b, b' and f_c of uncorrected outputs
+    counted the drift the model removes, and the budget's temperature term again."""
+    terms = getattr(model, "temperature", None)
+    if terms is None or not terms.external or TEMPERATURE not in calib.points.columns \
+            or getattr(calib, "temperature_fit", None) is not None:
+        return calib, None
+    from ..fitting.temperature import corrected_points
+
+    points = corrected_points(calib, terms)
+    return (replace(calib, points=points),
+            f"figures of the outputs corrected to T0 = {terms.t0:g} {terms.unit} by the model's "
+            "temperature terms (the instrument is the sensor with its correction); the budget's "
+            "temperature term is what they leave")
+
+
 def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str = "model",
                 settings: Settings | None = None, drift: dict | None = None) -> dict[str, Any]:
     """The certificate document of ``calib`` and the model fitted on it.
@@ -255,10 +275,13 @@ def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str
         check_drift_matches(drift, model, "the drift document")
     s = settings or model.settings
     lab, layout = s.lab, calib.layout
+    calib, at_t0 = _at_reference_temperature(calib, model)
     times = creep_times(calib, s)
     records, budgets, classes, notes = [], [], [], []
     if settings is not None:
         notes += unused_warning(settings, model.settings, "certificate")
+    if at_t0:
+        notes.append(at_t0)
     if calib.excluded:
         notes.append(f"left out of every figure, as the model's fit left them out: "
                      f"{', '.join(excluded_lines(calib.excluded))}")
