@@ -432,7 +432,7 @@ READS = {
 # keys fit's own options state over its config (--C .. --tolerance, --scaling, --refine,
 # --method, --extrapolation, --tune): the config fit was given may say otherwise than the
 # model it made.  The certificate decouples nothing, so for it they are the model's own
-# choice, neither compared nor noted (issue 33: the config fit used is the one it takes).
+# choice: warned about, never refused (issue 33: the config fit used is the one it takes).
 FIT_OPTIONS = ("svr", "scaling", "refine", "method", "extrapolation")
 
 
@@ -440,8 +440,7 @@ def unused_keys(settings: Settings, model_settings: Settings, command: str = "ap
     """The keys a config wrote that ``command`` does not read from a config (:data:`READS`;
     the model's own) and whose values differ from the model's."""
     out = []
-    own = set(FIT_OPTIONS) if command == "certificate" else set()
-    for name in sorted(settings.given - set(READS[command]) - own):
+    for name in sorted(settings.given - set(READS[command])):
         if name == "svr":
             mine, theirs = settings.svr, model_settings.svr
             fields = ["C", "epsilon", "gamma"] + ([] if mine.tolerance is None else ["tolerance"])
@@ -457,16 +456,18 @@ def unused_keys(settings: Settings, model_settings: Settings, command: str = "ap
 
 
 def _unused(names: list[str], command: str) -> str:
+    uses = ("takes the model's own (fit's options may have stated them over its config)"
+            if command == "certificate" else "decouples with the model's own settings")
     return (f"the config's {', '.join(names)} differ{'s' if len(names) == 1 else ''} from the "
-            f"model's: {command} decouples with the model's own settings and reads only "
-            f"{', '.join(READS[command])} from a config")
+            f"model's: {command} {uses} and reads only {', '.join(READS[command])} from a config")
 
 
 def refuse_unused(settings: Settings, model_settings: Settings, command: str = "apply") -> None:
     """Refuse a config that states a key changing the forces (:data:`CHANGES_FORCES`)
     otherwise than the model: ``apply -c rot.yaml`` with a rotation the model lacks
     decoupled without it, in silence."""
-    names = [n for n in unused_keys(settings, model_settings, command) if n in CHANGES_FORCES]
+    refused = set(CHANGES_FORCES) - (set(FIT_OPTIONS) if command == "certificate" else set())
+    names = [n for n in unused_keys(settings, model_settings, command) if n in refused]
     if names:
         raise ConfigError(f"{_unused(names, command)}; refit with this config, or leave "
                           f"{' and '.join(names)} out")
@@ -474,5 +475,6 @@ def refuse_unused(settings: Settings, model_settings: Settings, command: str = "
 
 def unused_warning(settings: Settings, model_settings: Settings, command: str = "apply") -> list[str]:
     """The warning for fit-only keys a config states otherwise than the model (not used)."""
-    names = [n for n in unused_keys(settings, model_settings, command) if n not in CHANGES_FORCES]
+    refused = set(CHANGES_FORCES) - (set(FIT_OPTIONS) if command == "certificate" else set())
+    names = [n for n in unused_keys(settings, model_settings, command) if n not in refused]
     return [f"{_unused(names, command)}; not used here"] if names else []

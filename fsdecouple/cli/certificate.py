@@ -23,6 +23,7 @@ from .app import (
     output_file,
     print_json,
     user_errors,
+    warn,
 )
 
 
@@ -69,6 +70,7 @@ def certificate(
             refuse_overwriting_input(output, [model_file, *_read(cs), *_given(config),
                                               *_given(drift)])
             write_certificate(doc, output, force=force)
+    warn(doc["warnings"])
     if json_out:
         print_json(doc)
     else:

@@ -278,8 +278,8 @@ def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str
     calib, at_t0 = _at_reference_temperature(calib, model)
     times = creep_times(calib, s)
     records, budgets, classes, notes = [], [], [], []
-    if settings is not None:
-        notes += unused_warning(settings, model.settings, "certificate")
+    # about this run, not the sensor: printed, never on the certificate itself
+    warnings = unused_warning(settings, model.settings, "certificate") if settings is not None else []
     if at_t0:
         notes.append(at_t0)
     if calib.excluded:
@@ -355,6 +355,7 @@ def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str
         "drift": _drift_stated(drift_source, drift, lab.drift),
         "coverage_factor": 2,
         "notes": notes,
+        "warnings": warnings,
         # the model's temperature terms (issue 31): the outputs were corrected to T0 by them
         **({"temperature": model.temperature.to_dict(layout.outputs)}
            if getattr(model, "temperature", None) is not None else {}),

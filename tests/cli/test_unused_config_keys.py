@@ -53,8 +53,9 @@ def test_certificate_refuses_a_rotation_warns_of_svr_and_reads_its_lab_keys(
     r, out = _certificate(sim_model_file, calib, tmp_path, ROTATION, 2)
     assert_one_line_error(r, "rotation", "refit with this config")
     assert not out.exists()
-    r, _ = _certificate(sim_model_file, calib, tmp_path, SVR)
-    assert "config's svr differs from the model's" in r.stdout and "not used" in r.stdout
+    r, out = _certificate(sim_model_file, calib, tmp_path, SVR)
+    assert "config's svr differs from the model's" in r.stderr and "not used" in r.stderr
+    assert "svr" not in out.read_text()  # about the run, not the sensor: not on the certificate
     # zero left unsaid and the lab's own keys are the certificate's: no news
     r, out = _certificate(sim_model_file, calib, tmp_path, SAME + "serial: SN-0042\n")
     assert "differs" not in r.stdout + r.stderr, r.stdout
