@@ -37,8 +37,11 @@ def binary(text: bytes) -> pa.Scalar:
 
 
 def column_floats(col: pa.ChunkedArray | pa.Array) -> np.ndarray:
-    """``col.to_numpy()`` as float64, nulls as NaN (read-only when it has none)."""
-    col = col.cast(pa.float64())
+    """``col.to_numpy()`` as float64, nulls as NaN (read-only when it has none).
+
+    Integers beyond 2**53 are rounded to the nearest double, as a CSV's digits are read
+    (Arrow's safe cast refused them with a traceback): the row's forces say what they are."""
+    col = col.cast(pa.float64(), safe=not pa.types.is_integer(col.type))
     if isinstance(col, pa.ChunkedArray):
         col = col.combine_chunks()
     n, start = len(col), col.offset

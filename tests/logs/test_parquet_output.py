@@ -105,3 +105,20 @@ def test_an_infinite_reading_in_a_parquet_log_is_told_as_a_number(sim_model_file
     r = invoke(["apply", sim_model_file, tmp_path / "i.parquet", "-o", tmp_path / "o.csv"], 2)
     assert_one_line_error(r, "i.parquet", "column 'uy'", "is inf, expected a finite number")
     assert "np." not in r.stderr and not (tmp_path / "o.csv").exists()
+
+
+@pytest.mark.parametrize("dtype", [np.int64, np.uint64])
+def test_integer_outputs_beyond_2_53_are_read_as_a_csv_reads_them(sample_model, tmp_path, dtype):
+    """Whole counts in an integer column: Arrow's safe cast to double refused 2**60 with a
+    71-line traceback; the CSV reader rounds such a number and its row is not_finite."""
+    model = load_model(sample_model)
+    n = 300
+    u = np.zeros((n, 3), dtype=dtype)
+    u[:, 0] = 1
+    u[150, 0] = 2 ** 60
+    log, out = tmp_path / "counts.parquet", tmp_path / "f.csv"
+    pq.write_table(pa.table({"ux": u[:, 0], "uy": u[:, 1], "uz": u[:, 2]}), log)
+    summary = apply_file(model, log, out)
+    assert summary.status_counts["not_finite"] == 1 and summary.status_counts["ok"] == n - 1
+    forces = pd.read_csv(out)
+    assert forces["status"][150] == "not_finite" and np.isfinite(forces["fx"][0])
