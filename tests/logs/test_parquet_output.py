@@ -122,3 +122,17 @@ def test_integer_outputs_beyond_2_53_are_read_as_a_csv_reads_them(sample_model, 
     assert summary.status_counts["not_finite"] == 1 and summary.status_counts["ok"] == n - 1
     forces = pd.read_csv(out)
     assert forces["status"][150] == "not_finite" and np.isfinite(forces["fx"][0])
+
+
+def test_a_csv_output_quotes_header_names_that_hold_its_separator_or_quotes(sample_model, tmp_path):
+    """A Parquet log's column 'time,s' made apply's CSV header one field longer than its rows."""
+    model = load_model(sample_model)
+    frame = pd.read_csv(SAMPLE / "task_voltages.csv").head(400)
+    frame.columns = ["time,s", "ux", "uy", "uz"]
+    frame['say "hi"'] = 1.0
+    log, out = tmp_path / "q.parquet", tmp_path / "f.csv"
+    pq.write_table(pa.Table.from_pandas(frame, preserve_index=False), log)
+    apply_file(model, log, out)
+    back = pd.read_csv(out)
+    assert list(back.columns) == ["time,s", "ux", "uy", "uz", 'say "hi"', "fx", "fy", "fz", "status"]
+    assert back["time,s"].tolist() == frame["time,s"].tolist()
