@@ -309,13 +309,16 @@ def flag_of(argument: str, flags: dict[str, str] | None = None) -> str:
 
 
 def interactive() -> bool:
-    return err_console.is_terminal and not os.environ.get("CI")
+    """A progress bar's terminal: stderr is one (rich's own test also honours FORCE_COLOR
+    and TTY_COMPATIBLE, which put the bar's escapes into a redirected log), and not CI."""
+    return err_console.is_terminal and sys.stderr.isatty() and not os.environ.get("CI")
 
 
 def say(lines, label: str = "error", style: str = "red") -> None:
-    """Each line on stderr after a coloured ``label:`` (one per failed file, sensor or gate)."""
+    """Each line on stderr after a coloured ``label:`` (one per failed file, sensor or gate),
+    one line whatever it quotes: a newline in a sensor's or a file's name is escaped."""
     for line in lines:
-        err_console.print(Text(f"{label}: ", style) + Text(line), soft_wrap=True)
+        err_console.print(Text(f"{label}: ", style) + Text(printable(line)), soft_wrap=True)
 
 
 def warn(lines) -> None:

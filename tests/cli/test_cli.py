@@ -287,6 +287,33 @@ def test_progress_bars_show_on_a_terminal_and_never_in_ci(tmp_path, sample_model
     assert hide_cursor not in cv_out
 
 
+@pytest.mark.slow  # a CLI process
+def test_no_progress_bar_in_a_redirected_log_whatever_forces_colour(tmp_path, sample_model):
+    """FORCE_COLOR=1 or TTY_COMPATIBLE=1 (set by some CI runners) made rich call a
+    redirected stderr a terminal: 1.9 kB of the bar's escapes went into the log."""
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "CI"}
+    env.update(FORCE_COLOR="1", TTY_COMPATIBLE="1", TERM="xterm-256color")
+    r = subprocess.run([sys.executable, "-m", "fsdecouple", "apply", str(sample_model),
+                        str(SAMPLE / "task_voltages.csv"), "-o", str(tmp_path / "f.csv")],
+                       capture_output=True, text=True, env=env, check=True)
+    assert "\x1b[?25l" not in r.stderr and "decoupling" not in r.stderr, r.stderr
+
+
+def test_a_warning_quoting_a_newline_stays_one_line(capsys):
+    """A sensor directory named 'bad<newline>name' split fit-many's warnings and errors."""
+    from fsdecouple.cli.app import say, warn
+
+    warn(["sensor bad\nname: gate failed"])
+    say(["bad\nname/rep1.csv: not a calibration file"])
+    err = capsys.readouterr().err
+    assert err.splitlines() == ["warning: sensor bad\\nname: gate failed",
+                                "error: bad\\nname/rep1.csv: not a calibration file"]
+
+
 @pytest.mark.slow  # over ~0.6 s: the not-slow run stays under a minute
 def test_usage_errors_are_one_line_and_exit_2(sample_model):
     """A missing argument, a bad option value or an unknown command: bad input like any
