@@ -215,13 +215,33 @@ def _model_from_dict(doc: Any, source: str, computed: str | None = None) -> Coup
         raise ModelFileError(f"{source}: malformed model file (an imported model's projection is "
                              "its matrix)")
     model = CouplingErrorModel(
-        settings, k, chi, FitReport.from_dict(report), doc.get("provenance", {}),
+        settings, k, chi, FitReport.from_dict(report), _provenance(doc, source),
         doc.get("created", ""), method, matrix, own, projection, temperature, zero,
     )
     _check_slopes(model, source)
     _check_tables(model, source)
     _check_intervals(model, source)
     return model
+
+
+def _provenance(doc: dict, source: str) -> dict:
+    """The file's ``provenance``, or one line saying what in it is not what fit writes (a
+    list in its place gave tracebacks in show, apply and report)."""
+    prov = doc.get("provenance", {})
+    shapes = {"files": list, "libraries": dict, "excluded": list, "ati": dict, "zero": str}
+    bad = None if isinstance(prov, dict) else "provenance"
+    for key, kind in shapes.items() if bad is None else ():
+        if key in prov and not isinstance(prov[key], kind):
+            bad = f"provenance.{key}"
+    for f in prov.get("files", []) if bad is None else ():
+        if not (isinstance(f, dict) and isinstance(f.get("path"), str)
+                and isinstance(f.get("sha256"), str)):
+            bad = "provenance.files"
+    if bad is None and not all(isinstance(x, str) for x in prov.get("excluded", [])):
+        bad = "provenance.excluded"
+    if bad is not None:
+        raise ModelFileError(f"{source}: malformed model file ({bad} is not as fit writes it)")
+    return prov
 
 
 # the start of the warning fit leaves when it leaves the certificate data out

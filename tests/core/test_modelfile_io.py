@@ -236,3 +236,21 @@ def test_a_certificates_numbers_are_numbers(six_model_file, where, value, loads)
     else:
         with pytest.raises(ModelFileError, match="certificate needs steps and interval scores"):
             model_from_dict(doc)
+
+
+@pytest.mark.parametrize("provenance, named", [
+    ([1, 2], "provenance"),
+    ({"files": "rep1.csv"}, "provenance.files"),
+    ({"files": [{"path": 1, "sha256": "ab"}]}, "provenance.files"),
+    ({"libraries": ["numpy"]}, "provenance.libraries"),
+    ({"excluded": [3]}, "provenance.excluded"),
+])
+def test_a_provenance_not_as_fit_writes_it_is_refused(saved, provenance, named):
+    """A list in its place, with a recomputed digest, gave tracebacks in show, apply and report."""
+    from fsdecouple.core.modelfile import model_from_dict
+
+    doc = json.loads(saved[1])
+    doc["provenance"] = provenance
+    doc["integrity"]["digest"] = content_digest(doc)
+    with pytest.raises(ModelFileError, match=re.escape(f"({named} is not as fit writes it)")):
+        model_from_dict(doc)
