@@ -255,10 +255,11 @@ def fit_many(sensors_dir: str | Path, models_dir: str | Path, *, method: str | N
                 out.rmdir()
         raise
     ex.shutdown()
+    if made:  # every sensor failed: no empty directory left behind, as apply leaves none
+        with contextlib.suppress(OSError):
+            out.rmdir()  # only while empty
     return FleetResult(str(sensors_dir), str(models_dir), [results[d.name] for d in dirs],
                        max_gamma, max_drift, None if baseline is None else str(baseline))
-
-
 
 
 def _stop(ex) -> None:

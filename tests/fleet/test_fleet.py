@@ -387,3 +387,13 @@ def test_ranges_that_meet_only_at_zero_are_not_compared(tmp_path):
     assert "share less than 10 %" in r.stderr and len(r.stderr.strip().splitlines()) == 1
     with pytest.raises(InputError, match="share less than"):
         compare(load_model(tmp_path / "pull.json"), load_model(tmp_path / "push.json"))
+
+
+def test_fit_many_leaves_no_empty_directory_when_every_sensor_fails(fleet, tmp_path, in_threads):
+    """Many-log apply removed the directory it made when nothing was written; fit-many
+    left an empty one (a CI's next run then found it there)."""
+    only_broken = tmp_path / "sensors"
+    shutil.copytree(fleet / "sensors" / "broken", only_broken / "broken")
+    out = tmp_path / "models"
+    r = invoke(["fit-many", only_broken, "-o", out], 2)
+    assert "error: broken:" in r.stderr and not out.exists()
