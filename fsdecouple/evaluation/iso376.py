@@ -1,9 +1,9 @@
 """The ISO 376 figures of a calibration, step by step, and the class they allow.
 
 For each component and each non-zero load step of its own sweeps, X_i is the
-deflection of repetition i at that step: its prime output less the mean of its
-sweep's zero rows, the first time the sweep reaches that load with |load| rising
-(ISO 376's increasing series; :func:`_out_and_back`).  In percent, as
+deflection of repetition i at that step: its prime output less the zero read before
+its series (:func:`_series_zeros`), the first time the sweep reaches that load with
+|load| rising after a zero reading (ISO 376's increasing series; :func:`_out_and_back`).  In percent, as
 ISO 376:2011 (Section 7.5) states them:
 
 * ``b``, reproducibility: 100 (max_i X_i - min_i X_i) / |mean_i X_i|, over all
@@ -106,25 +106,32 @@ def _out_and_back(loads: np.ndarray) -> tuple[dict[float, int], dict[float, int]
 
     A visit is *out* when |load| rises into it (from a smaller load, from zero, or
     from the other sign; a sweep's first row counts as out: the load was applied
-    from zero), *back* when |load| falls into it.  X is a load's first visit out,
-    or its first visit when it has none (a sweep from -100 to +100 reads the
+    from zero), *back* when |load| falls into it.  X is a load's first visit out
+    after a zero reading (a series with its own zero: -100 .. 100 .. -100 reads -100
+    first with no zero before it, and again at the end of its last series), else its
+    first visit out, else its first visit (a sweep from -100 to +100 reads the
     negative steps only on their way back); X' its first visit back where X is a
     visit out.  A reading right after one at the same load is a hold (creep), not
     a visit.
     """
     first: dict[float, int] = {}
     out: dict[float, int] = {}
+    zeroed: dict[float, int] = {}  # visits out after a zero reading
     back: dict[float, int] = {}
-    prev = 0.0
+    prev, zero_read = 0.0, False
     for i, f in enumerate(loads):
         if i and loads[i - 1] == f:
             continue
-        if f != 0.0:
+        if f == 0.0:
+            zero_read = True
+        else:
             rising = abs(f) > abs(prev) or np.sign(f) != np.sign(prev)
             first.setdefault(f, i)
             (out if rising else back).setdefault(f, i)
+            if rising and zero_read:
+                zeroed.setdefault(f, i)
         prev = f
-    return ({f: out.get(f, i) for f, i in first.items()},
+    return ({f: zeroed.get(f, out.get(f, i)) for f, i in first.items()},
             {f: i for f, i in back.items() if f in out})
 
 

@@ -616,6 +616,7 @@ def test_deflections_out_and_back_start_from_the_zero_before_their_series(tmp_pa
     calib = load_calibration(tmp_path / "s" / "calibration",
                              replace(load_config(), min_repetitions=1, zero="fit"))
     st = component_steps(calib, 0)
-    positive = st.loads > 0  # the series from the zero on the way up: the lag is constant there
-    assert np.abs(st.figures["f_c"][positive]).max() < 0.005
+    # each series from the zero read before it, the lag constant along it; -100 N is read
+    # first with no zero before it, and again at the end of the last series: that one
+    assert np.abs(st.figures["f_c"]).max() < 0.005
     assert np.nanmax(st.figures["v"]) > 0.4  # the lag is there, as reversibility (0.48 % at 10 N)
