@@ -161,3 +161,10 @@ class NamedChi:
     @property
     def input_axis(self) -> int:
         return self._pair()[1]
+
+
+def component_key(label: str) -> str:
+    """A component's name as compared across models: case aside, and ATI's torques
+    (``tx``, data/ati_model.py) as fsdecouple's moments (``mx``)."""
+    label = label.lower()
+    return "m" + label[1:] if len(label) == 2 and label[0] == "t" else label

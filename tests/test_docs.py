@@ -311,8 +311,9 @@ def test_the_readmes_synopsis_names_every_option_of_the_command(command):
     assert "Usage" in text, text
     options = set(re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)", text)) - {"--help", "--force"}
     table = _first_table(README.read_text(encoding="utf-8"), "Commands")
-    synopses = " ".join(s for row in table.splitlines() if f"fsdecouple {command}" in row
-                        for s in re.findall(r"`fsdecouple [^`]*`", row) if f"fsdecouple {command}" in s)
+    mine = re.compile(rf"`fsdecouple {re.escape(command)}(?=[\s`])")  # not fit-many's for fit
+    synopses = " ".join(s for row in table.splitlines()
+                        for s in re.findall(r"`fsdecouple [^`]*`", row) if mine.match(s))
     short = {"--output": "-o ", "--config": "-c "}
     missing = sorted(o for o in options if o not in synopses and short.get(o, o) not in synopses)
     assert not missing, f"README's {command} synopsis lacks {missing}"

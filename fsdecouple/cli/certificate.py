@@ -10,7 +10,7 @@ import typer
 
 from ..config import load_config
 from ..core.modelfile import load_model
-from ..errors import printable
+from ..errors import InputError, printable
 from ..files.outputs import check_output, refuse_overwriting_input
 from .app import (
     ForceOpt,
@@ -45,7 +45,7 @@ def certificate(
     """ISO 376 figures (b, b', f_c, f_0, v, c), class and uncertainty budget (U, k = 2) per step."""
     from ..data.calibration import excluded_lines, load_calibration
     from ..evaluation.certificate_doc import certificate as build
-    from ..evaluation.certificate_doc import check_drift_matches, read_drift
+    from ..evaluation.certificate_doc import check_drift_matches, check_matches, read_drift
     from ..reporting.certificate_file import check_certificate_path, write_certificate
     from ..reporting.certificate_html import certificate_tables
 
@@ -57,14 +57,23 @@ def certificate(
             check_output(output, force=force)
         changes = read_drift(drift) if drift is not None else None
         if changes is not None:
-            check_drift_matches(changes, model, str(drift))
+            changes = check_drift_matches(changes, model, str(drift))
         read_as = settings or model.settings
         if model.provenance.get("files"):
             # the set is matched file by file with the model's (check_matches): a missing
             # repetition is named there, not counted against min_repetitions first
             read_as = replace(read_as, min_repetitions=1)
-        cs = load_calibration(calib, read_as,  # the lines fit --exclude left out
-                              exclude=excluded_lines(model.provenance.get("excluded")))
+        left_out = excluded_lines(model.provenance.get("excluded"))
+        try:
+            cs = load_calibration(calib, read_as, exclude=left_out)  # as fit --exclude left it
+        except InputError as err:
+            if not left_out or getattr(err, "argument", None) != "exclude":
+                raise
+            # a line the model's fit left out is not in this set: it is not the set the
+            # model was fitted on, which check_matches says by file, as for any model
+            check_matches(model, load_calibration(calib, read_as), str(model_file), settings)
+            raise InputError(f"{calib}: does not match the model file {model_file}: "
+                             f"{printable(err)}") from None
         doc = build(model, cs, source=str(model_file), settings=settings, drift=changes)
         if output is not None:
             refuse_overwriting_input(output, [model_file, *_read(cs), *_given(config),

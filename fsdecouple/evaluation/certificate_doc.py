@@ -20,7 +20,9 @@ from typing import Any
 import numpy as np
 
 from .. import __version__
+from ..axes import component_key
 from ..config import Settings
+from ..core.interval_data import MAX_FULL_SCALES
 from ..core.model import CouplingErrorModel
 from ..data.calibration import CalibrationSet, excluded_lines
 from ..errors import InputError
@@ -161,13 +163,16 @@ def drift_fractions(drift: dict | None, percent: float | None, axis: str, loads:
     return np.zeros(loads.size), None
 
 
-def _drift_stated(source: str | None, drift: dict | None, percent: float | None) -> dict:
-    """What the budget's drift term rests on, for the certificate to state: the source,
-    the config's percentage, or the two model files a compare document compared."""
-    out: dict[str, Any] = {"source": source}
-    if source == "config drift":
+def _drift_stated(sources: dict[str, str | None], drift: dict | None,
+                  percent: float | None) -> dict:
+    """What the budget's drift term rests on, for the certificate to state: the sources
+    (per component where they differ), the config's percentage where it is used, and the
+    two model files a compare document compared where it is."""
+    used = sorted({v for v in sources.values() if v is not None})
+    out: dict[str, Any] = {"source": "; ".join(used) or None, "components": dict(sources)}
+    if "config drift" in used:
         out["percent"] = percent
-    elif source is not None and drift is not None:
+    if drift is not None and any(u != "config drift" for u in used):
         out["models"] = [str(m.get("model")) for m in (drift.get("old"), drift.get("new"))
                          if isinstance(m, dict) and m.get("model") is not None]
     return out
@@ -203,15 +208,20 @@ def check_drift_document(doc, source: str) -> dict:
     return doc
 
 
-def check_drift_matches(doc: dict, model: CouplingErrorModel, source: str) -> None:
-    """Refuse a ``compare --json`` document of another sensor, other components or
-    another load unit than ``model``'s: its drift would be dropped, or misread."""
-    labels = set(model.layout.labels)
-    named = set(doc.get("components") or {}) | {s["axis"] for s in doc.get("en_steps") or []}
-    if not named & labels:
+def check_drift_matches(doc: dict, model: CouplingErrorModel, source: str) -> dict:
+    """``doc`` (a checked ``compare --json`` document) in the model's component names
+    (ATI's ``tx`` as the model's ``mx``, as compare matches them), or one line refusing
+    it: of another sensor, other components or another load unit than ``model``'s (its
+    drift would be dropped or misread), or a change beyond MAX_FULL_SCALES full scales."""
+    labels = model.layout.labels
+    mine = {component_key(a): a for a in labels}
+    components = {mine.get(component_key(str(k)), k): v for k, v in (doc.get("components") or {}).items()}
+    steps = [{**st, "axis": mine.get(component_key(st["axis"]), st["axis"])}
+             for st in doc.get("en_steps") or []]
+    named = set(components) | {st["axis"] for st in steps}
+    if not named & set(labels):
         raise InputError(f"{source}: its components ({', '.join(sorted(named)) or 'none'}) are "
-                         f"not the model's ({', '.join(model.layout.labels)}): the drift of "
-                         "another sensor")
+                         f"not the model's ({', '.join(labels)}): the drift of another sensor")
     sensors = {str(m.get("sensor")) for m in (doc.get("old"), doc.get("new"))
                if isinstance(m, dict) and m.get("sensor") is not None}
     if sensors and model.settings.sensor not in sensors:
@@ -221,6 +231,17 @@ def check_drift_matches(doc: dict, model: CouplingErrorModel, source: str) -> No
     if unit is not None and unit != model.settings.units.load:
         raise InputError(f"{source}: its forces are in {unit}, the model's in "
                          f"{model.settings.units.load}")
+    fs = dict(zip(labels, model.settings.full_scale, strict=True))
+    for axis, comp in components.items():
+        if comp.get("force_max_pct") is not None and comp["force_max_pct"] > 100 * MAX_FULL_SCALES:
+            raise InputError(f"{source}: components.{axis}.force_max_pct = {comp['force_max_pct']!r}: "
+                             f"more than {MAX_FULL_SCALES:g} full scales")
+    for st in steps:
+        moved = abs(float(st["F_old"]) - float(st["F_new"]))
+        if st["axis"] in fs and moved > MAX_FULL_SCALES * fs[st["axis"]]:
+            raise InputError(f"{source}: en_steps: {st['axis']} at {st['load']!r}: F_old - F_new = "
+                             f"{moved:g}, more than {MAX_FULL_SCALES:g} full scales")
+    return {**doc, "components": components, "en_steps": steps}
 
 
 def read_drift(path: str | Path) -> dict:
@@ -272,7 +293,8 @@ def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str
     model.layout.one_output_each("certificate")
     check_matches(model, calib, source, settings)
     if drift is not None:
-        check_drift_matches(drift, model, "the drift document")
+        drift = check_drift_matches(check_drift_document(drift, "the drift document"), model,
+                                    "the drift document")
     s = settings or model.settings
     lab, layout = s.lab, calib.layout
     calib, at_t0 = _at_reference_temperature(calib, model)
@@ -319,15 +341,15 @@ def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str
             notes.append(f"{metric}: absent, {why}; not classed")
     if not temperature:
         notes.append("temperature: the calibration has no temperature column; its budget term is 0")
-    stated = sorted({v for v in sources.values() if v is not None})
-    drift_source = "; ".join(stated) or None
-    if drift_source is None:
+    stated = _drift_stated(sources, drift, lab.drift)
+    drift_source = stated["source"]
+    bare = [axis for axis, v in sources.items() if v is None]
+    if drift is None and drift_source is None:
         notes.append("drift: no compare document and no config drift; the "
                      "budget's drift between calibrations is 0")
-    elif None in sources.values():
-        bare = [axis for axis, v in sources.items() if v is None]
-        notes.append(f"drift: the compare document has nothing of {', '.join(bare)}; "
-                     "there the budget's drift between calibrations is 0")
+    elif bare:
+        notes.append(f"drift: the compare document gives none of {', '.join(bare)}, and the "
+                     "config states none; there the budget's drift between calibrations is 0")
     return {
         "format": FORMAT, "format_version": FORMAT_VERSION, "fsdecouple_version": __version__,
         "date": datetime.now(UTC).date().isoformat(),
@@ -352,7 +374,7 @@ def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str
         "budget": budgets,
         "budget_sources": dict(SOURCES),
         "drift_source": drift_source,
-        "drift": _drift_stated(drift_source, drift, lab.drift),
+        "drift": stated,
         "coverage_factor": 2,
         "notes": notes,
         "warnings": warnings,

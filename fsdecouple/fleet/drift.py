@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from ..axes import component_key
 from ..core.model import CouplingErrorModel
 from ..errors import InputError
 from .en import en_figures
@@ -209,10 +210,7 @@ def same_components(a, b) -> bool:
     """Whether two models' component names are one sensor's, in the same order: names may
     differ only in case and as ATI's torques (``tx``, data/ati_model.py) against
     fsdecouple's moments (``mx``)."""
-    def key(label: str) -> str:
-        label = label.lower()
-        return "m" + label[1:] if len(label) == 2 and label[0] == "t" else label
-    return [key(x) for x in a] == [key(x) for x in b]
+    return [component_key(x) for x in a] == [component_key(x) for x in b]
 
 
 # The range both calibrations cover must be at least this fraction of each one's span:

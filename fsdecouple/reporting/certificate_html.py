@@ -98,14 +98,24 @@ def _limited(c: dict) -> str:
 
 
 def _drift_row(doc: dict) -> str:
-    """The budget's drift term's basis, as the certificate states it."""
+    """The budget's drift term's basis, as the certificate states it: per component where
+    the components' sources differ."""
     d = doc.get("drift") or {"source": doc.get("drift_source")}
     if d.get("source") is None:
         return "not stated (no compare document, no config drift): 0"
-    if d.get("percent") is not None:
-        return f"{d['percent']:g} % of each step (config drift)"
     models = d.get("models") or []
-    return d["source"] + (f": {' against '.join(models)}" if models else "")
+
+    def said(source: str | None) -> str:
+        if source is None:
+            return "none stated: 0"
+        if source == "config drift":
+            return f"{d.get('percent'):g} % of each step (config drift)"
+        return source + (f": {' against '.join(models)}" if models else "")
+
+    by = d.get("components") or {}
+    if len(set(by.values())) > 1:
+        return "; ".join(f"{axis}: {said(source)}" for axis, source in by.items())
+    return said(next(iter(by.values()), d["source"]))
 
 
 def certificate_blocks(doc: dict) -> list[Block]:

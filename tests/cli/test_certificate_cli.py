@@ -316,7 +316,8 @@ def test_the_certificate_leaves_out_what_fit_left_out_and_takes_fits_config(tmp_
     at = {r["metric"]: r["value"] for r in doc["records"] if r["axis"] == "x" and r["load"] == load}
     assert "b_prime" not in at and at["b"] < 1.0  # rep1 lacks the step now; b of reps 2, 3
     assert any("rep1.csv:6" in n for n in doc["notes"])
-    assert not any("not used" in n or "differ" in n for n in doc["notes"])
+    assert any("refine" in w and "extrapolation" in w for w in doc["warnings"])  # said, not signed
+    assert not any("refine" in n for n in doc["notes"])
     negative = next(c for c in doc["classes"] if c["axis"] == "x" and c["sign"] == ("-" if load < 0 else "+"))
     assert negative["class"] == "none" and negative["limited_by"] == ["repetitions"]
     from fsdecouple import load_calibration
@@ -326,6 +327,11 @@ def test_the_certificate_leaves_out_what_fit_left_out_and_takes_fits_config(tmp_
     m = load_model(model)
     with pytest.raises(InputError, match="left out rep1.csv:6"):
         certificate(m, load_calibration(calib, m.settings))  # read without the exclusion
+    other = tmp_path / "other"
+    shutil.copytree(calib, other)
+    (other / "rep1.csv").unlink()  # the file of the excluded line is not in this set
+    r = invoke(["certificate", model, other], 2)
+    assert_one_line_error(r, "does not match the model file", "fitted on rep1.csv too")
 
 
 def test_a_drift_document_of_another_sensor_or_with_bad_numbers_is_one_line(fitted, sim_dir, tmp_path):
@@ -338,6 +344,9 @@ def test_a_drift_document_of_another_sensor_or_with_bad_numbers_is_one_line(fitt
         '{"format":"fsdecouple.drift","components":[1]}': "components",
         '{"format":"fsdecouple.drift","components":{"x":{"force_max_pct":"abc"}}}': "force_max_pct",
         '{"format":"fsdecouple.drift","components":{"x":{"force_max_pct":1e400}}}': "force_max_pct",
+        '{"format":"fsdecouple.drift","components":{"x":{"force_max_pct":1e200}}}': "1000 full scales",
+        '{"format":"fsdecouple.drift","en_steps":[{"axis":"x","load":10,"F_old":1e200,'
+        '"F_new":0}]}': "1000 full scales",
         '{"format":"fsdecouple.drift","en_steps":[{"axis":"x","load":10,"F_old":1e308,'
         '"F_new":-1e308}]}': "en_steps",
         '{"format":"fsdecouple.drift","components":{"x":{"force_max_pct":0.1}},'
@@ -362,7 +371,8 @@ def test_the_certificate_states_the_drift_it_budgets(fitted, sim_dir, tmp_path):
     config.write_text("drift: 0.3\n")
     doc = json.loads(invoke(["certificate", fitted, sim_dir / "calibration", "-c", config,
                              "--json"]).stdout)
-    assert doc["drift"] == {"source": "config drift", "percent": 0.3}
+    assert doc["drift"] == {"source": "config drift", "percent": 0.3,
+                            "components": dict.fromkeys("xyz", "config drift")}
     ident = dict(next(b for b in certificate_blocks(doc) if b.ident == "identity").rows)
     assert ident["Drift between calibrations"] == "0.3 % of each step (config drift)"
     drift = tmp_path / "cmp.json"
@@ -371,8 +381,17 @@ def test_the_certificate_states_the_drift_it_budgets(fitted, sim_dir, tmp_path):
     doc = json.loads(invoke(["certificate", fitted, sim_dir / "calibration", "--drift", drift,
                              "--json"]).stdout)
     ident = dict(next(b for b in certificate_blocks(doc) if b.ident == "identity").rows)
-    assert ident["Drift between calibrations"].endswith(": a.json against b.json")
-    assert any("nothing of y, z" in n for n in doc["notes"])
+    assert ident["Drift between calibrations"] == (
+        "x: compare --json (force_max_pct of full scale): a.json against b.json; "
+        "y: none stated: 0; z: none stated: 0")
+    assert any("gives none of y, z" in n for n in doc["notes"])
+    doc = json.loads(invoke(["certificate", fitted, sim_dir / "calibration", "--drift", drift,
+                             "-c", config, "--json"]).stdout)  # x from compare, y and z 0.3 %
+    ident = dict(next(b for b in certificate_blocks(doc) if b.ident == "identity").rows)
+    assert ident["Drift between calibrations"] == (
+        "x: compare --json (force_max_pct of full scale): a.json against b.json; "
+        "y: 0.3 % of each step (config drift); z: 0.3 % of each step (config drift)")
+    assert not any(n.startswith("drift:") for n in doc["notes"])
 
 
 @pytest.mark.slow  # a simulated drifting sensor and a verdict fit
@@ -400,3 +419,33 @@ def test_a_temperature_corrected_model_is_certified_on_outputs_at_t0(tmp_path):
                if r["axis"] == "x" and r["load"] == -100.0 and r["metric"] == "b")
     assert got == pytest.approx(b, rel=1e-6)
     assert any("corrected to T0" in n for n in doc["notes"])
+
+
+def test_a_compare_document_in_atis_torque_names_drifts_the_moments(six_model_file):
+    """compare matches ATI's tx with fsdecouple's mx; the certificate matched names
+    exactly and dropped the moments' drift (0 for mx, my, mz, with only a note)."""
+    from fsdecouple.errors import InputError
+    from fsdecouple.evaluation.certificate_doc import check_drift_matches
+
+    model = load_model(six_model_file)
+    labels = model.layout.labels
+    doc = {"format": "fsdecouple.drift",
+           "components": {a.replace("m", "t", 1) if a.startswith("m") else a: {"force_max_pct": 0.5}
+                          for a in labels}}
+    got = check_drift_matches(doc, model, "d.json")
+    assert sorted(got["components"]) == sorted(labels)
+    with pytest.raises(InputError, match="not the model's"):
+        check_drift_matches({**doc, "components": {"q1": {}}}, model, "d.json")
+
+
+def test_the_api_checks_a_drift_document_it_is_given(fitted, sim_dir):
+    """certificate(..., drift=doc) read an unchecked document's steps with a raw KeyError."""
+    from fsdecouple import load_calibration
+    from fsdecouple.errors import InputError
+    from fsdecouple.evaluation.certificate_doc import certificate
+
+    model = load_model(fitted)
+    calib = load_calibration(sim_dir / "calibration", model.settings)
+    with pytest.raises(InputError, match="en_steps"):
+        certificate(model, calib, drift={"format": "fsdecouple.drift", "en_steps": [{"load": 1}]})
+
