@@ -253,14 +253,18 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
         grids = cs.load_grid(axis)
         if not grids:  # rows loading several components, none of them mostly this one
             continue
-        ref_rep, ref = next(iter(grids.items()))
-        for rep, g in grids.items():
-            if g.shape != ref.shape or not np.allclose(g, ref, rtol=0, atol=1e-9):
-                warnings.append(
-                    f"the {axis} sweep of repetition {rep} uses a different load grid than "
-                    f"repetition {ref_rep}; gamma compares repetitions at different loads"
-                )
-                break
+        def same(g, h) -> bool:
+            return g.shape == h.shape and np.allclose(g, h, rtol=0, atol=1e-9)
+
+        # the grid most repetitions share (the first of a tie): an odd first repetition is
+        # the one named, not the five that agree
+        ref_rep, ref = max(grids.items(), key=lambda kv: sum(same(kv[1], g) for g in grids.values()))
+        odd = [rep for rep, g in grids.items() if not same(g, ref)]
+        if odd:
+            warnings.append(
+                f"the {axis} sweep of repetition {odd[0]} uses a different load grid than "
+                f"repetition {ref_rep} ({len(grids) - len(odd)} of {len(grids)} repetitions "
+                "share that one); gamma compares repetitions at different loads")
     for a, axis in enumerate(layout.labels):
         # loads far from the full scale usually mean other units (kN, kgf) or a
         # wrong full_scale, and gamma (eq. 12) is a fraction of the full scale

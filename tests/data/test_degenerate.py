@@ -87,3 +87,19 @@ def test_constant_channel_fails_clearly(tmp_path, sim_dir, channel):
     axis = channel[1]
     with pytest.raises(InputError, match=f"prime voltage {channel} does not change with f{axis}"):
         fit(load_calibration(d, settings), settings)
+
+
+def test_the_odd_repetitions_grid_is_the_one_named(tmp_path):
+    """Repetition 1 skipped a step of its x sweep: the warning named repetition 2 (the
+    first that differed from repetition 1), where five of six agree on another grid."""
+    from dataclasses import replace
+
+    from fsdecouple.data.calibration import from_table
+    from fsdecouple.sim.simulate import simulate_calibration
+
+    table = simulate_calibration(SimulatedSensor(), repetitions=6, seed=2)
+    gone = table.index[(table["repetition"] == 1) & (table["axis"] == "x") & (table["fx"] == 50.0)]
+    calib = from_table(table.drop(gone), replace(load_config(), min_repetitions=1))
+    said = [w for w in calib.warnings if "different load grid" in w]
+    assert len(said) == 1 and said[0].startswith("the x sweep of repetition 1 uses"), said
+    assert "than repetition 2 (5 of 6 repetitions share that one)" in said[0]
