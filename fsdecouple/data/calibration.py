@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import collections
 import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -249,16 +250,19 @@ def from_table(table: pd.DataFrame, settings: Settings, files=(), skipped=(),
         warnings.append(f"{len(rows)} {many} several components ({shown}"
                         f"{', ...' if len(rows) > 3 else ''}): fitted jointly (docs/rigs.md)")
     cs = CalibrationSet(points, offsets, tuple(files), tuple(skipped), layout=layout)
+
+    def same(g, h) -> bool:
+        return g.shape == h.shape and np.allclose(g, h, rtol=0, atol=1e-9)
+
     for axis in layout.labels:
         grids = cs.load_grid(axis)
         if not grids:  # rows loading several components, none of them mostly this one
             continue
-        def same(g, h) -> bool:
-            return g.shape == h.shape and np.allclose(g, h, rtol=0, atol=1e-9)
-
-        # the grid most repetitions share (the first of a tie): an odd first repetition is
-        # the one named, not the five that agree
-        ref_rep, ref = max(grids.items(), key=lambda kv: sum(same(kv[1], g) for g in grids.values()))
+        # the grid most repetitions share exactly (the first of a tie; counted, not compared
+        # pairwise: 3,000 repetitions): an odd first repetition is named, not the five
+        # that agree
+        shared = collections.Counter((g.shape, g.tobytes()) for g in grids.values())
+        ref_rep, ref = max(grids.items(), key=lambda kv: shared[(kv[1].shape, kv[1].tobytes())])
         odd = [rep for rep, g in grids.items() if not same(g, ref)]
         if odd:
             warnings.append(
