@@ -52,9 +52,16 @@ def kept_fields(line: bytes, keep: list[int], width: int, sep: str) -> bytes:
     text = line.decode("utf-8", "surrogateescape")
     fields = next(csv.reader([text], delimiter=sep)) if text else []
     fields += [""] * (width - len(fields))
+    return csv_row([fields[j] for j in keep], sep).encode("utf-8", "surrogateescape")
+
+
+def csv_row(fields, sep: str) -> str:
+    """``fields`` as one CSV line (no line end): quoted where one holds ``sep``, a quote or
+    a line end (the csv module's minimal quoting, as pandas reads it back)."""
     buf = io.StringIO()
-    csv.writer(buf, delimiter=sep, lineterminator="").writerow([fields[j] for j in keep])
-    return buf.getvalue().encode("utf-8", "surrogateescape")
+    # the line end given, and cut: the writer quotes the fields that hold one of its characters
+    csv.writer(buf, delimiter=sep, lineterminator="\r\n").writerow(fields)
+    return buf.getvalue()[:-2]
 
 
 def kept_lines(lines: pa.Array, keep: list[int], sep: str) -> pa.Array:

@@ -12,6 +12,7 @@ import pyarrow.csv as pcsv
 
 from ..axes import FORCE_COLUMNS
 from .arrow import binary, numbers
+from .passthrough import csv_row
 from .reader import Block
 
 
@@ -35,14 +36,6 @@ def force_decimals(full_scale, budget: float = 1e-10) -> int:
     return max(0, int(np.ceil(-np.log10(step))))
 
 
-def csv_field(name: str, sep: str) -> str:
-    """A header name as one CSV field: quoted (its quotes doubled) where it holds the
-    separator, a quote or a line end, as the csv module and pandas read it back."""
-    if any(c in name for c in (sep, '"', "\n", "\r")):
-        return '"' + name.replace('"', '""') + '"'
-    return name
-
-
 class CsvSink:
     """Writes blocks as CSV: the input line (or columns), ``fx, fy, fz``, ``status``.
 
@@ -59,11 +52,11 @@ class CsvSink:
         self.header = header
         self.decimals = decimals
         self.sep, self.decimal = sep, decimal
-        names = [csv_field(h, sep) for h in header]
-        line = header_line if header_line is not None else sep.join(names).encode("utf-8", "surrogateescape")
-        fh.write(sep.join([line.decode("utf-8", "surrogateescape"),
-                           *(csv_field(c, sep) for c in (*columns, *extra))])
-                 .encode("utf-8", "surrogateescape") + b"\n")
+        # the input's own header line as it is, else the names quoted where they must be
+        line = (header_line.decode("utf-8", "surrogateescape") if header_line is not None
+                else csv_row(header, sep))
+        fh.write((line + sep + csv_row([*columns, *extra], sep)).encode("utf-8", "surrogateescape")
+                 + b"\n")
 
     def _text(self, a: pa.Array) -> pa.Array:
         text = pc.cast(a, pa.string())
