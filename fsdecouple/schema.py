@@ -462,12 +462,16 @@ def _unused(names: list[str], command: str) -> str:
             f"model's: {command} {uses} and reads only {', '.join(READS[command])} from a config")
 
 
+def _refused(command: str) -> set[str]:
+    """The keys ``command`` refuses when a config states them otherwise than the model."""
+    return set(CHANGES_FORCES) - (set(FIT_OPTIONS) if command == "certificate" else set())
+
+
 def refuse_unused(settings: Settings, model_settings: Settings, command: str = "apply") -> None:
     """Refuse a config that states a key changing the forces (:data:`CHANGES_FORCES`)
     otherwise than the model: ``apply -c rot.yaml`` with a rotation the model lacks
     decoupled without it, in silence."""
-    refused = set(CHANGES_FORCES) - (set(FIT_OPTIONS) if command == "certificate" else set())
-    names = [n for n in unused_keys(settings, model_settings, command) if n in refused]
+    names = [n for n in unused_keys(settings, model_settings, command) if n in _refused(command)]
     if names:
         raise ConfigError(f"{_unused(names, command)}; refit with this config, or leave "
                           f"{' and '.join(names)} out")
@@ -475,6 +479,5 @@ def refuse_unused(settings: Settings, model_settings: Settings, command: str = "
 
 def unused_warning(settings: Settings, model_settings: Settings, command: str = "apply") -> list[str]:
     """The warning for fit-only keys a config states otherwise than the model (not used)."""
-    refused = set(CHANGES_FORCES) - (set(FIT_OPTIONS) if command == "certificate" else set())
-    names = [n for n in unused_keys(settings, model_settings, command) if n not in refused]
+    names = [n for n in unused_keys(settings, model_settings, command) if n not in _refused(command)]
     return [f"{_unused(names, command)}; not used here"] if names else []

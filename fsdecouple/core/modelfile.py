@@ -228,20 +228,26 @@ def _provenance(doc: dict, source: str) -> dict:
     """The file's ``provenance``, or one line saying what in it is not what fit writes (a
     list in its place gave tracebacks in show, apply and report)."""
     prov = doc.get("provenance", {})
-    shapes = {"files": list, "libraries": dict, "excluded": list, "ati": dict, "zero": str}
-    bad = None if isinstance(prov, dict) else "provenance"
-    for key, kind in shapes.items() if bad is None else ():
-        if key in prov and not isinstance(prov[key], kind):
-            bad = f"provenance.{key}"
-    for f in prov.get("files", []) if bad is None else ():
-        if not (isinstance(f, dict) and isinstance(f.get("path"), str)
-                and isinstance(f.get("sha256"), str)):
-            bad = "provenance.files"
-    if bad is None and not all(isinstance(x, str) for x in prov.get("excluded", [])):
-        bad = "provenance.excluded"
+    bad = _provenance_problem(prov)
     if bad is not None:
         raise ModelFileError(f"{source}: malformed model file ({bad} is not as fit writes it)")
     return prov
+
+
+def _provenance_problem(prov: Any) -> str | None:
+    """The first part of ``prov`` not shaped as fit writes it, or None."""
+    if not isinstance(prov, dict):
+        return "provenance"
+    shapes = {"files": list, "libraries": dict, "excluded": list, "ati": dict, "zero": str}
+    for key, kind in shapes.items():
+        if key in prov and not isinstance(prov[key], kind):
+            return f"provenance.{key}"
+    if not all(isinstance(f, dict) and isinstance(f.get("path"), str)
+               and isinstance(f.get("sha256"), str) for f in prov.get("files", [])):
+        return "provenance.files"
+    if not all(isinstance(x, str) for x in prov.get("excluded", [])):
+        return "provenance.excluded"
+    return None
 
 
 # the start of the warning fit leaves when it leaves the certificate data out

@@ -84,18 +84,19 @@ class ComponentSteps:
         return np.nanmean(self.X, axis=1)
 
 
-def _series_zeros(loads: np.ndarray, u: np.ndarray) -> np.ndarray:
+def _series_zeros(loads: np.ndarray, u: np.ndarray, first: dict[float, int],
+                  again: dict[float, int]) -> np.ndarray:
     """Each row's zero reading (ISO 376: a deflection starts from the zero read before
     its series): the zero row read last before the row, else the first after it (a sweep
     from -100 N reads steps before any zero); a step's reading on its way back (X')
-    takes its X's, so that X' - X is the readings' own difference.  Rows of zero load:
+    takes its X's, so that X' - X is the readings' own difference (``first``, ``again``:
+    :func:`_out_and_back` of ``loads``).  Rows of zero load:
     the mean of the zero rows (only their differences are used)."""
     zeros = np.flatnonzero(loads == 0.0)
     out = np.repeat(u[zeros].mean(axis=0, keepdims=True), len(loads), axis=0)
     loaded = np.flatnonzero(loads != 0.0)
     before = np.searchsorted(zeros, loaded) - 1  # the last zero row before each loaded row
     out[loaded] = u[zeros[np.where(before >= 0, before, 0)]]
-    first, again = _out_and_back(loads)
     for load, i in again.items():
         out[i] = out[first[load]]
     return out
@@ -177,14 +178,14 @@ def component_steps(calib: CalibrationSet, a: int, times=None) -> ComponentSteps
     for r, rep in enumerate(reps):
         mine = rep_of == rep
         f, u = f_all[mine], u_all[mine]
+        first, again = _out_and_back(f)
         if (f == 0.0).any():
             # ISO 376's deflections start from the zero read before their series, whatever
             # zeroed the set for the fit (offsets fitted from all points, or the mean of
             # the sweep's zero rows: out and back, half a lag's return zero); the set's
             # outputs less one offset a sweep, so their differences are the readings'
             # (at T0 where the set was corrected for temperature)
-            u = u - _series_zeros(f, u)
-        first, again = _out_and_back(f)
+            u = u - _series_zeros(f, u, first, again)
         for load, i in first.items():
             X[where[load], r] = u[i, a]
             outputs[where[load]] += u[i]

@@ -100,8 +100,8 @@ def _limited(c: dict) -> str:
 def _drift_row(doc: dict) -> str:
     """The budget's drift term's basis, as the certificate states it: per component where
     the components' sources differ."""
-    d = doc.get("drift") or {"source": doc.get("drift_source")}
-    if d.get("source") is None:
+    d = doc["drift"]
+    if d["source"] is None:
         return "not stated (no compare document, no config drift): 0"
     models = d.get("models") or []
 
@@ -112,10 +112,10 @@ def _drift_row(doc: dict) -> str:
             return f"{d.get('percent'):g} % of each step (config drift)"
         return source + (f": {' against '.join(models)}" if models else "")
 
-    by = d.get("components") or {}
+    by = d["components"]
     if len(set(by.values())) > 1:
         return "; ".join(f"{axis}: {said(source)}" for axis, source in by.items())
-    return said(next(iter(by.values()), d["source"]))
+    return said(next(iter(by.values())))
 
 
 def certificate_blocks(doc: dict) -> list[Block]:
