@@ -45,7 +45,7 @@ def certificate(
     """ISO 376 figures (b, b', f_c, f_0, v, c), class and uncertainty budget (U, k = 2) per step."""
     from ..data.calibration import excluded_lines, load_calibration
     from ..evaluation.certificate_doc import certificate as build
-    from ..evaluation.certificate_doc import check_drift_matches, check_matches, read_drift
+    from ..evaluation.certificate_doc import check_matches, read_drift
     from ..reporting.certificate_file import check_certificate_path, write_certificate
     from ..reporting.certificate_html import certificate_tables
 
@@ -56,8 +56,6 @@ def certificate(
             check_certificate_path(output)
             check_output(output, force=force)
         changes = read_drift(drift) if drift is not None else None
-        if changes is not None:
-            changes = check_drift_matches(changes, model, str(drift))
         read_as = settings or model.settings
         if model.provenance.get("files"):
             # the set is matched file by file with the model's (check_matches): a missing
@@ -74,7 +72,8 @@ def certificate(
             check_matches(model, load_calibration(calib, read_as), str(model_file), settings)
             raise InputError(f"{calib}: does not match the model file {model_file}: "
                              f"{printable(err)}") from None
-        doc = build(model, cs, source=str(model_file), settings=settings, drift=changes)
+        doc = build(model, cs, source=str(model_file), settings=settings, drift=changes,
+                    drift_name=str(drift))
         if output is not None:
             refuse_overwriting_input(output, [model_file, *_read(cs), *_given(config),
                                               *_given(drift)])

@@ -281,20 +281,21 @@ def _at_reference_temperature(calib: CalibrationSet, model: CouplingErrorModel
 
 
 def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str = "model",
-                settings: Settings | None = None, drift: dict | None = None) -> dict[str, Any]:
+                settings: Settings | None = None, drift: dict | None = None,
+                drift_name: str = "the drift document") -> dict[str, Any]:
     """The certificate document of ``calib`` and the model fitted on it.
 
     ``settings``: the config's (``-c``), for the sensor's identity, reference,
     environment, creep column and drift; default: the model's own.  ``drift``: a
     ``compare --json`` document of this sensor's last two calibrations, for the
-    budget's drift term (default: the config's ``drift``, else none).  Refused if
-    the set or the config do not match the model (:func:`check_matches`).
+    budget's drift term (default: the config's ``drift``, else none), refused in one
+    line naming ``drift_name`` where it is not this sensor's (:func:`check_drift_matches`).
+    Refused if the set or the config do not match the model (:func:`check_matches`).
     """
     model.layout.one_output_each("certificate")
     check_matches(model, calib, source, settings)
     if drift is not None:
-        drift = check_drift_matches(check_drift_document(drift, "the drift document"), model,
-                                    "the drift document")
+        drift = check_drift_matches(check_drift_document(drift, drift_name), model, drift_name)
     s = settings or model.settings
     lab, layout = s.lab, calib.layout
     calib, at_t0 = _at_reference_temperature(calib, model)
@@ -342,9 +343,8 @@ def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str
     if not temperature:
         notes.append("temperature: the calibration has no temperature column; its budget term is 0")
     stated = _drift_stated(sources, drift, lab.drift)
-    drift_source = stated["source"]
     bare = [axis for axis, v in sources.items() if v is None]
-    if drift is None and drift_source is None:
+    if drift is None and stated["source"] is None:
         notes.append("drift: no compare document and no config drift; the "
                      "budget's drift between calibrations is 0")
     elif bare:
@@ -373,7 +373,7 @@ def certificate(model: CouplingErrorModel, calib: CalibrationSet, *, source: str
                          "from_fraction_of_full_scale": CLASS_FROM},
         "budget": budgets,
         "budget_sources": dict(SOURCES),
-        "drift_source": drift_source,
+        "drift_source": stated["source"],
         "drift": stated,
         "coverage_factor": 2,
         "notes": notes,
